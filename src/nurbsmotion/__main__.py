@@ -1,0 +1,3 @@
+from nurbsmotion.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,88 @@
+"""The ``nurbsmotion`` command.
+
+Each sub-command is one module in this package (a plug-in, like python-can's interfaces):
+it defines ``HELP`` (one line), ``add_arguments(parser)`` and ``run(args) -> int``; the
+command name is the module name with ``_`` -> ``-``. Modules whose name starts with ``_``
+are helpers, not commands. Only the CLI and the service put the layers together.
+
+Exit codes: 0 success, 1 the job failed (fault, stop), 2 bad input (one line per error on
+stderr), 70 internal error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import pkgutil
+import sys
+from types import ModuleType
+
+from nurbsmotion import __version__
+from nurbsmotion.errors import InputError, NurbsmotionError
+from nurbsmotion.log import setup_logging
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+EXIT_INTERNAL = 70
+
+log = logging.getLogger(__name__)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that reports bad arguments as one line and exit code 2 (no usage dump)."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(EXIT_BAD_INPUT)
+
+
+def command_modules() -> dict[str, ModuleType]:
+    """Discover the sub-command modules of this package, by command name."""
+    found: dict[str, ModuleType] = {}
+    for info in sorted(pkgutil.iter_modules(__path__), key=lambda i: i.name):
+        if info.name.startswith("_"):
+            continue
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        if hasattr(module, "run") and hasattr(module, "add_arguments"):
+            found[info.name.replace("_", "-")] = module
+    return found
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="nurbsmotion", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"nurbsmotion {__version__}")
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name, module in command_modules().items():
+        p = sub.add_parser(name, help=getattr(module, "HELP", ""), description=getattr(module, "HELP", ""))
+        p.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS, help=argparse.SUPPRESS)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    setup_logging(getattr(args, "verbose", 0))
+    if not getattr(args, "_run", None):
+        parser.print_help(sys.stderr)
+        return EXIT_BAD_INPUT
+    try:
+        return int(args._run(args) or 0)
+    except InputError as err:
+        for line in str(err).splitlines():
+            sys.stderr.write(f"nurbsmotion {args.command}: error: {line}\n")
+        return EXIT_BAD_INPUT
+    except NurbsmotionError as err:
+        sys.stderr.write(f"nurbsmotion {args.command}: error: {err}\n")
+        return EXIT_FAILED
+    except KeyboardInterrupt:
+        sys.stderr.write(f"nurbsmotion {args.command}: interrupted\n")
+        return 130
+    except Exception as err:  # noqa: BLE001 - last line of defence: one line, no traceback
+        log.debug("internal error", exc_info=True)
+        sys.stderr.write(f"nurbsmotion {args.command}: internal error: {type(err).__name__}: {err} (run with -vv for details)\n")
+        return EXIT_INTERNAL
