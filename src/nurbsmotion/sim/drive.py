@@ -142,7 +142,9 @@ class SimDrive:
     """A simulated CiA-402 servo drive (IP and CSP) with node id ``node_id``.
 
     Create it, then :meth:`attach` it to a connected ``canopen.Network`` (``SimNetwork`` does
-    both). ``lag_cycles`` and ``max_velocity_counts_s`` set the servo model.
+    both). ``lag_cycles`` and ``max_velocity_counts_s`` set the servo model; ``identity``
+    (vendor id, product code) overrides 0x1018 sub 1/2; ``parameters`` {(index, subindex):
+    value} are the drive's stored values, restored instead of the EDS defaults on every reset.
     """
 
     def __init__(
@@ -153,6 +155,7 @@ class SimDrive:
         lag_cycles: int = 1,
         max_velocity_counts_s: float = 1e9,
         identity: tuple[int, int] | None = None,
+        parameters: dict[tuple[int, int], int] | None = None,
         name: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -164,6 +167,10 @@ class SimDrive:
         self.od = canopen.import_od(str(self.eds_path), node_id)
         self.identity = identity
         self.node = _DriveNode(node_id, self.od, self)
+        self._stored = self._encode_parameters(parameters or {})
+        if identity is not None:
+            self._stored[(c.IDENTITY, 1)] = struct.pack("<I", identity[0])
+            self._stored[(c.IDENTITY, 2)] = struct.pack("<I", identity[1])
         self.servo = ServoModel(lag_cycles, max_velocity_counts_s)
         self.recorder = SetpointRecorder()
         self.stats = DriveStats()
@@ -286,7 +293,8 @@ class SimDrive:
         self._state = State.SWITCH_ON_DISABLED  # transitions 0 and 1 are automatic
         self.transitions: list[int] = [0, 1]
         self.controlword = 0
-        self.mode = int(self.od[c.MODES_OF_OPERATION].default)
+        stored_mode = self._stored.get((c.MODES_OF_OPERATION, 0))
+        self.mode = self.od[c.MODES_OF_OPERATION].decode_raw(stored_mode) if stored_mode else int(self.od[c.MODES_OF_OPERATION].default)
         self.mode_display = self.mode
         self.target_position = 0
         self.ip_setpoint = 0
@@ -318,11 +326,11 @@ class SimDrive:
         for index in list(store):
             if reset_application or 0x1000 <= index <= 0x1FFF:
                 del store[index]
+        for (index, subindex), data in self._stored.items():
+            if reset_application or 0x1000 <= index <= 0x1FFF:
+                store.setdefault(index, {})[subindex] = data
         if reset_application:
             self._init_application()
-            if self.identity is not None:
-                vendor_id, product_code = self.identity
-                store[c.IDENTITY] = {1: struct.pack("<I", vendor_id), 2: struct.pack("<I", product_code)}
         self._pending.clear()
         self._load_parameters()
         self._rebuild_all_pdos()
@@ -330,6 +338,15 @@ class SimDrive:
         self.nmt_state = NmtState.PRE_OPERATIONAL
         self._next_heartbeat = self._clock() + self._heartbeat_period_s
         log.info(kv("sim.boot", node=self.node_id, reset_application=reset_application))
+
+    def _encode_parameters(self, parameters: dict[tuple[int, int], int]) -> dict[tuple[int, int], bytes]:
+        encoded = {}
+        for (index, subindex), value in parameters.items():
+            var = pdo_layout.find_variable(self.od, index, subindex)
+            if var is None:
+                raise ValueError(f"node {self.node_id}: no object 0x{index:04X} sub {subindex} in {self.eds_path}")
+            encoded[(index, subindex)] = var.encode_raw(value)
+        return encoded
 
     def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
         if len(data) < 2 or data[1] not in (0, self.node_id):

@@ -22,6 +22,24 @@ log = logging.getLogger(__name__)
 NOTIFIER_CYCLE_S = 0.1
 
 
+MODE_OF_AXIS = {"ip": 7, "csp": 8}
+UNLIMITED_VELOCITY_COUNTS_S = 1e12
+
+
+def period_as_value_exponent(period_s: float) -> tuple[int, int]:
+    """0x60C2 encoding of a period: value (UINT8) * 10**exponent s; exact with the smallest
+    value if possible (1 ms = 1e-3), else the most precise."""
+    for exponent in range(0, -7, -1):
+        value = round(period_s / 10.0**exponent)
+        if 1 <= value <= 255 and abs(value * 10.0**exponent - period_s) <= 1e-12:
+            return value, exponent
+    for exponent in range(-6, 1):  # not exact: the closest value that fits
+        value = round(period_s / 10.0**exponent)
+        if 1 <= value <= 255:
+            return value, exponent
+    raise ValueError(f"period {period_s} s cannot be encoded in 0x60C2")
+
+
 class SimNetwork:
     """Any number of :class:`SimDrive` on one bus (``interface``/``channel`` as python-can).
 
@@ -51,6 +69,36 @@ class SimNetwork:
             drive.attach(self.network)
             self._wake.set()
         return drive
+
+    @classmethod
+    def for_machine(cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None) -> "SimNetwork":
+        """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
+        bus.interface/channel/bitrate, cycle_period_s, axes[].name/node_id/mode/eds/identity).
+
+        Each drive is commissioned for the machine: its stored 0x6060 is the axis mode and
+        its stored 0x1006 / 0x60C2 the machine cycle; a master still writes what it needs.
+        """
+        bus = machine.bus
+        net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+        value, exponent = period_as_value_exponent(machine.cycle_period_s)
+        for axis in machine.axes:
+            identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
+            parameters = {
+                (0x6060, 0): MODE_OF_AXIS[axis.mode],
+                (0x1006, 0): int(round(machine.cycle_period_s * 1e6)),
+                (0x60C2, 1): value,
+                (0x60C2, 2): exponent,
+            }
+            net.add_drive(
+                axis.node_id,
+                axis.eds,
+                lag_cycles=lag_cycles,
+                max_velocity_counts_s=max_velocity_counts_s or UNLIMITED_VELOCITY_COUNTS_S,
+                identity=identity,
+                parameters=parameters,
+                name=f"{axis.name}/node{axis.node_id}",
+            )
+        return net
 
     def __getitem__(self, node_id: int) -> SimDrive:
         return self.drives[node_id]
