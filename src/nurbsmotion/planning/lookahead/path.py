@@ -52,6 +52,7 @@ class PathGrid:
     curv: NDArray[np.float64]  # (N, 3) x_ss (curvature vector)
     dcurv: NDArray[np.float64]  # (N, 3) x_sss
     feed_mm_s: NDArray[np.float64]  # (N,) programmed feed of the point's block
+    position: NDArray[np.float64]  # (N, 3) x
     pieces: tuple[BlockPiece, ...]
 
     def __len__(self) -> int:
@@ -99,8 +100,8 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
 
 
 def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-    """(x_s, x_ss, x_sss, du/ds, d2u/ds2) at each u (module docstring)."""
-    _, d1, d2, d3 = curve.derivatives(u, 3)
+    """(x, x_s, x_ss, x_sss, du/ds, d2u/ds2) at each u (module docstring)."""
+    x, d1, d2, d3 = curve.derivatives(u, 3)
     sigma = np.maximum(np.linalg.norm(d1, axis=1), TINY_SPEED)
     t = d1 / sigma[:, None]
     sigma1 = np.einsum("ij,ij->i", t, d2)
@@ -109,7 +110,7 @@ def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[N
     n1 = d3 * sigma[:, None] - d1 * sigma2[:, None]
     curv = n / sigma[:, None] ** 3
     dcurv = n1 / sigma[:, None] ** 4 - 3.0 * n * (sigma1 / sigma**5)[:, None]
-    return t, curv, dcurv, 1.0 / sigma, -sigma1 / sigma**3
+    return x, t, curv, dcurv, 1.0 / sigma, -sigma1 / sigma**3
 
 
 def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -123,20 +124,20 @@ def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
 
 def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     """The grid of a run of pieces (consecutive pieces meet at their ends)."""
-    parts: dict[str, list] = {k: [] for k in ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed")}
+    parts: dict[str, list] = {k: [] for k in ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed", "position")}
     offset = 0.0
     for index, piece in enumerate(pieces):
         u = piece_u_grid(piece, spacing_mm)
         ds = gauss_lengths(piece.curve, u[:-1], u[1:])
         s = offset + np.concatenate([[0.0], np.cumsum(ds)])
-        t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
+        x, t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
         for key, value in (("s", s), ("u", u), ("u_s", u_s), ("u_ss", u_ss), ("tangent", to_3d(t)),
-                           ("curv", to_3d(curv)), ("dcurv", to_3d(dcurv))):
+                           ("curv", to_3d(curv)), ("dcurv", to_3d(dcurv)), ("position", to_3d(x))):
             parts[key].append(value)
         parts["piece"].append(np.full(len(u), index, dtype=np.int32))
         parts["feed"].append(np.full(len(u), piece.feed_mm_s))
         offset = float(s[-1])
     cat = {k: np.concatenate(v) for k, v in parts.items()}
     return PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"],
-                    tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"],
+                    tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"], position=cat["position"],
                     pieces=tuple(pieces))

@@ -39,7 +39,9 @@ ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
 MAX_SPACING_MM = 0.5
 MIN_SPACING_MM = 0.005
-PART_TOLERANCE = 1e-9  # relative difference at which the stop and free scans are said to part
+WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
+PART_TOLERANCE = 1e-9
+NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
 
 
 class PlanningError(InputError):
@@ -89,6 +91,8 @@ class Cursor:
     before: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
     previous: Samples | None = None
     at_rest: bool = True  # the run starts here: sample t = 0 too
+    run_s_mm: float = 0.0  # arc length along the run at the cursor
+    carry: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None  # repairs so far
 
 
 @dataclass(eq=False)
@@ -111,28 +115,39 @@ class PlanSettings:
     tau_f: float
     spacing_mm: float
     window_mm: float
+    stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
 
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
     tau_f = averaging_time_s(limits)
     spacing = float(np.clip(max_feed_mm_s * limits.period_s / 2.0, MIN_SPACING_MM, MAX_SPACING_MM))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
-    window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 2.0 * stop
-    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window)
+    window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop)
 
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
-    """Pieces from the cursor on, at least ``length_mm`` long (or to the run's end)."""
-    first = run.pieces[cursor.piece_index]
-    pieces = [BlockPiece(first.block, first.curve, cursor.u, first.u_end, first.feed_mm_s)]
-    total = first.curve.length - float(first.curve.arc_length(cursor.u))
+    """Pieces from the cursor on, about ``length_mm`` long (or to the run's end); a long block
+    is cut inside (at the arc length that completes the window)."""
+    pieces: list[BlockPiece] = []
+    total = 0.0
     i = cursor.piece_index
-    while total < length_mm and i + 1 < len(run.pieces):
+    while True:
+        piece = run.pieces[i]
+        u_start = cursor.u if i == cursor.piece_index else piece.u_start
+        s_start = float(piece.curve.arc_length(u_start)) if u_start > piece.curve.u_min else 0.0
+        s_end = float(piece.curve.arc_length(piece.u_end)) if piece.u_end < piece.curve.u_max else piece.curve.length
+        if total + (s_end - s_start) > WINDOW_CUT_FACTOR * length_mm:
+            u_cut = float(piece.curve.u_at_arc_length(s_start + max(length_mm - total, MIN_SPACING_MM)))
+            pieces.append(BlockPiece(piece.block, piece.curve, u_start, u_cut, piece.feed_mm_s))
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
+        pieces.append(BlockPiece(piece.block, piece.curve, u_start, piece.u_end, piece.feed_mm_s))
+        total += s_end - s_start
+        if i + 1 == len(run.pieces):
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], True
+        if total >= length_mm:
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
         i += 1
-        pieces.append(run.pieces[i])
-        total += run.pieces[i].curve.length
-    speeds = run.junction_speed_mm_s[cursor.piece_index:i]
-    return tuple(pieces), tuple(speeds), i + 1 == len(run.pieces)
 
 
 def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[float, ...],
@@ -171,25 +186,41 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     return s, speed_profile(s, cap, sub)
 
 
-def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool,
-                 commit_until_s: float) -> NDArray[np.float64]:
-    """Times of the set-points this window emits (t = 0 is the cursor's set-point)."""
+def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool) -> NDArray[np.float64]:
+    """Times of the set-points of this window (t = 0 is the cursor's set-point): to rest on a
+    cycle boundary at the run's end; else every cycle until the window's stop."""
     period = settings.limits.period_s
+    duration = raw.end_time_s + settings.tau_f
     if final:
-        duration = raw.end_time_s + settings.tau_f
         times = jp.cycle_times(duration, period) if cursor.at_rest else jp.warped_cycle_times(duration, period)
     else:
-        times = np.arange(int(np.floor(commit_until_s / period + 1e-9)) + 1) * period
+        times = np.arange(int(np.floor(duration / period)) + 1) * period
     return times if cursor.at_rest else times[1:]
 
 
+def carried_repairs(grid: PathGrid, cursor: Cursor) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Speed caps and acceleration scales the previous window's repairs set on this window's path."""
+    speed_cap = np.full(len(grid), NO_CAP)
+    accel_scale = np.ones(len(grid))
+    if cursor.carry is not None:
+        run_s, caps, scales = cursor.carry
+        here = grid.s + cursor.run_s_mm
+        inside = here <= run_s[-1]
+        speed_cap[inside] = np.interp(here[inside], run_s, caps)
+        accel_scale[inside] = np.interp(here[inside], run_s, scales)
+    return speed_cap, accel_scale
+
+
 def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: float) -> WindowPlan:
-    """Plan, sample, verify and repair one window of a run."""
+    """Plan, sample, verify and repair one window of a run.
+
+    A window that does not reach the run's end is sampled and verified up to its stop at the
+    window's end, so the committed set-points always have a verified way to stop."""
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
     grid = build_grid(pieces, settings.spacing_mm)
-    speed_cap = np.full(len(grid), np.inf)
-    accel_scale = np.ones(len(grid))
+    speed_cap, accel_scale = carried_repairs(grid, cursor)
     idx = scan_grid(grid, cursor.raw_offset_mm)
+    period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
@@ -200,12 +231,14 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
             _, x_free = raw_for(grid, idx, x_cap, bounds, cursor, end_free=True)
             parted = np.flatnonzero(x < x_free * (1 - PART_TOLERANCE) - 1e-12)
             part_s = s_raw[parted[0]] if len(parted) else s_raw[-1]
-            k = int(np.searchsorted(raw.s, part_s, side="left"))
-            commit_t = float(raw.t[min(k, len(raw.t) - 1)]) - 2.0 * settings.limits.period_s
-            if commit_t < 2.0 * settings.limits.period_s:
+            # leave a stopping distance before the parting point, so a repair the next window
+            # needs where this one did not look still has room to slow down
+            k = int(np.searchsorted(raw.s, part_s - settings.stop_mm, side="left"))
+            commit_t = float(raw.t[min(k, len(raw.t) - 1)]) - 2.0 * period
+            if commit_t < 2.0 * period:
                 raise _WindowTooShort()
         full_raw = jp.prepend_history(cursor.history, raw) if cursor.history is not None else raw
-        times = sample_times(raw, cursor, settings, reaches_end, commit_t)
+        times = sample_times(raw, cursor, settings, reaches_end)
         s = np.clip(jp.filtered_position(full_raw, times, settings.tau_f), 0.0, grid.length_mm)
         if reaches_end:
             s[-1] = grid.length_mm
@@ -214,18 +247,24 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         previous_s = np.concatenate([[0.0], s[:-1]]) if not cursor.at_rest else np.concatenate([[s[0]], s[:-1]])
         planned_ds = s - previous_s
         end = samples.position_mm[-1:]
-        after = np.repeat(end, 3, axis=0) if reaches_end else np.zeros((0, 3))
+        after = np.repeat(end, 3, axis=0)
         before = cursor.before if len(cursor.before) else np.repeat(samples.position_mm[:1], 3, axis=0)
-        result = check(grid, samples, planned_ds, settings.machine, before, after, cursor.previous)
+        result = check(grid, samples, s, planned_ds, settings.machine, before, after, cursor.previous)
         bad = result.violations()
         if not bad:
             break
         if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
             raise _violation_error(pieces, samples, result, bad)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
+    if not reaches_end:
+        keep = times <= commit_t
+        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep])
+        s, planned_ds, times = s[keep], planned_ds[keep], times[keep]
     blocks = np.array([pieces[p].block for p in samples.piece], dtype=np.int32)
-    next_cursor = None if reaches_end else next_window_cursor(run, cursor, pieces, samples, s, times, full_raw,
-                                                              settings)
+    next_cursor = None
+    if not reaches_end:
+        next_cursor = next_window_cursor(run, cursor, pieces, samples, s, times, full_raw, settings)
+        next_cursor.carry = (grid.s + cursor.run_s_mm, speed_cap, accel_scale)
     return WindowPlan(samples, s, planned_ds, result, repairs, reaches_end, next_cursor, blocks)
 
 
@@ -247,12 +286,13 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
            speed_cap: NDArray[np.float64], accel_scale: NDArray[np.float64]) -> None:
     """Lower the speed cap around every violating set-point by its violation ratio."""
     v_grid = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
-    reach = settings.tau_f * np.sqrt(max(float(x.max()), 0.0)) + 2.0 * settings.spacing_mm
+    v_rows = np.sqrt(np.maximum(np.interp(s, s_raw, x), 0.0))
     for name, rows in bad.items():
         if name == "fluctuation":
             continue
         ratio = getattr(result, name)[rows]
         factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
+        reach = settings.tau_f * v_rows[rows] + 2.0 * settings.spacing_mm
         lo = s[np.maximum(rows - 3, 0)] - reach
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
@@ -279,7 +319,8 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
     assert run.pieces[piece_index].block == piece.block
     positions = np.concatenate([cursor.before, samples.position_mm])[-3:]
     last = Samples(samples.piece[-1:] * 0, samples.u[-1:], samples.position_mm[-1:])
-    return Cursor(piece_index, float(samples.u[-1]), raw_s - s_cut, raw_v, history, positions, last, at_rest=False)
+    return Cursor(piece_index, float(samples.u[-1]), raw_s - s_cut, raw_v, history, positions, last, at_rest=False,
+                  run_s_mm=cursor.run_s_mm + s_cut)
 
 
 def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],

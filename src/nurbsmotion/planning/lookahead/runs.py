@@ -6,9 +6,10 @@ At the junction of two blocks with tangent deflection theta the speed is limited
 - the discrete second difference: a set-point step turning by theta changes the velocity
   vector by 2 v sin(theta/2) within one cycle, so v <= A T / (2 sin(theta/2));
 - with a jerk limit, the discrete third difference: v <= J T^2 / (2 sin(theta/2)).
-Tangent-continuous joins (theta = 0) pass without slowing. A junction speed of 0 (zero
-junction deviation, or a reversal) is an exact stop: the program is split there into runs,
-each planned from rest to rest, and the stop lands on a cycle boundary.
+Tangent-continuous joins (theta = 0) pass without slowing. A junction speed at or below
+what one cycle of acceleration (A T) or, with a jerk limit, of jerk (J T^2) gives is an
+exact stop (passing that slowly gains nothing: it is the speed of the first cycles after a
+stop); so are zero junction deviation and reversals. An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
 """
 
 from __future__ import annotations
@@ -55,9 +56,12 @@ def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits) -> f
     cos_half = math.sqrt(max(1.0 - sin_half * sin_half, 0.0))  # sin(phi/2), phi = pi - theta
     deviation = math.sqrt(accel * limits.junction_deviation_mm * cos_half / (1.0 - cos_half)) if cos_half < 1 else math.inf
     v = min(deviation, accel * limits.period_s / (2.0 * sin_half))
+    stop_below = accel * limits.period_s
     if limits.max_jerk_mm_s3 is not None:
-        v = min(v, MARGIN * limits.max_jerk_mm_s3 * limits.period_s**2 / (2.0 * sin_half))
-    return v
+        jerk = MARGIN * limits.max_jerk_mm_s3
+        v = min(v, jerk * limits.period_s**2 / (2.0 * sin_half))
+        stop_below = jerk * limits.period_s**2
+    return v if v > stop_below else 0.0
 
 
 def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:

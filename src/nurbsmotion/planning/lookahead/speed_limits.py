@@ -8,7 +8,8 @@ tangent, c = x_ss the curvature vector and c' = x_sss:
 - feed: v <= F (limits.feed_for of the block);
 - chord error: a step of length dL on radius rho sags rho - sqrt(rho^2 - dL^2/4), so
   dL <= 2 sqrt(delta (2 rho - delta)); v <= dL / T with rho the smallest radius within one
-  step either side (a sliding minimum over +-dL, not the radius at the point);
+  step either side (a sliding minimum over +-dL, dL starting at F T, not the radius at the
+  point);
 - axis velocity: |t_i| v <= vmax_i;
 - resultant acceleration: a_t^2 + (|c| x)^2 <= A^2;
 - axis acceleration: |t_i a_t + c_i x| <= amax_i;
@@ -79,8 +80,8 @@ def chord_step_mm(kappa: NDArray[np.float64], chord_mm: float) -> NDArray[np.flo
 def chord_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     """v <= dL(rho_min over +-dL) / T, rho_min the smallest radius within a step either side."""
     kappa = np.linalg.norm(grid.curv, axis=1)
-    step = chord_step_mm(kappa, caps.chord_error_mm)
-    for _ in range(2):  # the window depends on the step it limits: two fixed-point passes
+    step = np.minimum(chord_step_mm(kappa, caps.chord_error_mm), grid.feed_mm_s * caps.period_s)
+    for _ in range(3):  # the window depends on the step it limits: fixed-point passes
         kappa_max = -sliding_min(grid.s, -kappa, step)
         step = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
     return step / caps.period_s
@@ -177,18 +178,23 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
     moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
 
-    Done per speed level L (geometric, ratio DIP_LEVEL_RATIO): the limits <= L spread over a
-    fixed +-L tau (at most DIP_LEVEL_RATIO x their own width: on the safe side)."""
-    finite = v[np.isfinite(v)]
+    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels): the limits in a band
+    spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
+    side). The two ends (the run's start and end states) are not dips and do not spread."""
+    inner = v.copy()
+    inner[0] = inner[-1] = np.inf
+    finite = inner[np.isfinite(inner)]
     if averaging_s <= 0 or len(finite) == 0:
         return v
     top = float(finite.max())
     level = max(float(finite.min()), 1e-3 * top, 1e-9)
     out = v.copy()
+    floor = -np.inf
     while True:
-        low = np.where(v <= level, v, np.inf)
+        band = np.where((inner <= level) & (inner > floor), inner, np.inf)
         width = np.full(len(s), DIP_WIDTH_FACTOR * level * averaging_s)
-        out = np.minimum(out, sliding_min(s, low, width))
+        out = np.minimum(out, sliding_min(s, band, width))
         if level >= top:
+            out[0], out[-1] = v[0], v[-1]
             return out
-        level = min(level * DIP_LEVEL_RATIO, top)
+        floor, level = level, min(level * DIP_LEVEL_RATIO, top)

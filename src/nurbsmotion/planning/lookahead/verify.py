@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import _GL_NODES, _GL_WEIGHTS, PathGrid, to_3d
+from nurbsmotion.planning.lookahead.path import _GL_NODES, _GL_WEIGHTS, PathGrid, gauss_lengths, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
 
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
@@ -125,24 +125,54 @@ def smooth_part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64],
     return arc, dist
 
 
-def step_figures(grid: PathGrid, samples: Samples, previous: Samples | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def arc_lengths_at(grid: PathGrid, piece: NDArray[np.int32], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Arc length from each piece's start to u, by composite 5-point Gauss-Legendre on the
+    piece's grid, the curve's knots and the set-points themselves (every sub-interval short
+    and smooth, so the rule is exact to rounding)."""
+    out = np.empty(len(u))
+    for q in np.unique(piece):
+        sel = piece == q
+        part = grid.pieces[int(q)]
+        knots = part.curve.breakpoints
+        cuts = np.unique(np.concatenate([grid.u[grid.piece == q], u[sel],
+                                         knots[(knots > part.u_start) & (knots < part.u_end)]]))
+        cumulative = np.concatenate([[0.0], np.cumsum(gauss_lengths(part.curve, cuts[:-1], cuts[1:]))])
+        out[sel] = cumulative[np.searchsorted(cuts, u[sel])]
+    return out
+
+
+def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np.float64], a: NDArray[np.float64],
+                      b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest distance of the grid points inside each step (s_prev, s) from its chord a-b:
+    catches sharp turns shorter than the step, which a few samples per step could miss."""
+    out = np.zeros(len(s))
+    step = np.searchsorted(s, grid.s, side="left")
+    inside = (step < len(s)) & (grid.s > s_prev[np.minimum(step, len(s) - 1)])
+    k = step[inside]
+    d = distance_to_chord(grid.position[inside][:, None, :], a[k], b[k])[:, 0]
+    np.maximum.at(out, k, d)
+    return out
+
+
+def step_figures(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
+                 previous: Samples | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Arc length and chord error of every step ending at a set-point of ``samples``
-    (step 0 joins the last set-point of ``previous``; without one it is 0)."""
+    (step 0 joins the last set-point of ``previous`` at s = 0; without one it is 0)."""
     piece, u, p = samples.piece, samples.u, samples.position_mm
-    if previous is not None and len(previous.u):
+    start = previous is not None and len(previous.u) > 0
+    if start:
         piece = np.concatenate([previous.piece[-1:], piece])
         u = np.concatenate([previous.u[-1:], u])
         p = np.concatenate([previous.position_mm[-1:], p])
-        offset = 0
-    else:
-        offset = 1
-    n = len(u)
-    arc, chord = np.zeros(n - 1), np.zeros(n - 1)
+        s = np.concatenate([[0.0], s])
+    along = arc_lengths_at(grid, piece, u)
     same = piece[1:] == piece[:-1]
+    arc = np.where(same, along[1:] - along[:-1], 0.0)
+    chord = np.zeros(len(u) - 1)
     for q in np.unique(piece[1:][same]):
         sel = np.flatnonzero(same & (piece[1:] == q))
         curve = grid.pieces[int(q)].curve
-        arc[sel], chord[sel] = smooth_part_figures(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])
+        chord[sel] = smooth_part_figures(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])[1]
     for i in np.flatnonzero(~same):  # steps across junctions: the parts of every piece touched
         a, b = p[i:i + 1], p[i + 1:i + 2]
         for q in range(int(piece[i]), int(piece[i + 1]) + 1):
@@ -153,9 +183,10 @@ def step_figures(grid: PathGrid, samples: Samples, previous: Samples | None) -> 
             ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
             arc[i] += length[0]
             chord[i] = max(chord[i], dist[0], float(distance_to_chord(ends, a, b).max()))
-    if offset:
-        return np.concatenate([[0.0], arc]), np.concatenate([[0.0], chord])
-    return arc, chord
+    chord = np.maximum(chord, grid_chord_errors(grid, s[:-1], s[1:], p[:-1], p[1:]))
+    if start:
+        return arc, chord
+    return np.concatenate([[0.0], arc]), np.concatenate([[0.0], chord])
 
 
 def rows_max(values: NDArray[np.float64], rows: NDArray[np.intp], n: int) -> NDArray[np.float64]:
@@ -165,7 +196,7 @@ def rows_max(values: NDArray[np.float64], rows: NDArray[np.intp], n: int) -> NDA
     return out
 
 
-def check(grid: PathGrid, samples: Samples, planned_ds: NDArray[np.float64], limits: MachineLimits,
+def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: NDArray[np.float64], limits: MachineLimits,
           before: NDArray[np.float64], after: NDArray[np.float64], previous: Samples | None) -> Check:
     """All figures of a stretch of n set-points. ``before``: the 3 positions preceding it (the
     start held at rest, or the previous stretch's last three); ``after``: the positions
@@ -183,7 +214,7 @@ def check(grid: PathGrid, samples: Samples, planned_ds: NDArray[np.float64], lim
     accel_vec = second[j2] / period**2
     accel = rows_max(np.linalg.norm(accel_vec, axis=1), j2 + 1 - nb, n)
     jerk = rows_max(np.linalg.norm(third[j3], axis=1) / period**3, j3 + 2 - nb, n)
-    arc, chord = step_figures(grid, samples, previous)
+    arc, chord = step_figures(grid, samples, s, previous)
     planned = np.asarray(planned_ds, dtype=float)
     moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
     safe = np.where(moving, planned, 1.0)
