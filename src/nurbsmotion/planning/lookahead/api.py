@@ -152,7 +152,7 @@ def start_from_state(program: Program, runs: list[Run], state: PlanState, settin
     tail = Run(run.pieces[p:], run.junction_speed_mm_s[p:])
     v, a, tau = state.v_mm_s, state.a_mm_s2, settings.tau_f
     period = settings.limits.period_s
-    back = np.array([3.0, 2.0, 1.0]) * period
+    back = np.array([2.0, 1.0, 0.0]) * period  # the last is the state itself
     before_s = state.s_mm - v * back + 0.5 * a * back**2
     before = np.array([point_at(runs, s) for s in before_s])
     if v <= 0.0 and a <= 0.0:

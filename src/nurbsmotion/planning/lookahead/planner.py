@@ -41,6 +41,7 @@ MAX_SPACING_MM = 0.5
 MIN_SPACING_MM = 0.005
 WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
 PART_TOLERANCE = 1e-9
+START_BRAKE_SHARE = 0.7  # share of A used to brake from a running start above the new caps
 NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
 
 
@@ -181,6 +182,10 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     else:
         take = np.concatenate([idx[:1], idx])
         sub = AccelBounds(bounds.tangent[take], bounds.curv[take], bounds.caps, bounds.tangential_cap[take])
+    if cursor.raw_speed_mm_s > 0:
+        # a running start above the caps (a lowered feed override): brake down to them
+        ramp = cursor.raw_speed_mm_s**2 - 2.0 * START_BRAKE_SHARE * bounds.caps.accel_mm_s2 * (s - s[0])
+        cap = np.maximum(cap, ramp)
     if not end_free:
         cap[-1] = 0.0
     return s, speed_profile(s, cap, sub)
