@@ -121,7 +121,7 @@ class PlanSettings:
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
     tau_f = averaging_time_s(limits)
-    spacing = float(np.clip(max_feed_mm_s * limits.period_s / 2.0, MIN_SPACING_MM, MAX_SPACING_MM))
+    spacing = float(np.clip(max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
     return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop)
@@ -263,7 +263,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
     if not reaches_end:
         keep = times <= commit_t
-        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep])
+        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep], samples.arc_residual_mm[keep])
         s, planned_ds, times = s[keep], planned_ds[keep], times[keep]
     blocks = np.array([pieces[p].block for p in samples.piece], dtype=np.int32)
     next_cursor = None
@@ -323,7 +323,7 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
     piece_index = cursor.piece_index + int(samples.piece[-1])
     assert run.pieces[piece_index].block == piece.block
     positions = np.concatenate([cursor.before, samples.position_mm])[-3:]
-    last = Samples(samples.piece[-1:] * 0, samples.u[-1:], samples.position_mm[-1:])
+    last = Samples(samples.piece[-1:] * 0, samples.u[-1:], samples.position_mm[-1:], np.zeros(1))
     return Cursor(piece_index, float(samples.u[-1]), raw_s - s_cut, raw_v, history, positions, last, at_rest=False,
                   run_s_mm=cursor.run_s_mm + s_cut)
 

@@ -4,8 +4,9 @@ On grid interval k (s_k..s_k+1) u(s) is first the quintic Hermite interpolant of
 and d2u/ds2 at both ends; then Newton corrections on the true arc length,
   s(u) = s_k + integral_{u_k}^{u} |x'| du  (5-point Gauss-Legendre on the short interval),
   u <- u - (s(u) - s*) du/ds,
-until |s(u) - s*| <= ARC_TOLERANCE_MM (at most NEWTON_STEPS). The planned step of a cycle is
-then the arc length between consecutive set-points, to that tolerance.
+until |s(u) - s*| <= ARC_TOLERANCE_MM (at most NEWTON_STEPS). The final residual of every
+set-point is kept: the arc length of a step differs from its planned length by exactly
+the difference of the residuals at its ends, which is what the verification checks.
 """
 
 from __future__ import annotations
@@ -28,6 +29,7 @@ class Samples:
     piece: NDArray[np.int32]
     u: NDArray[np.float64]
     position_mm: NDArray[np.float64]
+    arc_residual_mm: NDArray[np.float64] | None = None  # s(u) - planned s of every set-point
 
 
 def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -58,32 +60,44 @@ def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
         k = np.where(zero, k - 1, k)
 
 
-def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Newton corrections of u on the true arc length (module docstring), per piece."""
+def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64],
+                  curve) -> NDArray[np.float64]:
+    """s(u) - s* with s(u) = s_k + integral_{u_k}^{u} |x'| (5-point Gauss-Legendre)."""
+    return grid.s[k] + gauss_lengths(curve, grid.u[k], u) - s
+
+
+def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64],
+                         u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Newton corrections of u on the true arc length (module docstring), per piece.
+    Returns u and the final residual s(u) - s* of every point (the measured arc error)."""
     u = u.copy()
+    residual = np.empty(len(u))
     pieces = grid.piece[k]
     for p in np.unique(pieces):
         sel = np.flatnonzero(pieces == p)
         curve = grid.pieces[int(p)].curve
         ks, target, uu = k[sel], s[sel], u[sel]
-        lo, hi = grid.u[ks], grid.u[ks + 1]
+        err = arc_residuals(grid, ks, target, uu, curve)
         for _ in range(NEWTON_STEPS):
-            err = grid.s[ks] + gauss_lengths(curve, grid.u[ks], uu) - target
-            if np.all(np.abs(err) <= ARC_TOLERANCE_MM):
+            todo = np.flatnonzero(np.abs(err) > ARC_TOLERANCE_MM)
+            if len(todo) == 0:
                 break
-            speed = np.linalg.norm(curve.derivatives(uu, 1)[1], axis=1)
-            uu = np.clip(uu - err / np.maximum(speed, TINY_SPEED), lo, hi)
+            kt = ks[todo]
+            speed = np.linalg.norm(curve.derivatives(uu[todo], 1)[1], axis=1)
+            uu[todo] = np.clip(uu[todo] - err[todo] / np.maximum(speed, TINY_SPEED), grid.u[kt], grid.u[kt + 1])
+            err[todo] = arc_residuals(grid, kt, target[todo], uu[todo], curve)
         u[sel] = uu
-    return u
+        residual[sel] = err
+    return u, residual
 
 
 def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
     """Set-points at arc lengths ``s`` (non-decreasing) of the grid's path."""
     k = grid_interval(grid, s)
-    u = newton_on_arc_length(grid, k, s, hermite_u(grid, k, s))
+    u, residual = newton_on_arc_length(grid, k, s, hermite_u(grid, k, s))
     pieces = grid.piece[k]
     position = np.empty((len(s), 3))
     for p in np.unique(pieces):
         sel = pieces == p
         position[sel] = to_3d(grid.pieces[int(p)].curve.points(u[sel]))
-    return Samples(piece=pieces.astype(np.int32), u=u, position_mm=position)
+    return Samples(piece=pieces.astype(np.int32), u=u, position_mm=position, arc_residual_mm=residual)

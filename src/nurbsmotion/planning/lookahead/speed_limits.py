@@ -14,7 +14,9 @@ tangent, c = x_ss the curvature vector and c' = x_sss:
 - resultant acceleration: a_t^2 + (|c| x)^2 <= A^2;
 - axis acceleration: |t_i a_t + c_i x| <= amax_i;
 - jerk (when J is set): x_sss v^3 + 3 c v a_t + t j dominate the path jerk, so
-  v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J.
+  v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J; where the
+  curvature vector jumps (knots of a degree-2 curve, a line meeting an arc) the second
+  difference jumps within two cycles: |dc| v^2 / (2 T) <= J.
 The acceleration constraints are convex in (x, a_t), so the speeds at which some a_t is
 admissible form an interval [0, x_max]: found by vectorised bisection.
 """
@@ -26,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid
+from nurbsmotion.planning.lookahead.path import PathGrid, arc_length_derivatives, to_3d
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.5  # share of J left to the path's own jerk terms on curves
@@ -162,11 +164,52 @@ class AccelBounds:
         return x
 
 
+def curvature_jumps(grid: PathGrid) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(s, |c+ - c-|) at every place where the curvature vector jumps: interior knots of a
+    piece (a degree-2 curve is only C1 there) and junctions of pieces (a line meeting an arc)."""
+    where, size = [], []
+    for index, piece in enumerate(grid.pieces):
+        knots = piece.curve.breakpoints
+        inner = knots[(knots > piece.u_start) & (knots < piece.u_end)]
+        if len(inner) == 0 or piece.curve.degree > 3:
+            continue
+        eps = 1e-9 * (piece.curve.u_max - piece.curve.u_min)
+        left = arc_length_derivatives(piece.curve, inner - eps)[2]
+        right = arc_length_derivatives(piece.curve, inner + eps)[2]
+        on_piece = np.flatnonzero(grid.piece == index)
+        k = on_piece[np.clip(np.searchsorted(grid.u[on_piece], inner), 0, len(on_piece) - 1)]
+        where.append(grid.s[k])
+        size.append(np.linalg.norm(to_3d(right - left), axis=1))
+    ends = np.flatnonzero(grid.junction)
+    where.append(grid.s[ends])
+    size.append(np.linalg.norm(grid.curv[ends + 1] - grid.curv[ends], axis=1))
+    return np.concatenate(where), np.concatenate(size)
+
+
+def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """Where the curvature vector jumps by dc, the second difference of the set-points jumps by
+    by |dc| v^2 T^2, shared between the two cycles around the step that crosses the jump:
+    third difference / T^3 ~ |dc| v^2 / (2 T) <= J, applied within one step (F T) of the
+    jump (the verify-and-repair loop checks what this estimate misses)."""
+    v = np.full(len(grid), np.inf)
+    if caps.jerk_mm_s3 is None:
+        return v
+    s_jump, dc = curvature_jumps(grid)
+    big = dc > TINY
+    for s0, jump in zip(s_jump[big], dc[big]):
+        limit = np.sqrt(2.0 * caps.jerk_mm_s3 * caps.period_s / jump)
+        reach = float(grid.feed_mm_s.max()) * caps.period_s
+        lo, hi = np.searchsorted(grid.s, [s0 - reach, s0 + reach])
+        v[lo:hi] = np.minimum(v[lo:hi], limit)
+    return v
+
+
 def static_speed_limit(grid: PathGrid, caps: Caps, feed_scale: NDArray[np.float64]) -> NDArray[np.float64]:
     """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s)."""
     v = np.minimum(grid.feed_mm_s, chord_speed_limit(grid, caps))
     v = np.minimum(v, axis_velocity_limit(grid, caps))
     v = np.minimum(v, jerk_speed_limit(grid, caps))
+    v = np.minimum(v, curvature_jump_speed_limit(grid, caps))
     return v * feed_scale
 
 

@@ -2,10 +2,12 @@
 
 Same definitions as planning.measure (the shared ruler), computed here on the planner's own
 stretch of set-points so violations can be located and repaired:
-- step n (from set-point n-1 to n): arc length on the true curve (5-point Gauss-Legendre per
-  block part) and chord error = largest distance of the curve between the two set-points from
-  their chord (the Gauss nodes, a parabola through the three best, the vertex evaluated, and
-  any block junction inside the step);
+- step n (from set-point n-1 to n): chord error = largest distance of the curve between the
+  two set-points from their chord (Gauss nodes of every part between knots, a parabola
+  through the three best and its vertex evaluated, every path grid point inside the step,
+  and any block junction inside the step); arc length on the true curve: the planned step
+  plus the difference of the two set-points' arc-length residuals (sampling.py: s(u) by
+  Gauss-Legendre from the nearest grid point, minus the planned s);
 - at set-point n: |p_n+1 - 2 p_n + p_n-1| / T^2 (acceleration), per axis too, and
   |p_n+1 - 3 p_n + 3 p_n-1 - p_n-2| / T^3 (jerk), with the positions before the stretch
   (history, or the start held at rest) and after it (the end held at rest) included;
@@ -125,22 +127,6 @@ def smooth_part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64],
     return arc, dist
 
 
-def arc_lengths_at(grid: PathGrid, piece: NDArray[np.int32], u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Arc length from each piece's start to u, by composite 5-point Gauss-Legendre on the
-    piece's grid, the curve's knots and the set-points themselves (every sub-interval short
-    and smooth, so the rule is exact to rounding)."""
-    out = np.empty(len(u))
-    for q in np.unique(piece):
-        sel = piece == q
-        part = grid.pieces[int(q)]
-        knots = part.curve.breakpoints
-        cuts = np.unique(np.concatenate([grid.u[grid.piece == q], u[sel],
-                                         knots[(knots > part.u_start) & (knots < part.u_end)]]))
-        cumulative = np.concatenate([[0.0], np.cumsum(gauss_lengths(part.curve, cuts[:-1], cuts[1:]))])
-        out[sel] = cumulative[np.searchsorted(cuts, u[sel])]
-    return out
-
-
 def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np.float64], a: NDArray[np.float64],
                       b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Largest distance of the grid points inside each step (s_prev, s) from its chord a-b:
@@ -154,9 +140,9 @@ def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np
     return out
 
 
-def step_figures(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
-                 previous: Samples | None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Arc length and chord error of every step ending at a set-point of ``samples``
+def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
+                      previous: Samples | None) -> NDArray[np.float64]:
+    """Chord error of every step ending at a set-point of ``samples``
     (step 0 joins the last set-point of ``previous`` at s = 0; without one it is 0)."""
     piece, u, p = samples.piece, samples.u, samples.position_mm
     start = previous is not None and len(previous.u) > 0
@@ -165,9 +151,7 @@ def step_figures(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
         u = np.concatenate([previous.u[-1:], u])
         p = np.concatenate([previous.position_mm[-1:], p])
         s = np.concatenate([[0.0], s])
-    along = arc_lengths_at(grid, piece, u)
     same = piece[1:] == piece[:-1]
-    arc = np.where(same, along[1:] - along[:-1], 0.0)
     chord = np.zeros(len(u) - 1)
     for q in np.unique(piece[1:][same]):
         sel = np.flatnonzero(same & (piece[1:] == q))
@@ -179,14 +163,11 @@ def step_figures(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
             part = grid.pieces[q]
             lo = u[i] if q == piece[i] else part.u_start
             hi = u[i + 1] if q == piece[i + 1] else part.u_end
-            length, dist = smooth_part_figures(part.curve, np.array([lo]), np.array([hi]), a, b)
+            dist = smooth_part_figures(part.curve, np.array([lo]), np.array([hi]), a, b)[1]
             ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
-            arc[i] += length[0]
             chord[i] = max(chord[i], dist[0], float(distance_to_chord(ends, a, b).max()))
     chord = np.maximum(chord, grid_chord_errors(grid, s[:-1], s[1:], p[:-1], p[1:]))
-    if start:
-        return arc, chord
-    return np.concatenate([[0.0], arc]), np.concatenate([[0.0], chord])
+    return chord if start else np.concatenate([[0.0], chord])
 
 
 def rows_max(values: NDArray[np.float64], rows: NDArray[np.intp], n: int) -> NDArray[np.float64]:
@@ -214,11 +195,14 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     accel_vec = second[j2] / period**2
     accel = rows_max(np.linalg.norm(accel_vec, axis=1), j2 + 1 - nb, n)
     jerk = rows_max(np.linalg.norm(third[j3], axis=1) / period**3, j3 + 2 - nb, n)
-    arc, chord = step_figures(grid, samples, s, previous)
+    chord = step_chord_errors(grid, samples, s, previous)
     planned = np.asarray(planned_ds, dtype=float)
     moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
     safe = np.where(moving, planned, 1.0)
-    arc_fl = np.where(moving, np.abs(arc - planned) / safe, 0.0)
+    residual = samples.arc_residual_mm
+    residual_before = np.concatenate([[0.0 if previous is None or previous.arc_residual_mm is None
+                                       else previous.arc_residual_mm[-1]], residual[:-1]])
+    arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
     chord_fl = np.where(moving, np.abs(np.linalg.norm(step, axis=1) - planned) / safe, 0.0)
     zeros = np.zeros(n)
     axis_v = (np.max(np.abs(step) / period / limits.axis_velocity_mm_s, axis=1)
