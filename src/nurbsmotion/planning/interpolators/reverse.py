@@ -128,8 +128,9 @@ def build_reverse_table(reversed_path: CurvePath, feeds_mm_s: list[float], accel
         table.x.append(point.x)
         table.step_mm.append(chord)
         table.remaining_mm.append(table.remaining_mm[-1] + chord)
-        # the last, clamped step reaching the run's start keeps the feed it was planned with
-        table.feed_mm_s.append(planned / period_s if at_end else chord / period_s)
+        # on the final ramp V_k = L_k / T exactly (this keeps the phase, see module doc);
+        # beyond it V_achieve is only a cap, and the planned feed avoids the predictor's noise
+        table.feed_mm_s.append(chord / period_s if ramping and not at_end else v_step)
         if at_end:
             table.complete = True
             break

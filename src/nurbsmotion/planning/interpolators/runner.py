@@ -101,8 +101,10 @@ class RunPlanner:
         # the next step, so the limits hold for the feed the set-points really show
         self.compensate = method.adaptive and not method.correct
         self.stepper = Stepper(method.taylor_order, method.correct, limits.chord_error_mm)
+        # the reverse interpolation uses Wang's eq. 19 (second-order Taylor) for every method:
+        # its chords are measured, so the predictor's error does not enter V_achieve
         self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
-                                         self.stepper, self.period)
+                                         Stepper(2, False, limits.chord_error_mm), self.period)
         self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
