@@ -29,7 +29,8 @@ import numpy as np
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.interpolators.feed import FeedLimits
-from nurbsmotion.planning.interpolators.reverse import ReverseTable, build_reverse_table
+from nurbsmotion.planning.interpolators.reverse import build_reverse_table
+from nurbsmotion.planning.interpolators.slowdown import SlowdownProfile
 from nurbsmotion.planning.interpolators.stepping import (
     CurvePath,
     PathPoint,
@@ -105,6 +106,7 @@ class RunPlanner:
         # its chords are measured, so the predictor's error does not enter V_achieve
         self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
                                          Stepper(2, False, limits.chord_error_mm), self.period)
+        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, self.limits, self.accel)
         self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
@@ -176,7 +178,6 @@ class RunPlanner:
         profile = 0.0  # Wang's pre-interpolation linear acc/dec feed
         ramp = self.accel * period
         k_ahead = len(table) - 1  # index of the first table point not yet passed
-        final_zone = table.remaining_mm[table.final_ramp]  # S below which the table places the points
         tracked = None  # remaining length while the table places the points
         radius_before = math.inf  # radius of curvature at the previous set-point
         before_x = here.x  # the previous set-point (at rest before the start)
@@ -191,9 +192,15 @@ class RunPlanner:
             profile = min(profile + ramp, self.feeds[here.j])
             radius_here = radius_of_curvature(here.d1, here.d2)
             radius = min(radius_here, radius_before)  # the set-point's acceleration spans both steps
-            v_next = self.limits.feed(profile, v_in, radius)
+            # slow-downs still to come, read where this step will end (first-order estimate)
+            d1 = here.d1
+            u_end = here.u + (v_in + ramp) * period / math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+            ahead = self.slowdown.feed(here.j, u_end)
+            if v_achieve != math.inf and v_achieve > ahead:
+                ahead = v_achieve  # near the stop the table decides (it lands exactly)
+            v_next = self.limits.feed(min(profile, ahead), v_in, radius)
             done = False
-            if v_achieve <= v_next and s_now <= final_zone:  # Wang: decelerate into the stop
+            if v_achieve <= v_next:  # Wang: decelerate into the stop
                 step = v_achieve * period
                 tracked = s_now - step
                 if tracked <= 1e-12 * (1.0 + s_now) or step <= 0.0:
@@ -202,17 +209,21 @@ class RunPlanner:
                 else:
                     point = self.forward_point(table.point_at(tracked))
             else:  # the method's own step, at most V_achieve (slow-downs ahead)
-                v_step = min(v_next, v_achieve)
+                v_step = v_next
                 point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
-                radius_after = radius_of_curvature(point.d1, point.d2)
-                if radius_after < radius and not done:  # the step ends in tighter curvature: limit by it too
-                    v_tighter = self.limits.feed(profile, v_in, radius_after)
-                    if v_tighter < v_step * (1.0 - 1e-12):
-                        v_step = v_tighter
+                if not done:  # the step must also respect the limits where it ends
+                    radius_after = radius_of_curvature(point.d1, point.d2)
+                    v_after = self.slowdown.feed(point.j, point.u)
+                    if radius_after < radius:
+                        v_after = min(v_after, self.limits.feed(profile, v_in, radius_after))
+                    if v_after < v_step * (1.0 - 1e-12):
+                        v_step = v_after
                         point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
+                v_step = min(v_step, step * ratio / period)  # Zhang's midpoint rule may shorten it
                 if self.limits.adaptive and not done:
-                    point, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
-                    v_step = min(v_step, step * ratio / period)
+                    checked, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
+                    if checked is not point:
+                        point, v_step = checked, step * ratio / period
                 if self.compensate and step > 0.0 and not done:
                     ratio = distance(point.x, here.x) / step
                 step = v_step * period  # the commanded feed of this step, times T
