@@ -71,6 +71,7 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "repairs": float(figures.repairs),
         "windows": float(figures.windows),
         "runs": float(runs),
+        "stops": float(max(runs - 1, 0)),  # exact stops inside the program (corners)
     }
     if limits.max_jerk_mm_s3 is not None:
         notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3

@@ -49,7 +49,6 @@ NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be inte
 class PlanningError(InputError):
     """The limits cannot be held on every cycle at some place of the program."""
 
-    carry: tuple | None = None  # the failing window's repairs, in run coordinates
 
 
 def caps_for(limits: PlanLimits) -> Caps:
@@ -267,9 +266,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         if not bad:
             break
         if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
-            error = _violation_error(pieces, samples, result, bad)
-            error.carry = (grid.s + cursor.run_s_mm, speed_cap, accel_scale)
-            raise error
+            raise _violation_error(pieces, samples, result, bad)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
     if not reaches_end:
         keep = times <= commit_t
@@ -355,9 +352,10 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
              cursor: Cursor | None = None) -> Iterator[WindowPlan]:
     """All windows of one run, to rest at its end; from rest at its start unless ``cursor`` says otherwise.
 
-    One window is held back: when a window cannot be repaired because the repair would have
-    to start before its first set-point, the held-back window is planned again with that
-    window's repairs (at most MAX_BACKTRACKS times in a row)."""
+    One window is held back: when a window cannot be repaired (typically because the repair
+    would have to start before its first set-point), the held-back window is planned again
+    with twice the look-ahead, so it meets the trouble far enough ahead to slow down for it
+    (at most MAX_BACKTRACKS times in a row)."""
     cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
     length = settings.window_mm
     pending: WindowPlan | None = None
@@ -369,11 +367,11 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
         except _WindowTooShort:
             length *= 2.0
             continue
-        except PlanningError as err:
-            if pending is None or backtracks >= MAX_BACKTRACKS or err.carry is None:
+        except PlanningError:
+            if pending is None or backtracks >= MAX_BACKTRACKS:
                 raise
             backtracks += 1
-            pending_cursor.carry = merge_carry(pending_cursor.carry, err.carry)
+            length *= 2.0
             pending = plan_window(run, pending_cursor, settings, length)
             cursor = pending.cursor
             continue
