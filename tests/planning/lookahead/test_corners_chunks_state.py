@@ -39,7 +39,7 @@ def test_a_shallow_corner_is_passed_moving_within_limits(limits):
 
 def test_chunks_hold_the_limits_across_their_joins(wang_program):
     chunks = list(plan_lookahead_chunks(wang_program, WANG_LIMITS, chunk_cycles=150))
-    assert len(chunks) > 3
+    assert len(chunks) >= 3
     trajectory = Trajectory.concatenate(chunks)
     assert_within_limits(measure(trajectory, wang_program), WANG_LIMITS)
 

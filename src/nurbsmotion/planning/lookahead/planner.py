@@ -373,6 +373,9 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
             backtracks += 1
             length *= 2.0
             pending = plan_window(run, pending_cursor, settings, length)
+            if pending.final:
+                yield pending
+                return
             cursor = pending.cursor
             continue
         backtracks = 0
