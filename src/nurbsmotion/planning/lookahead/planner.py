@@ -29,8 +29,8 @@ from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid
 from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import speed_profile
-from nurbsmotion.planning.lookahead.speed_limits import (MARGIN, AccelBounds, Caps, static_speed_limit,
-                                                         widen_dips)
+from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
+                                                         static_speed_limit, widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
@@ -119,6 +119,11 @@ class PlanSettings:
     spacing_mm: float
     window_mm: float
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
+
+    @property
+    def min_pass_mm_s(self) -> float:
+        """Slowest junction speed passed moving: its widened plateau must span a grid interval."""
+        return 0.0 if self.tau_f <= 0 else self.spacing_mm / (DIP_WIDTH_FACTOR * self.tau_f)
 
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
@@ -301,6 +306,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
     """Lower the speed cap around every violating set-point by its violation ratio."""
     v_grid = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
     v_rows = np.sqrt(np.maximum(np.interp(s, s_raw, x), 0.0))
+    touched = np.zeros(len(grid), dtype=bool)
     for name, rows in bad.items():
         if name == "fluctuation":
             continue
@@ -311,10 +317,12 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
         k_hi = np.searchsorted(grid.s, hi, side="right")
-        for a, b, f in zip(k_lo, k_hi, factor):
-            speed_cap[a:b] = np.minimum(speed_cap[a:b], f * v_grid[a:b])
+        for a, b, f, v_row in zip(k_lo, k_hi, factor, v_rows[rows]):
+            # slower points nearby (a start from rest) are not pulled down below f x the row's speed
+            speed_cap[a:b] = np.minimum(speed_cap[a:b], f * np.maximum(v_grid[a:b], v_row))
             if name in ("accel", "jerk", "axis_accel"):
-                accel_scale[a:b] *= ACCEL_REPAIR_FACTOR
+                touched[a:b] = True
+    accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
