@@ -226,8 +226,9 @@ def one_hour(minutes: float) -> str:
         out = subprocess.run([sys.executable, "-c", script, str(laps)], capture_output=True, text=True, check=True)
         return json.loads(out.stdout.strip().splitlines()[-1])
 
-    probe = run(4)
-    laps = max(4, int(np.ceil(minutes * 60.0 / (probe["motion_s"] / 4))))
+    short, longer = run(4), run(8)
+    per_lap = (longer["motion_s"] - short["motion_s"]) / 4.0  # without the start and the stop
+    laps = max(8, int(np.ceil(minutes * 60.0 / per_lap)))
     result = run(laps)
     return f"""
 Racetrack (300 x 100 mm, R 50 half circles, tangent joins) x {laps} laps = {result['blocks']} blocks,
