@@ -20,6 +20,7 @@ from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program
 
 DEFAULT_CHUNK_CYCLES = 2000
+WHOLE_PLAN_CHUNK_CYCLES = 20000  # plan_lookahead keeps everything anyway: fewer, longer windows
 ALGORITHM = "lookahead"
 GUARANTEES = ("chord_error", "accel", "jerk", "axis_velocity", "axis_accel", "arc_fluctuation", "exact_end")
 
@@ -119,7 +120,7 @@ def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:
     """Plan the whole program (the registered ``lookahead`` algorithm)."""
     started = time.perf_counter()
     figures = _Figures()
-    chunks = list(plan_lookahead_chunks(program, limits, _figures=figures))
+    chunks = list(plan_lookahead_chunks(program, limits, WHOLE_PLAN_CHUNK_CYCLES, _figures=figures))
     trajectory = Trajectory.concatenate(chunks)
     trajectory.planning_time_s = time.perf_counter() - started
     trajectory.notes = notes_for(limits, figures, figures.runs)

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
-from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid
+from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths
 from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import speed_profile
@@ -136,21 +136,20 @@ def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) ->
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
     """Pieces from the cursor on, about ``length_mm`` long (or to the run's end); a long block
-    is cut inside (at the arc length that completes the window)."""
+    is cut inside (at the approximate arc length that completes the window)."""
     pieces: list[BlockPiece] = []
     total = 0.0
     i = cursor.piece_index
     while True:
         piece = run.pieces[i]
         u_start = cursor.u if i == cursor.piece_index else piece.u_start
-        s_start = float(piece.curve.arc_length(u_start)) if u_start > piece.curve.u_min else 0.0
-        s_end = float(piece.curve.arc_length(piece.u_end)) if piece.u_end < piece.curve.u_max else piece.curve.length
-        if total + (s_end - s_start) > WINDOW_CUT_FACTOR * length_mm:
-            u_cut = float(piece.curve.u_at_arc_length(s_start + max(length_mm - total, MIN_SPACING_MM)))
+        u, along = coarse_lengths(piece.curve, u_start, piece.u_end)
+        if total + along[-1] > WINDOW_CUT_FACTOR * length_mm:
+            u_cut = float(np.interp(max(length_mm - total, MIN_SPACING_MM), along, u))
             pieces.append(BlockPiece(piece.block, piece.curve, u_start, u_cut, piece.feed_mm_s))
             return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
         pieces.append(BlockPiece(piece.block, piece.curve, u_start, piece.u_end, piece.feed_mm_s))
-        total += s_end - s_start
+        total += along[-1]
         if i + 1 == len(run.pieces):
             return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], True
         if total >= length_mm:
