@@ -181,11 +181,12 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     if len(sharp) == 0:
         return None
     caps = np.full(len(s), np.inf)
+    spacing = float(np.diff(s).max())  # the cap only acts on grid points: allow one interval each side
     for peak in sharp:
         lo, hi = 0.0, float(x[peak])
         for _ in range(PLATEAU_SEARCH_STEPS):
             mid = 0.5 * (lo + hi)
-            if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f:
+            if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f + 2.0 * spacing:
                 lo = mid
             else:
                 hi = mid

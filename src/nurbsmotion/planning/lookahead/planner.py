@@ -15,8 +15,7 @@ window that stays in violation raises PlanningError naming the block.
 
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Iterator
 
 import numpy as np
@@ -119,6 +118,8 @@ class PlanSettings:
     spacing_mm: float
     window_mm: float
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
+    max_feed_mm_s: float = 0.0
+    tangential_share: float = 1.0  # raw tangential acceleration A x share, filter time tau_f x share
 
     @property
     def min_pass_mm_s(self) -> float:
@@ -131,7 +132,7 @@ def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) ->
     spacing = float(np.clip(max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
-    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop)
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)
 
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
@@ -235,6 +236,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
     grid = build_grid(pieces, settings.spacing_mm)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
+    accel_scale *= settings.tangential_share
     idx = scan_grid(grid, cursor.raw_offset_mm)
     period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
@@ -344,6 +346,36 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
                   run_s_mm=cursor.run_s_mm + s_cut)
 
 
+SHORT_RUN_SHARES = (1.0, 0.85, 0.7, 0.55)
+SHORT_RUN_GRID_POINTS = 400  # a short run gets at least this many grid points (plateau edges)
+
+
+def short_run_plan(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: float) -> WindowPlan | None:
+    """The fastest plan of a short rest-to-rest run with the jerk filter, trying smaller raw
+    accelerations A s with filter times tau_f s (same jerk A / tau_f): a move too short to
+    reach A is faster with a shorter filter (within 0.2 % of ruckig on a 5 mm line instead of
+    4.5 %). None for runs that are not short (longer than twice the time to reach the feed
+    and stop again) or start moving."""
+    if settings.tau_f <= 0 or not cursor.at_rest:
+        return None
+    a = settings.limits.max_accel_mm_s2
+    short_s = 2.0 * (settings.max_feed_mm_s / a + 2.0 * settings.tau_f)
+    best = None
+    length = sum(coarse_lengths(p.curve, p.u_start, p.u_end)[1][-1] for p in run.pieces)
+    spacing = max(min(settings.spacing_mm, length / SHORT_RUN_GRID_POINTS), MIN_SPACING_MM)
+    for share in SHORT_RUN_SHARES:
+        trial = replace(settings, tau_f=settings.tau_f * share, tangential_share=share, spacing_mm=spacing)
+        try:
+            plan = plan_window(run, cursor, trial, length_mm)
+        except (PlanningError, _WindowTooShort):
+            continue
+        if not plan.final or (share == 1.0 and len(plan.samples.u) * settings.limits.period_s > short_s):
+            return None
+        if best is None or len(plan.samples.u) < len(best.samples.u):
+            best = plan
+    return best
+
+
 def merge_carry(a: tuple | None, b: tuple | None) -> tuple | None:
     """Repairs of two windows on one run-coordinate grid (the tighter of both everywhere)."""
     if a is None or b is None:
@@ -365,6 +397,10 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
     (at most MAX_BACKTRACKS times in a row)."""
     cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
     length = settings.window_mm
+    short = short_run_plan(run, cursor, settings, length)
+    if short is not None:
+        yield short
+        return
     pending: WindowPlan | None = None
     pending_cursor: Cursor | None = None
     backtracks = 0
