@@ -70,10 +70,10 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "fluctuation_definition": "arc length between consecutive set-points vs planned step (feed_mm_s * T)",
         "chord_error_limit_mm": limits.chord_error_mm,
         "accel_limit_mm_s2": limits.max_accel_mm_s2,
-        "repairs": float(figures.repairs),
-        "windows": float(figures.windows),
-        "runs": float(runs),
-        "stops": float(max(runs - 1, 0)),  # exact stops inside the program (corners)
+        "repairs": figures.repairs,  # ints are floats to the notes' type (numeric tower)
+        "windows": figures.windows,
+        "runs": runs,
+        "stops": max(runs - 1, 0),  # exact stops inside the program (corners)
     }
     if limits.max_jerk_mm_s3 is not None:
         notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3
