@@ -347,6 +347,7 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
 
 
 SHORT_RUN_SHARES = (1.0, 0.85, 0.7, 0.55)
+SHORT_RUN_MAX_PIECES = 8
 SHORT_RUN_GRID_POINTS = 400  # a short run gets at least this many grid points (plateau edges)
 
 
@@ -354,14 +355,17 @@ def short_run_plan(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: 
     """The fastest plan of a short rest-to-rest run with the jerk filter, trying smaller raw
     accelerations A s with filter times tau_f s (same jerk A / tau_f): a move too short to
     reach A is faster with a shorter filter (within 0.2 % of ruckig on a 5 mm line instead of
-    4.5 %). None for runs that are not short (longer than twice the time to reach the feed
-    and stop again) or start moving."""
-    if settings.tau_f <= 0 or not cursor.at_rest:
+    4.5 %). None for runs that are not short (longer than the stopping distance from the
+    highest feed, or taking longer than twice the time to reach the feed and stop again) or
+    that start moving."""
+    if settings.tau_f <= 0 or not cursor.at_rest or len(run.pieces) > SHORT_RUN_MAX_PIECES:
+        return None
+    length = sum(coarse_lengths(p.curve, p.u_start, p.u_end)[1][-1] for p in run.pieces)
+    if length > settings.stop_mm:
         return None
     a = settings.limits.max_accel_mm_s2
     short_s = 2.0 * (settings.max_feed_mm_s / a + 2.0 * settings.tau_f)
     best = None
-    length = sum(coarse_lengths(p.curve, p.u_start, p.u_end)[1][-1] for p in run.pieces)
     spacing = max(min(settings.spacing_mm, length / SHORT_RUN_GRID_POINTS), MIN_SPACING_MM)
     for share in SHORT_RUN_SHARES:
         trial = replace(settings, tau_f=settings.tau_f * share, tangential_share=share, spacing_mm=spacing)
