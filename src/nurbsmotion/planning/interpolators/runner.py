@@ -45,6 +45,7 @@ from nurbsmotion.program import BlockKind, Program
 
 CORNER_ANGLE_DEG = 1.0  # tangent turn above which a junction is a stop
 MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped
+MAX_GAP_MM = 1e-6  # consecutive blocks must meet (Program's contract)
 MAX_CYCLES = 50_000_000
 
 
@@ -77,7 +78,9 @@ def split_runs(program: Program, corner_angle_deg: float = CORNER_ANGLE_DEG) -> 
             end_tangent = previous.curve.point_and_derivatives(previous.curve.u_max)[1]
             start_tangent = block.curve.point_and_derivatives(block.curve.u_min)[1]
             gap = distance(tuple(previous.end), tuple(block.start))
-            if gap > 1e-6 or tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
+            if gap > MAX_GAP_MM:
+                raise InputError(str(block.source), f"block starts {gap:.6g} mm away from the end of the block before it")
+            if tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
                 runs.append([])
         if not runs:
             runs.append([])
