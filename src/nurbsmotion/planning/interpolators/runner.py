@@ -57,6 +57,9 @@ class Method:
     taylor_order: int
     adaptive: bool
     correct: bool
+    # Wang exactly as printed: limits at the current point only, eq. 27 with the previous
+    # cycle's a_t, no planned slow-downs and no check on the set-points (for comparison)
+    as_printed: bool = False
 
 
 def tangent_angle_deg(a: tuple[float, ...], b: tuple[float, ...]) -> float:
@@ -103,13 +106,16 @@ class RunPlanner:
         self.limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2, method.adaptive)
         # wang: the Taylor predictor's relative step error, measured on the last step, scales
         # the next step, so the limits hold for the feed the set-points really show
-        self.compensate = method.adaptive and not method.correct
+        self.compensate = method.adaptive and not method.correct and not method.as_printed
         self.stepper = Stepper(method.taylor_order, method.correct, limits.chord_error_mm)
         # the reverse interpolation uses Wang's eq. 19 (second-order Taylor) for every method:
         # its chords are measured, so the predictor's error does not enter V_achieve
         self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
                                          Stepper(2, False, limits.chord_error_mm), self.period)
-        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, self.limits, self.accel)
+        ahead_limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2,
+                                  method.adaptive and not method.as_printed)
+        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, ahead_limits, self.accel)
+        self.as_printed = method.as_printed
         self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
@@ -185,6 +191,7 @@ class RunPlanner:
         radius_before = math.inf  # radius of curvature at the previous set-point
         before_x = here.x  # the previous set-point (at rest before the start)
         ratio = 1.0  # wang: measured chord / predicted step length of the last step
+        a_t_before = 0.0  # tangential acceleration of the last cycle (Wang eq. 27 as printed)
         end_x = self.end_x
         for _ in range(MAX_CYCLES):
             if tracked is None:
@@ -201,7 +208,10 @@ class RunPlanner:
             ahead = self.slowdown.feed(here.j, u_end)
             if v_achieve != math.inf and v_achieve > ahead:
                 ahead = v_achieve  # near the stop the table decides (it lands exactly)
-            v_next = self.limits.feed(min(profile, ahead), v_in, radius)
+            if self.as_printed:
+                v_next = self.limits.feed_as_printed(min(profile, ahead), radius_here, a_t_before)
+            else:
+                v_next = self.limits.feed(min(profile, ahead), v_in, radius)
             done = False
             if v_achieve <= v_next:  # Wang: decelerate into the stop
                 step = v_achieve * period
@@ -214,7 +224,7 @@ class RunPlanner:
             else:  # the method's own step, at most V_achieve (slow-downs ahead)
                 v_step = v_next
                 point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
-                if not done:  # the step must also respect the limits where it ends
+                if not done and not self.as_printed:  # the step must also respect the limits where it ends
                     radius_after = radius_of_curvature(point.d1, point.d2)
                     v_after = self.slowdown.feed(point.j, point.u)
                     if radius_after < radius:
@@ -223,7 +233,7 @@ class RunPlanner:
                         v_step = v_after
                         point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
                 v_step = min(v_step, step * ratio / period)  # Zhang's midpoint rule may shorten it
-                if self.limits.adaptive and not done:
+                if self.limits.adaptive and not done and not self.as_printed:
                     checked, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
                     if checked is not point:
                         point, v_step = checked, step * ratio / period
@@ -238,7 +248,8 @@ class RunPlanner:
             if done:
                 x_rows[-1] = end_x
                 return
-            v_in = distance(point.x, here.x) / period
+            v_out = distance(point.x, here.x) / period
+            a_t_before, v_in = (v_out - v_in) / period, v_out
             previous_step = step
             before_x = here.x
             here = point
