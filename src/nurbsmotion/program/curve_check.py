@@ -66,6 +66,13 @@ def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[Cu
         problems.append(CurveProblem("knots", f"end not clamped: the last {degree + 1} knots must be equal", i))
     if not k[-1] > k[0]:
         problems.append(CurveProblem("knots", "knot range is empty (first knot equals last knot)", len(k) - 1))
+        return problems
+    # more than degree+1 equal end knots: the curve would not start (end) at the first (last)
+    # control point; geometry.validate_definition does not catch this (reported)
+    if k[degree + 1] == k[0]:
+        problems.append(CurveProblem("knots", f"start knot {k[0]:g} repeats more than {degree + 1} (degree + 1) times", degree + 1))
+    if k[-degree - 2] == k[-1]:
+        problems.append(CurveProblem("knots", f"end knot {k[-1]:g} repeats more than {degree + 1} (degree + 1) times", len(k) - degree - 2))
     for i in range(degree + 1, len(k) - degree - 1 - degree):
         if k[i] == k[i + degree] and k[i] > k[0] and k[i + degree] < k[-1]:
             problems.append(CurveProblem("knots", f"interior knot {k[i]:g} repeats more than {degree} (the degree) times", i + degree))
