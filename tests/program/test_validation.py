@@ -28,6 +28,8 @@ GCODE_ERRORS = [
     ("F100\nG06.2 P2 K0\nK0 X1 F200", "t.nc:3: F200", "F inside a NURBS definition"),
     ("F100\nG06.2 P2 K0\nK0 X1\nK0 X2\nK1\nK1", "t.nc:4: K0", "start knot 0 repeats more than 2"),
     ("F100\nG06.2 P2 K0\nK0 X1\nK1 X2\nK1\nK1", "t.nc:4: K1", "end knot 1 repeats more than 2"),
+    ("F100\nG06.2 P2 K0\nK0 X1 R1e-7\nK1\nK1", "t.nc:3: R1e-7", "weights must be between 1e-06 and 1e+06"),
+    ("F100\nG06.2 P2 K0\nK0 X1\nK1e-12 X2\nK1\nK1", "t.nc:4: K1e-12", "too close to knot 2"),
     ("G4 P1", "t.nc:1: G4", "unsupported G code"),
     ("G43 H1", "t.nc:1: G43", "unsupported G code"),
     ("G1.5 X1", "t.nc:1: G1.5", "unsupported G code"),

@@ -17,6 +17,10 @@ from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.geometry import CurveError, NurbsCurve
 
 
+MIN_WEIGHT, MAX_WEIGHT = 1e-6, 1e6  # beyond these the rational evaluation loses all precision
+MIN_KNOT_SPAN = 1e-9  # of the knot range: shorter non-empty spans are numerically empty
+
+
 @dataclass(frozen=True)
 class CurveProblem:
     """One problem: ``field`` is degree | control_points | weights | knots; ``index`` the value."""
@@ -41,6 +45,8 @@ def weight_problems(weights: Sequence[float], n_points: int) -> list[CurveProble
     for i, w in enumerate(weights):
         if not np.isfinite(w) or w <= 0:
             problems.append(CurveProblem("weights", f"weight {i + 1} is {w:g}; weights must be > 0", i))
+        elif not MIN_WEIGHT <= w <= MAX_WEIGHT:
+            problems.append(CurveProblem("weights", f"weight {i + 1} is {w:g}; weights must be between {MIN_WEIGHT:g} and {MAX_WEIGHT:g}", i))
     return problems
 
 
@@ -67,6 +73,12 @@ def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[Cu
     if not k[-1] > k[0]:
         problems.append(CurveProblem("knots", "knot range is empty (first knot equals last knot)", len(k) - 1))
         return problems
+    spans = np.diff(k)
+    tiny = np.flatnonzero((spans > 0) & (spans < MIN_KNOT_SPAN * (k[-1] - k[0])))
+    if len(tiny):
+        i = int(tiny[0]) + 1
+        problems.append(CurveProblem("knots", f"knot {i + 1} ({k[i]:.17g}) is too close to knot {i} ({k[i - 1]:.17g}): "
+                                              f"make them equal or at least {MIN_KNOT_SPAN:g} of the knot range apart", i))
     # more than degree+1 equal end knots: the curve would not start (end) at the first (last)
     # control point; geometry.validate_definition does not catch this (reported)
     if k[degree + 1] == k[0]:
