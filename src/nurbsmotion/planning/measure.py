@@ -105,7 +105,8 @@ def max_distance_to_chords(curve, u_lo: NDArray[np.float64], u_hi: NDArray[np.fl
 
     Samples SAMPLES_PER_ROUND interior parameters, then repeatedly re-samples the bracket
     around the best sample (REFINE_ROUNDS times) and finishes with a parabola through the
-    best sample and its neighbours; relative accuracy about 1e-6 on smooth pieces.
+    best sample and its neighbours; relative accuracy about 1e-6 on smooth pieces, down to a
+    floor of about 1e-14 mm (rounding of the distances).
     """
     m = SAMPLES_PER_ROUND
     lo, hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
