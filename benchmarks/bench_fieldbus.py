@@ -7,6 +7,9 @@ thread plus its receive (notifier) thread, and the whole process (incl. the driv
 
     PYTHONPATH=src python benchmarks/bench_fieldbus.py --seconds 10
     PYTHONPATH=src python benchmarks/bench_fieldbus.py --seconds 60 --cases 3x1,3x4,6x4,6x1
+
+The first row (0 axes) is the bare deadline loop in a SCHED_FIFO thread with no bus: the
+lateness the machine itself allows (virtual machines and other load show up there).
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import numpy as np
 
 from nurbsmotion.config import parse_config
 from nurbsmotion.fieldbus import Master
+from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
 from nurbsmotion.sim import SimNetwork
 
 CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
@@ -81,18 +85,53 @@ def run_case(n_axes: int, period_ms: float, seconds: float, gc_mode: str = "free
     }
 
 
+def baseline_timing(period_ms: float, seconds: float) -> dict[str, float]:
+    """The same deadline loop with no bus and no Python threads: what the machine itself allows."""
+    stats = LatenessStats(late_threshold_s=0.1 * period_ms / 1000.0)
+    grid = DeadlineGrid(period_ms / 1000.0, time.perf_counter() + period_ms / 1000.0)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(20))
+    except PermissionError:
+        pass
+    proc0, wall0 = time.process_time(), time.perf_counter()
+    for _ in range(int(seconds * 1000 / period_ms)):
+        lateness, missed = grid.advance(wait_until(grid.next_s, 60e-6))
+        stats.add(lateness, missed)
+    wall = time.perf_counter() - wall0
+    return {"axes": 0, "period_ms": period_ms, "seconds": round(wall, 1), "cycles": stats.count,
+            "outcome": "baseline", "p50_us": stats.percentile_s(0.5) * 1e6, "p99_us": stats.percentile_s(0.99) * 1e6,
+            "max_us": stats.max_s * 1e6, "missed": stats.missed, "late": stats.late,
+            "master_cpu_pct": 100 * (time.process_time() - proc0) / wall, "process_cpu_pct": float("nan")}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="streaming time per case (default 10)")
     parser.add_argument("--cases", default="3x1,3x4,6x4,6x1", help="AXESxPERIOD_MS list (default 3x1,3x4,6x4,6x1)")
     parser.add_argument("--gc", default="freeze", choices=("freeze", "disable", "none"), help="Master gc_mode")
+    parser.add_argument("--sim-priority", type=int, default=10,
+                        help="SCHED_FIFO priority for the simulated drives' threads (they stand in for hardware "
+                             "that does not share this CPU or GIL); 0 = normal scheduling")
     args = parser.parse_args()
-    print(f"gc_mode={args.gc}, {os.cpu_count()} CPUs, SCHED_FIFO cycle thread if permitted")
+    if args.sim_priority > 0:
+        try:  # threads created from now on inherit it; the master raises its own threads above
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.sim_priority))
+        except PermissionError:
+            print("no permission for SCHED_FIFO: simulated drives run at normal priority")
+    print(f"gc_mode={args.gc}, {os.cpu_count()} CPUs, sim priority {args.sim_priority}, load average "
+          f"{os.getloadavg()[0]:.2f} at start")
     print("| axes | T ms | s | cycles | outcome | p50 µs | p99 µs | max µs | late | missed | master CPU % | process CPU % |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|")
-    for case in args.cases.split(","):
+    for case in ["0x1"] + args.cases.split(","):
         n_axes, period = case.split("x")
-        r = run_case(int(n_axes), float(period), args.seconds, args.gc)
+        if n_axes == "0":  # the timing loop alone, run in a thread like the master's
+            out: list[dict[str, float]] = []
+            worker = threading.Thread(target=lambda: out.append(baseline_timing(float(period), args.seconds)))
+            worker.start()
+            worker.join()
+            r = out[0]
+        else:
+            r = run_case(int(n_axes), float(period), args.seconds, args.gc)
         print(f"| {r['axes']} | {r['period_ms']:g} | {r['seconds']} | {r['cycles']} | {r['outcome']} | "
               f"{r['p50_us']:.0f} | {r['p99_us']:.0f} | {r['max_us']:.0f} | {r['late']} | {r['missed']} | "
               f"{r['master_cpu_pct']:.1f} | {r['process_cpu_pct']:.1f} |", flush=True)

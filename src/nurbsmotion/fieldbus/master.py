@@ -118,6 +118,7 @@ class Master:
         if gc_mode not in ("freeze", "disable", "none"):
             raise InputError("gc_mode", f"must be freeze, disable or none, got {gc_mode!r}")
         self._rt_priority = rt_priority
+        self._receive_priority_set = False
         self._gc_mode = gc_mode
         self.config = config
         self.axis_map = AxisMap.from_config(config)
@@ -234,6 +235,8 @@ class Master:
         unpack = TPDO1_FORMAT.unpack_from
 
         def on_tpdo1(can_id: int, data: bytearray, timestamp: float) -> None:
+            if not self._receive_priority_set:
+                self._raise_receive_thread_priority()
             if len(data) != size:
                 self._bad_tpdo[i] += 1
                 self._events.append((3, i, len(data)))
@@ -534,6 +537,17 @@ class Master:
             log.info(kv("cycle_thread_priority", policy="SCHED_FIFO", priority=self._rt_priority))
         except (PermissionError, OSError) as err:
             log.info(kv("cycle_thread_priority", policy="normal", reason=str(err)))
+
+    def _raise_receive_thread_priority(self) -> None:
+        """Run canopen's receive thread SCHED_FIFO just below the cycle thread: a normal-priority
+        thread preempted while it holds the GIL would stall the cycle thread (priority inversion)."""
+        self._receive_priority_set = True
+        if self._rt_priority is None or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, self._rt_priority - 1)))
+        except (PermissionError, OSError):
+            pass
 
     def _shorten_gil_switch_interval(self) -> None:
         """A thread busy in pure Python keeps the GIL up to the switch interval (5 ms by
