@@ -187,6 +187,8 @@ class Master:
         self._thread: threading.Thread | None = None
         self._quit = False
         self._sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self._sync_bus: can.BusABC | None = None
+        self._sync_seen_s = 0.0  # perf_counter when a SYNC sent by the kernel was last received
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         self._rpdo_msgs = [can.Message(arbitration_id=c.COB_RPDO[0] + node, is_extended_id=False,
                                        data=bytearray(RPDO_FORMAT.size)) for node in self._node_ids]
@@ -216,6 +218,7 @@ class Master:
             network.subscribe(c.COB_TPDO[1] + node_id, self._tpdo2_callback(i))
             network.subscribe(c.COB_EMCY + node_id, self._emcy_callback(i))
             network.subscribe(c.COB_HEARTBEAT + node_id, self._heartbeat_callback(i))
+        network.subscribe(c.COB_SYNC, self._on_sync_seen)
         self._network = network
 
     @staticmethod
@@ -434,6 +437,9 @@ class Master:
         if self._sync_task is not None:
             self._sync_task.stop()
             self._sync_task = None
+        if self._sync_bus is not None:
+            self._sync_bus.shutdown()
+            self._sync_bus = None
         if self._network is not None:
             for node_id in self._node_ids:
                 try:
@@ -469,6 +475,19 @@ class Master:
         self._thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
         self._thread.start()
 
+    def _sync_sender(self) -> can.BusABC:
+        """Bus whose send_periodic sends the SYNC. SocketCAN: the bus itself (its broadcast
+        manager socket's frames reach our raw socket, so the SYNC is seen). Virtual: a second
+        bus on the channel, so the SYNC is seen too (a python-can bus does not hear itself)."""
+        assert self._bus is not None
+        if type(self._bus).__name__ == "VirtualBus":
+            self._sync_bus = can.Bus(interface="virtual", channel=self._bus.channel_id)
+            return self._sync_bus
+        return self._bus
+
+    def _on_sync_seen(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        self._sync_seen_s = time.perf_counter()
+
     def _use_kernel_sync(self) -> bool:
         if self._sync_source == "auto":
             return type(self._bus).__name__ == "SocketcanBus"
@@ -480,8 +499,8 @@ class Master:
         assert self._bus is not None
         send = self._bus.send
         if kernel_sync:
-            self._sync_task = self._bus.send_periodic(self._sync_msg, period)
-            grid = DeadlineGrid(period, time.perf_counter() + 0.25 * period)  # RPDOs a quarter cycle after SYNC
+            self._sync_task = self._sync_sender().send_periodic(self._sync_msg, period)
+            grid = DeadlineGrid(period, time.perf_counter() + 0.5 * period, 0.5 * period)  # half a cycle after SYNC
         else:
             grid = DeadlineGrid(period, time.perf_counter() + period)
         sync_msg = None if kernel_sync else self._sync_msg
@@ -491,12 +510,16 @@ class Master:
         stats = self._stats
         history = self._sp_history
         k = 0
+        anchor_s = 0.0
         self._set_realtime_priority()
         if self._rt_priority is not None:
             self._shorten_gil_switch_interval()
         try:
             self._compute(1)
             while not self._quit:
+                if kernel_sync and self._sync_seen_s > anchor_s:
+                    anchor_s = self._sync_seen_s  # re-anchor on the SYNC the kernel really sent
+                    grid.next_s = anchor_s + (int((grid.next_s - anchor_s) / period) + 0.5) * period
                 woke = wait_until(grid.next_s, spin_s)
                 lateness, missed = grid.advance(woke)
                 stats.add(lateness, missed)
