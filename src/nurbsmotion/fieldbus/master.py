@@ -341,6 +341,8 @@ class Master:
                                 f"(states: {', '.join(f'node {a.node_id} {a.state}' for a in self.status().axes)})")
         if self._enable_error is not None:
             raise self._enable_error
+        if self._phase != "holding":
+            raise FieldbusError(f"bring-up: the cycle loop stopped in phase {self._phase} (see the log)")
 
     def reset_faults(self) -> None:
         """Acknowledge faults and re-enable every axis (fault reset, state machine), then hold."""
@@ -756,7 +758,7 @@ class Master:
             return
         if self._phase in ("enabling", "offline"):
             return
-        if kind == 1 and value != 0:
+        if kind == 1 and value & 0xFF00:  # 0x00xx = error reset / no error (CiA 301)
             self._report(node, name, "emcy", value, k,
                          f"node {node} (axis {name}): EMCY 0x{value:04X}{_emcy_text(value)} at cycle {k}")
         elif kind == 2 and value != c.NmtState.OPERATIONAL:
