@@ -412,13 +412,14 @@ class Master:
         """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
         stats = self._stats
         axes = []
+        sent = self._sp_history[self._cycle % _HISTORY] if self._cycle else self._sp
         for i in range(self._n):
             sw = self._fb_status[i]
             fe = self._fb_fe[i]
-            if fe is None and self._fb_cycle[i] >= 1:
+            if fe is None and self._fb_cycle[i] >= 1:  # no TPDO2: the master's estimate
                 fe = self._sp_history[(self._fb_cycle[i] - 1) % _HISTORY][i] - self._fb_pos[i]
             axes.append(AxisStatus(self._names[i], self._node_ids[i], state_name(sw), sw, self._fb_pos[i],
-                                   self._sp[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
+                                   sent[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
         timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
                             stats.percentile_s(0.99), stats.max_s, self._send_errors)
         job = self._job
