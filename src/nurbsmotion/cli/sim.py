@@ -67,8 +67,10 @@ def serve(
     record_dir: str | Path | None = None,
     on_ready: Callable[[SimNetwork], Any] | None = None,
 ) -> SimNetwork:
-    """Run the drives until ``stop`` is set; then stop them and write the recordings."""
-    net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s)
+    """Run the drives until ``stop`` is set; then stop them and write the recordings
+    (set-points are recorded only when ``record_dir`` is given)."""
+    net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s,
+                                 record=record_dir is not None)
     net.start()
     try:
         for fault in faults:

@@ -106,7 +106,8 @@ class SimDrive:
     Create it, then :meth:`attach` it to a connected ``canopen.Network`` (``SimNetwork`` does
     both). ``lag_cycles`` and ``max_velocity_counts_s`` set the servo model; ``identity``
     (vendor id, product code) overrides 0x1018 sub 1/2; ``parameters`` {(index, subindex):
-    value} are the drive's stored values, restored instead of the EDS defaults on every reset.
+    value} are the drive's stored values, restored instead of the EDS defaults on every reset;
+    ``record`` keeps every applied set-point in ``recorder``.
     """
 
     def __init__(
@@ -118,6 +119,7 @@ class SimDrive:
         max_velocity_counts_s: float = 1e9,
         identity: tuple[int, int] | None = None,
         parameters: dict[tuple[int, int], int] | None = None,
+        record: bool = True,
         name: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -133,7 +135,7 @@ class SimDrive:
             self._stored[(c.IDENTITY, 1)] = struct.pack("<I", identity[0])
             self._stored[(c.IDENTITY, 2)] = struct.pack("<I", identity[1])
         self.servo = ServoModel(lag_cycles, max_velocity_counts_s)
-        self.recorder = SetpointRecorder()
+        self.recorder = SetpointRecorder(enabled=record)
         self.stats = DriveStats()
         self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode())
         self.network: canopen.Network | None = None

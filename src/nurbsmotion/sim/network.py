@@ -71,7 +71,9 @@ class SimNetwork:
         return drive
 
     @classmethod
-    def for_machine(cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None) -> "SimNetwork":
+    def for_machine(
+        cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True
+    ) -> "SimNetwork":
         """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
         bus.interface/channel/bitrate, cycle_period_s, axes[].name/node_id/mode/eds/identity).
 
@@ -96,6 +98,7 @@ class SimNetwork:
                 max_velocity_counts_s=max_velocity_counts_s or UNLIMITED_VELOCITY_COUNTS_S,
                 identity=identity,
                 parameters=parameters,
+                record=record,
                 name=f"{axis.name}/node{axis.node_id}",
             )
         return net
