@@ -45,6 +45,7 @@ log = logging.getLogger(__name__)
 
 EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
+IP_LINEAR = 0  # 0x60C0 sub-mode
 TICK_MAX_S = 0.05  # the ticker looks at a drive at least this often
 _FOREVER = math.inf
 
@@ -467,6 +468,8 @@ class SimDrive:
             self.axis.error_history.clear()
         elif index in (c.SYNC_COB_ID, c.EMCY_COB_ID) and value & pdo_layout.COB_ID_EXTENDED_BIT:
             raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
+        elif index == c.IP_SUB_MODE and value != IP_LINEAR:
+            raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)  # only linear interpolation
         setter = self._live_write.get((index, subindex))
         if setter is not None:
             setter(value)
