@@ -229,3 +229,30 @@ def test_bad_fault_spec_is_one_line_naming_the_spec(text: str, message: str) -> 
     with pytest.raises(InputError) as err:
         parse_fault_spec(text)
     assert message in str(err.value) and text in str(err.value) and "\n" not in str(err.value)
+
+
+def test_fault_injected_before_start_fires_right_after_boot(channel: str) -> None:
+    import can
+
+    from nurbsmotion.sim import SimNetwork
+
+    listener = can.Bus(interface="virtual", channel=channel)
+    sim = SimNetwork(channel=channel)
+    drive = sim.add_drive(12)
+    drive.inject(FaultInjection("fault", code=0x4210))
+    drive.inject(FaultInjection("fault", at_s=0.0, code=0x3210))
+    try:
+        sim.start()
+        frames: list[can.Message] = []
+
+        def emcy_codes() -> list[bytes]:
+            while (msg := listener.recv(0)) is not None:
+                frames.append(msg)
+            return [bytes(m.data[:2]) for m in frames if m.arbitration_id == 0x8C]
+
+        wait_until(lambda: emcy_codes() == [b"\x10\x42", b"\x10\x32"], what="both EMCYs after the boot-up")
+        assert frames[0].arbitration_id == 0x70C and bytes(frames[0].data) == b"\x00"
+        assert drive.state is State.FAULT
+    finally:
+        sim.stop()
+        listener.shutdown()

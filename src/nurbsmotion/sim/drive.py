@@ -229,6 +229,9 @@ class SimDrive:
             self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
             self._t0 = self._clock()
             self._boot(reset_application=True)
+            for fault in self._deferred:
+                self._apply_injection(fault)
+            self._deferred.clear()
 
     def detach(self) -> None:
         """Leave the network (no more frames in or out)."""
@@ -244,13 +247,16 @@ class SimDrive:
             self.network = None
 
     def inject(self, fault: FaultInjection) -> None:
-        """Inject ``fault`` now, at its SYNC index or at its time (seconds after attach)."""
+        """Inject ``fault`` at once, at its SYNC index, or ``at_s`` seconds after the drive
+        was attached (an immediate fault injected before attach fires right after boot)."""
         with self._lock:
             self._fault_seq += 1
             if fault.at_sync is not None:
                 bisect.insort(self._sync_faults, (fault.at_sync, self._fault_seq, fault))
             elif fault.at_s is not None:
-                bisect.insort(self._time_faults, (self._t0 + fault.at_s, self._fault_seq, fault))
+                bisect.insort(self._time_faults, (fault.at_s, self._fault_seq, fault))
+            elif self.network is None:
+                self._deferred.append(fault)
             else:
                 self._apply_injection(fault)
 
@@ -270,7 +276,7 @@ class SimDrive:
         """Send a due heartbeat, fire due timed faults, watch consumed heartbeats; returns
         the time this should be called again."""
         with self._lock:
-            while self._time_faults and self._time_faults[0][0] <= now:
+            while self._time_faults and self._t0 + self._time_faults[0][0] <= now:
                 self._apply_injection(self._time_faults.pop(0)[2])
             if self._heartbeat_period_s > 0 and not self.silent and now >= self._next_heartbeat:
                 self._send_heartbeat()
@@ -283,7 +289,7 @@ class SimDrive:
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
-                deadline = min(deadline, self._time_faults[0][0])
+                deadline = min(deadline, self._t0 + self._time_faults[0][0])
             return deadline
 
     def write_recording(self, path: str | Path) -> Path:
@@ -309,8 +315,9 @@ class SimDrive:
         self._ignore_syncs: float = 0
         self._drop_rpdos = 0
         self._sdo_refusals: list[list[Any]] = []  # [index|None, subindex|None, code, remaining]
-        self._time_faults: list[tuple[float, int, FaultInjection]] = []
-        self._sync_faults: list[tuple[int, int, FaultInjection]] = []
+        self._time_faults: list[tuple[float, int, FaultInjection]] = []  # (at_s, order, fault)
+        self._sync_faults: list[tuple[int, int, FaultInjection]] = []  # (at_sync, order, fault)
+        self._deferred: list[FaultInjection] = []  # immediate, injected before attach
 
     def _boot(self, reset_application: bool) -> None:
         """Reset communication (and the application): stored values back, boot-up message,
