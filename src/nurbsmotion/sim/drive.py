@@ -276,11 +276,15 @@ class SimDrive:
         """Send a due heartbeat, fire due timed faults, watch consumed heartbeats; returns
         the time this should be called again."""
         with self._lock:
+            if self.network is None:
+                return now + TICK_MAX_S
             while self._time_faults and self._t0 + self._time_faults[0][0] <= now:
                 self._apply_injection(self._time_faults.pop(0)[2])
             if self._heartbeat_period_s > 0 and not self.silent and now >= self._next_heartbeat:
                 self._send_heartbeat()
-                self._next_heartbeat = max(self._next_heartbeat + self._heartbeat_period_s, now)
+                self._next_heartbeat += self._heartbeat_period_s
+                if self._next_heartbeat <= now:  # fell behind: no burst of catch-up heartbeats
+                    self._next_heartbeat = now + self._heartbeat_period_s
             for producer in self._heartbeat_consumer.newly_failed(now):
                 if not self.silent:
                     log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer))
