@@ -296,6 +296,11 @@ class SimDrive:
                 deadline = min(deadline, self._t0 + self._time_faults[0][0])
             return deadline
 
+    def value(self, index: int, subindex: int = 0) -> Any:
+        """An object's current value, as an SDO upload would read it."""
+        with self._lock:
+            return self._od_value(index, subindex)
+
     def write_recording(self, path: str | Path) -> Path:
         """Write the applied set-points as CSV (see ``recording``)."""
         return self.recorder.write_csv(path)
