@@ -139,3 +139,12 @@ def test_velocity_limit_and_lag_shape_the_actual_position(bench: Bench) -> None:
         bench.sync()
         actual.append(tpdo1(bench.frames.of(0x189)[-1])[1])
     assert actual == [0, 0, 100, 200, 300]
+
+
+@pytest.mark.parametrize("mode,expected_s", [(CSP, 0.004), (IP, 0.002)])
+def test_servo_period_is_0x1006_in_csp_and_0x60c2_in_ip(bench: Bench, mode: int, expected_s: float) -> None:
+    drive, node = bench.add(10)
+    node.sdo[0x1006].raw = 4000
+    node.sdo[0x60C2][1].raw = 2
+    node.sdo[0x6060].raw = mode
+    assert drive.period_s == pytest.approx(expected_s)

@@ -46,6 +46,7 @@ log = logging.getLogger(__name__)
 EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
 IP_LINEAR = 0  # 0x60C0 sub-mode
+DEFAULT_PERIOD_S = 1e-3  # if 0x60C2 is 0
 TICK_MAX_S = 0.05  # the ticker looks at a drive at least this often
 _FOREVER = math.inf
 
@@ -210,8 +211,8 @@ class SimDrive:
 
     @property
     def period_s(self) -> float:
-        """The cycle the servo model assumes (0x60C2, else 0x1006)."""
-        return self.axis.params.period_s
+        """The cycle the servo model assumes now: 0x60C2 in IP, 0x1006 in CSP."""
+        return self.axis.params.period_s(self.axis.mode_display)
 
     @property
     def sync_index(self) -> int:
@@ -432,10 +433,9 @@ class SimDrive:
         """Cache the parameters SYNC handling uses (after boot and every SDO write)."""
         params = self.axis.params
         value, exponent = self._od_value(c.IP_TIME_PERIOD, 1), self._od_value(c.IP_TIME_PERIOD, 2)
-        period_s = value * 10.0**exponent
-        if period_s <= 0:
-            period_s = self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
-        params.period_s = period_s if period_s > 0 else 1e-3
+        ip_period_s = value * 10.0**exponent
+        params.ip_period_s = ip_period_s if ip_period_s > 0 else DEFAULT_PERIOD_S
+        params.sync_period_s = self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
         params.fe_window_counts = self._od_value(c.FOLLOWING_ERROR_WINDOW)
         params.fe_timeout_ms = self._od_value(c.FOLLOWING_ERROR_TIMEOUT)
         params.quick_stop_option = self._od_value(c.QUICK_STOP_OPTION)
