@@ -118,7 +118,7 @@ class SimDrive:
         eds: str | Path | None = None,
         *,
         lag_cycles: int = 1,
-        max_velocity_counts_s: float = 1e9,
+        max_velocity_counts_s: float = math.inf,
         identity: tuple[int, int] | None = None,
         parameters: dict[tuple[int, int], int] | None = None,
         record: bool = True,
