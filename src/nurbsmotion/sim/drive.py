@@ -409,6 +409,8 @@ class SimDrive:
         """EMCY (CiA 301): code, error register, 5 zero bytes; not in STOPPED or if disabled."""
         if self._emcy_cob & pdo_layout.COB_ID_INVALID_BIT or self.nmt_state == NmtState.STOPPED:
             return
+        if self.silent or self.network is None:
+            return
         self._send(self._emcy_cob & 0x7FF, EMCY_STRUCT.pack(code, register))
         self.stats.emcys_sent += 1
 
