@@ -1,0 +1,54 @@
+"""PlanLimits: the plain input record of every planner (ruckig-style: all limits explicit)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from nurbsmotion.errors import InputError
+
+
+@dataclass(frozen=True)
+class PlanLimits:
+    """Everything a planner needs besides the path. Units are in the names.
+
+    ``feed_mm_s`` overrides every block's programmed feed when set (CLI --feed-mm-min);
+    ``default_feed_mm_s`` applies to blocks that carry no feed. ``max_jerk_mm_s3`` None
+    means no jerk limit. ``acc_time_s`` is Wang's linear acc/dec time t_l (a_l = V0 / t_l).
+    Per-axis limits are tuples in axis order (X, Y, Z), None when not limited.
+    """
+
+    period_s: float = 0.004
+    chord_error_mm: float = 0.01
+    max_accel_mm_s2: float = 2500.0
+    max_jerk_mm_s3: float | None = None
+    feed_mm_s: float | None = None
+    default_feed_mm_s: float = 200.0
+    rapid_feed_mm_s: float = 200.0
+    acc_time_s: float = 1.2
+    junction_deviation_mm: float = 0.01
+    axis_max_velocity_mm_s: tuple[float, ...] | None = None
+    axis_max_accel_mm_s2: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            values = value if isinstance(value, tuple) else (value,)
+            for v in values:
+                if v is None and f.name in ("max_jerk_mm_s3", "feed_mm_s", "axis_max_velocity_mm_s", "axis_max_accel_mm_s2"):
+                    continue
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                    raise InputError(f.name, f"must be a finite number, got {v!r}")
+                lower_ok = v >= 0 if f.name == "junction_deviation_mm" else v > 0
+                if not lower_ok:
+                    raise InputError(f.name, f"must be {'>= 0' if f.name == 'junction_deviation_mm' else '> 0'}, got {v!r}")
+        if self.period_s > 0.1:
+            raise InputError("period_s", f"interpolation period {self.period_s * 1000:g} ms is longer than 100 ms")
+
+    def feed_for(self, programmed_mm_s: float | None, rapid: bool = False) -> float:
+        """The feed a block runs at: rapid feed, the override, the programmed F, or the default."""
+        if rapid:
+            return self.rapid_feed_mm_s
+        if self.feed_mm_s is not None:
+            return self.feed_mm_s
+        return programmed_mm_s if programmed_mm_s is not None else self.default_feed_mm_s
