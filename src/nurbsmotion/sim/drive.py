@@ -493,6 +493,7 @@ class SimDrive:
             setter(value)
 
     def _after_sdo_write(self, index: int, subindex: int) -> None:
+        log.debug(kv("sim.sdo_write", node=self.node_id, object=f"0x{index:04X}:{subindex:02X}"))
         if pdo_layout.is_pdo_parameter(index):
             self._rebuild_all_pdos()
         elif index == c.CONSUMER_HEARTBEAT_TIME:
