@@ -15,7 +15,8 @@ Jerk and per-axis limits are not used by these methods (the ``lookahead`` planne
 
 from __future__ import annotations
 
-from nurbsmotion.planning.interpolators.runner import CORNER_ANGLE_DEG, Method, interpolate, split_runs
+from nurbsmotion.planning.interpolators.pieces import CORNER_ANGLE_DEG, split_runs
+from nurbsmotion.planning.interpolators.runner import Method, interpolate
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program
@@ -25,6 +26,8 @@ METHODS = {
     "taylor2": Method("taylor2", taylor_order=2, adaptive=False, correct=False),
     "wang": Method("wang", taylor_order=2, adaptive=True, correct=False),
     "zhang": Method("zhang", taylor_order=2, adaptive=True, correct=True),
+    # not registered as an algorithm: Wang's feed adaptation exactly as printed, for comparison
+    "wang-as-printed": Method("wang-as-printed", taylor_order=2, adaptive=True, correct=False, as_printed=True),
 }
 
 

@@ -99,6 +99,16 @@ class FeedLimits:
             cap = np.minimum(chord / self.period_s, np.sqrt(r * normal))
         return np.where(np.isinf(r), np.inf, cap)
 
+    def feed_as_printed(self, wanted_mm_s: float, radius_mm: float, a_t_before: float) -> float:
+        """Wang eq. 21-28 as printed: ΔL = min(V T, ΔL_c, ΔL_a) with ρ at the current point and
+        δ_a = T²/8 sqrt(a_max² - a_t²), a_t the change of feed in the previous cycle."""
+        if not self.adaptive or radius_mm == float("inf"):
+            return wanted_mm_s
+        delta_a = self.period_s**2 / 8.0 * sqrt(max(self.max_accel**2 - a_t_before**2, 0.0))
+        step_c = chord_limited_step_mm(radius_mm, self.chord_error_mm)
+        step_a = chord_limited_step_mm(radius_mm, delta_a) if delta_a > 0.0 else 0.0
+        return min(wanted_mm_s, step_c / self.period_s, step_a / self.period_s)
+
     def feed(self, wanted_mm_s: float, v_in_mm_s: float, radius_mm: float) -> float:
         """The outgoing feed of this cycle: wanted, capped by eq. 22 and the resultant rule."""
         if not self.adaptive:

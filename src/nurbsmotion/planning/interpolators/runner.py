@@ -1,14 +1,16 @@
 """Cycle-by-cycle interpolation of a whole Program, as a controller runs it.
 
-The program is cut into runs at sharp corners: where the tangent turns by more than
-CORNER_ANGLE_DEG between blocks the motion stops exactly on the junction (the reverse
-table of the run ends there) and restarts from rest. Inside a run the motion is continuous:
+The program is cut into runs at sharp corners (pieces.py): where the tangent turns by more
+than CORNER_ANGLE_DEG between blocks (or at a kink inside a block) the motion stops exactly
+on the junction (the reverse table of the run ends there) and restarts from rest. Inside a run the motion is continuous:
 a step that passes the end of a block carries its leftover into the next block.
 
 Each cycle of a run:
 1. the pre-interpolation linear acc/dec (Wang §III.A) raises the profile feed by a_l T up to
    the block's feed (a_l = V0 / t_l, V0 the run's highest feed, capped at a_max);
-2. the method's feed adaptation caps it (wang/zhang: chord error and resultant acceleration);
+2. the slow-downs still to come cap it (slowdown.py), and the method's feed adaptation
+   (wang/zhang: chord error and resultant acceleration at both ends of the step, then the
+   resultant acceleration checked on the set-points themselves);
 3. the reverse table gives V_achieve at the current remaining length; in the cycle where
    V_achieve <= V_next the step follows the table instead (reverse.py), which lands
    exactly on the stop;
@@ -29,6 +31,7 @@ import numpy as np
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.interpolators.feed import FeedLimits
+from nurbsmotion.planning.interpolators.pieces import Piece, split_runs
 from nurbsmotion.planning.interpolators.reverse import build_reverse_table
 from nurbsmotion.planning.interpolators.slowdown import SlowdownProfile
 from nurbsmotion.planning.interpolators.stepping import (
@@ -41,11 +44,11 @@ from nurbsmotion.planning.interpolators.stepping import (
 )
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.trajectory import Trajectory
-from nurbsmotion.program import BlockKind, Program
+from nurbsmotion.program import Program
 
-CORNER_ANGLE_DEG = 1.0  # tangent turn above which a junction is a stop
-MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped
 MAX_CYCLES = 50_000_000
+CHECK_ITERATIONS = 6  # re-steps of the set-point acceleration check
+CHECK_TARGET = 0.99999  # aim this far inside a_max: lengthening a step also bends it more
 
 
 @dataclass(frozen=True)
@@ -56,58 +59,38 @@ class Method:
     taylor_order: int
     adaptive: bool
     correct: bool
-
-
-def tangent_angle_deg(a: tuple[float, ...], b: tuple[float, ...]) -> float:
-    na, nb = math.sqrt(sum(x * x for x in a)), math.sqrt(sum(x * x for x in b))
-    if na == 0.0 or nb == 0.0:
-        return 180.0
-    cos = sum(x * y for x, y in zip(a, b)) / (na * nb)
-    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
-
-
-def split_runs(program: Program, corner_angle_deg: float = CORNER_ANGLE_DEG) -> list[list[int]]:
-    """Block indices grouped into runs of tangent-continuous blocks (stops between runs)."""
-    runs: list[list[int]] = []
-    previous = None
-    for index, block in enumerate(program.blocks):
-        if block.curve.length < MIN_BLOCK_LENGTH_MM:
-            continue
-        if previous is not None:
-            end_tangent = previous.curve.point_and_derivatives(previous.curve.u_max)[1]
-            start_tangent = block.curve.point_and_derivatives(block.curve.u_min)[1]
-            gap = distance(tuple(previous.end), tuple(block.start))
-            if gap > 1e-6 or tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
-                runs.append([])
-        if not runs:
-            runs.append([])
-        runs[-1].append(index)
-        previous = block
-    return runs
+    # Wang exactly as printed: limits at the current point only, eq. 27 with the previous
+    # cycle's a_t, no planned slow-downs and no check on the set-points (for comparison)
+    as_printed: bool = False
 
 
 class RunPlanner:
     """Interpolates one run (from rest to rest) and appends its rows."""
 
-    def __init__(self, program: Program, block_indices: list[int], method: Method, limits: PlanLimits):
-        self.indices = block_indices
-        blocks = [program.blocks[i] for i in block_indices]
+    def __init__(self, pieces: list[Piece], method: Method, limits: PlanLimits):
+        self.indices = [piece.block for piece in pieces]
+        curves = [piece.curve for piece in pieces]
         self.period = limits.period_s
-        self.feeds = [limits.feed_for(b.feed_mm_s, rapid=b.kind == BlockKind.RAPID) for b in blocks]
+        self.feeds = [piece.feed_mm_s for piece in pieces]
         self.accel = min(max(self.feeds) / limits.acc_time_s, limits.max_accel_mm_s2)  # a_l = V0 / t_l
-        self.path = CurvePath([b.curve for b in blocks])
-        self.reversed_path = CurvePath([b.curve.reversed() for b in reversed(blocks)])
+        self.path = CurvePath(curves)
+        last = len(curves) - 1
+        self.reversed_path = CurvePath(lambda j: curves[last - j].reversed(),
+                                       [(c.u_min, c.u_max) for c in reversed(curves)])
         self.limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2, method.adaptive)
         # wang: the Taylor predictor's relative step error, measured on the last step, scales
         # the next step, so the limits hold for the feed the set-points really show
-        self.compensate = method.adaptive and not method.correct
+        self.compensate = method.adaptive and not method.correct and not method.as_printed
         self.stepper = Stepper(method.taylor_order, method.correct, limits.chord_error_mm)
         # the reverse interpolation uses Wang's eq. 19 (second-order Taylor) for every method:
         # its chords are measured, so the predictor's error does not enter V_achieve
         self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
                                          Stepper(2, False, limits.chord_error_mm), self.period)
-        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, self.limits, self.accel)
-        self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
+        ahead_limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2,
+                                  method.adaptive and not method.as_printed)
+        self.slowdown = SlowdownProfile(curves, self.feeds, ahead_limits, self.accel)
+        self.as_printed = method.as_printed
+        self.end_x = tuple(float(v) for v in curves[-1].control_points[-1])  # the exact end point
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
         self.table_u = [self.path.u_min[last - j] + self.path.u_max[last - j] - u
@@ -130,7 +113,7 @@ class RunPlanner:
         """
         limit = self.limits.max_accel * self.period * self.period
         done = False
-        for _ in range(3):
+        for _ in range(CHECK_ITERATIONS):
             x, h = point.x, here.x
             d = (x[0] - 2.0 * h[0] + before_x[0], x[1] - 2.0 * h[1] + before_x[1], x[2] - 2.0 * h[2] + before_x[2])
             d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
@@ -145,7 +128,7 @@ class RunPlanner:
             if across2 >= limit * limit:  # the bend alone is too much: take the smallest resultant
                 change = -along
             else:
-                change = -along + math.copysign(math.sqrt(limit * limit - across2), along) * 0.999999
+                change = -along + math.copysign(math.sqrt(limit * limit - across2), along) * CHECK_TARGET
                 if abs(change) > abs(along):
                     change = -along
             new_step = max(chord + change, 0.0) * step / chord
@@ -182,6 +165,7 @@ class RunPlanner:
         radius_before = math.inf  # radius of curvature at the previous set-point
         before_x = here.x  # the previous set-point (at rest before the start)
         ratio = 1.0  # wang: measured chord / predicted step length of the last step
+        a_t_before = 0.0  # tangential acceleration of the last cycle (Wang eq. 27 as printed)
         end_x = self.end_x
         for _ in range(MAX_CYCLES):
             if tracked is None:
@@ -198,7 +182,10 @@ class RunPlanner:
             ahead = self.slowdown.feed(here.j, u_end)
             if v_achieve != math.inf and v_achieve > ahead:
                 ahead = v_achieve  # near the stop the table decides (it lands exactly)
-            v_next = self.limits.feed(min(profile, ahead), v_in, radius)
+            if self.as_printed:
+                v_next = self.limits.feed_as_printed(min(profile, ahead), radius_here, a_t_before)
+            else:
+                v_next = self.limits.feed(min(profile, ahead), v_in, radius)
             done = False
             if v_achieve <= v_next:  # Wang: decelerate into the stop
                 step = v_achieve * period
@@ -211,7 +198,7 @@ class RunPlanner:
             else:  # the method's own step, at most V_achieve (slow-downs ahead)
                 v_step = v_next
                 point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
-                if not done:  # the step must also respect the limits where it ends
+                if not done and not self.as_printed:  # the step must also respect the limits where it ends
                     radius_after = radius_of_curvature(point.d1, point.d2)
                     v_after = self.slowdown.feed(point.j, point.u)
                     if radius_after < radius:
@@ -220,7 +207,7 @@ class RunPlanner:
                         v_step = v_after
                         point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
                 v_step = min(v_step, step * ratio / period)  # Zhang's midpoint rule may shorten it
-                if self.limits.adaptive and not done:
+                if self.limits.adaptive and not done and not self.as_printed:
                     checked, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
                     if checked is not point:
                         point, v_step = checked, step * ratio / period
@@ -235,7 +222,8 @@ class RunPlanner:
             if done:
                 x_rows[-1] = end_x
                 return
-            v_in = distance(point.x, here.x) / period
+            v_out = distance(point.x, here.x) / period
+            a_t_before, v_in = (v_out - v_in) / period, v_out
             previous_step = step
             before_x = here.x
             here = point
@@ -247,9 +235,9 @@ def interpolate(program: Program, limits: PlanLimits, method: Method) -> Traject
     """Plan ``program`` cycle by cycle with ``method``; one set-point per period."""
     started = time.perf_counter()
     rows: tuple[list, list, list, list] = ([], [], [], [])
-    runs = split_runs(program)
-    for r, indices in enumerate(runs):
-        RunPlanner(program, indices, method, limits).run(rows, include_start=(r == 0))
+    runs = split_runs(program, limits)
+    for r, pieces in enumerate(runs):
+        RunPlanner(pieces, method, limits).run(rows, include_start=(r == 0))
     block_rows, u_rows, x_rows, feed_rows = rows
     if not block_rows:
         if not program.blocks:
