@@ -42,6 +42,7 @@ WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut
 PART_TOLERANCE = 1e-9
 START_BRAKE_SHARE = 0.7  # share of A used to brake from a running start above the new caps
 MAX_BACKTRACKS = 4  # re-plans of a held-back window for the sake of the next one
+MAX_WINDOW_CYCLES = 10_000_000  # a window planned slower than this cannot move: an error, not a crawl
 NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
 
 
@@ -255,6 +256,9 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
             commit_t = float(raw.t[min(k, len(raw.t) - 1)]) - 2.0 * period
             if commit_t < 2.0 * period:
                 raise _WindowTooShort()
+        if raw.end_time_s > MAX_WINDOW_CYCLES * period:
+            raise PlanningError(f"block {pieces[0].block + 1}", "lookahead finds no speed at which the limits "
+                                f"hold here (the window would take {raw.end_time_s:.3g} s)")
         full_raw = jp.prepend_history(cursor.history, raw) if cursor.history is not None else raw
         times = sample_times(raw, cursor, settings, reaches_end)
         s = np.clip(jp.filtered_position(full_raw, times, settings.tau_f), 0.0, grid.length_mm)
