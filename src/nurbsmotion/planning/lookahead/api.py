@@ -14,6 +14,7 @@ from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
 from nurbsmotion.planning.lookahead.planner import Cursor, PlanSettings, WindowPlan, plan_run, settings_for
 from nurbsmotion.planning.lookahead.runs import Run, program_pieces, split_runs
+from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.planning.trajectory import Trajectory
@@ -169,7 +170,6 @@ def start_from_state(program: Program, runs: list[Run], state: PlanState, settin
     else:
         v_raw, offset, history = v, 0.0, None
     last = point_at(runs, state.s_mm)
-    from nurbsmotion.planning.lookahead.sampling import Samples
     previous = Samples(np.zeros(1, np.int32), np.array([u]), last[None, :])
     cursor = Cursor(0, u, offset, v_raw, history, before, previous, at_rest=False)
     return [tail] + runs[r + 1:], cursor
