@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from nurbsmotion.planning import Trajectory
+from nurbsmotion.errors import InputError
 from nurbsmotion.planning.lookahead import (PlanningError, PlanState, plan_from_state, plan_lookahead,
-                                            plan_lookahead_chunks)
+                                            plan_lookahead_chunks, plan_lookahead_resumable)
 from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import read_program
 from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits, polyline
@@ -107,3 +108,25 @@ def test_replanning_too_close_to_the_end_is_a_clear_error(wang_program):
         assert "re-plan" in str(err) or "cannot hold" in str(err)
     else:
         np.testing.assert_array_equal(rest.position_mm[-1], wang_program.end_position)
+
+
+@pytest.mark.parametrize("limits", [WANG_LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+@pytest.mark.parametrize("feed_mm_s", [80.0, 250.0])
+def test_feed_override_resumes_exactly_at_a_chunk_boundary(mixed_plans, limits, feed_mm_s):
+    """Stop consuming a chunked plan after 3 chunks, resume from its Resume with a new feed:
+    old chunks + resumed ones hold every limit and end exactly."""
+    program = mixed_plans[0]
+    chunks = plan_lookahead_resumable(program, limits, chunk_cycles=150)
+    head = [next(chunks) for _ in range(3)]
+    tail = [chunk for chunk, _ in plan_lookahead_resumable(program, replace(limits, feed_mm_s=feed_mm_s), 150,
+                                                           head[-1][1])]
+    assert tail
+    joined = Trajectory.concatenate([chunk for chunk, _ in head] + tail)
+    assert_within_limits(measure(joined, program), limits)
+
+
+def test_resuming_with_other_acceleration_limits_is_refused(mixed_plans):
+    program = mixed_plans[0]
+    _, resume = next(plan_lookahead_resumable(program, WANG_LIMITS, chunk_cycles=150))
+    with pytest.raises(InputError, match="acceleration and jerk"):
+        list(plan_lookahead_resumable(program, replace(WANG_LIMITS, max_jerk_mm_s3=20000.0), 150, resume))
