@@ -37,6 +37,24 @@ def vcan0() -> str:
 
 
 @pytest.fixture
+def sim_process(vcan0: str, tmp_path: Path) -> Iterator:
+    """Factory: the simulated drives of a config in a child process, ready; always stopped."""
+    from tests.vcan.two_processes import SimProcess
+
+    started: list[SimProcess] = []
+
+    def start(config_path: Path) -> SimProcess:
+        sim = SimProcess(config_path, tmp_path / "recordings")
+        started.append(sim)
+        sim.wait_ready()
+        return sim
+
+    yield start
+    for sim in started:
+        sim.stop()
+
+
+@pytest.fixture
 def open_bus(vcan0: str) -> Iterator:
     """Factory of socketcan buses on vcan0 listening to the given ids; all shut down after."""
     buses: list[can.BusABC] = []
