@@ -1,0 +1,128 @@
+"""The real MotionLink: fieldbus.Master (+ a playback rate for the feed override) and, when
+``simulate: true``, the simulated drives started first on the same bus channel.
+
+RateMaster is a small wrapper owned by the service: fieldbus.Master streams one planned row
+per cycle; here the streaming phase plays the rows at a rate r (fractional rows per cycle,
+linear interpolation between rows, like the master's own controlled-stop ramp) and r moves
+towards the requested rate by the master's stop-ramp slope per cycle, so a rate change
+adds at most a_max (see fieldbus.stop_ramp). A controlled stop starts from the current
+position and rate. Replace it by the master's own rate control once it has one.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable
+
+import numpy as np
+
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.fieldbus import Job, Master
+from nurbsmotion.log import kv
+
+log = logging.getLogger(__name__)
+
+
+class RateMaster(Master):
+    """fieldbus.Master with :meth:`set_rate` (feed override as playback rate)."""
+
+    def __init__(self, config: MachineConfig, *args: Any, **kwargs: Any) -> None:
+        super().__init__(config, *args, **kwargs)
+        self._rate_target = 1.0
+
+    def set_rate(self, rate: float) -> None:
+        """Playback rate for the running and the next jobs (1.0 = as planned, 0 = pause)."""
+        self._rate_target = max(0.0, float(rate))
+
+    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
+        job = super().stream(counts, on_progress)
+        job.playback_s = 0.0  # type: ignore[attr-defined]
+        job.playback_r = self._rate_target  # type: ignore[attr-defined]
+        return job
+
+    def _compute(self, k: int) -> None:
+        if self._phase != "streaming":
+            super()._compute(k)
+            return
+        job = self._job
+        assert job is not None
+        sp, n = self._sp, self._n
+        if job.index < 0:
+            s = 0.0
+        else:
+            r, target, dr = job.playback_r, self._rate_target, job.ramp.dr
+            r = min(r + dr, target) if r < target else max(r - dr, target)
+            job.playback_r = r
+            s = min(job.playback_s + r, float(job.last))
+        job.playback_s = s
+        i = int(s)
+        f = s - i
+        row = job.rows[i]
+        if f > 0.0:
+            nxt = job.rows[i + 1]
+            for j in range(n):
+                sp[j] = int(round(row[j] + f * (nxt[j] - row[j])))
+        else:
+            for j in range(n):
+                sp[j] = row[j]
+        self._cw[:] = self._run_cw
+        job.index = i
+        if i == job.last:
+            self._hold[:] = row
+            self._set_phase("holding", k)
+            job.outcome, job.finish_cycle = "done", k + 1
+
+    def _start_controlled_stop(self, k: int, outcome: str) -> None:
+        super()._start_controlled_stop(k, outcome)
+        job = self._job
+        if job is not None and hasattr(job, "playback_s"):
+            job.ramp.s = job.playback_s
+            job.ramp.r = job.playback_r
+
+
+class SimulatedDrives:
+    """The simulated drives of every configured axis on the configured bus (simulate: true)."""
+
+    def __init__(self, config: MachineConfig) -> None:
+        from nurbsmotion.sim import SimNetwork
+
+        bus = config.bus
+        self.network = SimNetwork(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+        for axis in config.axes:
+            identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
+            self.network.add_drive(axis.node_id, axis.eds, identity=identity, name=axis.name)
+
+    def start(self) -> "SimulatedDrives":
+        self.network.start()
+        log.info(kv("simulated_drives", channel=self.network.channel, nodes=sorted(self.network.drives)))
+        return self
+
+    def inject(self, spec: str) -> None:
+        from nurbsmotion.sim import parse_fault_spec
+
+        self.network.inject(parse_fault_spec(spec))
+
+    def clear_recordings(self) -> None:
+        for drive in self.network.drives.values():
+            drive.recorder.clear()
+
+    def write_recordings(self, folder: str) -> list[str]:
+        return [str(p) for p in self.network.write_recordings(folder)]
+
+    def stop(self) -> None:
+        self.network.stop()
+
+
+def open_link(config: MachineConfig) -> tuple[RateMaster, SimulatedDrives | None]:
+    """Start the simulated drives (if configured), bring every axis up; FieldbusError names
+    the node and the step if that fails (and everything started is stopped again)."""
+    simulation = SimulatedDrives(config).start() if config.simulate else None
+    master = RateMaster(config)
+    try:
+        master.bring_up()
+    except BaseException:
+        master.shutdown(2.0)
+        if simulation is not None:
+            simulation.stop()
+        raise
+    return master, simulation
