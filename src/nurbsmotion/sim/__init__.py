@@ -1,0 +1,24 @@
+"""Simulated CiA-402 servo drives (IP and CSP) on any python-can bus, with set-point recording
+and fault injection. Never imports nurbsmotion.fieldbus: the drive side is an independent
+implementation of CiA 301/402 against which the master is tested.
+"""
+
+from nurbsmotion.sim.drive import DriveStats, SimDrive
+from nurbsmotion.sim.eds import default_eds_path
+from nurbsmotion.sim.faults import FaultInjection, parse_fault_spec
+from nurbsmotion.sim.network import SimNetwork
+from nurbsmotion.sim.recording import SetpointRecord, SetpointRecorder, read_csv
+from nurbsmotion.sim.servo import ServoModel
+
+__all__ = [
+    "DriveStats",
+    "FaultInjection",
+    "ServoModel",
+    "SetpointRecord",
+    "SetpointRecorder",
+    "SimDrive",
+    "SimNetwork",
+    "default_eds_path",
+    "parse_fault_spec",
+    "read_csv",
+]

@@ -1,0 +1,125 @@
+"""PDO layouts of a simulated drive, computed once when the master (re)maps a PDO.
+
+A mapping entry (0x16xx / 0x1Axx sub n, CiA 301) is ``index << 16 | subindex << 8 | bits``.
+A layout turns the entries into one ``struct.Struct`` so that a frame is decoded or encoded
+with a single ``unpack_from`` / ``pack_into`` per SYNC.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+
+from canopen import objectdictionary as od_types
+from canopen.objectdictionary import ObjectDictionary, ODVariable
+from canopen.sdo import SdoAbortedError
+
+ABORT_VALUE_INVALID = 0x06090030
+ABORT_VALUE_TOO_HIGH = 0x06090031
+ABORT_NOT_MAPPABLE = 0x06040041
+ABORT_PDO_LENGTH_EXCEEDED = 0x06040042
+ABORT_DEVICE_STATE = 0x08000022
+COB_ID_INVALID_BIT = 0x8000_0000
+COB_ID_EXTENDED_BIT = 0x2000_0000
+MAX_PDO_BITS = 64
+
+_STRUCT_CODE = {
+    od_types.BOOLEAN: "?",
+    od_types.INTEGER8: "b",
+    od_types.UNSIGNED8: "B",
+    od_types.INTEGER16: "h",
+    od_types.UNSIGNED16: "H",
+    od_types.INTEGER32: "i",
+    od_types.UNSIGNED32: "I",
+    od_types.INTEGER64: "q",
+    od_types.UNSIGNED64: "Q",
+    od_types.REAL32: "f",
+    od_types.REAL64: "d",
+}
+# CiA 301 dummy entries (RPDO only): index = data type, nothing is written.
+_DUMMY_BITS = {0x0002: 8, 0x0003: 16, 0x0004: 32, 0x0005: 8, 0x0006: 16, 0x0007: 32}
+
+
+def split_entry(entry: int) -> tuple[int, int, int]:
+    """(index, subindex, bits) of a mapping entry."""
+    return (entry >> 16) & 0xFFFF, (entry >> 8) & 0xFF, entry & 0xFF
+
+
+def find_variable(od: ObjectDictionary, index: int, subindex: int) -> ODVariable | None:
+    if index not in od:
+        return None
+    obj = od[index]
+    if isinstance(obj, ODVariable):
+        return obj if subindex == 0 else None
+    return obj[subindex] if subindex in obj else None
+
+
+def check_entry(od: ObjectDictionary, entry: int, receive: bool) -> None:
+    """Raise the SDO abort a drive answers when ``entry`` cannot be mapped (0 = empty entry)."""
+    if entry == 0:
+        return
+    index, subindex, bits = split_entry(entry)
+    if receive and index in _DUMMY_BITS and subindex == 0:
+        if bits != _DUMMY_BITS[index]:
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+        return
+    var = find_variable(od, index, subindex)
+    if var is None or not var.pdo_mappable or var.data_type not in _STRUCT_CODE:
+        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+    if (receive and not var.writable) or (not receive and not var.readable) or len(var) != bits:
+        raise SdoAbortedError(ABORT_NOT_MAPPABLE)
+
+
+def check_entries(od: ObjectDictionary, entries: list[int], receive: bool) -> None:
+    """Check a whole mapping before it is activated (writing the entry count)."""
+    if len(entries) > 8:
+        raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
+    for entry in entries:
+        check_entry(od, entry, receive)
+    if sum(split_entry(e)[2] for e in entries) > MAX_PDO_BITS:
+        raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
+
+
+@dataclass
+class PdoLayout:
+    """One PDO as the drive currently sees it."""
+
+    number: int  # 1..4
+    cob_id: int  # 11-bit CAN id
+    enabled: bool
+    transmission_type: int
+    keys: list[tuple[int, int]] = field(default_factory=list)  # mapped (index, subindex); dummies skipped
+    codec: struct.Struct = field(default_factory=lambda: struct.Struct("<"))
+
+    @property
+    def size(self) -> int:
+        return self.codec.size
+
+    @property
+    def synchronous(self) -> bool:
+        """Transmission types 0..240 are synchronous (CiA 301)."""
+        return self.transmission_type <= 240
+
+
+def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmission_type: int, entries: list[int]) -> PdoLayout:
+    """Layout of PDO ``number`` from its communication and mapping parameter values."""
+    fmt = "<"
+    keys: list[tuple[int, int]] = []
+    for entry in entries:
+        if entry == 0:
+            continue
+        index, subindex, bits = split_entry(entry)
+        var = find_variable(od, index, subindex)
+        if var is None:  # dummy entry: skip its bytes
+            fmt += f"{bits // 8}x"
+            continue
+        fmt += _STRUCT_CODE[var.data_type]
+        keys.append((index, subindex))
+    return PdoLayout(
+        number=number,
+        cob_id=cob_id_value & 0x7FF,
+        enabled=not cob_id_value & COB_ID_INVALID_BIT,
+        transmission_type=transmission_type,
+        keys=keys,
+        codec=struct.Struct(fmt),
+    )

@@ -1,0 +1,138 @@
+"""A bench for simulated drives: the drives on one virtual bus, a minimal canopen master
+(RemoteNode) on a second bus of the same channel, and a recorder of every frame the master
+sees. Every wait polls a condition with a timeout; nothing sleeps and hopes."""
+
+from __future__ import annotations
+
+import struct
+import threading
+import time
+import uuid
+from typing import Callable, Iterator
+
+import can
+import canopen
+import pytest
+
+from nurbsmotion.sim import SimDrive, SimNetwork, default_eds_path
+
+TIMEOUT_S = 2.0
+
+
+def rpdo(controlword: int, setpoint: int) -> bytes:
+    """Data of the default RPDO1/RPDO2: controlword, then the CSP target or IP set-point."""
+    return struct.pack("<Hi", controlword, setpoint)
+
+
+def wait_until(condition: Callable[[], object], timeout_s: float = TIMEOUT_S, what: str = "condition") -> None:
+    """Poll ``condition`` until it is true; fail the test after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.001)
+
+
+class FrameLog(can.Listener):
+    """Every frame the master receives, as (can_id, data, monotonic time)."""
+
+    def __init__(self) -> None:
+        self.frames: list[tuple[int, bytes, float]] = []
+        self._lock = threading.Lock()
+
+    def on_message_received(self, msg: can.Message) -> None:
+        with self._lock:
+            self.frames.append((msg.arbitration_id, bytes(msg.data), time.monotonic()))
+
+    def of(self, can_id: int) -> list[bytes]:
+        with self._lock:
+            return [data for cid, data, _ in self.frames if cid == can_id]
+
+    def clear(self) -> None:
+        with self._lock:
+            self.frames.clear()
+
+
+class Bench:
+    """Drives under test plus the master side."""
+
+    def __init__(self, sim: SimNetwork, master: canopen.Network, frames: FrameLog) -> None:
+        self.sim = sim
+        self.master = master
+        self.frames = frames
+        self.nodes: dict[int, canopen.RemoteNode] = {}
+        self.syncs_sent = 0
+
+    def add(self, node_id: int, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
+        """Start drive ``node_id``; wait for its boot-up; return it and its master-side node."""
+        drive = self.sim.add_drive(node_id, **drive_kwargs)
+        node = canopen.RemoteNode(node_id, str(default_eds_path()))
+        node.sdo.RESPONSE_TIMEOUT = 1.0
+        self.master.add_node(node)
+        self.nodes[node_id] = node
+        wait_until(lambda: bytes([0]) in self.frames.of(0x700 + node_id), what=f"boot-up of node {node_id}")
+        return drive, node
+
+    def send(self, can_id: int, data: bytes) -> None:
+        self.master.send_message(can_id, data)
+
+    def nmt(self, command: int, node_id: int) -> None:
+        self.send(0x000, bytes([command, node_id]))
+
+    def sync(self, counter: int | None = None) -> None:
+        """Send one SYNC and wait until every drive on the bus has taken it."""
+        drives = list(self.sim.drives.values())
+        before = [d.stats.syncs for d in drives]
+        operational = [d.nmt_state == 0x05 and not d.silent for d in drives]
+        self.send(0x80, b"" if counter is None else bytes([counter]))
+        self.syncs_sent += 1
+        wait_until(
+            lambda: all(d.stats.syncs > b or not op for d, b, op in zip(drives, before, operational)),
+            what="SYNC processed",
+        )
+        # The TPDOs of this SYNC are sent before the counter is read again: wait for the
+        # receive thread of the master to have them too (a round trip through an SDO-free ping).
+        self.flush()
+
+    def flush(self) -> None:
+        """Wait until every frame sent so far by the drives reached the master's log."""
+        marker = 0x7FF
+        token = uuid.uuid4().bytes[:8]
+        sim_net = self.sim.network
+        assert sim_net is not None
+        sim_net.send_message(marker, token)  # sent after the drives' frames: arrives after them
+        wait_until(lambda: token in self.frames.of(marker), what="frames flushed")
+
+    def operational(self, node_id: int) -> None:
+        self.nmt(0x01, node_id)
+        wait_until(lambda: self.sim.drives[node_id].nmt_state == 0x05, what="OPERATIONAL")
+
+    def enable(self, node_id: int, mode: int = 8) -> None:
+        """By SDO: mode, shutdown, switch on, enable operation (+ bit 4 in IP)."""
+        node = self.nodes[node_id]
+        node.sdo[0x6060].raw = mode
+        for word in (0x06, 0x07, 0x0F):
+            node.sdo[0x6040].raw = word
+        if mode == 7:
+            node.sdo[0x6040].raw = 0x1F
+
+
+@pytest.fixture
+def channel() -> str:
+    return f"sim-test-{uuid.uuid4().hex}"
+
+
+@pytest.fixture
+def bench(channel: str) -> Iterator[Bench]:
+    frames = FrameLog()
+    master = canopen.Network()
+    master.NOTIFIER_CYCLE = 0.05
+    master.connect(interface="virtual", channel=channel)
+    assert master.notifier is not None
+    master.notifier.add_listener(frames)
+    sim = SimNetwork(interface="virtual", channel=channel).start()
+    try:
+        yield Bench(sim, master, frames)
+    finally:
+        sim.stop()
+        master.disconnect()

@@ -1,0 +1,117 @@
+"""``nurbsmotion sim``: drives for a configuration, faults from the command line, clean exit."""
+
+from __future__ import annotations
+
+import os
+import select
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+
+import canopen
+import pytest
+
+import nurbsmotion
+from nurbsmotion.cli import main
+from nurbsmotion.cli.sim import parse_faults, serve
+from nurbsmotion.config import load_config
+from nurbsmotion.sim import SimNetwork, read_csv
+
+from conftest import FrameLog, rpdo, wait_until
+
+
+def write_config(tmp_path: Path, channel: str) -> Path:
+    path = tmp_path / "machine.yaml"
+    path.write_text(
+        "cycle_period_ms: 2\n"
+        f"bus: {{interface: virtual, channel: {channel}}}\n"
+        "axes:\n"
+        "  - {name: X, node_id: 1, mode: csp}\n"
+        "  - {name: Z, node_id: 2, mode: ip, identity: {vendor_id: 0x99, product_code: 0x42}}\n"
+    )
+    return path
+
+
+def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_path: Path) -> None:
+    channel = f"sim-cli-{uuid.uuid4().hex}"
+    machine = load_config(write_config(tmp_path, channel))
+    faults = parse_faults(["node=2,kind=fault,at_sync=3,code=0x2310"], machine)
+    frames = FrameLog()
+    master = canopen.Network()
+    master.NOTIFIER_CYCLE = 0.05
+    master.connect(interface="virtual", channel=channel)
+    master.notifier.add_listener(frames)
+    stop = threading.Event()
+    ready: list[SimNetwork] = []
+    server = threading.Thread(target=serve, args=(machine, faults, stop),
+                              kwargs={"record_dir": tmp_path / "rec", "on_ready": ready.append})
+    server.start()
+    try:
+        wait_until(lambda: ready, what="drives up")
+        net = ready[0]
+        z = canopen.RemoteNode(2, str(net[2].eds_path))
+        master.add_node(z)
+        assert (z.sdo[0x1018][1].raw, z.sdo[0x1018][2].raw) == (0x99, 0x42)
+        assert z.sdo[0x6061].raw == 7 and (z.sdo[0x60C2][1].raw, z.sdo[0x60C2][2].raw) == (2, -3)
+        assert net[2].period_s == pytest.approx(0.002)
+        master.send_message(0x000, bytes([0x01, 0]))
+        wait_until(lambda: all(d.nmt_state == 0x05 for d in net.drives.values()), what="operational")
+        for word in (0x06, 0x07, 0x0F):
+            master.send_message(0x201, rpdo(word, 0))
+            master.send_message(0x80, b"")
+        master.send_message(0x201, rpdo(0x0F, 77))
+        master.send_message(0x80, b"")
+        wait_until(lambda: frames.of(0x82), what="EMCY of node 2")
+        assert frames.of(0x82)[0][:2] == (0x2310).to_bytes(2, "little")
+        wait_until(lambda: len(net[1].recorder) == 2, what="set-points of node 1")
+    finally:
+        stop.set()
+        server.join(timeout=5)
+        master.disconnect()
+    assert not server.is_alive()
+    assert [(r.sync_index, r.setpoint_counts) for r in read_csv(tmp_path / "rec" / "node1.csv")] == [(3, 0), (4, 77)]  # the enabling RPDO carries a set-point too
+    assert read_csv(tmp_path / "rec" / "node2.csv") == []
+
+
+@pytest.mark.parametrize(
+    "extra,message",
+    [
+        (["--fault", "node=2,kind=melt"], "fault spec 'node=2,kind=melt': unknown fault kind"),
+        (["--fault", "node=9,kind=fault"], "node 9 is not an axis"),
+        (["--fault", "kind=fault"], "node is required"),
+        (["--lag-cycles", "-1"], "--lag-cycles: must be >= 0"),
+        (["--max-velocity-counts-s", "0"], "--max-velocity-counts-s: must be > 0"),
+    ],
+)
+def test_bad_options_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str) -> None:
+    config = write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}")
+    assert main(["sim", "--config", str(config), *extra]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Path) -> None:
+    config = write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}")
+    env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config), "--record-dir", str(tmp_path / "rec")],
+        stderr=subprocess.PIPE, text=True, env=env,
+    )
+    try:
+        deadline = time.monotonic() + 20
+        seen = ""
+        while "sim.ready" not in seen:
+            assert time.monotonic() < deadline and proc.poll() is None, f"no sim.ready: {seen}"
+            if select.select([proc.stderr], [], [], 0.5)[0]:
+                seen += proc.stderr.readline()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=1.0) == 0
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["node1.csv", "node2.csv"]

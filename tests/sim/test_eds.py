@@ -1,0 +1,58 @@
+"""The shipped EDS: loadable by canopen, with the CiA-301/402 objects the issue lists."""
+
+from __future__ import annotations
+
+import canopen
+import pytest
+
+from nurbsmotion.sim import default_eds_path
+
+REQUIRED = [
+    0x1000, 0x1001, 0x1003, 0x1005, 0x1006, 0x1014, 0x1016, 0x1017, 0x1018,
+    *range(0x1400, 0x1404), *range(0x1600, 0x1604), *range(0x1800, 0x1804), *range(0x1A00, 0x1A04),
+    0x603F, 0x6040, 0x6041, 0x605A, 0x6060, 0x6061, 0x6064, 0x6065, 0x6066, 0x607A, 0x607D,
+    0x6085, 0x60C0, 0x60C1, 0x60C2, 0x60C4, 0x60F4, 0x6502,
+]
+
+
+def test_default_eds_is_the_repository_file() -> None:
+    path = default_eds_path()
+    assert path.name == "nurbsmotion-servo.eds" and path.parent.name == "eds"
+
+
+@pytest.mark.parametrize("index", REQUIRED, ids=lambda i: f"0x{i:04X}")
+def test_eds_has_object(index: int) -> None:
+    od = canopen.import_od(str(default_eds_path()), 5)
+    assert index in od
+
+
+@pytest.mark.parametrize("node_id", [1, 42, 127])
+def test_default_cob_ids_follow_the_node_id(node_id: int) -> None:
+    od = canopen.import_od(str(default_eds_path()), node_id)
+    assert od[0x1014].default == 0x80 + node_id
+    assert od[0x1400][1].default == 0x200 + node_id
+    assert od[0x1800][1].default == 0x180 + node_id
+    assert od[0x1402][1].default == 0x8000_0400 + node_id  # RPDO3 disabled by default
+
+
+def test_supported_modes_advertise_ip_and_csp() -> None:
+    od = canopen.import_od(str(default_eds_path()), 1)
+    assert od[0x6502].default & (1 << 6) and od[0x6502].default & (1 << 7)
+    assert od[0x6040].pdo_mappable and od[0x607A].pdo_mappable and od[0x60C1][1].pdo_mappable
+
+
+def test_local_and_remote_nodes_load_the_eds() -> None:
+    local = canopen.LocalNode(3, str(default_eds_path()))
+    remote = canopen.RemoteNode(3, str(default_eds_path()))
+    assert local.object_dictionary[0x1018][4].default == 3
+    assert remote.tpdo[1].map_array.od.index == 0x1A00
+
+
+def test_generated_file_is_up_to_date() -> None:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("eds_generate", default_eds_path().with_name("generate.py"))
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.eds_text() == default_eds_path().read_text(encoding="ascii")
