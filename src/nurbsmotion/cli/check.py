@@ -1,0 +1,70 @@
+"""``nurbsmotion check PROGRAM``: read and validate a program, print what it does.
+
+Exit 0 with a summary (blocks by kind, length, bounding box of the sampled path, feed
+range), or exit 2 with one line per error (``file:line: word: message``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from nurbsmotion.errors import InputError
+from nurbsmotion.program import read_program
+from nurbsmotion.program.summary import ProgramSummary, summarize
+
+HELP = "validate a G-code or YAML curve program and summarise it"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("program", help="G-code (.nc .ngc .gcode .tap) or YAML curve file (.yaml .yml)")
+    parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+    parser.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"), default=(0.0, 0.0, 0.0),
+                        help="machine position (mm) the G-code program starts from (default 0 0 0)")
+
+
+def format_summary(s: ProgramSummary) -> str:
+    def xyz(v: tuple[float, float, float]) -> str:
+        return " ".join(f"{a}{c:.3f}" for a, c in zip("XYZ", v))
+
+    kinds = ", ".join(f"{n} {k}" for k, n in sorted(s.blocks_by_kind.items())) or "none"
+    lengths = ", ".join(f"{k} {v:.3f}" for k, v in sorted(s.length_by_kind_mm.items()))
+    if s.feed_min_mm_min is None:
+        feeds = "machine default for every block"
+    else:
+        feeds = f"{s.feed_min_mm_min:g} .. {s.feed_max_mm_min:g} mm/min"
+        if s.blocks_at_machine_feed:
+            feeds += f" ({s.blocks_at_machine_feed} blocks at the machine's rapid/default feed)"
+    return "\n".join([
+        f"program   {s.name}: OK",
+        f"blocks    {s.blocks} ({kinds})",
+        f"length    {s.length_mm:.3f} mm" + (f" ({lengths})" if lengths else ""),
+        f"start     {xyz(s.start_mm)}",
+        f"end       {xyz(s.end_mm)}",
+        f"bbox min  {xyz(s.bbox_min_mm)}",
+        f"bbox max  {xyz(s.bbox_max_mm)}",
+        f"feed      {feeds}",
+    ])
+
+
+def errors_as_json(err: InputError) -> str:
+    errors = getattr(err, "errors", [err])
+    return json.dumps({"ok": False, "errors": [{"where": e.where, "message": e.message} for e in errors]}, indent=2)
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        program = read_program(args.program, args.start)
+    except InputError as err:
+        if not args.json:
+            raise
+        print(errors_as_json(err))
+        return 2
+    summary = summarize(program)
+    if args.json:
+        print(json.dumps({"ok": True, **summary.as_dict()}, indent=2))
+    else:
+        print(format_summary(summary))
+    sys.stdout.flush()
+    return 0

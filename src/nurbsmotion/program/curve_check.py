@@ -1,0 +1,101 @@
+"""All problems of a NURBS definition at once, each naming its field and index.
+
+``NurbsCurve.create`` stops at the first problem; a user fixing a curve file wants every
+problem in one run (Zhang's example has zero weights *and* decreasing knots). The checks
+here are the same rules as ``geometry.nurbs.validate_definition`` run independently of each
+other; the readers map each problem to the file line holding the offending value.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.geometry import CurveError, NurbsCurve
+
+
+@dataclass(frozen=True)
+class CurveProblem:
+    """One problem: ``field`` is degree | control_points | weights | knots; ``index`` the value."""
+
+    field: str
+    message: str
+    index: int | None = None
+
+
+def degree_problems(degree: int, n_points: int, min_degree: int, max_degree: int, name: str) -> list[CurveProblem]:
+    if not min_degree <= degree <= max_degree:
+        return [CurveProblem("degree", f"{name} must be between {min_degree} and {max_degree}, got {degree}")]
+    if n_points < degree + 1:
+        return [CurveProblem("control_points", f"a degree-{degree} curve needs at least {degree + 1} control points, got {n_points}")]
+    return []
+
+
+def weight_problems(weights: Sequence[float], n_points: int) -> list[CurveProblem]:
+    problems = []
+    if len(weights) != n_points:
+        problems.append(CurveProblem("weights", f"need one weight per control point ({n_points}), got {len(weights)}"))
+    for i, w in enumerate(weights):
+        if not np.isfinite(w) or w <= 0:
+            problems.append(CurveProblem("weights", f"weight {i + 1} is {w:g}; weights must be > 0", i))
+    return problems
+
+
+def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[CurveProblem]:
+    """Count, order, clamped ends, non-empty range, interior multiplicity <= degree."""
+    k = np.asarray(knots, dtype=float)
+    problems = []
+    expected = n_points + degree + 1
+    if len(k) != expected:
+        problems.append(CurveProblem(
+            "knots", f"need {expected} knots ({n_points} control points + degree {degree} + 1), got {len(k)}"))
+    for i in np.flatnonzero(np.diff(k) < 0) + 1:
+        problems.append(CurveProblem(
+            "knots", f"knot {i + 1} ({k[i]:g}) is less than knot {i} ({k[i - 1]:g}); knots must not decrease", int(i)))
+    if len(k) < 2 * (degree + 1) or problems:
+        return problems
+    first, last = k[: degree + 1], k[-degree - 1:]
+    if np.any(first != first[0]):
+        i = int(np.flatnonzero(first != first[0])[0])
+        problems.append(CurveProblem("knots", f"start not clamped: the first {degree + 1} knots must be equal", i))
+    if np.any(last != last[-1]):
+        i = len(k) - degree - 1 + int(np.flatnonzero(last != last[-1])[0])
+        problems.append(CurveProblem("knots", f"end not clamped: the last {degree + 1} knots must be equal", i))
+    if not k[-1] > k[0]:
+        problems.append(CurveProblem("knots", "knot range is empty (first knot equals last knot)", len(k) - 1))
+    for i in range(degree + 1, len(k) - degree - 1 - degree):
+        if k[i] == k[i + degree] and k[i] > k[0] and k[i + degree] < k[-1]:
+            problems.append(CurveProblem("knots", f"interior knot {k[i]:g} repeats more than {degree} (the degree) times", i + degree))
+            break
+    return problems
+
+
+def zero_length_problems(points: np.ndarray, tolerance_mm: float) -> list[CurveProblem]:
+    if len(points) and float(np.max(np.linalg.norm(points - points[0], axis=1))) <= tolerance_mm:
+        return [CurveProblem("control_points", "zero-length NURBS: all control points are the same point", len(points) - 1)]
+    return []
+
+
+def build_curve(degree: int, points: Sequence[Sequence[float]], weights: Sequence[float], knots: Sequence[float],
+                locate: Callable[[CurveProblem], str], *, min_degree: int = 1, max_degree: int = 9,
+                degree_name: str = "degree", zero_length_mm: float = 1e-9) -> NurbsCurve:
+    """Validate everything, then build the curve; raise InputErrors listing every problem.
+
+    ``locate(problem)`` returns the ``where`` of a problem (file:line: word or field).
+    """
+    pts = np.asarray(points, dtype=float).reshape(len(points), -1)
+    problems = degree_problems(degree, len(pts), min_degree, max_degree, degree_name)
+    shape_ok = not problems  # knot rules depend on a valid degree and point count
+    problems += weight_problems(weights, len(pts))
+    if shape_ok:
+        problems += knot_problems(knots, len(pts), degree)
+    problems += zero_length_problems(pts, zero_length_mm)
+    if not problems:
+        try:
+            return NurbsCurve.create(degree, pts, weights, knots)
+        except CurveError as err:  # a rule checked only by the geometry: still located
+            problems = [CurveProblem(err.field, err.message, err.index)]
+    raise InputErrors([InputError(locate(p), p.message) for p in problems])

@@ -1,0 +1,37 @@
+"""``read_program(path)``: pick the reader by file extension."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from numpy.typing import ArrayLike
+
+from nurbsmotion.errors import InputError
+from nurbsmotion.program.curve_yaml import parse_curve_yaml
+from nurbsmotion.program.gcode import parse_gcode
+from nurbsmotion.program.model import Program
+
+GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap")
+YAML_SUFFIXES = (".yaml", ".yml")
+
+
+def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0)) -> Program:
+    """Read a G-code (.nc .ngc .gcode .tap) or YAML curve (.yaml .yml) program.
+
+    ``start_position`` (machine XYZ in mm) is where a G-code program starts; a YAML curve
+    file starts at its first point and ignores it.
+    """
+    source = str(path)
+    suffix = Path(path).suffix.lower()
+    if suffix not in GCODE_SUFFIXES + YAML_SUFFIXES:
+        raise InputError(source, f"unknown program type {suffix or '(no extension)'!r}: "
+                                 f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError(source, f"not a UTF-8 text file ({err.reason} at byte {err.start})") from None
+    except OSError as err:
+        raise InputError(source, f"cannot read: {err.strerror or err}") from None
+    if suffix in YAML_SUFFIXES:
+        return parse_curve_yaml(text, source)
+    return parse_gcode(text, source, start_position)
