@@ -3,15 +3,7 @@
 import numpy as np
 import pytest
 
-from nurbsmotion.service.rate import axis_peaks, effective_rate, max_rate
-
-
-def test_peaks_are_finite_differences_of_the_set_points():
-    t = np.arange(0, 1.0001, 0.004)
-    pos = np.column_stack([50.0 * t**2, 10.0 * t, np.zeros_like(t)])  # a = 100, v <= 100 / 10
-    v, a = axis_peaks(pos, 0.004)
-    assert v[0] == pytest.approx(100.0, rel=0.01) and v[1] == pytest.approx(10.0)
-    assert a[0] == pytest.approx(100.0, rel=1e-6) and a[2] == 0.0
+from nurbsmotion.service.rate import effective_rate, max_rate
 
 
 def test_the_tightest_axis_limit_bounds_the_rate():

@@ -42,6 +42,8 @@ class ActiveJob:
     plan: PlannedJob
     handle: JobHandle | None = None
     stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown'
+    late_before: int = 0  # the link's cycle counters when the job started (outcome: the job's own)
+    missed_before: int = 0
     started_s: float = field(default_factory=time.monotonic)
     watcher: threading.Thread | None = None
 
@@ -73,7 +75,8 @@ class Controller:
             plan = self.planner(name, text, start_mm)
             record = self.records.create(name, text)
             record.write_plan(plan.summary, plan.write_trace)
-            job = ActiveJob(record, name, plan)
+            job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
+                            missed_before=status.timing.missed_cycles)
             if self.simulation is not None:
                 self.simulation.clear_recordings()
             try:
@@ -252,7 +255,8 @@ class Controller:
                 "fault": fault_dict(first) if first else None, "faults": [fault_dict(f) for f in result.faults],
                 "sent": result.sent, "planned": result.length,
                 "motion_time_s": round(time.monotonic() - job.started_s, 3),
-                "missed_cycles": result.missed_cycles, "late_cycles": result.late_cycles,
+                "missed_cycles": result.missed_cycles - job.missed_before,
+                "late_cycles": result.late_cycles - job.late_before,
                 "ended_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
 
     # ------------------------------------------------------------------ shutdown

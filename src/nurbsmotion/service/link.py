@@ -12,6 +12,7 @@ position and rate. Replace it by the master's own rate control once it has one.
 from __future__ import annotations
 
 import logging
+import time
 from typing import Any, Callable
 
 import numpy as np
@@ -86,11 +87,7 @@ class SimulatedDrives:
     def __init__(self, config: MachineConfig) -> None:
         from nurbsmotion.sim import SimNetwork
 
-        bus = config.bus
-        self.network = SimNetwork(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
-        for axis in config.axes:
-            identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
-            self.network.add_drive(axis.node_id, axis.eds, identity=identity, name=axis.name)
+        self.network = SimNetwork.for_machine(config)
 
     def start(self) -> "SimulatedDrives":
         self.network.start()
@@ -106,7 +103,15 @@ class SimulatedDrives:
         for drive in self.network.drives.values():
             drive.recorder.clear()
 
-    def write_recordings(self, folder: str) -> list[str]:
+    def write_recordings(self, folder: str, settle_s: float = 0.5) -> list[str]:
+        """Write each drive's recording once it holds the set-points already sent: the last
+        one takes effect at the next SYNC, so wait for two more applied rows (or ``settle_s``,
+        e.g. when the drives are disabled and record nothing)."""
+        drives = list(self.network.drives.values())
+        wanted = [len(d.recorder) + 2 for d in drives]
+        deadline = time.monotonic() + settle_s
+        while any(len(d.recorder) < n for d, n in zip(drives, wanted)) and time.monotonic() < deadline:
+            time.sleep(0.002)
         return [str(p) for p in self.network.write_recordings(folder)]
 
     def stop(self) -> None:

@@ -18,9 +18,12 @@ import numpy as np
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
-from nurbsmotion.planning import PlanLimits, Trajectory
-from nurbsmotion.program import AXES, Program
-from nurbsmotion.service.rate import axis_peaks, max_rate
+from nurbsmotion.planning import PlanLimits, Trajectory, plan
+from nurbsmotion.planning.measure import Measurements, measure
+from nurbsmotion.planning.trace import write_trace
+from nurbsmotion.program import AXES, Program, parse_curve_yaml, parse_gcode
+from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
+from nurbsmotion.service.rate import max_rate
 
 
 @dataclass(eq=False)
@@ -30,11 +33,12 @@ class PlannedJob:
     summary: dict[str, Any]
     max_rate: float  # highest playback rate (feed override) within the axis limits
     program: Program | None = field(default=None, repr=False)
+    measurements: Measurements | None = field(default=None, repr=False)
 
     def write_trace(self, path: Path) -> None:
-        from nurbsmotion.planning.trace import write_trace
-
-        write_trace(path, self.trajectory)
+        """The same CSV as ``nurbsmotion plan --trace`` (planning.trace)."""
+        assert self.measurements is not None
+        write_trace(path, self.trajectory, self.measurements)
 
 
 def plan_limits(config: MachineConfig) -> PlanLimits:
@@ -73,16 +77,19 @@ def axis_positions(trajectory: Trajectory, config: MachineConfig, source: str) -
 
 
 def parse(name: str, text: str, start_mm: np.ndarray) -> Program:
-    """The program readers (G-code or YAML by the name's suffix)."""
-    from nurbsmotion.program import parse_program
-
-    return parse_program(text, name, start_position=start_mm)
+    """The program readers, chosen by the name's suffix as ``read_program`` does for files;
+    a G-code program starts at ``start_mm`` (where the axes hold)."""
+    suffix = Path(name).suffix.lower()
+    if suffix in YAML_SUFFIXES:
+        return parse_curve_yaml(text, name)
+    if suffix in GCODE_SUFFIXES:
+        return parse_gcode(text, name, start_mm)
+    raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
+                           f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
 
 
 def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None) -> PlannedJob:
     """Parse, plan, check and convert ``text`` (see the module docstring)."""
-    from nurbsmotion.planning import plan
-
     axis_map = AxisMap.from_config(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
@@ -98,16 +105,20 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
         counts = axis_map.to_counts(positions)
     except InputError as err:
         raise InputError(f"{name}: {err.where}", err.message) from None
-    v_peak, a_peak = axis_peaks(positions, config.cycle_period_s)
+    measured = measure(trajectory, program)
+    columns = axis_columns(config)
+    v_peak = np.array(measured.axis_max_velocity_mm_s)[columns]
+    a_peak = np.array(measured.axis_max_accel_mm_s2)[columns]
     rate = max_rate(v_peak, a_peak, [a.max_velocity_mm_s for a in config.axes],
                     [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
     summary = plan_summary(name, program, trajectory, config, v_peak, a_peak, rate, planning_s)
-    return PlannedJob(trajectory, counts, summary, rate, program)
+    summary["measured"] = measured.summary()
+    return PlannedJob(trajectory, counts, summary, rate, program, measured)
 
 
 def plan_summary(name: str, program: Program, trajectory: Trajectory, config: MachineConfig, v_peak: np.ndarray,
                  a_peak: np.ndarray, rate: float, planning_s: float) -> dict[str, Any]:
-    """The plan.json of a job record."""
+    """The plan.json of a job record (the measured figures are added by plan_job)."""
     return {
         "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
         "algorithm": trajectory.algorithm, "period_s": trajectory.period_s, "cycles": len(trajectory),

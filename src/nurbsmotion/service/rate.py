@@ -4,8 +4,8 @@ Playing the planned set-points at rate r (r planned cycles per real cycle) multi
 axis velocity by r and every axis acceleration by r², so the highest rate that keeps the
 axis limits is
     r_max = min(1.5, min_j sqrt(a_max_j / a_planned_j), min_j v_max_j / v_planned_j)
-with a_planned, v_planned the plan's largest per-axis values (finite differences of the
-set-points). Overrides at or below 100 % are always allowed; above 100 % they are clamped
+with a_planned, v_planned the plan's largest per-axis values (planning.measure: finite
+differences of the set-points, at rest before and after). Overrides at or below 100 % are always allowed; above 100 % they are clamped
 to max(1, r_max).
 """
 
@@ -16,15 +16,6 @@ import math
 import numpy as np
 
 MAX_OVERRIDE = 1.5
-
-
-def axis_peaks(positions_mm: np.ndarray, period_s: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per-axis largest |velocity| (mm/s) and |acceleration| (mm/s²) of the set-points."""
-    pos = np.asarray(positions_mm, dtype=float)
-    n_axes = pos.shape[1]
-    v = np.abs(np.diff(pos, axis=0)).max(axis=0) / period_s if len(pos) > 1 else np.zeros(n_axes)
-    a = np.abs(np.diff(pos, n=2, axis=0)).max(axis=0) / period_s**2 if len(pos) > 2 else np.zeros(n_axes)
-    return v, a
 
 
 def max_rate(v_planned: np.ndarray, a_planned: np.ndarray, v_max: list[float | None],
