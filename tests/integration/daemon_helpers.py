@@ -12,14 +12,9 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 import nurbsmotion
-from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig, load_config
-from nurbsmotion.planning.trace import read_trace
 from nurbsmotion.service.client import Client, DaemonUnavailable
-from nurbsmotion.sim import read_csv
 
 SRC_DIR = Path(nurbsmotion.__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
@@ -115,29 +110,3 @@ class DaemonProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5.0)
-
-
-def planned_counts(folder: Path, config: MachineConfig) -> np.ndarray:
-    """The job's set-points in counts, from its trace CSV."""
-    trace = read_trace(folder / "trace.csv")
-    return AxisMap.from_config(config).to_counts(np.column_stack([trace["x"], trace["y"], trace["z"]]))
-
-
-def recorded_setpoints(folder: Path, config: MachineConfig) -> np.ndarray:
-    """(n, n_axes) set-points the simulated drives applied during the job, one row per SYNC."""
-    columns = []
-    for axis in config.axes:
-        records = read_csv(folder / "drives" / f"node{axis.node_id}.csv")
-        columns.append([r.setpoint_counts for r in records])
-    n = min(len(c) for c in columns)
-    return np.array([c[:n] for c in columns]).T
-
-
-def is_held_plan_held(recorded: np.ndarray, plan: np.ndarray) -> bool:
-    """recorded == [plan[0]] * k + plan + [plan[-1]] * m for some k, m >= 0."""
-    for start in range(len(recorded) - len(plan) + 1):
-        if np.array_equal(recorded[start:start + len(plan)], plan):
-            before, after = recorded[:start], recorded[start + len(plan):]
-            if (before == plan[0]).all() and (after == plan[-1]).all():
-                return True
-    return False

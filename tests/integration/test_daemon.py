@@ -16,8 +16,8 @@ from nurbsmotion.cli import main
 from nurbsmotion.planning import ALGORITHM_MODULES
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES
 from nurbsmotion.service.records import JobRecords
-from tests.integration.daemon_helpers import (DaemonProcess, is_held_plan_held, planned_counts, recorded_setpoints,
-                                              wait_until)
+from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
+from tests.integration.daemon_helpers import DaemonProcess, wait_until
 
 # The daemon plans with the configured algorithm, 'lookahead' (planning.lookahead).
 pytest.importorskip(ALGORITHM_MODULES["lookahead"], reason="the lookahead planner is not on this branch yet")
@@ -52,9 +52,9 @@ def test_a_job_completes_and_the_drives_applied_exactly_the_plan(daemon):
     folder = Path(job["folder"])
     assert (folder / "program.nc").read_text() == SHORT
     plan = planned_counts(folder, daemon.config)
-    recorded = recorded_setpoints(folder, daemon.config)
+    recorded, _ = recorded_counts(folder, daemon.config)
     assert len(plan) == job["plan"]["cycles"] and len(recorded) > len(plan)
-    assert is_held_plan_held(recorded, plan)
+    assert held_plan_held(recorded, plan)
     assert daemon.request("status")["state"] == "idle"
     _back_home(daemon)
 
@@ -159,7 +159,7 @@ def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
         outcome = record.outcome()
         assert outcome["outcome"] == "stopped", outcome
         assert outcome["sent"] < outcome["planned"]
-        _assert_within_axis_limits(recorded_setpoints(record.folder, proc.config), proc.config)
+        _assert_within_axis_limits(recorded_counts(record.folder, proc.config)[0], proc.config)
     finally:
         proc.close()
 
