@@ -33,6 +33,7 @@ from nurbsmotion.cia402 import EmcyCode, Mode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim.eds import default_eds_path
+from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
 from nurbsmotion.sim.recording import SetpointRecorder
 from nurbsmotion.sim.servo import ServoModel
@@ -186,6 +187,8 @@ class SimDrive:
         self._sync_faults: list[tuple[int, int, FaultInjection]] = []
         self._fault_seq = 0
         self._t0 = clock()
+        self._heartbeat_consumer = HeartbeatConsumer()
+        self._consumed_cobs: list[int] = []
         self.nmt_state = NmtState.BOOTUP
         self.silent = False
         self._init_application()
@@ -276,7 +279,11 @@ class SimDrive:
             if self._heartbeat_period_s > 0 and not self.silent and now >= self._next_heartbeat:
                 self._send_heartbeat()
                 self._next_heartbeat = max(self._next_heartbeat + self._heartbeat_period_s, now)
-            deadline = now + 0.05
+            for producer in self._heartbeat_consumer.newly_failed(now):
+                if not self.silent:
+                    log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer))
+                    self._raise_fault(EmcyCode.HEARTBEAT)
+            deadline = min(now + 0.05, self._heartbeat_consumer.next_deadline())
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
@@ -334,6 +341,7 @@ class SimDrive:
         self._pending.clear()
         self._load_parameters()
         self._rebuild_all_pdos()
+        self._configure_heartbeat_consumer()
         self._send(c.COB_HEARTBEAT + self.node_id, bytes([NmtState.BOOTUP]))
         self.nmt_state = NmtState.PRE_OPERATIONAL
         self._next_heartbeat = self._clock() + self._heartbeat_period_s
@@ -377,6 +385,21 @@ class SimDrive:
                 slot.last_data = b""
         log.info(kv("sim.nmt", node=self.node_id, state=new.name, previous=self.nmt_state.name))
         self.nmt_state = new
+
+    def _configure_heartbeat_consumer(self) -> None:
+        """Watch the producers listed in 0x1016 (EMCY 0x8130 and fault when one goes silent)."""
+        entries = [self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, self._od_value(c.CONSUMER_HEARTBEAT_TIME, 0) + 1)]
+        self._heartbeat_consumer.configure(entries)
+        for cob in self._consumed_cobs:
+            self._unsubscribe(cob, self._on_peer_heartbeat)
+        self._consumed_cobs = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
+        if self.network is not None:
+            for cob in self._consumed_cobs:
+                self._subscribe(cob, self._on_peer_heartbeat)
+
+    def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
+        with self._lock:
+            self._heartbeat_consumer.seen(can_id - c.COB_HEARTBEAT, self._clock())
 
     def _send_heartbeat(self) -> None:
         if self.nmt_state != NmtState.BOOTUP:
@@ -467,6 +490,8 @@ class SimDrive:
     def _after_sdo_write(self, index: int, subindex: int) -> None:
         if 0x1400 <= index <= 0x1A03:
             self._rebuild_all_pdos()
+        elif index == c.CONSUMER_HEARTBEAT_TIME:
+            self._configure_heartbeat_consumer()
         else:
             self._load_parameters()
 
