@@ -207,3 +207,13 @@ def test_g5_2_linuxcnc_nurbs_starts_at_the_current_position_with_clamped_uniform
     np.testing.assert_array_equal(nurbs.curve.weights, [1, 2, 1, 0.5])
     np.testing.assert_allclose(nurbs.curve.knots, clamped_uniform_knots(4, 2))
     assert bs[2].kind is BlockKind.LINE
+
+
+def test_blocks_without_a_programmed_feed_take_the_machines_rapid_or_default_feed():
+    from nurbsmotion.program import parse_curve_yaml
+
+    rapid, line = blocks("G0 X1\nG1 X2 F600")
+    (curve,) = parse_curve_yaml("degree: 1\npoints: [[0,0],[1,0]]\n", "c.yaml").blocks
+    assert rapid.feed_or_default_mm_s(100.0, 300.0) == 300.0
+    assert line.feed_or_default_mm_s(100.0, 300.0) == 10.0
+    assert curve.feed_or_default_mm_s(100.0, 300.0) == 100.0

@@ -51,7 +51,7 @@ def command_modules() -> dict[str, ModuleType]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="nurbsmotion", description=__doc__.splitlines()[0])
+    parser = _Parser(prog="nurbsmotion", description="NURBS motion controller: plan feed, interpolate, stream set-points to CiA-402 drives.")
     parser.add_argument("--version", action="version", version=f"nurbsmotion {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)

@@ -12,6 +12,7 @@ clockwise; R < 0 asks for the arc longer than 180 deg (the other centre).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -126,7 +127,8 @@ def arc_nurbs(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64]
     curve = arc_curve(centre, start, sweep, plane.normal)
     points = curve.control_points.copy()
     points[0], points[-1] = start, (start if closed else end)  # exact programmed end points
-    return NurbsCurve.create(2, points, curve.weights, curve.knots)
+    points.setflags(write=False)
+    return dataclasses.replace(curve, control_points=points)  # moved by rounding only: still valid
 
 
 def _cross2(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:

@@ -153,10 +153,10 @@ def _read_curve(r: _Reader, node: yaml.Node, path: str, default_feed_mm_min: flo
         key = {"control_points": "points"}.get(problem.field, problem.field)
         if key not in got:
             return r.where(got.get("points", node) if key != "degree" else node, f"{prefix}{key}")
-        value_node = got[key]
+        key_node, value_node = fields[key]
         if problem.index is not None and isinstance(value_node, yaml.SequenceNode) and problem.index < len(value_node.value):
             return r.where(value_node.value[problem.index], f"{prefix}{key}[{problem.index}]")
-        return r.where(value_node, f"{prefix}{key}")
+        return r.where(key_node, f"{prefix}{key}")
 
     try:
         curve = build_curve(d, points, weights, knots, locate, max_degree=MAX_DEGREE, zero_length_mm=JOIN_TOLERANCE_MM)

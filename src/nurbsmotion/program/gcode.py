@@ -64,6 +64,7 @@ class _Line:
     g_words: list[Word] = field(default_factory=list)
     m_words: list[Word] = field(default_factory=list)
     words: dict[str, Word] = field(default_factory=dict)
+    unsupported: list[Word] = field(default_factory=list)
 
     @property
     def where(self) -> str:
@@ -108,9 +109,7 @@ class _Nurbs:
         places = {"control_points": self.point_at, "weights": self.weight_at, "knots": self.knot_at}.get(problem.field)
         if places and problem.index is not None and problem.index < len(places):
             return places[problem.index]
-        if problem.field == "degree":
-            return self.first.at(self.first.words.get("P" if self.kind == NURBS_FANUC else "L"))
-        return (self.last or self.first).where
+        return self.first.at(self.first.words.get("P" if self.kind == NURBS_FANUC else "L"))
 
 
 class GcodeParser:
@@ -144,8 +143,11 @@ class GcodeParser:
             return False
         line = _Line(self.source, number, raw)
         self.sort_words(line, split_words(raw, line.where))
-        ends = self.apply_m_codes(line)
         motion = self.apply_g_codes(line)
+        ends = self.apply_m_codes(line)
+        if line.unsupported:
+            w = line.unsupported[0]
+            raise InputError(line.at(w), f"unsupported word {w.letter}")
         if motion is not None:
             self.change_motion(line, motion)
         self.apply_feed(line)
@@ -163,7 +165,7 @@ class GcodeParser:
             elif w.letter in line.words:
                 raise InputError(line.at(w), f"{w.letter} appears twice in one block")
             elif w.letter not in "XYZIJKRFPL":
-                raise InputError(line.at(w), f"unsupported word {w.letter}")
+                line.unsupported.append(w)
             else:
                 line.words[w.letter] = w
 
@@ -371,7 +373,8 @@ class GcodeParser:
     def linuxcnc_nurbs(self, line: _Line, explicit: bool) -> None:
         if explicit:
             if self.plane != 17:
-                raise InputError(line.at(line.g_words[0]), f"G5.2 works in the XY plane only (G17), not G{self.plane}")
+                word = next(w for w in line.g_words if round(w.value * 10) == NURBS_LINUXCNC)
+                raise InputError(line.at(word), f"G5.2 works in the XY plane only (G17), not G{self.plane}")
             order = self.nurbs_order(line, line.words.get("L"), default=3)
             self.nurbs = _Nurbs(NURBS_LINUXCNC, order, self.need_feed(line), line)
             self.nurbs.add_point(line, self.position.copy(), None, None)

@@ -40,8 +40,14 @@ class SourceRef:
 class Block:
     kind: BlockKind
     curve: NurbsCurve
-    feed_mm_s: float | None  # None: rapid (machine rapid feed applies)
+    feed_mm_s: float | None  # None: the machine's feed applies (rapid feed for RAPID, default feed otherwise)
     source: SourceRef
+
+    def feed_or_default_mm_s(self, default_feed_mm_s: float, rapid_feed_mm_s: float) -> float:
+        """The programmed feed, or the machine's: rapid feed for RAPID blocks, default feed otherwise."""
+        if self.feed_mm_s is not None:
+            return self.feed_mm_s
+        return rapid_feed_mm_s if self.kind is BlockKind.RAPID else default_feed_mm_s
 
     @property
     def start(self) -> NDArray[np.float64]:

@@ -3,14 +3,18 @@ and fault injection. Never imports nurbsmotion.fieldbus: the drive side is an in
 implementation of CiA 301/402 against which the master is tested.
 """
 
-from nurbsmotion.sim.drive import DriveStats, SimDrive
+from nurbsmotion.sim.axis import AxisParameters, Cia402Axis
+from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.eds import default_eds_path
 from nurbsmotion.sim.faults import FaultInjection, parse_fault_spec
 from nurbsmotion.sim.network import SimNetwork
 from nurbsmotion.sim.recording import SetpointRecord, SetpointRecorder, read_csv
 from nurbsmotion.sim.servo import ServoModel
+from nurbsmotion.sim.stats import DriveStats
 
 __all__ = [
+    "AxisParameters",
+    "Cia402Axis",
     "DriveStats",
     "FaultInjection",
     "ServoModel",

@@ -8,6 +8,7 @@ with a single ``unpack_from`` / ``pack_into`` per SYNC.
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from canopen import objectdictionary as od_types
@@ -123,3 +124,48 @@ def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmiss
         keys=keys,
         codec=struct.Struct(fmt),
     )
+
+
+Reader = Callable[[int, int], int]  # (index, subindex) -> current value in the drive
+
+
+def is_pdo_parameter(index: int) -> bool:
+    """RPDO/TPDO 1-4 communication (0x1400.., 0x1800..) or mapping (0x1600.., 0x1A00..)."""
+    return any(base <= index <= base + 3 for base in (0x1400, 0x1600, 0x1800, 0x1A00))
+
+
+def check_parameter_write(od: ObjectDictionary, read: Reader, index: int, subindex: int, value: int) -> None:
+    """Raise the SDO abort for a write to a PDO parameter that CiA 301 does not allow."""
+    if index in range(0x1400, 0x1404) or index in range(0x1800, 0x1804):
+        check_communication_write(read, index, subindex, value)
+    elif index in range(0x1600, 0x1604) or index in range(0x1A00, 0x1A04):
+        check_mapping_write(od, read, index, subindex, value)
+
+
+def check_communication_write(read: Reader, index: int, subindex: int, value: int) -> None:
+    """The CAN id of a valid PDO cannot change (disable it with bit 31 first); 11-bit ids
+    only; transmission types 241..251 are reserved."""
+    if subindex == 1:
+        current = read(index, 1)
+        if value & COB_ID_EXTENDED_BIT:
+            raise SdoAbortedError(ABORT_VALUE_INVALID)
+        both_valid = not current & COB_ID_INVALID_BIT and not value & COB_ID_INVALID_BIT
+        if both_valid and (current & 0x7FF) != (value & 0x7FF):
+            raise SdoAbortedError(ABORT_VALUE_INVALID)
+    elif subindex == 2 and 241 <= value <= 251:
+        raise SdoAbortedError(ABORT_VALUE_INVALID)
+
+
+def check_mapping_write(od: ObjectDictionary, read: Reader, index: int, subindex: int, value: int) -> None:
+    """CiA 301 mapping procedure: PDO disabled, count 0, entries, count (checks them all)."""
+    receive = index < 0x1A00
+    if not read(index - 0x200, 1) & COB_ID_INVALID_BIT:  # 0x16xx -> 0x14xx, 0x1Axx -> 0x18xx
+        raise SdoAbortedError(ABORT_DEVICE_STATE)
+    if subindex == 0:
+        if value > 8:
+            raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
+        check_entries(od, [read(index, n) for n in range(1, value + 1)], receive)
+    else:
+        if read(index, 0) != 0:
+            raise SdoAbortedError(ABORT_DEVICE_STATE)
+        check_entry(od, value, receive)

@@ -1,0 +1,250 @@
+"""The application of a simulated CiA-402 position drive, without any bus.
+
+It holds the power drive system state, the controlword and mode, the IP / CSP set-points,
+the servo model, the following-error monitor and the error state, and advances once per
+SYNC. The drive (``drive.py``) feeds it from SDO and PDO and publishes what it reports.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from nurbsmotion import cia402 as c
+from nurbsmotion.cia402 import EmcyCode, Mode, State
+from nurbsmotion.log import kv
+from nurbsmotion.sim.recording import SetpointRecorder
+from nurbsmotion.sim.servo import ServoModel
+from nurbsmotion.sim.statemachine import apply_controlword, quick_stop_stays_active
+from nurbsmotion.sim.stats import DriveStats
+
+log = logging.getLogger("nurbsmotion.sim.drive")
+
+SUPPORTED_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION))
+FE_WINDOW_DISABLED = 0xFFFF_FFFF
+ERROR_HISTORY_LENGTH = 8
+STATES_WITH_VOLTAGE = (State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
+
+
+class UnsupportedMode(ValueError):
+    """0x6060 written with a mode this drive does not have."""
+
+
+@dataclass
+class AxisParameters:
+    """The object-dictionary parameters the per-SYNC step uses (cached by the drive)."""
+
+    period_s: float = 1e-3  # 0x60C2 (or 0x1006)
+    fe_window_counts: int = 10000  # 0x6065; 0xFFFFFFFF disables the monitor
+    fe_timeout_ms: int = 20  # 0x6066
+    quick_stop_option: int = 2  # 0x605A
+    quick_stop_decel_counts_s2: float = 1e7  # 0x6085
+    limit_min_counts: int = 0  # 0x607D sub 1; min >= max disables the limits
+    limit_max_counts: int = 0  # 0x607D sub 2
+
+
+def error_register_bits(code: int) -> int:
+    """0x1001 bits for an EMCY code (CiA 301: bit 0 generic, 1 current, 2 voltage,
+    3 temperature, 4 communication, 5 device profile, 7 manufacturer)."""
+    bits = 0x01
+    group = code >> 12
+    if group == 0x2:
+        bits |= 0x02
+    elif group == 0x3:
+        bits |= 0x04
+    elif group == 0x4:
+        bits |= 0x08
+    elif code >> 8 in (0x81, 0x82):
+        bits |= 0x10
+    elif code >> 8 == 0x86:
+        bits |= 0x20
+    elif code >> 8 == 0xFF:
+        bits |= 0x80
+    return bits
+
+
+class Cia402Axis:
+    """One CiA-402 axis: state machine, set-points, servo, following error, faults.
+
+    ``emit_emcy(code, error_register)`` is called for every EMCY the drive must send.
+    """
+
+    def __init__(
+        self,
+        servo: ServoModel,
+        recorder: SetpointRecorder,
+        stats: DriveStats,
+        emit_emcy: Callable[[int, int], None],
+        name: str,
+        mode: int,
+    ) -> None:
+        self.servo = servo
+        self.recorder = recorder
+        self.stats = stats
+        self.params = AxisParameters()
+        self._emit_emcy = emit_emcy
+        self.name = name
+        self.reset(mode)
+
+    def reset(self, mode: int) -> None:
+        """Power-on / reset node: transitions 0 and 1 to SWITCH ON DISABLED; the motor
+        stays where it is."""
+        self.state = State.SWITCH_ON_DISABLED
+        self.transitions: list[int] = [0, 1]
+        self.controlword = 0
+        self.mode = self.mode_display = mode
+        self.target_position = 0
+        self.ip_setpoint = 0
+        self.error_code = 0
+        self.error_register = 0
+        self.error_history: list[int] = []
+        self._fe_flag = False
+        self._hold_position()
+        self.position_actual = int(round(self.servo.actual))
+        self._update_statusword()
+
+    # ------------------------------------------------------------------ written objects
+    def set_controlword(self, controlword: int) -> None:
+        previous, self.controlword = self.controlword, controlword
+        new_state, taken = apply_controlword(self.state, controlword, previous, self.params.quick_stop_option)
+        if taken:
+            self._change_state(new_state, taken)
+        elif self.state is State.OPERATION_ENABLED and controlword & c.CW_ENABLE_IP and not previous & c.CW_ENABLE_IP:
+            self._fresh_ip = False  # IP enabled: hold position until the first new set-point
+        self._update_statusword()
+
+    def set_mode(self, mode: int) -> None:
+        """0x6060; 0x6061 follows at once. Raises UnsupportedMode for modes other than 7, 8."""
+        if mode not in SUPPORTED_MODES:
+            raise UnsupportedMode(mode)
+        if mode != self.mode_display:
+            self._hold_position()
+            log.info(kv("sim.mode", node=self.name, mode=mode))
+        self.mode = self.mode_display = mode
+        self._update_statusword()
+
+    def set_target_position(self, value: int) -> None:
+        """0x607A, the CSP set-point."""
+        self.target_position = value
+        self._fresh_target = True
+
+    def set_ip_setpoint(self, value: int) -> None:
+        """0x60C1 sub 1, the IP set-point."""
+        self.ip_setpoint = value
+        self._fresh_ip = True
+
+    # ------------------------------------------------------------------ state machine
+    def _change_state(self, new_state: State, taken: list[int]) -> None:
+        old = self.state
+        self.state = new_state
+        self.transitions.extend(taken)
+        if new_state is State.OPERATION_ENABLED and old is not State.OPERATION_ENABLED:
+            self._hold_position()
+        elif new_state is State.QUICK_STOP_ACTIVE and self.params.quick_stop_option == 0:
+            self.state = State.SWITCH_ON_DISABLED  # option 0: disable drive function at once
+            self.transitions.append(12)
+            self._hold_position()
+        elif new_state not in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
+            self._hold_position()
+        if 15 in taken:
+            self.error_code = 0
+            self.error_register = 0
+            self._fe_flag = False
+            self._emit_emcy(EmcyCode.NO_ERROR, 0)
+        log.info(kv("sim.state", node=self.name, state=self.state.name, transitions=taken))
+
+    def _hold_position(self) -> None:
+        """Stand still where the motor is; set-points count only from the next new one."""
+        self.servo.hold(self.servo.actual)
+        self._demand = self.servo.actual
+        self.following_error = 0
+        self._fe_cycles = 0
+        self._fresh_target = self._fresh_ip = False
+
+    def setpoint_active(self) -> bool:
+        """Statusword bit 12: CSP 'target used' / IP 'interpolation active'."""
+        if self.state is not State.OPERATION_ENABLED:
+            return False
+        if self.mode_display == Mode.CYCLIC_SYNC_POSITION:
+            return True
+        return self.mode_display == Mode.INTERPOLATED_POSITION and bool(self.controlword & c.CW_ENABLE_IP)
+
+    # ------------------------------------------------------------------ per SYNC
+    def step(self, sync_index: int, sync_counter: int) -> None:
+        """One SYNC: take the new set-point (recorded), move, check the following error."""
+        period_s = self.params.period_s
+        csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
+        fresh = self._fresh_target if csp else self._fresh_ip
+        self._fresh_target = self._fresh_ip = False
+        if self.state is State.OPERATION_ENABLED:
+            if fresh and self.setpoint_active():
+                setpoint = self.target_position if csp else self.ip_setpoint
+                if not self._within_limits(setpoint):
+                    self.stats.setpoints_refused += 1
+                    self.raise_fault(EmcyCode.SOFTWARE_LIMIT)
+                    return
+                self._demand = setpoint
+                self.position_actual = int(round(self.servo.step(setpoint, period_s)))
+                self.recorder.append(sync_index, self.mode_display, setpoint, self.position_actual, sync_counter)
+                self.stats.setpoints_applied += 1
+            else:
+                self.stats.setpoints_ignored += fresh
+                self.position_actual = int(round(self.servo.step(self._demand, period_s)))
+            self._check_following_error(period_s)
+        elif self.state is State.QUICK_STOP_ACTIVE:
+            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, period_s)
+            self._demand = self.servo.actual
+            self.position_actual = int(round(self.servo.actual))
+            if stopped and not quick_stop_stays_active(self.params.quick_stop_option):
+                self._change_state(State.SWITCH_ON_DISABLED, [12])
+        else:
+            self.stats.setpoints_ignored += fresh
+        self._update_statusword()
+
+    def _within_limits(self, setpoint: int) -> bool:
+        """0x607D: min <= set-point <= max (limits disabled while min >= max)."""
+        low, high = self.params.limit_min_counts, self.params.limit_max_counts
+        return low >= high or low <= setpoint <= high
+
+    def _check_following_error(self, period_s: float) -> None:
+        """0x60F4 = demand - actual; fault 0x8611 when |e| > 0x6065 for longer than 0x6066 ms
+        (each SYNC outside the window counts one period)."""
+        error = int(round(self._demand - self.servo.actual))
+        self.following_error = error
+        window = self.params.fe_window_counts
+        if window == FE_WINDOW_DISABLED or abs(error) <= window:
+            self._fe_cycles = 0
+            return
+        self._fe_cycles += 1
+        if self._fe_cycles * period_s * 1000.0 > self.params.fe_timeout_ms:
+            self.raise_fault(EmcyCode.FOLLOWING_ERROR, following_error=True)
+
+    def _update_statusword(self) -> None:
+        word = c.STATUSWORD_OF_STATE[self.state] | c.SW_REMOTE
+        if self.state in STATES_WITH_VOLTAGE:
+            word |= c.SW_VOLTAGE_ENABLED
+        if self.setpoint_active():
+            word |= c.SW_IP_ACTIVE
+        if self._fe_flag:
+            word |= c.SW_FOLLOWING_ERROR
+        self.statusword = word
+
+    # ------------------------------------------------------------------ faults
+    def raise_fault(self, code: int, following_error: bool = False) -> None:
+        """Transitions 13 and 14: fault reaction (motor held where it is), then FAULT; EMCY.
+        ``following_error`` also sets statusword bit 13."""
+        self.error_code = code
+        self.error_register |= error_register_bits(code)
+        self.error_history.insert(0, code)
+        del self.error_history[ERROR_HISTORY_LENGTH:]
+        self._fe_flag = self._fe_flag or following_error
+        if self.state is not State.FAULT:
+            error_at_fault = self.following_error
+            self.state = State.FAULT
+            self.transitions.extend([13, 14])
+            self._hold_position()
+            self.following_error = error_at_fault  # 0x60F4 keeps the error that caused the fault
+        self._update_statusword()
+        self._emit_emcy(code, self.error_register)
+        log.warning(kv("sim.fault", node=self.name, code=f"0x{code:04X}"))

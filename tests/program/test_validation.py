@@ -1,0 +1,134 @@
+"""Every rejected input: one error naming file:line and the offending word, and no Program."""
+
+from __future__ import annotations
+
+import pytest
+
+from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.program import parse_curve_yaml, parse_gcode
+
+GCODE_ERRORS = [
+    # (program, where, message fragment)
+    ("F100\nG06.2 P2 K0\nK0 X1\nK1 X2\nK0.5\nK1", "t.nc:5: K0.5", "knots must not decrease"),
+    ("F100\nG06.2 P2 K0\nK0.2 X1\nK1\nK1", "t.nc:3: K0.2", "start not clamped"),
+    ("F100\nG06.2 P2 K0\nK0 X1\nK0.5\nK0.7", "t.nc:4: K0.5", "end not clamped"),
+    ("F100\nG06.2 P2 K0\nK0 X1 R-1\nK1\nK1", "t.nc:3: R-1", "weights must be > 0"),
+    ("F100\nG06.2 P2 K0 R0\nK0 X1\nK1\nK1", "t.nc:2: R0", "weights must be > 0"),
+    ("F100\nG06.2 P2 K0\nK0 X1 R1e999\nK1\nK1", "t.nc:3: R1e999", "not finite"),
+    ("F100\nG06.2 P5 K0", "t.nc:2: P5", "order must be an integer from 2 to 4"),
+    ("F100\nG06.2 P1 K0", "t.nc:2: P1", "order must be"),
+    ("F100\nG06.2 P3.5 K0", "t.nc:2: P3.5", "order must be"),
+    ("F100\nG06.2 P3 K0\nK0 X1\nK1\nK1\nK1", "t.nc:2: P3", "needs at least 3 control points"),
+    ("F100\nG06.2 P2 K0\nK0 X0\nK1\nK1", "t.nc:3", "zero-length NURBS"),
+    ("G1 X5 F100\nG06.2 P2 K0 X0 Y0\nK0 X1\nK1\nK1", "t.nc:2: X0", "must be the current position (5, 0, 0)"),
+    ("F100\nG06.2 P2 K0\nK0 X1\nK1\nG01 X0", "t.nc:5: G01", "missing K blocks"),
+    ("F100\nG06.2 P2 K0\nK0 X1\nK1", "t.nc:4", "missing K blocks: the program ends"),
+    ("F100\nG06.2 P2 K0\nX1 Y1\nK1\nK1", "t.nc:3", "K missing"),
+    ("F100\nG06.2 P2 K0\nK0 X1\nK1\nK1 X3", "t.nc:5: X3", "control point after a closing K block"),
+    ("F100\nG06.2 P2 K0\nK0 X1 F200", "t.nc:3: F200", "F inside a NURBS definition"),
+    ("G4 P1", "t.nc:1: G4", "unsupported G code"),
+    ("G43 H1", "t.nc:1: G43", "unsupported G code"),
+    ("G1.5 X1", "t.nc:1: G1.5", "unsupported G code"),
+    ("M06", "t.nc:1: M06", "unsupported M code"),
+    ("T1", "t.nc:1: T1", "unsupported word T"),
+    ("#1=5", "t.nc:1: #1=5", "unsupported: parameters"),
+    ("G1 X1.2.3 F100", "t.nc:1: X1.2.3", "malformed number"),
+    ("G1 Xabc F100", "t.nc:1: X", "X needs a number, got 'abc'"),
+    ("G1 X F100", "t.nc:1: X", "X needs a number"),
+    ("G1 X1e999 F100", "t.nc:1: X1e999", "not finite"),
+    ("G1 X1,5 F100", "t.nc:1: X1,5", "malformed number"),
+    ("G1 X1 F0", "t.nc:1: F0", "feed must be > 0"),
+    ("G1 X1 F-5", "t.nc:1: F-5", "feed must be > 0"),
+    ("G1 X1", "t.nc:1", "no feed rate: F missing"),
+    ("G2 X1 I0.5", "t.nc:1", "no feed rate: F missing"),
+    ("G17 G2 X10 Y0 I4 J0 F100", "t.nc:1: I4 J0", "inconsistent arc radius: 4 mm at the start, 6 mm at the end"),
+    ("G17 G2 X10 Y0 R4 F100", "t.nc:1: R4", "too small for the chord"),
+    ("G17 G2 X0 Y0 R4 F100", "t.nc:1: R4", "end point different from the start"),
+    ("G17 G2 X10 Y0 I5 J0 Z1 F100", "t.nc:1: Z1", "unsupported: helical arc"),
+    ("G18 G3 X10 Y2 I5 F100", "t.nc:1: Y2", "unsupported: helical arc"),
+    ("G17 G2 X10 Y0 I5 R5 F100", "t.nc:1: R5", "either R or I J K"),
+    ("G17 G2 X10 Y0 F100", "t.nc:1: G2", "an arc needs centre offsets I J or a radius R"),
+    ("G17 G2 X10 Y0 K5 F100", "t.nc:1: K5", "K not allowed in a G17 arc"),
+    ("G1 X1 I3 F100", "t.nc:1: I3", "I not allowed in a G01 block"),
+    ("G0 X1 R3", "t.nc:1: R3", "R not allowed in a G00 block"),
+    ("G1 X1 X2 F100", "t.nc:1: X2", "X appears twice"),
+    ("G0 G1 X1 F100", "t.nc:1: G1", "both set the motion"),
+    ("X1", "t.nc:1: X1", "no motion mode"),
+    ("G1 X1 (comment F100", "t.nc:1", "comment '(' is not closed"),
+    ("G1 X1 ) F100", "t.nc:1", "')' without an opening"),
+    ("G1 X1 F100 $", "t.nc:1: $", "unexpected character '$'"),
+    ("G5.3", "t.nc:1: G5.3", "G5.3 without an open G5.2"),
+    ("F100\nG5.2 X1 Y1\nX2 Y0\nX3 Y3", "t.nc:4", "not closed with G5.3"),
+    ("F100\nG5.2 X1 Y1\nG1 X0", "t.nc:3: G1", "close the NURBS with G5.3 first"),
+    ("F100\nG5.2 X1 Y1 Z1", "t.nc:2: Z1", "Z not allowed in a G5.2 block"),
+    ("F100\nG5.2 X1 Y1 L3\nG5.3", "t.nc:3", "needs at least 3 control points"),
+    ("F100\nG5.2 X1 Y1\nX2 Y0 P0\nG5.3", "t.nc:3: P0", "weights must be > 0"),
+    ("F100\nG18 G5.2 X1 Y1", "t.nc:2: G5.2", "XY plane only"),
+    ("G20 G21 G1 X1 F1", "t.nc:1: G21", "both set the units"),
+    ("G1 X2e9 F100", "t.nc:1: X2e9", "out of range"),
+]
+
+
+def assert_rejected(parse, text: str, source: str, where: str, fragment: str) -> None:
+    """The first error names ``where`` and says ``fragment``; every line names the source."""
+    with pytest.raises(InputError) as info:
+        parse(text, source)
+    errors = getattr(info.value, "errors", [info.value])
+    assert errors[0].where == where
+    assert fragment in errors[0].message
+    assert all("\n" not in e.message for e in errors)
+    assert str(info.value).startswith(f"{where}: ")
+    assert all(line.startswith(f"{source}:") for line in str(info.value).splitlines())
+
+
+@pytest.mark.parametrize("text,where,fragment", GCODE_ERRORS, ids=[e[1] + " " + e[2] for e in GCODE_ERRORS])
+def test_gcode_error_names_line_and_word(text, where, fragment):
+    assert_rejected(parse_gcode, text, "t.nc", where, fragment)
+
+
+def test_nothing_after_the_first_bad_line_is_read():
+    with pytest.raises(InputError) as info:
+        parse_gcode("G1 X1 F100\nG1 Xbad\nG4 P1\n", "t.nc")
+    assert str(info.value).count("\n") == 0 and info.value.where == "t.nc:2: X"
+
+
+def test_all_problems_of_one_nurbs_are_reported_each_on_its_line():
+    text = "F100\nG06.2 P2 K0 R0\nK2 X1 R-3\nK1 X2\nK3\nK3"
+    with pytest.raises(InputErrors) as info:
+        parse_gcode(text, "t.nc")
+    assert [e.where for e in info.value.errors] == ["t.nc:2: R0", "t.nc:3: R-3", "t.nc:4: K1"]
+    assert len(str(info.value).splitlines()) == 3
+
+
+YAML_ERRORS = [
+    # (yaml text, where, message fragment); line numbers are 1-based
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nknots: [0,0,0,1,0.5,1]\n", "c.yaml:3: knots[4]", "knots must not decrease"),
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nknots: [0,0,0,1,1]\n", "c.yaml:3: knots", "need 6 knots"),
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nknots: [0,0,0.1,1,1,1]\n", "c.yaml:3: knots[2]", "start not clamped"),
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nweights:\n  - 1\n  - 0\n  - 1\n", "c.yaml:5: weights[1]", "weights must be > 0"),
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nweights: [1, .inf, 1]\n", "c.yaml:3: weights[1]", "must be a finite number"),
+    ("degree: 2\npoints: [[0,0,0],[1,0,0],[2,1,0]]\nweights: [1, 1]\n", "c.yaml:3: weights", "need one weight per control point"),
+    ("degree: 0\npoints: [[0,0,0],[1,0,0]]\n", "c.yaml:1: degree", "degree must be between 1 and 9"),
+    ("degree: 12\npoints: [[0,0,0],[1,0,0]]\n", "c.yaml:1: degree", "degree must be between 1 and 9"),
+    ("degree: 2.5\npoints: [[0,0,0],[1,0,0]]\n", "c.yaml:1: degree", "must be an integer"),
+    ("degree: 3\npoints:\n  - [0,0,0]\n  - [1,0,0]\n", "c.yaml:2: points", "needs at least 4 control points"),
+    ("degree: 1\npoints:\n  - [0,0,0]\n  - [1,0]\n  - [1,0,0,4]\n", "c.yaml:5: points[2]", "a point is [x, y] or [x, y, z]"),
+    ("degree: 1\npoints:\n  - [0,0,0]\n  - [1,x,0]\n", "c.yaml:4: points[1][1]", "must be a number, got 'x'"),
+    ("degree: 1\npoints: [[0,0,0],[0,0,0]]\n", "c.yaml:2: points[1]", "zero-length NURBS"),
+    ("degree: 1\npoints: [[0,0,0],[1,0,0]]\nfeed_mm_min: 0\n", "c.yaml:3: feed_mm_min", "must be > 0"),
+    ("degree: 1\npoints: [[0,0,0],[1,0,0]]\nfeedrate: 5\n", "c.yaml:3: feedrate", "unknown key 'feedrate'"),
+    ("points: [[0,0,0],[1,0,0]]\n", "c.yaml:1: degree", "missing (required)"),
+    ("degree: 1\npoints: [[0,0,0],[1,0,0]\n", "c.yaml:3", "YAML syntax error"),
+    ("", "c.yaml:1", "empty curve file"),
+    ("- 1\n- 2\n", "c.yaml:1", "must be a mapping"),
+    ("curves:\n  - degree: 1\n    points: [[0,0,0],[1,0,0]]\n  - degree: 1\n    points: [[2,0,0],[3,0,0]]\n",
+     "c.yaml:5: curves[1].points[0]", "does not start where curves[0] ends"),
+    ("curves:\n  - degree: 1\n    points: [[0,0,0],[1,0,0]]\n    weights: [1, -2]\n",
+     "c.yaml:4: curves[0].weights[1]", "weights must be > 0"),
+    ("curves: []\n", "c.yaml:1: curves", "must not be empty"),
+]
+
+
+@pytest.mark.parametrize("text,where,fragment", YAML_ERRORS, ids=[e[1] + " " + e[2] for e in YAML_ERRORS])
+def test_yaml_error_names_line_and_field(text, where, fragment):
+    assert_rejected(parse_curve_yaml, text, "c.yaml", where, fragment)
