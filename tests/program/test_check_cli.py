@@ -80,3 +80,11 @@ def test_start_option_moves_the_gcode_start(tmp_path, capsys):
     assert main(["check", "--json", "--start", "5", "0", "0", str(prog)]) == 0
     data = json.loads(capsys.readouterr().out)
     assert data["start_mm"] == [5, 0, 0] and data["end_mm"] == [6, 0, 0]
+
+
+def test_windows_line_ends_and_a_byte_order_mark_are_accepted(tmp_path):
+    prog = tmp_path / "w.nc"
+    prog.write_bytes("\ufeff%\r\nG1 X1 F100\r\nY2\r\n%\r\n".encode("utf-8"))
+    program = read_program(prog)
+    assert [b.source.line for b in program.blocks] == [2, 3]
+    assert program.blocks[1].source.text == "Y2"

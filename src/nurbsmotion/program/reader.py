@@ -27,7 +27,7 @@ def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0)) 
         raise InputError(source, f"unknown program type {suffix or '(no extension)'!r}: "
                                  f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")  # a BOM is not part of line 1
     except UnicodeDecodeError as err:
         raise InputError(source, f"not a UTF-8 text file ({err.reason} at byte {err.start})") from None
     except OSError as err:
