@@ -141,6 +141,28 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     _back_home(daemon)
 
 
+def test_feed_override_changes_the_playback_rate_within_the_axis_limits(daemon):
+    job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
+    daemon.wait_progress(0.2)
+    slow = daemon.request("override", percent=50)
+    assert slow["ok"] and slow["effective_percent"] == pytest.approx(50.0)
+    assert daemon.request("status")["override"]["effective_percent"] == pytest.approx(50.0)
+    daemon.wait_progress(0.4)
+    fast = daemon.request("override", percent=150)
+    max_percent = daemon.request("status")["override"]["max_percent"]
+    assert fast["effective_percent"] == pytest.approx(min(150.0, max_percent))
+    job = daemon.wait_job_end(job_id)
+    assert job["outcome"]["outcome"] == "completed"
+    folder = Path(job["folder"])
+    recorded, _ = recorded_counts(folder, daemon.config)
+    plan = planned_counts(folder, daemon.config)
+    assert len(recorded) > len(plan)  # half speed for a while: more cycles than planned
+    assert (recorded[-1] == plan[-1]).all()
+    _assert_within_axis_limits(recorded, daemon.config)
+    assert daemon.request("override", percent=100)["ok"]
+    _back_home(daemon)
+
+
 def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
     records = JobRecords(tmp_path)
     orphan = records.create("old.nc", "G01 X1\n")  # a job a killed daemon left without outcome
