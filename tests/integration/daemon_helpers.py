@@ -23,7 +23,7 @@ CONFIG = """\
 cycle_period_ms: 4
 simulate: true
 bus: {{interface: virtual, channel: {channel}}}
-interpolation: {{algorithm: lookahead, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
+interpolation: {{algorithm: wang, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
                 max_jerk_mm_s3: 50000, acc_time_s: 0.1}}
 axes:
   - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],

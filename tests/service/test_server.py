@@ -2,8 +2,11 @@
 
 import json
 import os
+import shutil
 import socket
 import stat
+import tempfile
+from pathlib import Path
 
 import pytest
 
@@ -104,3 +107,41 @@ def test_peer_access_rule(uid, gid, groups, allowed):
     peer = PeerCredentials(1, uid, gid, frozenset(groups))
     assert peer_allowed(peer, daemon_uid=1000, control_gid=50) is allowed
     assert peer_allowed(peer, daemon_uid=1000, control_gid=None) is (uid in (0, 1000))
+
+
+@pytest.mark.skipif(os.getuid() != 0, reason="needs root to connect as another user")
+def test_a_peer_of_another_user_is_refused_by_its_credentials():
+    folder = tempfile.mkdtemp(prefix="nm-peer-")  # under /tmp: the other user must reach it
+    server = ControlServer(Path(folder) / "ctl.sock", _handler)
+    server.start()
+    try:
+        os.chmod(folder, 0o755)
+        os.chmod(server.path, 0o666)  # let the file system pass it: SO_PEERCRED must still refuse
+        line = _ask_as_nobody(server.path)
+    finally:
+        server.close()
+        shutil.rmtree(folder, ignore_errors=True)
+    response = json.loads(line)
+    assert response["ok"] is False and "permission denied: uid 65534" in response["error"]
+
+
+def _ask_as_nobody(path: Path) -> bytes:
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # child: become nobody, ask, pass the answer up the pipe
+        try:
+            os.setgroups([])
+            os.setgid(65534)
+            os.setuid(65534)
+            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+                s.settimeout(10.0)
+                s.connect(str(path))
+                s.sendall(b'{"cmd": "status"}\n')
+                os.write(write_end, s.makefile("rb").readline())
+        finally:
+            os._exit(0)
+    os.close(write_end)
+    with os.fdopen(read_end, "rb") as answer:
+        line = answer.read()
+    os.waitpid(pid, 0)
+    return line

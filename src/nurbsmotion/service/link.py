@@ -4,8 +4,8 @@
 RateMaster is a small wrapper owned by the service: fieldbus.Master streams one planned row
 per cycle; here the streaming phase plays the rows at a rate r (fractional rows per cycle,
 linear interpolation between rows, like the master's own controlled-stop ramp) and r moves
-towards the requested rate by the master's stop-ramp slope per cycle, so a rate change
-adds at most a_max (see fieldbus.stop_ramp). A controlled stop starts from the current
+towards the requested rate by RAMP_SHARE of the master's stop-ramp slope per cycle, so a
+rate change adds at most RAMP_SHARE·a_max (see fieldbus.stop_ramp and service.rate). A controlled stop starts from the current
 position and rate. Replace it by the master's own rate control once it has one.
 """
 
@@ -20,6 +20,7 @@ import numpy as np
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Job, Master
 from nurbsmotion.log import kv
+from nurbsmotion.service.rate import RAMP_SHARE
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +52,7 @@ class RateMaster(Master):
         if job.index < 0:
             s = 0.0
         else:
-            r, target, dr = job.playback_r, self._rate_target, job.ramp.dr
+            r, target, dr = job.playback_r, self._rate_target, job.ramp.dr * RAMP_SHARE
             r = min(r + dr, target) if r < target else max(r - dr, target)
             job.playback_r = r
             s = min(job.playback_s + r, float(job.last))
