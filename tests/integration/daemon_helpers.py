@@ -61,14 +61,22 @@ class DaemonProcess:
         self.config: MachineConfig = load_config(self.config_path)
         self.log_path = self.folder / "daemon.log"
         self.proc: subprocess.Popen[bytes] | None = None
+        self.notify_socket: Path | None = None  # set: the daemon gets it as $NOTIFY_SOCKET
 
-    def start(self) -> "DaemonProcess":
+    def environment(self) -> dict[str, str]:
+        """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if asked for."""
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in (str(SRC_DIR), env.get("PYTHONPATH", "")) if p)
         env.pop("NOTIFY_SOCKET", None)
+        if self.notify_socket is not None:
+            env["NOTIFY_SOCKET"] = str(self.notify_socket)
+        return env
+
+    def start(self) -> "DaemonProcess":
         with open(self.log_path, "wb") as log:
             self.proc = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "-v", "daemon", "--config",
-                                          str(self.config_path)], stdout=log, stderr=subprocess.STDOUT, env=env)
+                                          str(self.config_path)], stdout=log, stderr=subprocess.STDOUT,
+                                         env=self.environment())
         wait_until(self._answers, START_TIMEOUT_S, "the daemon to answer on its socket", poll_s=0.05)
         return self
 

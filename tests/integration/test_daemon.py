@@ -7,6 +7,8 @@ import json
 import os
 import signal
 import socket
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -163,8 +165,13 @@ def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
     records = JobRecords(tmp_path)
     orphan = records.create("old.nc", "G01 X1\n")  # a job a killed daemon left without outcome
     proc = DaemonProcess(tmp_path)
+    proc.notify_socket = proc.folder / "notify"
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify.bind(str(proc.notify_socket))
+    notify.settimeout(5.0)
     try:
         proc.start()
+        assert notify.recv(64) == b"READY=1"  # systemd Type=notify
         assert orphan.outcome()["outcome"] == "interrupted"
         job_id = proc.request("submit", name="long.nc", program=LONG)["job"]["id"]
         proc.wait_progress(0.4)
@@ -178,8 +185,24 @@ def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
         assert outcome["outcome"] == "stopped", outcome
         assert outcome["sent"] < outcome["planned"]
         _assert_within_axis_limits(recorded_counts(record.folder, proc.config)[0], proc.config)
+        assert notify.recv(64) == b"STOPPING=1"
+    finally:
+        notify.close()
+        proc.close()
+
+
+def test_no_drives_on_the_bus_is_one_error_line_and_nothing_left_behind(tmp_path):
+    proc = DaemonProcess(tmp_path)
+    proc.config_path.write_text(proc.config_path.read_text().replace("simulate: true", "simulate: false"))
+    try:
+        result = subprocess.run([sys.executable, "-m", "nurbsmotion", "daemon", "--config", str(proc.config_path)],
+                                capture_output=True, text=True, timeout=30, env=proc.environment())
     finally:
         proc.close()
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "node 1" in lines[0] and "boot-up" in lines[0], result.stderr
+    assert not proc.socket.exists()
 
 
 def _assert_within_axis_limits(counts: np.ndarray, config) -> None:
