@@ -12,6 +12,7 @@ position and rate. Replace it by the master's own rate control once it has one.
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from typing import Any, Callable
 
@@ -83,15 +84,27 @@ class RateMaster(Master):
 
 
 class SimulatedDrives:
-    """The simulated drives of every configured axis on the configured bus (simulate: true)."""
+    """The simulated drives of every configured axis on the configured bus (simulate: true).
+
+    The drives record every applied set-point; the daemon keeps what a job applied (from
+    :meth:`clear_recordings` at submit to :meth:`write_recordings` at its end) and drops the
+    rest every ``IDLE_CLEAR_S`` while no job records, so an idle daemon does not grow.
+    """
+
+    IDLE_CLEAR_S = 10.0
 
     def __init__(self, config: MachineConfig) -> None:
         from nurbsmotion.sim import SimNetwork
 
         self.network = SimNetwork.for_machine(config)
+        self._lock = threading.Lock()
+        self._recording = False
+        self._stop = threading.Event()
+        self._janitor = threading.Thread(target=self._clear_while_idle, name="sim-recording-janitor", daemon=True)
 
     def start(self) -> "SimulatedDrives":
         self.network.start()
+        self._janitor.start()
         log.info(kv("simulated_drives", channel=self.network.channel, nodes=sorted(self.network.drives)))
         return self
 
@@ -101,8 +114,10 @@ class SimulatedDrives:
         self.network.inject(parse_fault_spec(spec))
 
     def clear_recordings(self) -> None:
-        for drive in self.network.drives.values():
-            drive.recorder.clear()
+        """Start a job's recording (before its first set-point is sent)."""
+        with self._lock:
+            self._recording = True
+            self._clear()
 
     def write_recordings(self, folder: str, settle_s: float = 0.5) -> list[str]:
         """Write each drive's recording once it holds the set-points already sent: the last
@@ -113,9 +128,24 @@ class SimulatedDrives:
         deadline = time.monotonic() + settle_s
         while any(len(d.recorder) < n for d, n in zip(drives, wanted)) and time.monotonic() < deadline:
             time.sleep(0.002)
-        return [str(p) for p in self.network.write_recordings(folder)]
+        with self._lock:
+            self._recording = False
+            return [str(p) for p in self.network.write_recordings(folder)]
+
+    def _clear(self) -> None:
+        for drive in self.network.drives.values():
+            drive.recorder.clear()
+
+    def _clear_while_idle(self) -> None:
+        while not self._stop.wait(self.IDLE_CLEAR_S):
+            with self._lock:
+                if not self._recording:
+                    self._clear()
 
     def stop(self) -> None:
+        self._stop.set()
+        if self._janitor.is_alive():
+            self._janitor.join(2.0)
         self.network.stop()
 
 
