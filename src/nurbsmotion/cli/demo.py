@@ -6,6 +6,7 @@ the record and the plot are.
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import tempfile
 from dataclasses import replace
@@ -100,11 +101,26 @@ def _report(info: dict[str, Any], config: MachineConfig) -> int:
 
 
 def _plot(folder: Path, config: MachineConfig) -> Path | None:
-    """The trace plot (planning.plot) as a PNG next to the record; None without matplotlib."""
+    """The six-panel figure of the run (planning.plot) from the job record, as plot.png in
+    the record; None when matplotlib is missing (the demo extra installs it)."""
     try:
-        from nurbsmotion.planning.plot import plot_trace_file
+        import matplotlib  # noqa: F401
     except ImportError:
         return None
+    import numpy as np
+
+    from nurbsmotion.cli._planning_options import limits_from_config
+    from nurbsmotion.planning import Trajectory
+    from nurbsmotion.planning.measure import measure
+    from nurbsmotion.planning.plot import plot_run
+    from nurbsmotion.planning.trace import read_trace
+    from nurbsmotion.service.planner import parse
+
+    plan = json.loads((folder / "plan.json").read_text(encoding="utf-8"))
+    trace = read_trace(folder / "trace.csv")
+    program = parse(PROGRAM_NAME, data.read_text(PROGRAM_NAME), np.zeros(3))
+    trajectory = Trajectory(plan["algorithm"], plan["period_s"], trace["block"].astype(np.int32), trace["u"],
+                            np.column_stack([trace["x"], trace["y"], trace["z"]]), trace["feed"])
     path = folder / "plot.png"
-    plot_trace_file(folder / "trace.csv", path)
+    plot_run(path, program, trajectory, measure(trajectory, program), limits_from_config(config))
     return path
