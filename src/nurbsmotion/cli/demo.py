@@ -15,7 +15,7 @@ from typing import Any
 
 from nurbsmotion import data
 from nurbsmotion.cli.run import _display, follow
-from nurbsmotion.config import MachineConfig, load_config, parse_config
+from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.service.client import Client, RequestFailed
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.service.verify import drive_report
@@ -38,8 +38,21 @@ def demo_config(args: argparse.Namespace, socket_path: Path) -> MachineConfig:
         from nurbsmotion.errors import InputError
 
         raise InputError(config.where("simulate"), "the demo runs simulated drives: set simulate: true")
-    return replace(config, data_dir=args.data_dir or config.data_dir,
+    return replace(config, data_dir=args.data_dir or config.data_dir, axes=_with_findable_eds(config.axes),
                    control=replace(config.control, socket=str(socket_path), group=None))
+
+
+def _with_findable_eds(axes: tuple[AxisConfig, ...]) -> tuple[AxisConfig, ...]:
+    """Axes without an EDS use the simulated drives' default (the repository's eds/); in a
+    non-editable install that folder is absent, so use the packaged copy."""
+    from nurbsmotion.sim import default_eds_path
+
+    try:
+        default_eds_path()
+        return axes
+    except FileNotFoundError:
+        eds = str(data.path("nurbsmotion-servo.eds"))
+        return tuple(a if a.eds else replace(a, eds=eds) for a in axes)
 
 
 def run(args: argparse.Namespace) -> int:
