@@ -35,3 +35,10 @@ def test_lateness_beyond_the_histogram_is_counted_in_the_last_bin():
     stats = LatenessStats(late_threshold_s=1e-4)
     stats.add(1.5, missed=True)
     assert stats.percentile_s(0.5) <= 0.1 and stats.max_s == 1.5 and stats.missed == 1
+
+
+def test_kernel_sync_grid_counts_half_a_period_late_as_missed():
+    grid = DeadlineGrid(0.004, 10.0, missed_after_s=0.002)
+    lateness, missed = grid.advance(10.0025)
+    assert missed
+    assert grid.next_s == pytest.approx(10.004)  # still the same grid: less than a period late

@@ -108,8 +108,12 @@ def test_stream_reaches_every_drive_once_per_sync(mode):
 
 def test_hold_keeps_drives_enabled_at_the_last_setpoint():
     counts = sine_counts(100)
+    progress: list[tuple[int, int]] = []
     with rig() as (master, sim, _):
-        assert master.stream(counts).wait(WAIT_S).outcome == "done"
+        assert master.stream(counts, on_progress=lambda sent, n: progress.append((sent, n))).wait(WAIT_S).outcome \
+            == "done"
+        assert progress and all(n == len(counts) for _, n in progress)
+        assert [sent for sent, _ in progress] == sorted(sent for sent, _ in progress)
         cycle = master.status().cycle
         wait_for(lambda: master.status().cycle > cycle + 20)
         status = master.status()

@@ -73,16 +73,19 @@ class LatenessStats:
 class DeadlineGrid:
     """t_k = t_0 + k·T with whole-period shifts after a missed cycle."""
 
-    def __init__(self, period_s: float, start_s: float) -> None:
+    def __init__(self, period_s: float, start_s: float, missed_after_s: float | None = None) -> None:
         self.period_s = period_s
         self.next_s = start_s
+        # loop SYNC: a cycle is missed when later than one period; kernel SYNC half a cycle
+        # before our RPDOs: later than half a period means they crossed the next SYNC
+        self.missed_after_s = period_s if missed_after_s is None else missed_after_s
 
     def advance(self, woke_s: float) -> tuple[float, bool]:
         """Consume the current deadline; return (lateness, missed) and set the next deadline."""
         deadline = self.next_s
         lateness = woke_s - deadline
-        missed = lateness > self.period_s
-        if missed:
+        missed = lateness > self.missed_after_s
+        if lateness > self.period_s:
             deadline += int(lateness / self.period_s) * self.period_s
         self.next_s = deadline + self.period_s
         return lateness, missed

@@ -118,6 +118,7 @@ class Master:
         if gc_mode not in ("freeze", "disable", "none"):
             raise InputError("gc_mode", f"must be freeze, disable or none, got {gc_mode!r}")
         self._rt_priority = rt_priority
+        self._receive_priority_set = False
         self._gc_mode = gc_mode
         self.config = config
         self.axis_map = AxisMap.from_config(config)
@@ -155,6 +156,8 @@ class Master:
         self._fb_pos: list[int] = [0] * n
         self._fb_fe: list[int | None] = [None] * n
         self._fb_cycle = [-1] * n
+        self._fb_time = [0.0] * n  # receive timestamp of the last TPDO1 (time.time() based)
+        self._fe_checked_time = [0.0] * n
         self._bad_tpdo = [0] * n
         self._emcy_count = [0] * n
         self._last_emcy: list[int | None] = [None] * n
@@ -186,6 +189,10 @@ class Master:
         self._thread: threading.Thread | None = None
         self._quit = False
         self._sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self._sync_bus: can.BusABC | None = None
+        self._sync_seen_s = 0.0  # perf_counter when a SYNC sent by the kernel was last received
+        self._sync_seen_stamp = 0.0  # its frame timestamp
+        self._sync_time = [0.0] * _HISTORY  # time.time() of the SYNC each cycle's RPDOs follow
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         self._rpdo_msgs = [can.Message(arbitration_id=c.COB_RPDO[0] + node, is_extended_id=False,
                                        data=bytearray(RPDO_FORMAT.size)) for node in self._node_ids]
@@ -215,6 +222,7 @@ class Master:
             network.subscribe(c.COB_TPDO[1] + node_id, self._tpdo2_callback(i))
             network.subscribe(c.COB_EMCY + node_id, self._emcy_callback(i))
             network.subscribe(c.COB_HEARTBEAT + node_id, self._heartbeat_callback(i))
+        network.subscribe(c.COB_SYNC, self._on_sync_seen)
         self._network = network
 
     @staticmethod
@@ -234,12 +242,15 @@ class Master:
         unpack = TPDO1_FORMAT.unpack_from
 
         def on_tpdo1(can_id: int, data: bytearray, timestamp: float) -> None:
+            if not self._receive_priority_set:
+                self._raise_receive_thread_priority()
             if len(data) != size:
                 self._bad_tpdo[i] += 1
                 self._events.append((3, i, len(data)))
                 return
             self._fb_status[i], self._fb_pos[i] = unpack(data)
             self._fb_cycle[i] = self._cycle
+            self._fb_time[i] = timestamp
         return on_tpdo1
 
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
@@ -431,6 +442,9 @@ class Master:
         if self._sync_task is not None:
             self._sync_task.stop()
             self._sync_task = None
+        if self._sync_bus is not None:
+            self._sync_bus.shutdown()
+            self._sync_bus = None
         if self._network is not None:
             for node_id in self._node_ids:
                 try:
@@ -466,6 +480,24 @@ class Master:
         self._thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
         self._thread.start()
 
+    def _sync_sender(self) -> can.BusABC:
+        """Bus whose send_periodic sends the SYNC. SocketCAN: the bus itself (its broadcast
+        manager socket's frames reach our raw socket, so the SYNC is seen). Virtual: a second
+        bus on the channel, so the SYNC is seen too (a python-can bus does not hear itself)."""
+        assert self._bus is not None
+        if type(self._bus).__name__ == "VirtualBus":
+            self._sync_bus = can.Bus(interface="virtual", channel=self._bus.channel_id)
+            return self._sync_bus
+        return self._bus
+
+    def _on_sync_seen(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """A SYNC the kernel sent: its frame timestamp (time.time based) says when, even if
+        this receive thread runs late; convert it to perf_counter for the loop's grid."""
+        now_wall, now_perf = time.time(), time.perf_counter()
+        age = now_wall - timestamp
+        self._sync_seen_s = now_perf - age if 0.0 <= age < 1.0 else now_perf
+        self._sync_seen_stamp = timestamp
+
     def _use_kernel_sync(self) -> bool:
         if self._sync_source == "auto":
             return type(self._bus).__name__ == "SocketcanBus"
@@ -477,8 +509,8 @@ class Master:
         assert self._bus is not None
         send = self._bus.send
         if kernel_sync:
-            self._sync_task = self._bus.send_periodic(self._sync_msg, period)
-            grid = DeadlineGrid(period, time.perf_counter() + 0.25 * period)  # RPDOs a quarter cycle after SYNC
+            self._sync_task = self._sync_sender().send_periodic(self._sync_msg, period)
+            grid = DeadlineGrid(period, time.perf_counter() + 0.5 * period, 0.5 * period)  # half a cycle after SYNC
         else:
             grid = DeadlineGrid(period, time.perf_counter() + period)
         sync_msg = None if kernel_sync else self._sync_msg
@@ -487,13 +519,18 @@ class Master:
         spin_s = self._spin_s
         stats = self._stats
         history = self._sp_history
+        sync_time = self._sync_time
         k = 0
+        anchor_s = 0.0
         self._set_realtime_priority()
         if self._rt_priority is not None:
             self._shorten_gil_switch_interval()
         try:
             self._compute(1)
             while not self._quit:
+                if kernel_sync and self._sync_seen_s > anchor_s:
+                    anchor_s = self._sync_seen_s  # re-anchor on the SYNC the kernel really sent
+                    grid.next_s = anchor_s + (int((grid.next_s - anchor_s) / period) + 0.5) * period
                 woke = wait_until(grid.next_s, spin_s)
                 lateness, missed = grid.advance(woke)
                 stats.add(lateness, missed)
@@ -501,7 +538,10 @@ class Master:
                 self._cycle = k
                 try:
                     if sync_msg is not None:
+                        sync_time[k % _HISTORY] = time.time()  # frame timestamps are time.time() based
                         send(sync_msg)
+                    else:
+                        sync_time[k % _HISTORY] = self._sync_seen_stamp
                     for i in range(n):
                         msg = msgs[i]
                         pack(msg.data, 0, cw[i], sp[i])
@@ -534,6 +574,17 @@ class Master:
             log.info(kv("cycle_thread_priority", policy="SCHED_FIFO", priority=self._rt_priority))
         except (PermissionError, OSError) as err:
             log.info(kv("cycle_thread_priority", policy="normal", reason=str(err)))
+
+    def _raise_receive_thread_priority(self) -> None:
+        """Run canopen's receive thread SCHED_FIFO just below the cycle thread: a normal-priority
+        thread preempted while it holds the GIL would stall the cycle thread (priority inversion)."""
+        self._receive_priority_set = True
+        if self._rt_priority is None or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, self._rt_priority - 1)))
+        except (PermissionError, OSError):
+            pass
 
     def _shorten_gil_switch_interval(self) -> None:
         """A thread busy in pure Python keeps the GIL up to the switch interval (5 ms by
@@ -745,11 +796,31 @@ class Master:
                          f"now {state_name(sw)} at cycle {k}")
 
     def _check_following_error(self, i: int, k: int) -> None:
-        """|set-point effective at the TPDO's SYNC - actual| > window for longer than the time-out."""
-        fb_cycle = self._fb_cycle[i]
-        if fb_cycle <= self._phase_cycle + 1 or fb_cycle < k - 2:  # stale: its set-point left the history
+        """|set-point in force at the answered SYNC - actual| > window for longer than the time-out.
+
+        The TPDO answers the latest SYNC sent before its receive timestamp (so a lagging
+        receive thread does not matter); the set-point in force at SYNC c was sent in cycle
+        c-1. Servo lag: the nearest of the set-points of cycles c-1, c-2, c-3 counts. Each
+        TPDO is judged once; one older than the set-point history is not judged (the drive's
+        own check, statusword bit 13, still is)."""
+        stamp = self._fb_time[i]
+        if stamp == self._fe_checked_time[i]:
             return
-        error = self._sp_history[(fb_cycle - 1) % _HISTORY][i] - self._fb_pos[i]
+        self._fe_checked_time[i] = stamp
+        times, history = self._sync_time, self._sp_history
+        answered = -1
+        for c in range(k, k - _HISTORY + 3, -1):
+            if 0.0 < times[c % _HISTORY] <= stamp:
+                answered = c
+                break
+        if answered < _HISTORY:
+            return
+        actual = self._fb_pos[i]
+        error = history[(answered - 1) % _HISTORY][i] - actual
+        for back in (2, 3):
+            e = history[(answered - back) % _HISTORY][i] - actual
+            if abs(e) < abs(error):
+                error = e
         if abs(error) <= self._fe_window[i]:
             self._fe_cycles[i] = 0
             return
