@@ -152,6 +152,9 @@ def test_reversed_curve_traces_the_same_path_backwards(wang_curve):
         (dict(degree=1, control_points=[(0, 0), (1, 1)], knots=[1, 1, 1, 1]), "knots", "empty"),
         (dict(degree=2, control_points=[(0, 0)] * 6, knots=[0, 0, 0, .5, .5, .5, 1, 1, 1]), "knots", "repeats 3 times"),
         (dict(degree=1, control_points=[(0,) * 7, (1,) * 7]), "control_points", "1 to 6 coordinates"),
+        (dict(degree=1, control_points=[(0, 0), (1, 0), (2, 0)], knots=[0, 0, 0, 1, 1]), "knots", "repeats an end knot"),
+        (dict(degree=1, control_points=[(0, 0), (1, 0), (2, 0)], knots=[0, 0, 1, 1, 1]), "knots", "repeats an end knot"),
+        (dict(degree=1, control_points=[(0, 0), (1, 0)], weights=[1, 1e-300]), "weights", "must lie in"),
     ],
 )
 def test_invalid_definitions_name_the_field(kwargs, field, fragment):

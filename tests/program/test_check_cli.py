@@ -88,3 +88,8 @@ def test_windows_line_ends_and_a_byte_order_mark_are_accepted(tmp_path):
     program = read_program(prog)
     assert [b.source.line for b in program.blocks] == [2, 3]
     assert program.blocks[1].source.text == "Y2"
+
+
+def test_a_non_finite_start_position_is_an_input_error(capsys):
+    assert main(["check", "--start", "nan", "0", "0", str(EXAMPLES / "mixed.nc")]) == 2
+    assert "start position: must be 3 finite numbers" in capsys.readouterr().err

@@ -97,7 +97,10 @@ def check_outcome(parse, text: str, source: str) -> bool:
     for a, b in zip(program.blocks, program.blocks[1:]):
         assert np.allclose(a.end, b.start, atol=1e-6)
     for block in program.blocks:
-        assert np.all(np.isfinite(block.curve.control_points))
+        curve = block.curve
+        assert np.all(np.isfinite(curve.control_points))
+        ends = curve.points(np.array([curve.u_min, curve.u_max]))  # the curve really starts/ends there
+        np.testing.assert_allclose(ends, [block.start, block.end], atol=1e-9 * (1 + np.abs(ends).max()))
     return True
 
 

@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 MAX_DEGREE = 9
 MAX_DIM = 6
 KNOT_TOLERANCE = 1e-12
+MIN_WEIGHT, MAX_WEIGHT = 1e-9, 1e9  # beyond this the homogeneous form under/overflows
 
 
 class CurveError(ValueError):
@@ -81,6 +82,10 @@ def validate_definition(degree: int, points: NDArray[np.float64], weights: NDArr
     if len(nonpositive):
         i = int(nonpositive[0])
         raise CurveError("weights", f"weight {i + 1} is {weights[i]:g}; weights must be > 0", i)
+    out_of_range = np.flatnonzero((weights < MIN_WEIGHT) | (weights > MAX_WEIGHT))
+    if len(out_of_range):
+        i = int(out_of_range[0])
+        raise CurveError("weights", f"weight {i + 1} is {weights[i]:g}; weights must lie in [{MIN_WEIGHT:g}, {MAX_WEIGHT:g}]", i)
     expected = n_points + degree + 1
     if len(knots) != expected:
         raise CurveError("knots", f"need {expected} knots ({n_points} control points + degree {degree} + 1), got {len(knots)}")
@@ -93,6 +98,11 @@ def validate_definition(degree: int, points: NDArray[np.float64], weights: NDArr
     if not knots[-1] - knots[0] > KNOT_TOLERANCE:
         raise CurveError("knots", "knot range is empty (first knot equals last knot)")
     interior = knots[degree + 1: -degree - 1]
+    at_ends = np.flatnonzero((interior == knots[0]) | (interior == knots[-1]))
+    if len(at_ends):
+        i = int(at_ends[0]) + degree + 1
+        raise CurveError("knots", f"knot {i + 1} ({knots[i]:g}) repeats an end knot: each end holds exactly "
+                         f"{degree + 1} equal knots (degree + 1)", i)
     if len(interior):
         values, counts = np.unique(interior, return_counts=True)
         too_many = np.flatnonzero(counts > degree)

@@ -17,6 +17,10 @@ from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.geometry import CurveError, NurbsCurve
 
 
+MIN_WEIGHT, MAX_WEIGHT = 1e-6, 1e6  # beyond these the rational evaluation loses all precision
+MIN_KNOT_SPAN = 1e-9  # of the knot range: shorter non-empty spans are numerically empty
+
+
 @dataclass(frozen=True)
 class CurveProblem:
     """One problem: ``field`` is degree | control_points | weights | knots; ``index`` the value."""
@@ -41,6 +45,8 @@ def weight_problems(weights: Sequence[float], n_points: int) -> list[CurveProble
     for i, w in enumerate(weights):
         if not np.isfinite(w) or w <= 0:
             problems.append(CurveProblem("weights", f"weight {i + 1} is {w:g}; weights must be > 0", i))
+        elif not MIN_WEIGHT <= w <= MAX_WEIGHT:
+            problems.append(CurveProblem("weights", f"weight {i + 1} is {w:g}; weights must be between {MIN_WEIGHT:g} and {MAX_WEIGHT:g}", i))
     return problems
 
 
@@ -66,6 +72,19 @@ def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[Cu
         problems.append(CurveProblem("knots", f"end not clamped: the last {degree + 1} knots must be equal", i))
     if not k[-1] > k[0]:
         problems.append(CurveProblem("knots", "knot range is empty (first knot equals last knot)", len(k) - 1))
+        return problems
+    spans = np.diff(k)
+    tiny = np.flatnonzero((spans > 0) & (spans < MIN_KNOT_SPAN * (k[-1] - k[0])))
+    if len(tiny):
+        i = int(tiny[0]) + 1
+        problems.append(CurveProblem("knots", f"knot {i + 1} ({k[i]:.17g}) is too close to knot {i} ({k[i - 1]:.17g}): "
+                                              f"make them equal or at least {MIN_KNOT_SPAN:g} of the knot range apart", i))
+    # more than degree+1 equal end knots: the curve would not start (end) at the first (last)
+    # control point; geometry.validate_definition does not catch this (reported)
+    if k[degree + 1] == k[0]:
+        problems.append(CurveProblem("knots", f"start knot {k[0]:g} repeats more than {degree + 1} (degree + 1) times", degree + 1))
+    if k[-degree - 2] == k[-1]:
+        problems.append(CurveProblem("knots", f"end knot {k[-1]:g} repeats more than {degree + 1} (degree + 1) times", len(k) - degree - 2))
     for i in range(degree + 1, len(k) - degree - 1 - degree):
         if k[i] == k[i + degree] and k[i] > k[0] and k[i + degree] < k[-1]:
             problems.append(CurveProblem("knots", f"interior knot {k[i]:g} repeats more than {degree} (the degree) times", i + degree))

@@ -117,7 +117,10 @@ class GcodeParser:
 
     def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0)) -> None:
         self.source = source
-        self.start = np.asarray(start_position, dtype=float).reshape(3)
+        start = np.asarray(start_position, dtype=float)
+        if start.shape != (3,) or not np.all(np.isfinite(start)):
+            raise InputError(f"{source}: start position", f"must be 3 finite numbers X Y Z in mm, got {start_position!r}")
+        self.start = start
         self.position = self.start.copy()
         self.motion: int | None = None
         self.plane = 17

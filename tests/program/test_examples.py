@@ -35,3 +35,31 @@ def test_wang_gcode_block_names_its_g06_2_line():
     assert source.text.startswith("N30 G06.2 P3")
     lines = (EXAMPLES / "wang_table1.nc").read_text().splitlines()
     assert "G06.2" in lines[source.line - 1]
+
+
+def junction_angles_deg(program) -> list[float]:
+    """Angle between the end tangent of each block and the start tangent of the next."""
+    angles = []
+    for a, b in zip(program.blocks, program.blocks[1:]):
+        ta = a.curve.derivatives(a.curve.u_max, 1)[1]
+        tb = b.curve.derivatives(b.curve.u_min, 1)[1]
+        cos = ta @ tb / (np.linalg.norm(ta) * np.linalg.norm(tb))
+        angles.append(float(np.degrees(np.arccos(np.clip(cos, -1, 1)))))
+    return angles
+
+
+def test_mixed_example_has_every_block_kind_arcs_in_three_planes_and_both_junction_kinds():
+    program = read_program(EXAMPLES / "mixed.nc")
+    kinds = {b.kind for b in program.blocks}
+    assert kinds == {BlockKind.RAPID, BlockKind.LINE, BlockKind.ARC, BlockKind.NURBS}
+    arcs = [b for b in program.blocks if b.kind is BlockKind.ARC]
+    normals = set()
+    for arc in arcs:  # the plane normal is the axis along which the arc does not move
+        pts = arc.curve.points(np.linspace(arc.curve.u_min, arc.curve.u_max, 50))
+        normals.add(int(np.argmin(np.ptp(pts, axis=0))))
+    assert normals == {0, 1, 2}
+    angles = junction_angles_deg(program)
+    assert sum(a < 1e-6 for a in angles) >= 3  # tangent junctions
+    assert sum(a > 10 for a in angles) >= 3  # corners
+    for a, b in zip(program.blocks, program.blocks[1:]):
+        np.testing.assert_allclose(a.end, b.start, atol=1e-12)
