@@ -1,5 +1,6 @@
-"""Files the installed package carries for ``nurbsmotion demo``: copies of config/demo.yaml,
-examples/wang_table1.nc and eds/nurbsmotion-servo.eds (a test keeps them identical), so a
+"""Files the installed package carries for ``nurbsmotion demo``: config/demo.yaml,
+examples/wang_table1.nc and eds/nurbsmotion-servo.eds. In the repository they are symlinks
+to those files (so they cannot drift); building the package copies their content, so a
 non-editable install runs the demo without the repository."""
 
 from __future__ import annotations
