@@ -28,3 +28,17 @@ def test_percentiles_and_counts():
     assert stats.late == 50  # 51..99 µs and the 5 ms one
     assert stats.percentile_s(0.5) == pytest.approx(51e-6)
     assert stats.max_s == pytest.approx(5e-3)
+    assert 5.0e-3 <= stats.percentile_s(1.0) <= 5.1e-3 + 1e-9  # coarse 100 µs bins above 1 ms
+
+
+def test_lateness_beyond_the_histogram_is_counted_in_the_last_bin():
+    stats = LatenessStats(late_threshold_s=1e-4)
+    stats.add(1.5, missed=True)
+    assert stats.percentile_s(0.5) <= 0.1 and stats.max_s == 1.5 and stats.missed == 1
+
+
+def test_kernel_sync_grid_counts_half_a_period_late_as_missed():
+    grid = DeadlineGrid(0.004, 10.0, missed_after_s=0.002)
+    lateness, missed = grid.advance(10.0025)
+    assert missed
+    assert grid.next_s == pytest.approx(10.004)  # still the same grid: less than a period late

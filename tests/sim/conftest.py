@@ -4,6 +4,7 @@ sees. Every wait polls a condition with a timeout; nothing sleeps and hopes."""
 
 from __future__ import annotations
 
+import contextlib
 import struct
 import threading
 import time
@@ -61,7 +62,6 @@ class Bench:
         self.master = master
         self.frames = frames
         self.nodes: dict[int, canopen.RemoteNode] = {}
-        self.syncs_sent = 0
 
     def add(self, node_id: int, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
         """Start drive ``node_id``; wait for its boot-up; return it and its master-side node."""
@@ -71,6 +71,13 @@ class Bench:
         self.master.add_node(node)
         self.nodes[node_id] = node
         wait_until(lambda: bytes([0]) in self.frames.of(0x700 + node_id), what=f"boot-up of node {node_id}")
+        return drive, node
+
+    def add_enabled(self, node_id: int, mode: int = 8, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
+        """A drive in NMT OPERATIONAL and OPERATION ENABLED in ``mode`` (IP with bit 4)."""
+        drive, node = self.add(node_id, **drive_kwargs)
+        self.operational(node_id)
+        self.enable(node_id, mode)
         return drive, node
 
     def send(self, can_id: int, data: bytes) -> None:
@@ -85,13 +92,12 @@ class Bench:
         before = [d.stats.syncs for d in drives]
         operational = [d.nmt_state == 0x05 and not d.silent for d in drives]
         self.send(0x80, b"" if counter is None else bytes([counter]))
-        self.syncs_sent += 1
         wait_until(
             lambda: all(d.stats.syncs > b or not op for d, b, op in zip(drives, before, operational)),
             what="SYNC processed",
         )
-        # The TPDOs of this SYNC are sent before the counter is read again: wait for the
-        # receive thread of the master to have them too (a round trip through an SDO-free ping).
+        # The drives sent this SYNC's TPDOs before counting it; wait until the master's
+        # receive thread has logged them too.
         self.flush()
 
     def flush(self) -> None:
@@ -122,17 +128,25 @@ def channel() -> str:
     return f"sim-test-{uuid.uuid4().hex}"
 
 
-@pytest.fixture
-def bench(channel: str) -> Iterator[Bench]:
+@contextlib.contextmanager
+def open_bench(interface: str, channel: str) -> Iterator[Bench]:
+    """Simulated drives and a master on ``interface``/``channel``; everything closed after."""
     frames = FrameLog()
     master = canopen.Network()
     master.NOTIFIER_CYCLE = 0.05
-    master.connect(interface="virtual", channel=channel)
+    master.connect(interface=interface, channel=channel)
     assert master.notifier is not None
     master.notifier.add_listener(frames)
-    sim = SimNetwork(interface="virtual", channel=channel).start()
+    sim = SimNetwork(interface=interface, channel=channel)
     try:
+        sim.start()
         yield Bench(sim, master, frames)
     finally:
         sim.stop()
         master.disconnect()
+
+
+@pytest.fixture
+def bench(channel: str) -> Iterator[Bench]:
+    with open_bench("virtual", channel) as opened:
+        yield opened

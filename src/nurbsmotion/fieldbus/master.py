@@ -17,7 +17,10 @@ controlword to all axes) -> 'disabled'; 'disabling' at shutdown.
 from __future__ import annotations
 
 import collections
+import gc
 import logging
+import os
+import sys
 import threading
 import time
 from typing import Callable
@@ -109,9 +112,14 @@ class Master:
                  traffic_log: str | None = None, sync_source: str = "auto", check_load: bool = True,
                  bootup_timeout_s: float = 2.0, stuck_timeout_s: float = 0.5, enable_timeout_s: float = 5.0,
                  sdo_timeout_s: float = 0.5, spin_s: float = 60e-6, late_threshold_s: float | None = None,
-                 progress_period_s: float = 0.05) -> None:
+                 progress_period_s: float = 0.05, rt_priority: int | None = 20, gc_mode: str = "freeze") -> None:
         if sync_source not in ("auto", "loop", "kernel"):
             raise InputError("sync_source", f"must be auto, loop or kernel, got {sync_source!r}")
+        if gc_mode not in ("freeze", "disable", "none"):
+            raise InputError("gc_mode", f"must be freeze, disable or none, got {gc_mode!r}")
+        self._rt_priority = rt_priority
+        self._receive_priority_set = False
+        self._gc_mode = gc_mode
         self.config = config
         self.axis_map = AxisMap.from_config(config)
         self.bus_load: BusLoad = check_bus_load(config) if check_load else config_bus_load(config)
@@ -148,6 +156,8 @@ class Master:
         self._fb_pos: list[int] = [0] * n
         self._fb_fe: list[int | None] = [None] * n
         self._fb_cycle = [-1] * n
+        self._fb_time = [0.0] * n  # receive timestamp of the last TPDO1 (time.time() based)
+        self._fe_checked_time = [0.0] * n
         self._bad_tpdo = [0] * n
         self._emcy_count = [0] * n
         self._last_emcy: list[int | None] = [None] * n
@@ -179,6 +189,10 @@ class Master:
         self._thread: threading.Thread | None = None
         self._quit = False
         self._sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
+        self._sync_bus: can.BusABC | None = None
+        self._sync_seen_s = 0.0  # perf_counter when a SYNC sent by the kernel was last received
+        self._sync_seen_stamp = 0.0  # its frame timestamp
+        self._sync_time = [0.0] * _HISTORY  # time.time() of the SYNC each cycle's RPDOs follow
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         self._rpdo_msgs = [can.Message(arbitration_id=c.COB_RPDO[0] + node, is_extended_id=False,
                                        data=bytearray(RPDO_FORMAT.size)) for node in self._node_ids]
@@ -208,6 +222,7 @@ class Master:
             network.subscribe(c.COB_TPDO[1] + node_id, self._tpdo2_callback(i))
             network.subscribe(c.COB_EMCY + node_id, self._emcy_callback(i))
             network.subscribe(c.COB_HEARTBEAT + node_id, self._heartbeat_callback(i))
+        network.subscribe(c.COB_SYNC, self._on_sync_seen)
         self._network = network
 
     @staticmethod
@@ -227,12 +242,15 @@ class Master:
         unpack = TPDO1_FORMAT.unpack_from
 
         def on_tpdo1(can_id: int, data: bytearray, timestamp: float) -> None:
+            if not self._receive_priority_set:
+                self._raise_receive_thread_priority()
             if len(data) != size:
                 self._bad_tpdo[i] += 1
                 self._events.append((3, i, len(data)))
                 return
             self._fb_status[i], self._fb_pos[i] = unpack(data)
             self._fb_cycle[i] = self._cycle
+            self._fb_time[i] = timestamp
         return on_tpdo1
 
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
@@ -366,8 +384,27 @@ class Master:
                                  f"{self._fe_window[j]} counts away)")
         job = Job(self, arr.astype(np.int64).tolist(), ramp_slope(arr, self._accel_counts_s2, self._period_s),
                   on_progress, self._progress_every)
+        self._quiet_gc()
         self._request("job", job)
         return job
+
+    def _quiet_gc(self) -> None:
+        """Keep the cyclic garbage collector from stalling the loop for milliseconds during a job.
+
+        'freeze' moves every object alive now (the job's rows included) out of the collector's
+        reach, so collections during the job only scan what is allocated meanwhile; 'disable'
+        stops cyclic collection until the job ends (reference counting still frees memory).
+        """
+        if self._gc_mode == "freeze":
+            gc.freeze()
+        elif self._gc_mode == "disable":
+            gc.disable()
+
+    def _release_gc(self) -> None:
+        if self._gc_mode == "freeze":
+            gc.unfreeze()
+        elif self._gc_mode == "disable":
+            gc.enable()
 
     def status(self) -> MasterStatus:
         """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
@@ -405,6 +442,9 @@ class Master:
         if self._sync_task is not None:
             self._sync_task.stop()
             self._sync_task = None
+        if self._sync_bus is not None:
+            self._sync_bus.shutdown()
+            self._sync_bus = None
         if self._network is not None:
             for node_id in self._node_ids:
                 try:
@@ -440,6 +480,24 @@ class Master:
         self._thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
         self._thread.start()
 
+    def _sync_sender(self) -> can.BusABC:
+        """Bus whose send_periodic sends the SYNC. SocketCAN: the bus itself (its broadcast
+        manager socket's frames reach our raw socket, so the SYNC is seen). Virtual: a second
+        bus on the channel, so the SYNC is seen too (a python-can bus does not hear itself)."""
+        assert self._bus is not None
+        if type(self._bus).__name__ == "VirtualBus":
+            self._sync_bus = can.Bus(interface="virtual", channel=self._bus.channel_id)
+            return self._sync_bus
+        return self._bus
+
+    def _on_sync_seen(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """A SYNC the kernel sent: its frame timestamp (time.time based) says when, even if
+        this receive thread runs late; convert it to perf_counter for the loop's grid."""
+        now_wall, now_perf = time.time(), time.perf_counter()
+        age = now_wall - timestamp
+        self._sync_seen_s = now_perf - age if 0.0 <= age < 1.0 else now_perf
+        self._sync_seen_stamp = timestamp
+
     def _use_kernel_sync(self) -> bool:
         if self._sync_source == "auto":
             return type(self._bus).__name__ == "SocketcanBus"
@@ -451,8 +509,8 @@ class Master:
         assert self._bus is not None
         send = self._bus.send
         if kernel_sync:
-            self._sync_task = self._bus.send_periodic(self._sync_msg, period)
-            grid = DeadlineGrid(period, time.perf_counter() + 0.25 * period)  # RPDOs a quarter cycle after SYNC
+            self._sync_task = self._sync_sender().send_periodic(self._sync_msg, period)
+            grid = DeadlineGrid(period, time.perf_counter() + 0.5 * period, 0.5 * period)  # half a cycle after SYNC
         else:
             grid = DeadlineGrid(period, time.perf_counter() + period)
         sync_msg = None if kernel_sync else self._sync_msg
@@ -461,10 +519,18 @@ class Master:
         spin_s = self._spin_s
         stats = self._stats
         history = self._sp_history
+        sync_time = self._sync_time
         k = 0
+        anchor_s = 0.0
+        self._set_realtime_priority()
+        if self._rt_priority is not None:
+            self._shorten_gil_switch_interval()
         try:
             self._compute(1)
             while not self._quit:
+                if kernel_sync and self._sync_seen_s > anchor_s:
+                    anchor_s = self._sync_seen_s  # re-anchor on the SYNC the kernel really sent
+                    grid.next_s = anchor_s + (int((grid.next_s - anchor_s) / period) + 0.5) * period
                 woke = wait_until(grid.next_s, spin_s)
                 lateness, missed = grid.advance(woke)
                 stats.add(lateness, missed)
@@ -472,7 +538,10 @@ class Master:
                 self._cycle = k
                 try:
                     if sync_msg is not None:
+                        sync_time[k % _HISTORY] = time.time()  # frame timestamps are time.time() based
                         send(sync_msg)
+                    else:
+                        sync_time[k % _HISTORY] = self._sync_seen_stamp
                     for i in range(n):
                         msg = msgs[i]
                         pack(msg.data, 0, cw[i], sp[i])
@@ -495,6 +564,33 @@ class Master:
             self._finish_job("faulted")
             self._phase = "disabled"
             self._ready.set()
+
+    def _set_realtime_priority(self) -> None:
+        """SCHED_FIFO for the cycle thread when allowed (root / CAP_SYS_NICE); else normal."""
+        if self._rt_priority is None or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(self._rt_priority))
+            log.info(kv("cycle_thread_priority", policy="SCHED_FIFO", priority=self._rt_priority))
+        except (PermissionError, OSError) as err:
+            log.info(kv("cycle_thread_priority", policy="normal", reason=str(err)))
+
+    def _raise_receive_thread_priority(self) -> None:
+        """Run canopen's receive thread SCHED_FIFO just below the cycle thread: a normal-priority
+        thread preempted while it holds the GIL would stall the cycle thread (priority inversion)."""
+        self._receive_priority_set = True
+        if self._rt_priority is None or not hasattr(os, "sched_setscheduler"):
+            return
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, self._rt_priority - 1)))
+        except (PermissionError, OSError):
+            pass
+
+    def _shorten_gil_switch_interval(self) -> None:
+        """A thread busy in pure Python keeps the GIL up to the switch interval (5 ms by
+        default) before the woken cycle thread gets it: cap it at a quarter period."""
+        if sys.getswitchinterval() > self._period_s / 4:
+            sys.setswitchinterval(self._period_s / 4)
 
     def _log_cycle(self, sync_msg: can.Message | None) -> None:
         assert self._traffic is not None
@@ -594,12 +690,14 @@ class Master:
             self._handle_event(self._events.popleft(), k)
         phase = self._phase
         if phase in RUNNING_PHASES:
-            self._check_axes(k)
+            self._check_axes(k, running=True)
         elif phase == "enabling":
             self._check_enabling(k)
+        elif phase == "disabled":
+            self._check_axes(k, running=False)
         elif phase == "quick_stop":
-            if all((s or 0) & _OE_MASK not in (_OE_VALUE, _QS_VALUE) for s in self._fb_status) \
-                    and k - self._phase_cycle > 2:
+            self._check_axes(k, running=False)
+            if k - self._phase_cycle > 2 and all(self._stopped_or_silent(i, k) for i in range(self._n)):
                 self._set_phase("disabled", k)
         elif phase == "disabling":
             if all((s or 0) & _OE_MASK != _OE_VALUE for s in self._fb_status) and k - self._phase_cycle > 2 \
@@ -611,6 +709,10 @@ class Master:
                 self._finish_job(job.outcome)
             elif job.on_progress is not None and k % job.progress_every == 0:
                 self._call_progress(job)
+
+    def _stopped_or_silent(self, i: int, k: int) -> bool:
+        """Axis i no longer enabled nor quick-stopping, or its TPDO1 stopped coming."""
+        return (self._fb_status[i] or 0) & _OE_MASK not in (_OE_VALUE, _QS_VALUE) or self._fb_cycle[i] < k - 3
 
     def _call_progress(self, job: Job) -> None:
         try:
@@ -627,6 +729,7 @@ class Master:
                 self._job = arg
                 self._set_phase("streaming", k)
             else:
+                self._release_gc()
                 arg._finish(JobResult("aborted", 0, arg.length, (), 0, 0))
         elif what == "stop":
             if self._job is arg and phase == "streaming":
@@ -662,42 +765,71 @@ class Master:
             self._report(node, name, "heartbeat", value, k, f"node {node} (axis {name}): heartbeat reports {what} "
                          f"at cycle {k}")
 
-    def _check_axes(self, k: int) -> None:
-        """Fault bit, state, following error (drive bit and computed) and heartbeat time-out."""
+    def _check_axes(self, k: int, running: bool) -> None:
+        """Per axis: statusword bits, computed following error (running only), heartbeat."""
         now = time.perf_counter()
-        history = self._sp_history
         for i in range(self._n):
-            sw = self._fb_status[i] or 0
-            node = self._node_ids[i]
-            if sw & c.SW_FAULT:
-                code = self._last_emcy[i] or 0
-                self._report(node, self._names[i], "fault_bit", code, k,
-                             f"node {node} (axis {self._names[i]}): drive in {state_name(sw)} at cycle {k}"
-                             f"{f' (last EMCY 0x{code:04X})' if code else ''}")
-            elif sw & _OE_MASK != _OE_VALUE:
-                self._report(node, self._names[i], "fault_bit", sw, k,
-                             f"node {node} (axis {self._names[i]}): drive left OPERATION ENABLED, now "
-                             f"{state_name(sw)} at cycle {k}")
-            elif sw & c.SW_FOLLOWING_ERROR:
-                self._report(node, self._names[i], "following_error", self._fb_fe[i] or 0, k,
-                             f"node {node} (axis {self._names[i]}): drive reports following error (statusword bit 13)"
-                             f" at cycle {k}")
-            fb_cycle = self._fb_cycle[i]
-            if fb_cycle > self._phase_cycle + 1:
-                error = history[(fb_cycle - 1) % _HISTORY][i] - self._fb_pos[i]
-                if abs(error) > self._fe_window[i]:
-                    self._fe_cycles[i] += 1
-                    if self._fe_cycles[i] > self._fe_timeout_cycles[i]:
-                        self._report(node, self._names[i], "following_error", error, k,
-                                     f"node {node} (axis {self._names[i]}): following error {error} counts exceeds the "
-                                     f"window {self._fe_window[i]} counts for {self._fe_cycles[i]} cycles at cycle {k}")
-                else:
-                    self._fe_cycles[i] = 0
+            self._check_statusword(i, k, running)
+            if running:
+                self._check_following_error(i, k)
             if now - self._hb_time[i] > self._hb_timeout_s:
+                node = self._node_ids[i]
                 self._report(node, self._names[i], "heartbeat", -1, k,
                              f"node {node} (axis {self._names[i]}): no heartbeat for "
                              f"{(now - self._hb_time[i]) * 1000:.0f} ms (consumer time "
                              f"{self._hb_timeout_s * 1000:.0f} ms) at cycle {k}")
+
+    def _check_statusword(self, i: int, k: int, running: bool) -> None:
+        """Following error bit 13, fault bit 3, and (running) leaving OPERATION ENABLED."""
+        sw = self._fb_status[i] or 0
+        node, name = self._node_ids[i], self._names[i]
+        if sw & c.SW_FOLLOWING_ERROR:
+            self._report(node, name, "following_error", self._fb_fe[i] or 0, k,
+                         f"node {node} (axis {name}): drive reports following error (statusword bit 13)"
+                         f" in {state_name(sw)} at cycle {k}")
+        elif sw & c.SW_FAULT:
+            code = self._last_emcy[i] or 0
+            self._report(node, name, "fault_bit", code, k, f"node {node} (axis {name}): drive in {state_name(sw)} "
+                         f"at cycle {k}{f' (last EMCY 0x{code:04X})' if code else ''}")
+        elif running and sw & _OE_MASK != _OE_VALUE:
+            self._report(node, name, "fault_bit", sw, k, f"node {node} (axis {name}): drive left OPERATION ENABLED, "
+                         f"now {state_name(sw)} at cycle {k}")
+
+    def _check_following_error(self, i: int, k: int) -> None:
+        """|set-point in force at the answered SYNC - actual| > window for longer than the time-out.
+
+        The TPDO answers the latest SYNC sent before its receive timestamp (so a lagging
+        receive thread does not matter); the set-point in force at SYNC c was sent in cycle
+        c-1. Servo lag: the nearest of the set-points of cycles c-1, c-2, c-3 counts. Each
+        TPDO is judged once; one older than the set-point history is not judged (the drive's
+        own check, statusword bit 13, still is)."""
+        stamp = self._fb_time[i]
+        if stamp == self._fe_checked_time[i]:
+            return
+        self._fe_checked_time[i] = stamp
+        times, history = self._sync_time, self._sp_history
+        answered = -1
+        for c in range(k, k - _HISTORY + 3, -1):
+            if 0.0 < times[c % _HISTORY] <= stamp:
+                answered = c
+                break
+        if answered < _HISTORY:
+            return
+        actual = self._fb_pos[i]
+        error = history[(answered - 1) % _HISTORY][i] - actual
+        for back in (2, 3):
+            e = history[(answered - back) % _HISTORY][i] - actual
+            if abs(e) < abs(error):
+                error = e
+        if abs(error) <= self._fe_window[i]:
+            self._fe_cycles[i] = 0
+            return
+        self._fe_cycles[i] += 1
+        if self._fe_cycles[i] > self._fe_timeout_cycles[i]:
+            node = self._node_ids[i]
+            self._report(node, self._names[i], "following_error", error, k,
+                         f"node {node} (axis {self._names[i]}): following error {error} counts exceeds the "
+                         f"window {self._fe_window[i]} counts for {self._fe_cycles[i]} cycles at cycle {k}")
 
     def _check_enabling(self, k: int) -> None:
         ready = True
@@ -773,6 +905,8 @@ class Master:
 
     def _quick_stop(self, k: int, outcome: str) -> None:
         self._set_phase("quick_stop", k)
+        for i in range(self._n):  # what the drives report now belongs to the job's faults too
+            self._check_statusword(i, k, running=False)
         self._finish_job(outcome)
 
     def _finish_job(self, outcome: str) -> None:
@@ -780,6 +914,7 @@ class Master:
         if job is None:
             return
         self._job = None
+        self._release_gc()
         if outcome == "done" and job.faults:
             outcome = "faulted"
         job._finish(JobResult(outcome, job.index + 1, job.length, tuple(job.faults), self._stats.missed,

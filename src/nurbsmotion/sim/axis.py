@@ -35,13 +35,20 @@ class UnsupportedMode(ValueError):
 class AxisParameters:
     """The object-dictionary parameters the per-SYNC step uses (cached by the drive)."""
 
-    period_s: float = 1e-3  # 0x60C2 (or 0x1006)
+    ip_period_s: float = 1e-3  # 0x60C2, the IP cycle
+    sync_period_s: float = 1e-3  # 0x1006, the SYNC cycle (0 -> 0x60C2)
     fe_window_counts: int = 10000  # 0x6065; 0xFFFFFFFF disables the monitor
     fe_timeout_ms: int = 20  # 0x6066
     quick_stop_option: int = 2  # 0x605A
     quick_stop_decel_counts_s2: float = 1e7  # 0x6085
     limit_min_counts: int = 0  # 0x607D sub 1; min >= max disables the limits
     limit_max_counts: int = 0  # 0x607D sub 2
+
+    def period_s(self, mode: int) -> float:
+        """The cycle one SYNC stands for: 0x60C2 in IP, 0x1006 in CSP (0x60C2 if 0x1006 is 0)."""
+        if mode == Mode.INTERPOLATED_POSITION or self.sync_period_s <= 0:
+            return self.ip_period_s
+        return self.sync_period_s
 
 
 def error_register_bits(code: int) -> int:
@@ -100,6 +107,7 @@ class Cia402Axis:
         self.error_register = 0
         self.error_history: list[int] = []
         self._fe_flag = False
+        self._fresh_target = self._fresh_ip = False
         self._hold_position()
         self.position_actual = int(round(self.servo.actual))
         self._update_statusword()
@@ -110,8 +118,6 @@ class Cia402Axis:
         new_state, taken = apply_controlword(self.state, controlword, previous, self.params.quick_stop_option)
         if taken:
             self._change_state(new_state, taken)
-        elif self.state is State.OPERATION_ENABLED and controlword & c.CW_ENABLE_IP and not previous & c.CW_ENABLE_IP:
-            self._fresh_ip = False  # IP enabled: hold position until the first new set-point
         self._update_statusword()
 
     def set_mode(self, mode: int) -> None:
@@ -155,12 +161,12 @@ class Cia402Axis:
         log.info(kv("sim.state", node=self.name, state=self.state.name, transitions=taken))
 
     def _hold_position(self) -> None:
-        """Stand still where the motor is; set-points count only from the next new one."""
+        """Stand still where the motor is until a new set-point comes (one received since
+        the last SYNC, whatever its order in the RPDO relative to the controlword)."""
         self.servo.hold(self.servo.actual)
         self._demand = self.servo.actual
         self.following_error = 0
         self._fe_cycles = 0
-        self._fresh_target = self._fresh_ip = False
 
     def setpoint_active(self) -> bool:
         """Statusword bit 12: CSP 'target used' / IP 'interpolation active'."""
@@ -173,7 +179,7 @@ class Cia402Axis:
     # ------------------------------------------------------------------ per SYNC
     def step(self, sync_index: int, sync_counter: int) -> None:
         """One SYNC: take the new set-point (recorded), move, check the following error."""
-        period_s = self.params.period_s
+        period_s = self.params.period_s(self.mode_display)
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip
         self._fresh_target = self._fresh_ip = False
