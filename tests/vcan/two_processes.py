@@ -144,8 +144,8 @@ def run_job(config_path: Path, sim: SimProcess, cycles: int, **master_options) -
     """Bring the drives up, stream `cycles` strictly increasing set-points, shut down, stop
     the sim (so its recordings are written).
 
-    SYNC comes from the cycle loop: see docs/vcan.md for why the kernel-BCM SYNC ('auto' on
-    socketcan) loses set-points when its period drifts against the loop's.
+    SYNC comes from the cycle loop: with the kernel-BCM SYNC ('auto' on socketcan) the drives
+    inside User-Mode Linux lose set-points (docs/vcan.md, Limits).
     """
     options = {**SLOW_KERNEL_MASTER_OPTIONS, **master_options}
     with Master(load_config(config_path), sync_source="loop", **options) as master:
