@@ -39,7 +39,7 @@ def vcan0() -> str:
 @pytest.fixture
 def sim_process(vcan0: str, tmp_path: Path) -> Iterator:
     """Factory: the simulated drives of a config in a child process, ready; always stopped."""
-    from tests.vcan.two_processes import SimProcess
+    from tests.vcan.two_processes import SimProcess  # here: it imports this module
 
     started: list[SimProcess] = []
 

@@ -22,7 +22,7 @@ QUIET_S = 0.5  # the bus is quiet after shutdown: the listener has read everythi
 DRAIN_TIMEOUT_S = 10.0
 NODES = [node for _, node, _, _ in AXES]
 RPDO_IDS = [c.COB_RPDO[0] + node for node in NODES]
-MASTER_IDS = {c.COB_NMT, c.COB_SYNC, *RPDO_IDS, *(0x600 + node for node in NODES)}  # NMT, SYNC, RPDO, SDO request
+MASTER_IDS = {c.COB_NMT, c.COB_SYNC, *RPDO_IDS, *(c.COB_SDO_RX + node for node in NODES)}
 CYCLE_IDS = [c.COB_SYNC, *RPDO_IDS]
 
 
