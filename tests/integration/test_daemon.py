@@ -139,6 +139,23 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     _back_home(daemon)
 
 
+def test_abort_quick_stops_and_reset_brings_the_drives_back(daemon):
+    job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
+    daemon.wait_progress(0.3)
+    assert daemon.request("abort")["ok"]
+    outcome = daemon.wait_job_end(job_id)["outcome"]
+    assert outcome["outcome"] == "aborted" and outcome["sent"] < outcome["planned"]
+    wait_until(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
+    first = [a["actual_mm"] for a in daemon.request("status")["axes"]]
+    assert daemon.request("status")["state"] == "fault"
+    assert daemon.request("submit", name="short.nc", program=SHORT)["ok"] is False
+    assert daemon.request("reset")["ok"]
+    status = daemon.request("status")
+    assert status["state"] == "idle"
+    assert np.allclose([a["actual_mm"] for a in status["axes"]], first, atol=0.05)  # stopped where it was
+    _back_home(daemon)
+
+
 def test_feed_override_changes_the_playback_rate_within_the_axis_limits(daemon):
     job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
     daemon.wait_progress(0.2)
