@@ -341,6 +341,8 @@ class Master:
                                 f"(states: {', '.join(f'node {a.node_id} {a.state}' for a in self.status().axes)})")
         if self._enable_error is not None:
             raise self._enable_error
+        if self._phase != "holding":
+            raise FieldbusError(f"bring-up: the cycle loop stopped in phase {self._phase} (see the log)")
 
     def reset_faults(self) -> None:
         """Acknowledge faults and re-enable every axis (fault reset, state machine), then hold."""
@@ -410,13 +412,14 @@ class Master:
         """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
         stats = self._stats
         axes = []
+        sent = self._sp_history[self._cycle % _HISTORY] if self._cycle else self._sp
         for i in range(self._n):
             sw = self._fb_status[i]
             fe = self._fb_fe[i]
-            if fe is None and self._fb_cycle[i] >= 1:
+            if fe is None and self._fb_cycle[i] >= 1:  # no TPDO2: the master's estimate
                 fe = self._sp_history[(self._fb_cycle[i] - 1) % _HISTORY][i] - self._fb_pos[i]
             axes.append(AxisStatus(self._names[i], self._node_ids[i], state_name(sw), sw, self._fb_pos[i],
-                                   self._sp[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
+                                   sent[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
         timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
                             stats.percentile_s(0.99), stats.max_s, self._send_errors)
         job = self._job
@@ -756,7 +759,7 @@ class Master:
             return
         if self._phase in ("enabling", "offline"):
             return
-        if kind == 1 and value != 0:
+        if kind == 1 and value & 0xFF00:  # 0x00xx = error reset / no error (CiA 301)
             self._report(node, name, "emcy", value, k,
                          f"node {node} (axis {name}): EMCY 0x{value:04X}{_emcy_text(value)} at cycle {k}")
         elif kind == 2 and value != c.NmtState.OPERATIONAL:
