@@ -22,6 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks._report import write_section  # noqa: E402
 from nurbsmotion.geometry import NurbsCurve  # noqa: E402
 from nurbsmotion.planning import PlanLimits, plan  # noqa: E402
+from nurbsmotion.planning.interpolators import METHODS, interpolate  # noqa: E402
 from nurbsmotion.planning.measure import measure  # noqa: E402
 from nurbsmotion.program import Block, BlockKind, Program, SourceRef  # noqa: E402
 from tests.conftest import WANG_KNOTS, WANG_POINTS, WANG_WEIGHTS  # noqa: E402
@@ -46,6 +47,21 @@ def best_times(repeat: int, fn):
         cpus.append(time.process_time() - c0)
         walls.append(time.perf_counter() - w0)
     return min(walls), min(cpus), result
+
+
+def as_printed_table(program: Program) -> str:
+    """Wang's experiment (T = 4 ms) with Wang's eq. 27 as printed next to the registered methods."""
+    limits = PlanLimits(period_s=0.004, chord_error_mm=0.010, max_accel_mm_s2=2500.0, acc_time_s=1.2)
+    rows = []
+    for name in ("wang-as-printed", "wang", "zhang"):
+        trajectory = interpolate(program, limits, METHODS[name])
+        m = measure(trajectory, program)
+        rows.append(f"| {name} | {m.cycles:,} | {m.duration_s:.3f} s | {m.max_chord_error_mm * 1e3:.3f} | "
+                    f"{m.max_accel_mm_s2:.1f} | {m.max_fluctuation:.2e} |")
+    return ("Wang's own experiment (T = 4 ms): the feed adaptation exactly as printed (eq. 27 with the previous "
+            "cycle's a_t, limits at the current point only; docs/planning.md, finding 1) against `wang` and `zhang`.\n\n"
+            "| method | set-points | motion time | max chord error (µm) | max accel (mm/s²) | max feed fluctuation |\n"
+            "|---|---|---|---|---|---|\n" + "\n".join(rows))
 
 
 def main() -> None:
@@ -73,6 +89,7 @@ def main() -> None:
             "| algorithm | set-points | CPU time | wall time | set-points/s (CPU) | x real time | target | "
             "max chord error (µm) | max accel (mm/s²) | max feed fluctuation |\n"
             "|---|---|---|---|---|---|---|---|---|---|\n" + "\n".join(rows))
+    body += "\n\n" + as_printed_table(program)
     write_section("interpolators", "The papers' interpolators", body, "python benchmarks/bench_interpolators.py")
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -73,3 +74,12 @@ def test_bad_options_are_one_line_and_exit_2(capsys, argv, where):
     assert code == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and where in err
+
+
+def test_plot_without_matplotlib_is_one_line_before_any_work(capsys, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    trace, png = tmp_path / "t.csv", tmp_path / "p.png"
+    assert main(["plan", WANG_NC, "--algorithm", "taylor2", "--trace", str(trace), "--plot", str(png)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--plot" in err[0] and "matplotlib" in err[0]
+    assert not trace.exists() and not png.exists()

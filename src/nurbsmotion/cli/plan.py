@@ -44,6 +44,8 @@ def format_summary(program: Program, trajectory: Trajectory, m: Measurements, li
         f"  max feed                 {m.max_speed_mm_s:.3f} mm/s",
         f"  max feed fluctuation     {m.max_fluctuation:.3e}",
         f"  end point error          {m.end_error_mm:.3e} mm",
+        "  axis max velocity        " + " ".join(f"{a} {v:.1f}" for a, v in zip("XYZ", m.axis_max_velocity_mm_s)) + " mm/s",
+        "  axis max acceleration    " + " ".join(f"{a} {v:.0f}" for a, v in zip("XYZ", m.axis_max_accel_mm_s2)) + " mm/s^2",
         f"planning     {trajectory.planning_time_s * 1000:.1f} ms ({rate:,.0f} set-points/s)",
     ])
 

@@ -8,7 +8,9 @@ a step that passes the end of a block carries its leftover into the next block.
 Each cycle of a run:
 1. the pre-interpolation linear acc/dec (Wang §III.A) raises the profile feed by a_l T up to
    the block's feed (a_l = V0 / t_l, V0 the run's highest feed, capped at a_max);
-2. the method's feed adaptation caps it (wang/zhang: chord error and resultant acceleration);
+2. the slow-downs still to come cap it (slowdown.py), and the method's feed adaptation
+   (wang/zhang: chord error and resultant acceleration at both ends of the step, then the
+   resultant acceleration checked on the set-points themselves);
 3. the reverse table gives V_achieve at the current remaining length; in the cycle where
    V_achieve <= V_next the step follows the table instead (reverse.py), which lands
    exactly on the stop;
