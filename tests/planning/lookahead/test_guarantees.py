@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from nurbsmotion.planning import plan
 from nurbsmotion.planning.measure import measure
-from tests.planning.lookahead.conftest import WANG_LIMITS, assert_within_limits
+from nurbsmotion.program import read_program
+from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits
 
 
 @pytest.fixture(scope="module")
@@ -71,3 +74,21 @@ def test_notes_report_the_guarantees_and_tolerance(wang_plan):
                 "verified_max_arc_fluctuation"):
         assert key in notes
     assert notes["verified_max_arc_fluctuation"] <= notes["fluctuation_limit"]
+
+
+def test_lookahead_finishes_wangs_experiment_sooner_than_wang(wang_program):
+    """Wang's experiment (no jerk limit, like the paper): same limits, shorter motion time,
+    and lookahead's limits still hold."""
+    limits = replace(WANG_LIMITS, max_jerk_mm_s3=None, axis_max_velocity_mm_s=None, axis_max_accel_mm_s2=None)
+    ours = plan(wang_program, limits, "lookahead")
+    theirs = plan(wang_program, limits, "wang")
+    assert ours.duration_s < theirs.duration_s
+    assert_within_limits(measure(ours, wang_program), limits)
+
+
+def test_a_mixed_program_of_lines_arcs_and_nurbs_holds_every_limit():
+    program = read_program(EXAMPLES / "mixed.nc")
+    trajectory = plan(program, WANG_LIMITS, "lookahead")
+    m = measure(trajectory, program)
+    assert_within_limits(m, WANG_LIMITS)
+    assert trajectory.notes["verified_max_arc_fluctuation"] <= 1e-6

@@ -51,6 +51,7 @@ class _Figures:
         self.values: dict[str, float] = {}
         self.repairs = 0
         self.windows = 0
+        self.runs = 0
 
     def add(self, plan: WindowPlan) -> None:
         for key, value in plan.check.figures.items():
@@ -71,6 +72,7 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "repairs": float(figures.repairs),
         "windows": float(figures.windows),
         "runs": float(runs),
+        "stops": float(max(runs - 1, 0)),  # exact stops inside the program (corners)
     }
     if limits.max_jerk_mm_s3 is not None:
         notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3
@@ -99,8 +101,8 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
     Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
     from the highest feed), not by the program's length."""
     pieces = program_pieces(program, limits)
-    runs = split_runs(pieces, limits)
     settings = settings_for(limits, max_feed(pieces), chunk_cycles)
+    runs = split_runs(pieces, limits, settings.min_pass_mm_s)
     figures = _figures if _figures is not None else _Figures()
     if not runs:
         yield Trajectory(ALGORITHM, limits.period_s, np.zeros(1, np.int32), np.zeros(1),
@@ -109,6 +111,7 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
     first = None
     if state is not None:
         runs, first = start_from_state(program, runs, state, settings)
+    figures.runs = len(runs)
     yield from _chunks(runs, settings, first, figures)
 
 
@@ -119,7 +122,7 @@ def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:
     chunks = list(plan_lookahead_chunks(program, limits, _figures=figures))
     trajectory = Trajectory.concatenate(chunks)
     trajectory.planning_time_s = time.perf_counter() - started
-    trajectory.notes = notes_for(limits, figures, len(split_runs(program_pieces(program, limits), limits)))
+    trajectory.notes = notes_for(limits, figures, figures.runs)
     return trajectory
 
 

@@ -13,7 +13,9 @@ over the last tau_f = A / J seconds,
       j_f = (a(t) - a(t - tau_f)) / tau_f,
 
 so |a_f| <= max |a| and the tangential jerk is at most (change of a within tau_f) / tau_f:
-a change of A (start or end of an acceleration) gives exactly J. On a straight
+a change of A (start or end of an acceleration) gives exactly J. Where the raw profile goes
+straight from accelerating to braking (a short move, a peak between two slow-downs) the
+change is up to 2A: such peaks are cut to a plateau lasting tau_f (peak_plateau_caps). On a straight
 rest-to-rest move with a cruise this is the time-optimal 7-phase S-curve (duration
 D/V + V/A + A/J). Speed dips are widened to plateaus (speed_limits.widen_dips) so the
 average never runs through a V-shaped dip. The integral of s is evaluated exactly from the
@@ -137,3 +139,56 @@ def warped_cycle_times(duration_s: float, period_s: float) -> NDArray[np.float64
     times = total * (r - eps * (r**3 - r**4 / 2.0))
     times[-1] = duration_s
     return times
+
+
+PLATEAU_SEARCH_STEPS = 40
+PLATEAU_MARGIN = 1.02  # plateaus last 2 % longer than tau_f (the grid is not the time axis)
+
+
+def superlevel_width(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, level: float) -> float:
+    """Length of the stretch around grid point ``peak`` where x >= level (linear crossings)."""
+    below_left = np.flatnonzero(x[:peak] < level)
+    below_right = np.flatnonzero(x[peak:] < level)
+    if len(below_left):
+        j = int(below_left[-1])
+        left = s[j] + (level - x[j]) / (x[j + 1] - x[j]) * (s[j + 1] - s[j])
+    else:
+        left = s[0]
+    if len(below_right):
+        j = peak + int(below_right[0])
+        right = s[j - 1] + (x[j - 1] - level) / (x[j - 1] - x[j]) * (s[j] - s[j - 1])
+    else:
+        right = s[-1]
+    return right - left
+
+
+def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float,
+                      jerk: float) -> NDArray[np.float64] | None:
+    """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
+
+    A peak is sharp when the filtered jerk across it, (a(t_p - tau/2) - a(t_p + tau/2)) / tau,
+    exceeds J. Its plateau level v is the highest at which the stretch with speed >= v is at
+    least v tau long (so the raw motion holds that speed for tau): found by bisection. None when
+    no peak is sharp."""
+    inner = np.flatnonzero((x[1:-1] >= x[:-2]) & (x[1:-1] > x[2:]) & (x[1:-1] > 0)) + 1
+    if len(inner) == 0:
+        return None
+    raw = raw_profile(s, x)
+    t_peak = np.interp(s[inner], raw.s, raw.t)
+    k_before, _ = raw.locate(t_peak - tau_f / 2.0)
+    k_after, _ = raw.locate(t_peak + tau_f / 2.0)
+    sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > jerk]
+    if len(sharp) == 0:
+        return None
+    caps = np.full(len(s), np.inf)
+    for peak in sharp:
+        lo, hi = 0.0, float(x[peak])
+        for _ in range(PLATEAU_SEARCH_STEPS):
+            mid = 0.5 * (lo + hi)
+            if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f:
+                lo = mid
+            else:
+                hi = mid
+        near = np.abs(s - s[peak]) <= superlevel_width(s, x, peak, lo) + 1e-9
+        caps[near & (x > lo)] = np.minimum(caps[near & (x > lo)], lo)
+    return caps

@@ -29,8 +29,8 @@ from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid
 from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import speed_profile
-from nurbsmotion.planning.lookahead.speed_limits import (MARGIN, AccelBounds, Caps, static_speed_limit,
-                                                         widen_dips)
+from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
+                                                         static_speed_limit, widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
@@ -42,11 +42,13 @@ MIN_SPACING_MM = 0.005
 WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
 PART_TOLERANCE = 1e-9
 START_BRAKE_SHARE = 0.7  # share of A used to brake from a running start above the new caps
+MAX_BACKTRACKS = 4  # re-plans of a held-back window for the sake of the next one
 NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
 
 
 class PlanningError(InputError):
     """The limits cannot be held on every cycle at some place of the program."""
+
 
 
 def caps_for(limits: PlanLimits) -> Caps:
@@ -118,6 +120,11 @@ class PlanSettings:
     window_mm: float
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
 
+    @property
+    def min_pass_mm_s(self) -> float:
+        """Slowest junction speed passed moving: its widened plateau must span a grid interval."""
+        return 0.0 if self.tau_f <= 0 else self.spacing_mm / (DIP_WIDTH_FACTOR * self.tau_f)
+
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
     tau_f = averaging_time_s(limits)
@@ -171,8 +178,9 @@ def scan_grid(grid: PathGrid, start_mm: float) -> NDArray[np.intp]:
 
 
 def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], bounds: AccelBounds,
-            cursor: Cursor, end_free: bool) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point."""
+            cursor: Cursor, end_free: bool, tau_f: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
+    with the jerk filter, sharp speed peaks are flattened (jp.peak_plateau_caps)."""
     s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
     cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
     if s[1] - s[0] <= 1e-12:  # start on a grid point
@@ -188,7 +196,12 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
         cap = np.maximum(cap, ramp)
     if not end_free:
         cap[-1] = 0.0
-    return s, speed_profile(s, cap, sub)
+    x = speed_profile(s, cap, sub)
+    if tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
+        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3)
+        if plateaus is not None:
+            x = speed_profile(s, np.minimum(cap, plateaus), sub)
+    return s, x
 
 
 def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool) -> NDArray[np.float64]:
@@ -210,9 +223,8 @@ def carried_repairs(grid: PathGrid, cursor: Cursor) -> tuple[NDArray[np.float64]
     if cursor.carry is not None:
         run_s, caps, scales = cursor.carry
         here = grid.s + cursor.run_s_mm
-        inside = here <= run_s[-1]
-        speed_cap[inside] = np.interp(here[inside], run_s, caps)
-        accel_scale[inside] = np.interp(here[inside], run_s, scales)
+        speed_cap = np.interp(here, run_s, caps, left=NO_CAP, right=NO_CAP)
+        accel_scale = np.interp(here, run_s, scales, left=1.0, right=1.0)
     return speed_cap, accel_scale
 
 
@@ -229,11 +241,11 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
-        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, end_free=False)
+        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)
         if not reaches_end:
-            _, x_free = raw_for(grid, idx, x_cap, bounds, cursor, end_free=True)
+            _, x_free = raw_for(grid, idx, x_cap, bounds, cursor, True, settings.tau_f)
             parted = np.flatnonzero(x < x_free * (1 - PART_TOLERANCE) - 1e-12)
             part_s = s_raw[parted[0]] if len(parted) else s_raw[-1]
             # leave a stopping distance before the parting point, so a repair the next window
@@ -269,7 +281,9 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     next_cursor = None
     if not reaches_end:
         next_cursor = next_window_cursor(run, cursor, pieces, samples, s, times, full_raw, settings)
-        next_cursor.carry = (grid.s + cursor.run_s_mm, speed_cap, accel_scale)
+        carry = merge_carry(cursor.carry, (grid.s + cursor.run_s_mm, speed_cap, accel_scale))
+        ahead = carry[0] >= next_cursor.run_s_mm - settings.stop_mm  # bounded memory: forget what is passed
+        next_cursor.carry = (carry[0][ahead], carry[1][ahead], carry[2][ahead])
     return WindowPlan(samples, s, planned_ds, result, repairs, reaches_end, next_cursor, blocks)
 
 
@@ -292,6 +306,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
     """Lower the speed cap around every violating set-point by its violation ratio."""
     v_grid = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
     v_rows = np.sqrt(np.maximum(np.interp(s, s_raw, x), 0.0))
+    touched = np.zeros(len(grid), dtype=bool)
     for name, rows in bad.items():
         if name == "fluctuation":
             continue
@@ -302,10 +317,12 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
         k_hi = np.searchsorted(grid.s, hi, side="right")
-        for a, b, f in zip(k_lo, k_hi, factor):
-            speed_cap[a:b] = np.minimum(speed_cap[a:b], f * v_grid[a:b])
+        for a, b, f, v_row in zip(k_lo, k_hi, factor, v_rows[rows]):
+            # slower points nearby (a start from rest) are not pulled down below f x the row's speed
+            speed_cap[a:b] = np.minimum(speed_cap[a:b], f * np.maximum(v_grid[a:b], v_row))
             if name in ("accel", "jerk", "axis_accel"):
-                accel_scale[a:b] *= ACCEL_REPAIR_FACTOR
+                touched[a:b] = True
+    accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
@@ -328,19 +345,53 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
                   run_s_mm=cursor.run_s_mm + s_cut)
 
 
+def merge_carry(a: tuple | None, b: tuple | None) -> tuple | None:
+    """Repairs of two windows on one run-coordinate grid (the tighter of both everywhere)."""
+    if a is None or b is None:
+        return a if b is None else b
+    s = np.union1d(a[0], b[0])
+    caps = np.minimum(np.interp(s, a[0], a[1], left=NO_CAP, right=NO_CAP),
+                      np.interp(s, b[0], b[1], left=NO_CAP, right=NO_CAP))
+    scales = np.minimum(np.interp(s, a[0], a[2], left=1.0, right=1.0), np.interp(s, b[0], b[2], left=1.0, right=1.0))
+    return s, caps, scales
+
+
 def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
              cursor: Cursor | None = None) -> Iterator[WindowPlan]:
-    """All windows of one run, to rest at its end; from rest at its start unless ``cursor`` says otherwise."""
+    """All windows of one run, to rest at its end; from rest at its start unless ``cursor`` says otherwise.
+
+    One window is held back: when a window cannot be repaired (typically because the repair
+    would have to start before its first set-point), the held-back window is planned again
+    with twice the look-ahead, so it meets the trouble far enough ahead to slow down for it
+    (at most MAX_BACKTRACKS times in a row)."""
     cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
     length = settings.window_mm
+    pending: WindowPlan | None = None
+    pending_cursor: Cursor | None = None
+    backtracks = 0
     while True:
         try:
             plan = plan_window(run, cursor, settings, length)
         except _WindowTooShort:
             length *= 2.0
             continue
-        yield plan
+        except PlanningError:
+            if pending is None or backtracks >= MAX_BACKTRACKS:
+                raise
+            backtracks += 1
+            length *= 2.0
+            pending = plan_window(run, pending_cursor, settings, length)
+            if pending.final:
+                yield pending
+                return
+            cursor = pending.cursor
+            continue
+        backtracks = 0
+        if pending is not None:
+            yield pending
         if plan.final:
+            yield plan
             return
+        pending, pending_cursor = plan, cursor
         cursor = plan.cursor
         length = settings.window_mm

@@ -9,7 +9,8 @@ At the junction of two blocks with tangent deflection theta the speed is limited
 Tangent-continuous joins (theta = 0) pass without slowing. A junction speed at or below
 what one cycle of acceleration (A T) or, with a jerk limit, of jerk (J T^2) gives is an
 exact stop (passing that slowly gains nothing: it is the speed of the first cycles after a
-stop); so are zero junction deviation and reversals. An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
+stop), and so, with the jerk filter, is a junction speed whose plateau (v tau) would be
+shorter than the path grid spacing; so are zero junction deviation and reversals. An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ def end_tangents(piece: BlockPiece) -> tuple[np.ndarray, np.ndarray]:
     return d[0], d[1]
 
 
-def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits) -> float:
+def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits, min_pass_mm_s: float = 0.0) -> float:
     """Largest speed through a junction of unit tangents t_in -> t_out (module docstring)."""
     cos_theta = float(np.clip(np.dot(t_in, t_out), -1.0, 1.0))
     sin_half = math.sqrt(max(0.5 * (1.0 - cos_theta), 0.0))  # sin(theta/2)
@@ -61,7 +62,7 @@ def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits) -> f
         jerk = MARGIN * limits.max_jerk_mm_s3
         v = min(v, jerk * limits.period_s**2 / (2.0 * sin_half))
         stop_below = jerk * limits.period_s**2
-    return v if v > stop_below else 0.0
+    return v if v > max(stop_below, min_pass_mm_s) else 0.0
 
 
 def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
@@ -75,14 +76,15 @@ def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
     return pieces
 
 
-def split_runs(pieces: list[BlockPiece], limits: PlanLimits) -> list[Run]:
-    """Group pieces into runs separated by exact stops."""
+def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: float = 0.0) -> list[Run]:
+    """Group pieces into runs separated by exact stops (junctions slower than ``min_pass_mm_s``
+    are stops too)."""
     runs: list[Run] = []
     current: list[BlockPiece] = []
     speeds: list[float] = []
     for piece in pieces:
         if current:
-            v = junction_speed(end_tangents(current[-1])[1], end_tangents(piece)[0], limits)
+            v = junction_speed(end_tangents(current[-1])[1], end_tangents(piece)[0], limits, min_pass_mm_s)
             if v <= 0.0:
                 runs.append(Run(tuple(current), tuple(speeds)))
                 current, speeds = [], []

@@ -99,5 +99,9 @@ def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
     position = np.empty((len(s), 3))
     for p in np.unique(pieces):
         sel = pieces == p
-        position[sel] = to_3d(grid.pieces[int(p)].curve.points(u[sel]))
+        curve = grid.pieces[int(p)].curve
+        position[sel] = to_3d(curve.points(u[sel]))
+        # a block's ends are its first and last control points exactly (clamped knots)
+        position[sel & (u == curve.u_max)] = to_3d(curve.control_points[-1:])[0]
+        position[sel & (u == curve.u_min)] = to_3d(curve.control_points[:1])[0]
     return Samples(piece=pieces.astype(np.int32), u=u, position_mm=position, arc_residual_mm=residual)

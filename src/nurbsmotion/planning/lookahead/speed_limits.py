@@ -14,7 +14,8 @@ tangent, c = x_ss the curvature vector and c' = x_sss:
 - resultant acceleration: a_t^2 + (|c| x)^2 <= A^2;
 - axis acceleration: |t_i a_t + c_i x| <= amax_i;
 - jerk (when J is set): x_sss v^3 + 3 c v a_t + t j dominate the path jerk, so
-  v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J; where the
+  v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J (each term its share,
+  the verify-and-repair loop checks the sum); where the
   curvature vector jumps (knots of a degree-2 curve, a line meeting an arc) the second
   difference jumps within two cycles: |dc| v^2 / (2 T) <= J.
 The acceleration constraints are convex in (x, a_t), so the speeds at which some a_t is
@@ -31,7 +32,7 @@ from numpy.typing import NDArray
 from nurbsmotion.planning.lookahead.path import PathGrid, arc_length_derivatives, to_3d
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
-JERK_SHARE = 0.5  # share of J left to the path's own jerk terms on curves
+JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
 BISECTION_STEPS = 40
 TINY = 1e-12
 

@@ -29,7 +29,7 @@ from nurbsmotion.planning.lookahead.sampling import Samples
 
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
 FLUCTUATION_LIMIT = 1e-6  # guaranteed |arc step - planned step| / planned step
-MIN_STEP_FOR_FLUCTUATION_MM = 1e-9  # steps shorter than this (at rest) are exempt
+MIN_STEP_FOR_FLUCTUATION_MM = 1e-6  # steps shorter than 1 nm (coming to rest) are exempt
 
 
 @dataclass(frozen=True)
