@@ -22,6 +22,9 @@ from tests.integration.daemon_helpers import DaemonProcess, wait_until
 
 SHORT = "G21 G90\nG01 X4 Y2 F3000\nG01 X0 Y3 Z1\n"  # ~0.3 s at 50 mm/s
 LONG = "G21 G90\nG01 X60 Y20 F6000\n"  # ~0.8 s, 100 mm/s at cruise
+# Stopped by SIGTERM: long enough that a signal delayed by a loaded machine still lands in the
+# cruise (a controlled stop during the plan's own deceleration adds both: fieldbus issue).
+LONGER = "G21 G90\nG01 X90 Y40 F6000\n"  # ~1.1 s
 
 
 @pytest.fixture(scope="module")
@@ -190,8 +193,8 @@ def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
         proc.start()
         assert notify.recv(64) == b"READY=1"  # systemd Type=notify
         assert orphan.outcome()["outcome"] == "interrupted"
-        job_id = proc.request("submit", name="long.nc", program=LONG)["job"]["id"]
-        proc.wait_progress(0.4)
+        job_id = proc.request("submit", name="longer.nc", program=LONGER)["job"]["id"]
+        proc.wait_progress(0.3)
         assert proc.proc is not None
         proc.proc.send_signal(signal.SIGTERM)
         assert proc.proc.wait(15.0) == 0, proc.log()[-2000:]
