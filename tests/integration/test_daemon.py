@@ -142,6 +142,16 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     _back_home(daemon)
 
 
+def test_a_stop_during_the_plans_deceleration_stays_within_the_axis_limits(daemon):
+    job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
+    daemon.wait_progress(0.85)
+    assert daemon.request("stop")["ok"]
+    job = daemon.wait_job_end(job_id)
+    assert job["outcome"]["outcome"] in ("stopped", "completed")  # the job may end before the stop lands
+    _assert_within_axis_limits(recorded_counts(Path(job["folder"]), daemon.config)[0], daemon.config)
+    _back_home(daemon)
+
+
 def test_abort_quick_stops_and_reset_brings_the_drives_back(daemon):
     job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
     daemon.wait_progress(0.3)
