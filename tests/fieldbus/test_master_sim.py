@@ -32,7 +32,7 @@ def make_config(channel: str, mode: str = "csp", n_axes: int = 3, period_ms: flo
     axes = "".join(f"  - {{name: {'XYZABC'[i]}, node_id: {i + 1}, mode: {mode}, counts_per_mm: 1000,"
                    f" max_accel_mm_s2: 2000{identity if i == 0 else ''}}}\n" for i in range(n_axes))
     text = (f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
-            f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 200}}\n{extra}axes:\n{axes}")
+            f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 600}}\n{extra}axes:\n{axes}")
     return parse_config(text, "test.yaml")
 
 

@@ -903,6 +903,10 @@ class Master:
         job = self._job
         assert job is not None
         job.outcome = outcome
+        if job.index < 0:  # nothing of the job sent yet: keep holding
+            self._set_phase("holding", k)
+            self._finish_job(outcome)
+            return
         job.ramp.start(job.index)
         self._set_phase("stopping", k)
 
