@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tests.vcan.two_processes import AXES, assert_applied_once_in_order, run_job, write_vcan_config
+from tests.vcan.two_processes import (AXES, assert_applied_once_in_order, retrying_a_stuck_bring_up, run_job,
+                                      write_vcan_config)
 
 pytestmark = pytest.mark.vcan
 
@@ -16,7 +17,8 @@ JOB_CYCLES = 300  # 1.2 s at 4 ms
 
 def test_master_streams_to_simulated_drives_in_another_process_on_vcan0(vcan0, tmp_path, sim_process):
     config_path = write_vcan_config(tmp_path, vcan0)
-    run = run_job(config_path, sim_process(config_path), JOB_CYCLES)
+    sim = sim_process(config_path)
+    run = retrying_a_stuck_bring_up(lambda attempt: run_job(config_path, sim, JOB_CYCLES))
 
     assert run.result is not None, f"job not finished; {run.diagnosis()}"
     assert run.result.outcome == "done", f"{run.result}; {run.diagnosis()}"

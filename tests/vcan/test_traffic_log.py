@@ -13,7 +13,8 @@ import pytest
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.fieldbus.pdo import RPDO_FORMAT
-from tests.vcan.two_processes import AXES, assert_applied_once_in_order, run_job, write_vcan_config
+from tests.vcan.two_processes import (AXES, JobRun, assert_applied_once_in_order, retrying_a_stuck_bring_up, run_job,
+                                      write_vcan_config)
 
 pytestmark = pytest.mark.vcan
 
@@ -69,18 +70,21 @@ def rpdo_setpoints(cycle: list[tuple], node: int) -> np.ndarray:
 def test_the_traffic_log_is_complete_and_agrees_with_the_bus(vcan0, tmp_path, sim_process, suffix):
     config_path = write_vcan_config(tmp_path, vcan0)
     sim = sim_process(config_path)
-    log_path = tmp_path / f"traffic{suffix}"
-    witness_path = tmp_path / "witness.log"
-    started_s = time.time()
-    with can.Bus(interface="socketcan", channel=vcan0) as witness_bus:
-        last = LastHeard()
-        witness = can.Notifier(witness_bus, [can.Logger(str(witness_path)), last], timeout=0.1)
-        try:
-            run = run_job(config_path, sim, JOB_CYCLES, traffic_log=str(log_path))
-            wait_quiet(last)
-        finally:
-            witness.stop(5.0)
-    ended_s = time.time()
+
+    def attempt(number: int) -> tuple[JobRun, Path, Path, float, float]:
+        log_path, witness_path = tmp_path / f"traffic{number}{suffix}", tmp_path / f"witness{number}.log"
+        started_s = time.time()
+        with can.Bus(interface="socketcan", channel=vcan0) as witness_bus:
+            last = LastHeard()
+            witness = can.Notifier(witness_bus, [can.Logger(str(witness_path)), last], timeout=0.1)
+            try:
+                run = run_job(config_path, sim, JOB_CYCLES, traffic_log=str(log_path))
+                wait_quiet(last)
+            finally:
+                witness.stop(5.0)
+        return run, log_path, witness_path, started_s, time.time()
+
+    run, log_path, witness_path, started_s, ended_s = retrying_a_stuck_bring_up(attempt)
     assert run.result is not None and run.result.outcome == "done", f"{run.result}; {run.diagnosis()}"
 
     logged = list(can.LogReader(str(log_path)))  # raises on a line it cannot parse

@@ -9,8 +9,10 @@ import signal
 import subprocess
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 import pytest
@@ -18,6 +20,7 @@ import yaml
 
 import nurbsmotion
 from nurbsmotion.config import load_config
+from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import CycleStats, JobResult, Master
 from nurbsmotion.sim import read_csv
 from tests.vcan.conftest import CYCLE_PERIOD_S
@@ -126,6 +129,25 @@ def assert_applied_once_in_order(applied: np.ndarray, sent: np.ndarray, hold_bef
         f"axis {name}: applied set-points differ from the sent ones from job row "
         f"{lost_or_repeated[0] if lost_or_repeated.size else len(streamed)} on")
     assert (applied[first + len(sent):] == sent[-1]).all(), f"axis {name}: did not hold the last set-point"
+
+
+T = TypeVar("T")
+
+
+def retrying_a_stuck_bring_up(attempt: Callable[[int], T]) -> T:
+    """attempt(0), and attempt(1) if the drives' bring-up got stuck in a state-machine step.
+
+    Known flake inside User-Mode Linux (~1 run in 8, docs/vcan.md): the IP drive stays
+    'stuck in OPERATION ENABLED' at 'enable interpolation' while the master's loop stalls
+    ~9 ms every 8 cycles. What these tests check (streaming, traffic) starts after it.
+    """
+    try:
+        return attempt(0)
+    except FieldbusError as err:
+        if "bring-up step" not in str(err) or "stuck in" not in str(err):
+            raise
+        print(f"bring-up stuck, trying once more: {err}")
+        return attempt(1)
 
 
 @dataclass
