@@ -1,0 +1,1 @@
+../../../examples/wang_table1.nc
