@@ -20,11 +20,20 @@ ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
 
 
+SYNC_SOURCES = ("loop", "kernel")
+
+
 @dataclass(frozen=True)
 class BusConfig:
+    """``sync_source``: 'loop' sends SYNC from the cycle loop right before that cycle's RPDOs
+    (a late cycle delays SYNC, it never loses a set-point); 'kernel' lets the SocketCAN
+    broadcast manager send SYNC on its own clock (less SYNC jitter, but a cycle later than
+    half a period loses its set-point: measured on vcan0, docs/vcan.md)."""
+
     interface: str = "virtual"
     channel: str = "nurbsmotion"
     bitrate: int = 1_000_000
+    sync_source: str = "loop"
 
 
 @dataclass(frozen=True)
@@ -304,6 +313,7 @@ def _interpolation(doc: _Doc) -> Any:
 _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "cycle_period_ms": (_number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
     "bus": (_section(BusConfig, {"interface": (_string, {}), "channel": (_string, {}),
+                                 "sync_source": (_string, {"choices": SYNC_SOURCES}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),

@@ -105,14 +105,17 @@ class Master:
     ``bus``: an open python-can bus to use (not closed at shutdown); None opens
     ``config.bus``. ``sync_source``: 'loop' (the cycle loop sends SYNC right before the
     RPDOs), 'kernel' (SocketCAN broadcast manager via send_periodic), 'auto' (kernel on
-    socketcan, else loop). ``traffic_log``: file for every frame (.log candump, .asc ...).
+    socketcan, else loop); None (default) takes ``config.bus.sync_source`` ('loop' unless
+    configured: it never loses a set-point to a late cycle). ``traffic_log``: file for every frame (.log candump, .asc ...).
     """
 
     def __init__(self, config: MachineConfig, bus: can.BusABC | None = None, *,
-                 traffic_log: str | None = None, sync_source: str = "auto", check_load: bool = True,
+                 traffic_log: str | None = None, sync_source: str | None = None, check_load: bool = True,
                  bootup_timeout_s: float = 2.0, stuck_timeout_s: float = 0.5, enable_timeout_s: float = 5.0,
                  sdo_timeout_s: float = 0.5, spin_s: float = 60e-6, late_threshold_s: float | None = None,
                  progress_period_s: float = 0.05, rt_priority: int | None = 20, gc_mode: str = "freeze") -> None:
+        if sync_source is None:
+            sync_source = config.bus.sync_source
         if sync_source not in ("auto", "loop", "kernel"):
             raise InputError("sync_source", f"must be auto, loop or kernel, got {sync_source!r}")
         if gc_mode not in ("freeze", "disable", "none"):
