@@ -32,6 +32,7 @@ axes:
      max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
   - {{name: Z, node_id: 3, mode: ip, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
      max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
+monitoring: {{traffic_log: log}}
 control: {{socket: {socket}}}
 data_dir: {data_dir}
 """

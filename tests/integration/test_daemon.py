@@ -56,6 +56,8 @@ def test_a_job_completes_and_the_drives_applied_exactly_the_plan(daemon):
     recorded, _ = recorded_counts(folder, daemon.config)
     assert len(plan) == job["plan"]["cycles"] and len(recorded) > len(plan)
     assert held_plan_held(recorded, plan)
+    sync_frames = [line for line in (folder / "traffic.log").read_text().splitlines() if " 080#" in line]
+    assert len(sync_frames) >= len(plan)  # monitoring.traffic_log: the job's frames in its record
     assert daemon.request("status")["state"] == "idle"
     _back_home(daemon)
 

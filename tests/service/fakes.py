@@ -97,6 +97,9 @@ class FakeLink:
     def set_rate(self, rate: float) -> None:
         self.rate = rate
 
+    def record_traffic(self, path: str | None) -> None:
+        self.traffic = path
+
     def shutdown(self, timeout_s: float = 5.0) -> None:
         if self.job is not None:
             self.job.request_stop()

@@ -23,7 +23,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import PlannedJob
 from nurbsmotion.service.rate import effective_rate
-from nurbsmotion.service.records import JobRecord, JobRecords
+from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords
 
 log = logging.getLogger(__name__)
 
@@ -81,8 +81,10 @@ class Controller:
                 self.simulation.clear_recordings()
             try:
                 self._set_link_rate(plan)
+                self._record_traffic(record)
                 job.handle = self.link.stream(plan.counts)
             except (InputError, FieldbusError) as err:
+                self._stop_traffic()
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
                 raise InputError("submit", str(err)) from None
             job.watcher = threading.Thread(target=self._watch, args=(job,), name=f"job-{record.job_id}", daemon=True)
@@ -222,6 +224,20 @@ class Controller:
             raise InputError("data_dir", f"cannot write the job record in {self.records.root}: "
                              f"{err.strerror or err}") from None
 
+    def _record_traffic(self, record: JobRecord) -> None:
+        """monitoring.traffic_log: every bus frame of the job into its folder (log: candump,
+        asc: Vector ASCII)."""
+        fmt = self.config.monitoring.traffic_log
+        if fmt != "none":
+            self.link.record_traffic(str(record.folder / f"{TRAFFIC_FILE}.{fmt}"))
+
+    def _stop_traffic(self) -> None:
+        if self.config.monitoring.traffic_log != "none":
+            try:
+                self.link.record_traffic(None)
+            except FieldbusError as err:
+                log.warning(kv("traffic_log_not_closed", error=err))
+
     def _running_job(self, what: str) -> ActiveJob:
         job = self._job
         if job is None or job.handle is None:
@@ -244,6 +260,7 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
         outcome = self._outcome(job, result)
+        self._stop_traffic()
         if self.simulation is not None:
             try:
                 outcome["drive_recordings"] = self.simulation.write_recordings(str(job.record.drives_dir))

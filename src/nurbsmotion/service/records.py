@@ -22,6 +22,7 @@ PLAN_FILE = "plan.json"
 TRACE_FILE = "trace.csv"
 OUTCOME_FILE = "outcome.json"
 DRIVES_DIR = "drives"  # simulated drives' set-point recordings (simulate: true)
+TRAFFIC_FILE = "traffic"  # + .log / .asc: every bus frame of the job (monitoring.traffic_log)
 OUTCOMES = ("completed", "stopped", "aborted", "fault", "interrupted")
 
 
