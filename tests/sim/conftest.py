@@ -4,6 +4,7 @@ sees. Every wait polls a condition with a timeout; nothing sleeps and hopes."""
 
 from __future__ import annotations
 
+import contextlib
 import struct
 import threading
 import time
@@ -122,17 +123,25 @@ def channel() -> str:
     return f"sim-test-{uuid.uuid4().hex}"
 
 
-@pytest.fixture
-def bench(channel: str) -> Iterator[Bench]:
+@contextlib.contextmanager
+def open_bench(interface: str, channel: str) -> Iterator[Bench]:
+    """Simulated drives and a master on ``interface``/``channel``; everything closed after."""
     frames = FrameLog()
     master = canopen.Network()
     master.NOTIFIER_CYCLE = 0.05
-    master.connect(interface="virtual", channel=channel)
+    master.connect(interface=interface, channel=channel)
     assert master.notifier is not None
     master.notifier.add_listener(frames)
-    sim = SimNetwork(interface="virtual", channel=channel).start()
+    sim = SimNetwork(interface=interface, channel=channel)
     try:
+        sim.start()
         yield Bench(sim, master, frames)
     finally:
         sim.stop()
         master.disconnect()
+
+
+@pytest.fixture
+def bench(channel: str) -> Iterator[Bench]:
+    with open_bench("virtual", channel) as opened:
+        yield opened

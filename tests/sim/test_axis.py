@@ -63,3 +63,15 @@ def test_statusword_bit_12_and_setpoint_recording_in_ip() -> None:
     axis.step(sync_index=9, sync_counter=-1)
     assert [(r.sync_index, r.mode, r.setpoint_counts) for r in axis.recorder.records()] == [(9, 7, 42)]
     assert axis.position_actual == 42
+
+
+@pytest.mark.parametrize("setpoint_first", [True, False])
+def test_setpoint_with_the_enabling_controlword_counts_in_either_order(setpoint_first: bool) -> None:
+    axis, _ = make_axis()
+    axis.set_controlword(0x06)
+    axis.set_controlword(0x07)
+    writes = [lambda: axis.set_target_position(300), lambda: axis.set_controlword(0x0F)]
+    for write in writes if setpoint_first else writes[::-1]:
+        write()
+    axis.step(sync_index=1, sync_counter=-1)
+    assert [r.setpoint_counts for r in axis.recorder.records()] == [300]

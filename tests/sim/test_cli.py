@@ -99,15 +99,15 @@ def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Pat
     env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
     proc = subprocess.Popen(
         [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config), "--record-dir", str(tmp_path / "rec")],
-        stderr=subprocess.PIPE, text=True, env=env,
+        stderr=subprocess.PIPE, env=env,
     )
     try:
         deadline = time.monotonic() + 20
-        seen = ""
-        while "sim.ready" not in seen:
-            assert time.monotonic() < deadline and proc.poll() is None, f"no sim.ready: {seen}"
+        seen = b""
+        while b"sim.ready" not in seen:
+            assert time.monotonic() < deadline and proc.poll() is None, f"no sim.ready: {seen!r}"
             if select.select([proc.stderr], [], [], 0.5)[0]:
-                seen += proc.stderr.readline()
+                seen += os.read(proc.stderr.fileno(), 65536)  # unbuffered: select sees the rest
         proc.send_signal(signal.SIGTERM)
         assert proc.wait(timeout=1.0) == 0
     finally:

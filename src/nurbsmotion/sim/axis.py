@@ -100,6 +100,7 @@ class Cia402Axis:
         self.error_register = 0
         self.error_history: list[int] = []
         self._fe_flag = False
+        self._fresh_target = self._fresh_ip = False
         self._hold_position()
         self.position_actual = int(round(self.servo.actual))
         self._update_statusword()
@@ -110,8 +111,6 @@ class Cia402Axis:
         new_state, taken = apply_controlword(self.state, controlword, previous, self.params.quick_stop_option)
         if taken:
             self._change_state(new_state, taken)
-        elif self.state is State.OPERATION_ENABLED and controlword & c.CW_ENABLE_IP and not previous & c.CW_ENABLE_IP:
-            self._fresh_ip = False  # IP enabled: hold position until the first new set-point
         self._update_statusword()
 
     def set_mode(self, mode: int) -> None:
@@ -155,12 +154,12 @@ class Cia402Axis:
         log.info(kv("sim.state", node=self.name, state=self.state.name, transitions=taken))
 
     def _hold_position(self) -> None:
-        """Stand still where the motor is; set-points count only from the next new one."""
+        """Stand still where the motor is until a new set-point comes (one received since
+        the last SYNC, whatever its order in the RPDO relative to the controlword)."""
         self.servo.hold(self.servo.actual)
         self._demand = self.servo.actual
         self.following_error = 0
         self._fe_cycles = 0
-        self._fresh_target = self._fresh_ip = False
 
     def setpoint_active(self) -> bool:
         """Statusword bit 12: CSP 'target used' / IP 'interpolation active'."""

@@ -1,0 +1,140 @@
+"""``nurbsmotion run PROGRAM``: submit a program to the daemon, show progress, print the outcome.
+
+Exit codes: 0 completed, 1 stopped/aborted/fault, 2 rejected (errors one per line, file:line),
+3 no daemon. Ctrl-C asks the daemon for a controlled stop; a second Ctrl-C leaves the job running.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
+from nurbsmotion.errors import InputError
+from nurbsmotion.service.client import Client
+
+HELP = "submit a program (G-code or YAML) to the daemon, follow it and print the outcome"
+POLL_S = 0.2
+PLAIN_EVERY_S = 1.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("program", help="program file (.nc G-code or .yaml curves); read here, sent as text")
+    parser.add_argument("--no-progress", action="store_true", help="only print the outcome")
+    add_socket_arguments(parser)
+
+
+def read_program(path: str) -> str:
+    try:
+        return Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(path, f"cannot read program: {getattr(err, 'strerror', None) or err}") from None
+
+
+def progress_text(status: dict[str, Any]) -> str:
+    job = status["job"]
+    positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
+    return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
+            f"{positions}  [{status['state']}]")
+
+
+class _Plain:
+    """One line per second when the output is not a terminal."""
+
+    def __init__(self) -> None:
+        self.last = 0.0
+
+    def update(self, status: dict[str, Any]) -> None:
+        now = time.monotonic()
+        if now - self.last >= PLAIN_EVERY_S:
+            self.last = now
+            print(progress_text(status), flush=True)
+
+    def close(self) -> None:
+        pass
+
+
+class _Rich:
+    """A rich progress bar with feed and position (when rich is installed and stdout is a TTY)."""
+
+    def __init__(self, name: str) -> None:
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+        self.progress = Progress(TextColumn("{task.description}"), BarColumn(), TextColumn("{task.percentage:>5.1f} %"),
+                                 TimeRemainingColumn(), TextColumn("{task.fields[info]}"))
+        self.task = self.progress.add_task(name, total=1, info="")
+        self.progress.start()
+
+    def update(self, status: dict[str, Any]) -> None:
+        job = status["job"]
+        positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
+        self.progress.update(self.task, total=job["total"], completed=job["cycle"],
+                             info=f"{job['feed_mm_s']:6.1f} mm/s {positions} {status['state']}")
+
+    def close(self) -> None:
+        self.progress.stop()
+
+
+def _display(name: str, quiet: bool) -> Any:
+    if quiet:
+        return None
+    if sys.stdout.isatty():
+        try:
+            return _Rich(name)
+        except ImportError:
+            pass
+    return _Plain()
+
+
+def follow(client: Client, job_id: str, on_status: Callable[[dict[str, Any]], None] | None) -> dict[str, Any]:
+    """Poll the status until job ``job_id`` has ended; return its record (with outcome)."""
+    stop_sent = False
+    while True:
+        try:
+            status = client.call("status")
+            job = status.get("job")
+            if job is None or job["id"] != job_id:
+                return client.call("job", id=job_id)["job"]
+            if on_status is not None:
+                on_status(status)
+            time.sleep(POLL_S)
+        except KeyboardInterrupt:
+            if stop_sent:
+                raise
+            stop_sent = True
+            sys.stderr.write("stopping the job along the path (Ctrl-C again to leave it running)\n")
+            client.request("stop")
+
+
+def describe_outcome(info: dict[str, Any]) -> str:
+    outcome = info.get("outcome") or {}
+    text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {outcome.get('sent', 0)}/"
+            f"{outcome.get('planned', 0)} set-points in {outcome.get('motion_time_s', 0.0):.2f} s")
+    if outcome.get("reason"):
+        text += f"; {outcome['reason']}"
+    return f"{text}\nrecord: {info['folder']}"
+
+
+def run(args: argparse.Namespace) -> int:
+    text = read_program(args.program)
+
+    def body(client: Client) -> int:
+        response = client.request("submit", name=Path(args.program).name, program=text)
+        if not response.get("ok"):
+            for line in response.get("errors") or [response.get("error", "rejected")]:
+                error_line(args, line)
+            return EXIT_REFUSED
+        job = response["job"]
+        display = _display(Path(args.program).name, args.no_progress)
+        try:
+            info = follow(client, job["id"], display.update if display else None)
+        finally:
+            if display is not None:
+                display.close()
+        print(describe_outcome(info))
+        return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+
+    return with_client(args, body)

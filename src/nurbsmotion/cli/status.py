@@ -1,0 +1,55 @@
+"""``nurbsmotion status``: the daemon's state, job progress, axes, cycle statistics, faults."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from nurbsmotion.cli._control import add_socket_arguments, with_client
+from nurbsmotion.service.client import Client
+
+HELP = "show the daemon's state, job progress, positions, following errors and faults"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print the status response as JSON")
+    add_socket_arguments(parser)
+
+
+def _mm(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4f}"
+
+
+def format_status(s: dict[str, Any]) -> list[str]:
+    """Human-readable lines of a status response."""
+    override = s["override"]
+    lines = [f"state {s['state']} (drives {s['phase']}), override {override['requested_percent']:g} % "
+             f"(effective {override['effective_percent']:g} %)"]
+    job = s.get("job")
+    if job:
+        lines.append(f"job {job['id']} {job['name']}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
+                     f"feed {job['feed_mm_s']:.1f} mm/s")
+    for a in s["axes"]:
+        lines.append(f"axis {a['name']} node {a['node']}: {a['drive_state']}, commanded {_mm(a['commanded_mm'])} mm, "
+                     f"actual {_mm(a['actual_mm'])} mm, following error {_mm(a['following_error_mm'])} mm")
+    c = s["cycles"]
+    lines.append(f"cycles {c['count']}: late {c['late']}, missed {c['missed']}, lateness p99 "
+                 f"{c['lateness_p99_ms']:.3f} ms, max {c['lateness_max_ms']:.3f} ms")
+    lines.extend(f"fault: {f['message']}" for f in s["faults"])
+    last = s.get("last_job")
+    if last:
+        lines.append(f"last job {last['id']} {last['name']}: {last['outcome']}"
+                     f"{': ' + last['reason'] if last.get('reason') else ''}")
+    return lines
+
+
+def run(args: argparse.Namespace) -> int:
+    def body(client: Client) -> int:
+        response = client.call("status")
+        if args.json:
+            print(json.dumps(response, indent=2))
+        else:
+            print("\n".join(format_status(response)))
+        return 0
+    return with_client(args, body)

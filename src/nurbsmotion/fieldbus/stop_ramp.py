@@ -1,0 +1,68 @@
+"""Controlled stop on the path by time-scaling the remaining planned set-points.
+
+Playback position s (a fractional index into the planned rows) advances by a rate r per
+cycle; r ramps from 1 to 0 by ``dr`` per cycle and set-points are interpolated linearly
+between rows i = floor(s) and i + 1. An axis moving |Δc| counts per planned cycle moves
+r·|Δc| counts per cycle, so the ramp adds a deceleration of |Δc|·dr / T² counts/s².
+Choosing dr = min_j a_j·T² / max|Δc_j| keeps that extra deceleration within every
+axis' a_max (the path's own curvature accelerations scale with r² <= 1). The positions
+stay on the planned polyline, so the stop stays on the path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def ramp_slope(counts: np.ndarray, accel_counts_s2: np.ndarray, period_s: float) -> float:
+    """dr per cycle (0 < dr <= 1) from the largest per-cycle step of each axis."""
+    if len(counts) < 2:
+        return 1.0
+    max_step = np.abs(np.diff(np.asarray(counts, dtype=np.int64), axis=0)).max(axis=0).astype(float)
+    moving = max_step > 0
+    if not moving.any():
+        return 1.0
+    slopes = np.asarray(accel_counts_s2, dtype=float)[moving] * period_s**2 / max_step[moving]
+    return float(min(1.0, slopes.min()))
+
+
+class StopRamp:
+    """Per-cycle state of a controlled stop; :meth:`step` only does float arithmetic."""
+
+    __slots__ = ("rows", "last", "dr", "s", "r", "n_axes")
+
+    def __init__(self, rows: list[list[int]], dr: float) -> None:
+        self.rows = rows
+        self.last = len(rows) - 1
+        self.dr = dr
+        self.n_axes = len(rows[0]) if rows else 0
+        self.s = 0.0
+        self.r = 0.0
+
+    def start(self, index: int) -> None:
+        """Begin at row ``index`` (the last set-point sent) moving at the planned rate."""
+        self.s = float(min(index, self.last))
+        self.r = 1.0
+
+    def step(self, out: list[int]) -> bool:
+        """Write the next set-points into ``out``; False once stopped (out holds the final ones)."""
+        r = self.r - self.dr
+        if r < 0.0:
+            r = 0.0
+        self.r = r
+        s = self.s + r
+        if s >= self.last:
+            s = float(self.last)
+            self.r = r = 0.0
+        self.s = s
+        i = int(s)
+        f = s - i
+        row = self.rows[i]
+        if f > 0.0:
+            nxt = self.rows[i + 1]
+            for j in range(self.n_axes):
+                out[j] = int(round(row[j] + f * (nxt[j] - row[j])))
+        else:
+            for j in range(self.n_axes):
+                out[j] = row[j]
+        return r > 0.0

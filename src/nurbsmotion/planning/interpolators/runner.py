@@ -1,0 +1,256 @@
+"""Cycle-by-cycle interpolation of a whole Program, as a controller runs it.
+
+The program is cut into runs at sharp corners: where the tangent turns by more than
+CORNER_ANGLE_DEG between blocks the motion stops exactly on the junction (the reverse
+table of the run ends there) and restarts from rest. Inside a run the motion is continuous:
+a step that passes the end of a block carries its leftover into the next block.
+
+Each cycle of a run:
+1. the pre-interpolation linear acc/dec (Wang §III.A) raises the profile feed by a_l T up to
+   the block's feed (a_l = V0 / t_l, V0 the run's highest feed, capped at a_max);
+2. the method's feed adaptation caps it (wang/zhang: chord error and resultant acceleration);
+3. the reverse table gives V_achieve at the current remaining length; in the cycle where
+   V_achieve <= V_next the step follows the table instead (reverse.py), which lands
+   exactly on the stop;
+4. the method's stepper turns the step length into the next parameter (Taylor, Zhang).
+
+The last cycle of a run is closed by the table: its step is f L_1 <= a_l T² (f the phase
+carried from the cycle the deceleration started) and ends exactly on the stop point, whose
+set-point is the curve's end point itself; the feed reaches zero in that same cycle.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from nurbsmotion.errors import InputError
+from nurbsmotion.planning.interpolators.feed import FeedLimits
+from nurbsmotion.planning.interpolators.reverse import ReverseTable, build_reverse_table
+from nurbsmotion.planning.interpolators.stepping import (
+    CurvePath,
+    PathPoint,
+    Stepper,
+    Vec,
+    distance,
+    radius_of_curvature,
+)
+from nurbsmotion.planning.limits import PlanLimits
+from nurbsmotion.planning.trajectory import Trajectory
+from nurbsmotion.program import BlockKind, Program
+
+CORNER_ANGLE_DEG = 1.0  # tangent turn above which a junction is a stop
+MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped
+MAX_CYCLES = 50_000_000
+
+
+@dataclass(frozen=True)
+class Method:
+    """One of the papers' algorithms: Taylor order, feed adaptation, Zhang's correction."""
+
+    name: str
+    taylor_order: int
+    adaptive: bool
+    correct: bool
+
+
+def tangent_angle_deg(a: tuple[float, ...], b: tuple[float, ...]) -> float:
+    na, nb = math.sqrt(sum(x * x for x in a)), math.sqrt(sum(x * x for x in b))
+    if na == 0.0 or nb == 0.0:
+        return 180.0
+    cos = sum(x * y for x, y in zip(a, b)) / (na * nb)
+    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+
+
+def split_runs(program: Program, corner_angle_deg: float = CORNER_ANGLE_DEG) -> list[list[int]]:
+    """Block indices grouped into runs of tangent-continuous blocks (stops between runs)."""
+    runs: list[list[int]] = []
+    previous = None
+    for index, block in enumerate(program.blocks):
+        if block.curve.length < MIN_BLOCK_LENGTH_MM:
+            continue
+        if previous is not None:
+            end_tangent = previous.curve.point_and_derivatives(previous.curve.u_max)[1]
+            start_tangent = block.curve.point_and_derivatives(block.curve.u_min)[1]
+            gap = distance(tuple(previous.end), tuple(block.start))
+            if gap > 1e-6 or tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
+                runs.append([])
+        if not runs:
+            runs.append([])
+        runs[-1].append(index)
+        previous = block
+    return runs
+
+
+class RunPlanner:
+    """Interpolates one run (from rest to rest) and appends its rows."""
+
+    def __init__(self, program: Program, block_indices: list[int], method: Method, limits: PlanLimits):
+        self.indices = block_indices
+        blocks = [program.blocks[i] for i in block_indices]
+        self.period = limits.period_s
+        self.feeds = [limits.feed_for(b.feed_mm_s, rapid=b.kind == BlockKind.RAPID) for b in blocks]
+        self.accel = min(max(self.feeds) / limits.acc_time_s, limits.max_accel_mm_s2)  # a_l = V0 / t_l
+        self.path = CurvePath([b.curve for b in blocks])
+        self.reversed_path = CurvePath([b.curve.reversed() for b in reversed(blocks)])
+        self.limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2, method.adaptive)
+        # wang: the Taylor predictor's relative step error, measured on the last step, scales
+        # the next step, so the limits hold for the feed the set-points really show
+        self.compensate = method.adaptive and not method.correct
+        self.stepper = Stepper(method.taylor_order, method.correct, limits.chord_error_mm)
+        self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
+                                         self.stepper, self.period)
+        self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
+        last = self.path.last
+        self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
+        self.table_u = [self.path.u_min[last - j] + self.path.u_max[last - j] - u
+                        for j, u in zip(self.table.j, self.table.u)]
+
+    def forward_point(self, reverse_point: PathPoint) -> PathPoint:
+        """A reverse-path point in forward coordinates: x' changes sign, x'' does not."""
+        j = self.path.last - reverse_point.j
+        u = self.path.u_min[j] + self.path.u_max[j] - reverse_point.u
+        d1 = reverse_point.d1
+        return PathPoint(j, u, reverse_point.x, (-d1[0], -d1[1], -d1[2]), reverse_point.d2)
+
+    def keep_resultant_accel(self, here: PathPoint, before_x: Vec, point: PathPoint, step: float,
+                             previous_step: float) -> tuple[PathPoint, float, bool]:
+        """Wang eq. 24 checked on the set-points themselves: |p_{i+1} - 2 p_i + p_{i-1}| / T² <= a_max.
+
+        The feed rules above are estimates (curvature at one point, the predictor's step
+        error); when the step they chose still breaks the limit, shorten it along the tangent
+        t: |D + (ℓ' - ℓ) t| = a_max T², D the second difference of the chosen step.
+        """
+        limit = self.limits.max_accel * self.period * self.period
+        done = False
+        for _ in range(3):
+            x, h = point.x, here.x
+            d = (x[0] - 2.0 * h[0] + before_x[0], x[1] - 2.0 * h[1] + before_x[1], x[2] - 2.0 * h[2] + before_x[2])
+            d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+            if d2 <= limit * limit * (1.0 + 1e-9):
+                break
+            chord = distance(x, h)
+            if chord <= 0.0:
+                break
+            t = ((x[0] - h[0]) / chord, (x[1] - h[1]) / chord, (x[2] - h[2]) / chord)
+            along = d[0] * t[0] + d[1] * t[1] + d[2] * t[2]
+            across2 = max(d2 - along * along, 0.0)
+            if across2 >= limit * limit:  # the bend alone is too much: take the smallest resultant
+                change = -along
+            else:
+                change = -along + math.copysign(math.sqrt(limit * limit - across2), along) * 0.999999
+                if abs(change) > abs(along):
+                    change = -along
+            new_step = max(chord + change, 0.0) * step / chord
+            if new_step <= 0.0 or abs(new_step - step) <= 1e-15:
+                break
+            point, step, done = self.stepper.step(self.path, here, new_step, previous_step)
+        return point, step, done
+
+    def remaining_at(self, here: PathPoint, k_ahead: int) -> tuple[float, int]:
+        """Remaining table length S at ``here`` and the index of the first table point ahead."""
+        table = self.table
+        while k_ahead >= 0 and (self.table_j[k_ahead] < here.j or (
+                self.table_j[k_ahead] == here.j and self.table_u[k_ahead] <= here.u)):
+            k_ahead -= 1
+        if k_ahead < 0:
+            return 0.0, k_ahead
+        return table.remaining_mm[k_ahead] + distance(table.x[k_ahead], here.x), k_ahead
+
+    def run(self, rows: tuple[list, list, list, list], include_start: bool) -> None:
+        block_rows, u_rows, x_rows, feed_rows = rows
+        path, table, period = self.path, self.table, self.period
+        here = path.start()
+        if include_start:
+            block_rows.append(self.indices[here.j])
+            u_rows.append(here.u)
+            x_rows.append(here.x)
+            feed_rows.append(0.0)
+        v_in = 0.0  # measured feed of the step that arrived here
+        previous_step = 0.0
+        profile = 0.0  # Wang's pre-interpolation linear acc/dec feed
+        ramp = self.accel * period
+        k_ahead = len(table) - 1  # index of the first table point not yet passed
+        final_zone = table.remaining_mm[table.final_ramp]  # S below which the table places the points
+        tracked = None  # remaining length while the table places the points
+        radius_before = math.inf  # radius of curvature at the previous set-point
+        before_x = here.x  # the previous set-point (at rest before the start)
+        ratio = 1.0  # wang: measured chord / predicted step length of the last step
+        end_x = self.end_x
+        for _ in range(MAX_CYCLES):
+            if tracked is None:
+                s_now, k_ahead = self.remaining_at(here, k_ahead)
+            else:
+                s_now = tracked
+            v_achieve = table.v_achieve(s_now)
+            profile = min(profile + ramp, self.feeds[here.j])
+            radius_here = radius_of_curvature(here.d1, here.d2)
+            radius = min(radius_here, radius_before)  # the set-point's acceleration spans both steps
+            v_next = self.limits.feed(profile, v_in, radius)
+            done = False
+            if v_achieve <= v_next and s_now <= final_zone:  # Wang: decelerate into the stop
+                step = v_achieve * period
+                tracked = s_now - step
+                if tracked <= 1e-12 * (1.0 + s_now) or step <= 0.0:
+                    point, done = path.end(), True
+                    step = distance(end_x, here.x)
+                else:
+                    point = self.forward_point(table.point_at(tracked))
+            else:  # the method's own step, at most V_achieve (slow-downs ahead)
+                v_step = min(v_next, v_achieve)
+                point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
+                radius_after = radius_of_curvature(point.d1, point.d2)
+                if radius_after < radius and not done:  # the step ends in tighter curvature: limit by it too
+                    v_tighter = self.limits.feed(profile, v_in, radius_after)
+                    if v_tighter < v_step * (1.0 - 1e-12):
+                        v_step = v_tighter
+                        point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
+                if self.limits.adaptive and not done:
+                    point, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
+                    v_step = min(v_step, step * ratio / period)
+                if self.compensate and step > 0.0 and not done:
+                    ratio = distance(point.x, here.x) / step
+                step = v_step * period  # the commanded feed of this step, times T
+                tracked = None
+            block_rows.append(self.indices[point.j])
+            u_rows.append(point.u)
+            x_rows.append(point.x)
+            feed_rows.append(step / period)
+            if done:
+                x_rows[-1] = end_x
+                return
+            v_in = distance(point.x, here.x) / period
+            previous_step = step
+            before_x = here.x
+            here = point
+            radius_before = radius_here
+        raise RuntimeError("interpolation did not reach the end of the run")
+
+
+def interpolate(program: Program, limits: PlanLimits, method: Method) -> Trajectory:
+    """Plan ``program`` cycle by cycle with ``method``; one set-point per period."""
+    started = time.perf_counter()
+    rows: tuple[list, list, list, list] = ([], [], [], [])
+    runs = split_runs(program)
+    for r, indices in enumerate(runs):
+        RunPlanner(program, indices, method, limits).run(rows, include_start=(r == 0))
+    block_rows, u_rows, x_rows, feed_rows = rows
+    if not block_rows:
+        if not program.blocks:
+            raise InputError(program.name, "program has no motion blocks")
+        start = program.blocks[0]
+        block_rows, u_rows, x_rows, feed_rows = [0], [start.curve.u_min], [tuple(start.start)], [0.0]
+    trajectory = Trajectory(
+        algorithm=method.name,
+        period_s=limits.period_s,
+        block=np.asarray(block_rows, dtype=np.int32),
+        u=np.asarray(u_rows, dtype=np.float64),
+        position_mm=np.asarray(x_rows, dtype=np.float64),
+        feed_mm_s=np.asarray(feed_rows, dtype=np.float64),
+        notes={"runs": len(runs), "stops": max(len(runs) - 1, 0)},
+    )
+    trajectory.planning_time_s = time.perf_counter() - started
+    return trajectory

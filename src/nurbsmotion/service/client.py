@@ -1,0 +1,88 @@
+"""Client side of the control socket: one connection, one request line, one response line."""
+
+from __future__ import annotations
+
+import json
+import socket
+from pathlib import Path
+from typing import Any
+
+from nurbsmotion.errors import NurbsmotionError
+from nurbsmotion.service.protocol import encode
+
+
+class DaemonUnavailable(NurbsmotionError):
+    """Nobody answers on the socket: ``no daemon at PATH (is it running?)``."""
+
+    def __init__(self, path: Path | str, detail: str = "") -> None:
+        super().__init__(f"no daemon at {path} (is it running?){f' [{detail}]' if detail else ''}")
+
+
+class RequestFailed(NurbsmotionError):
+    """The daemon answered ``ok: false``; ``errors`` holds one line per problem."""
+
+    def __init__(self, response: dict[str, Any]) -> None:
+        self.response = response
+        self.errors = [str(e) for e in response.get("errors") or [response.get("error", "request failed")]]
+        super().__init__(str(response.get("error", "request failed")))
+
+
+class Client:
+    """A connection to the daemon; ``request`` returns the response dict (ok or not)."""
+
+    def __init__(self, path: str | Path, timeout_s: float = 60.0) -> None:
+        self.path = Path(path)
+        self.timeout_s = timeout_s
+        self._sock: socket.socket | None = None
+        self._file: Any = None
+
+    def connect(self) -> "Client":
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        sock.settimeout(self.timeout_s)
+        try:
+            sock.connect(str(self.path))
+        except (FileNotFoundError, ConnectionRefusedError) as err:
+            sock.close()
+            raise DaemonUnavailable(self.path) from err
+        except OSError as err:
+            sock.close()
+            raise DaemonUnavailable(self.path, err.strerror or str(err)) from err
+        self._sock = sock
+        self._file = sock.makefile("rb")
+        return self
+
+    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        if self._sock is None:
+            self.connect()
+        assert self._sock is not None
+        try:
+            self._sock.sendall(encode({"cmd": cmd, **fields}))
+            line = self._file.readline()
+        except OSError as err:
+            self.close()
+            raise DaemonUnavailable(self.path, f"connection lost: {err.strerror or err}") from err
+        if not line:
+            self.close()
+            raise DaemonUnavailable(self.path, "the daemon closed the connection")
+        return json.loads(line)
+
+    def call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        """``request`` that raises RequestFailed for ``ok: false``."""
+        response = self.request(cmd, **fields)
+        if not response.get("ok"):
+            raise RequestFailed(response)
+        return response
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+        if self._sock is not None:
+            self._sock.close()
+            self._sock = None
+
+    def __enter__(self) -> "Client":
+        return self.connect()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

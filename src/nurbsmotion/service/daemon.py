@@ -1,0 +1,116 @@
+"""The daemon: drives up, job records checked, control socket served until SIGTERM/SIGINT.
+
+Start-up order: mark jobs left without outcome 'interrupted' -> simulated drives (if
+configured) -> bring-up of every axis -> control socket -> READY=1 (systemd). Shutdown
+order: refuse new jobs -> controlled stop of a running job (outcome 'stopped') -> drives
+disabled -> socket removed -> simulated drives stopped.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+import threading
+from typing import Any, Callable
+
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.log import kv
+from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.service.link import open_link
+from nurbsmotion.service.motion import MotionLink, Simulation
+from nurbsmotion.service.notify import sd_notify
+from nurbsmotion.service.planner import plan_job
+from nurbsmotion.service.protocol import Request
+from nurbsmotion.service.records import JobRecords
+from nurbsmotion.service.server import ControlServer
+
+log = logging.getLogger(__name__)
+
+
+def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
+    """Route one checked request to the controller."""
+    f = request.fields
+    handlers: dict[str, Callable[[], dict[str, Any]]] = {
+        "submit": lambda: controller.submit(f["name"], f["program"]),
+        "status": controller.status,
+        "job": lambda: controller.job_info(f["id"]),
+        "stop": controller.stop,
+        "abort": controller.abort,
+        "reset": controller.reset,
+        "override": lambda: controller.override(float(f["percent"])),
+        "inject_fault": lambda: controller.inject_fault(f["spec"]),
+    }
+    return handlers[request.cmd]()
+
+
+class Daemon:
+    """Everything the daemon runs, started by :meth:`start` and ended by :meth:`close`."""
+
+    def __init__(self, config: MachineConfig,
+                 open_motion: Callable[[MachineConfig], tuple[MotionLink, Simulation | None]] = open_link) -> None:
+        self.config = config
+        self._open_motion = open_motion
+        self.records = JobRecords(config.data_dir)
+        self.controller: Controller | None = None
+        self.server: ControlServer | None = None
+        self.simulation: Simulation | None = None
+        self._closing = False
+
+    def start(self) -> None:
+        for record in self.records.mark_interrupted():
+            log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
+        link, self.simulation = self._open_motion(self.config)
+        self.controller = Controller(self.config, link, lambda name, text, start: plan_job(name, text, self.config, start),
+                                     self.records, self.simulation)
+        self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
+        try:
+            self.server.start()
+        except BaseException:
+            self._stop_motion()
+            raise
+        sd_notify("READY=1")
+        log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
+
+    def _handle(self, request: Request) -> dict[str, Any]:
+        assert self.controller is not None
+        if self._closing and request.cmd == "submit":
+            raise Refused("submit", "the daemon is shutting down")
+        return dispatch(self.controller, request)
+
+    def close(self) -> None:
+        self._closing = True
+        sd_notify("STOPPING=1")
+        self._stop_motion()
+        if self.server is not None:
+            self.server.close()
+            self.server = None
+        log.info(kv("daemon_stopped"))
+
+    def _stop_motion(self) -> None:
+        if self.controller is not None:
+            self.controller.shutdown()
+            self.controller = None
+        if self.simulation is not None:
+            self.simulation.stop()
+            self.simulation = None
+
+
+def run_daemon(config: MachineConfig) -> int:
+    """Serve until SIGTERM or SIGINT, then stop in order (module docstring); exit code 0."""
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        log.info(kv("signal", name=signal.Signals(signum).name))
+        stop.set()
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
+    daemon = Daemon(config)
+    try:
+        daemon.start()
+        while not stop.wait(0.5):
+            pass
+    finally:
+        daemon.close()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    return 0

@@ -1,0 +1,133 @@
+"""Program text -> checked, fully planned job: the one place the service calls the program
+readers, the planners and the axis map.
+
+plan_job(name, text, config, start_mm) parses the program, plans it with the configured
+algorithm, maps XYZ onto the configured axes, checks soft limits and converts to counts.
+Every failure is an InputError naming file:line (or the axis and cycle); nothing moves.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nurbsmotion.axes import AxisMap
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import InputError
+from nurbsmotion.planning import PlanLimits, Trajectory, plan
+from nurbsmotion.planning.measure import Measurements, measure
+from nurbsmotion.planning.trace import write_trace
+from nurbsmotion.program import AXES, Program, parse_curve_yaml, parse_gcode
+from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
+from nurbsmotion.service.rate import max_rate
+
+
+@dataclass(eq=False)
+class PlannedJob:
+    trajectory: Trajectory
+    counts: np.ndarray  # (N, n_axes) int32, one row per cycle
+    summary: dict[str, Any]
+    max_rate: float  # highest playback rate (feed override) within the axis limits
+    program: Program | None = field(default=None, repr=False)
+    measurements: Measurements | None = field(default=None, repr=False)
+
+    def write_trace(self, path: Path) -> None:
+        """The same CSV as ``nurbsmotion plan --trace`` (planning.trace)."""
+        assert self.measurements is not None
+        write_trace(path, self.trajectory, self.measurements)
+
+
+def plan_limits(config: MachineConfig) -> PlanLimits:
+    """The planner's limits from the machine configuration (axis limits in X, Y, Z order)."""
+    ip = config.interpolation
+    by_name = {a.name: a for a in config.axes}
+    v_axes = tuple(by_name[n].max_velocity_mm_s if n in by_name and by_name[n].max_velocity_mm_s else 1e9
+                   for n in AXES)
+    a_axes = tuple(by_name[n].max_accel_mm_s2 if n in by_name and by_name[n].max_accel_mm_s2 else ip.max_accel_mm_s2
+                   for n in AXES)
+    return PlanLimits(period_s=config.cycle_period_s, chord_error_mm=ip.chord_error_mm,
+                      max_accel_mm_s2=ip.max_accel_mm_s2, max_jerk_mm_s3=ip.max_jerk_mm_s3,
+                      default_feed_mm_s=ip.feed_mm_s, rapid_feed_mm_s=ip.rapid_feed_mm_s, acc_time_s=ip.acc_time_s,
+                      junction_deviation_mm=ip.junction_deviation_mm, axis_max_velocity_mm_s=v_axes,
+                      axis_max_accel_mm_s2=a_axes)
+
+
+def axis_columns(config: MachineConfig) -> list[int]:
+    """Column of the program's XYZ for each configured axis (axes must be named X, Y or Z)."""
+    columns = []
+    for axis in config.axes:
+        if axis.name not in AXES:
+            raise InputError(config.where("axes"), f"axis {axis.name!r}: programs move {', '.join(AXES)} only")
+        columns.append(AXES.index(axis.name))
+    return columns
+
+
+def axis_positions(trajectory: Trajectory, config: MachineConfig, source: str) -> np.ndarray:
+    """(N, n_axes) positions of the configured axes; unconfigured program axes must not move."""
+    columns = axis_columns(config)
+    pos = trajectory.position_mm
+    for j, name in enumerate(AXES):
+        if j not in columns and len(pos) and np.ptp(pos[:, j]) > 1e-9:
+            raise InputError(source, f"the program moves {name}, which this machine has no axis for")
+    return pos[:, columns]
+
+
+def parse(name: str, text: str, start_mm: np.ndarray) -> Program:
+    """The program readers, chosen by the name's suffix as ``read_program`` does for files;
+    a G-code program starts at ``start_mm`` (where the axes hold)."""
+    suffix = Path(name).suffix.lower()
+    if suffix in YAML_SUFFIXES:
+        return parse_curve_yaml(text, name)
+    if suffix in GCODE_SUFFIXES:
+        return parse_gcode(text, name, start_mm)
+    raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
+                           f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
+
+
+def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None) -> PlannedJob:
+    """Parse, plan, check and convert ``text`` (see the module docstring)."""
+    axis_map = AxisMap.from_config(config)
+    start_xyz = np.zeros(len(AXES))
+    if start_mm is not None:
+        start_xyz[axis_columns(config)] = start_mm
+    program = parse(name, text, start_xyz)
+    if not program.blocks:
+        raise InputError(name, "the program has no motion")
+    t0 = time.perf_counter()
+    trajectory = plan(program, plan_limits(config), config.interpolation.algorithm)
+    planning_s = time.perf_counter() - t0
+    positions = axis_positions(trajectory, config, name)
+    try:
+        counts = axis_map.to_counts(positions)
+    except InputError as err:
+        raise InputError(f"{name}: {err.where}", err.message) from None
+    measured = measure(trajectory, program)
+    columns = axis_columns(config)
+    v_peak = np.array(measured.axis_max_velocity_mm_s)[columns]
+    a_peak = np.array(measured.axis_max_accel_mm_s2)[columns]
+    rate = max_rate(v_peak, a_peak, [a.max_velocity_mm_s for a in config.axes],
+                    [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
+    summary = plan_summary(name, program, trajectory, config, v_peak, a_peak, rate, planning_s)
+    summary["measured"] = measured.summary()
+    return PlannedJob(trajectory, counts, summary, rate, program, measured)
+
+
+def plan_summary(name: str, program: Program, trajectory: Trajectory, config: MachineConfig, v_peak: np.ndarray,
+                 a_peak: np.ndarray, rate: float, planning_s: float) -> dict[str, Any]:
+    """The plan.json of a job record (the measured figures are added by plan_job)."""
+    return {
+        "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
+        "algorithm": trajectory.algorithm, "period_s": trajectory.period_s, "cycles": len(trajectory),
+        "duration_s": round(trajectory.duration_s, 6), "planning_time_s": round(planning_s, 6),
+        "max_feed_mm_s": round(float(np.max(trajectory.feed_mm_s)), 6) if len(trajectory) else 0.0,
+        "axes": [{"name": a.name, "node": a.node_id, "max_velocity_mm_s": round(float(v), 6),
+                  "max_accel_mm_s2": round(float(acc), 6)} for a, v, acc in zip(config.axes, v_peak, a_peak)],
+        "start_mm": [round(float(x), 6) for x in trajectory.position_mm[0]],
+        "end_mm": [round(float(x), 6) for x in trajectory.position_mm[-1]],
+        "max_override_percent": round(max(1.0, rate) * 100.0, 3),
+        "notes": {k: v for k, v in trajectory.notes.items()},
+    }

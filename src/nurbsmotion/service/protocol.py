@@ -1,0 +1,103 @@
+"""The control API's wire format: one JSON object per line, each request answered by one line.
+
+Request: ``{"cmd": NAME, ...fields}``; response: ``{"ok": true, ...}`` or
+``{"ok": false, "error": "one line naming the field"}`` (program rejections add
+``"errors": [one line per problem]``). Requests longer than :data:`MAX_REQUEST_BYTES` are
+refused. This module is pure: it turns bytes into checked :class:`Request` records and
+records into bytes; the server and the client both use it.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+MAX_REQUEST_BYTES = 10 * 1024 * 1024
+
+# command -> {field: (type name, required)}
+COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
+    "submit": {"name": ("string", True), "program": ("string", True)},
+    "status": {},
+    "job": {"id": ("string", True)},
+    "stop": {},
+    "abort": {},
+    "reset": {},
+    "override": {"percent": ("number", True)},
+    "inject_fault": {"spec": ("string", True)},  # only when the daemon simulates its drives
+}
+
+
+class ProtocolError(Exception):
+    """A request that cannot be served; ``str()`` is the one-line error for the response."""
+
+
+@dataclass(frozen=True)
+class Request:
+    cmd: str
+    fields: dict[str, Any] = field(default_factory=dict)
+
+
+def _type_ok(value: Any, type_name: str) -> bool:
+    if type_name == "string":
+        return isinstance(value, str)
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def parse_request(line: bytes) -> Request:
+    """Decode and check one request line; ProtocolError names the offending field."""
+    if len(line) > MAX_REQUEST_BYTES:
+        raise ProtocolError(f"request: longer than the {MAX_REQUEST_BYTES // (1024 * 1024)} MB limit")
+    try:
+        obj = json.loads(line.decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise ProtocolError(f"request: not UTF-8 ({err.reason} at byte {err.start})") from None
+    except json.JSONDecodeError as err:
+        raise ProtocolError(f"request: malformed JSON ({err.msg} at column {err.colno})") from None
+    if not isinstance(obj, dict):
+        raise ProtocolError(f"request: must be a JSON object, got {type(obj).__name__}")
+    cmd = obj.get("cmd")
+    if not isinstance(cmd, str):
+        raise ProtocolError(f"field 'cmd': must be a string naming the command, got {cmd!r}"[:200])
+    spec = COMMANDS.get(cmd)
+    if spec is None:
+        raise ProtocolError(f"field 'cmd': unknown command {cmd[:40]!r}; expected one of {', '.join(COMMANDS)}")
+    fields: dict[str, Any] = {}
+    for key, value in obj.items():
+        if key == "cmd":
+            continue
+        if key not in spec:
+            raise ProtocolError(f"field {key[:40]!r}: unknown for command {cmd!r}"
+                                f"{'; expected ' + ', '.join(spec) if spec else ' (it takes no fields)'}")
+        type_name, _ = spec[key]
+        if not _type_ok(value, type_name):
+            raise ProtocolError(f"field {key!r}: must be a {type_name}, got {type(value).__name__}")
+        fields[key] = value
+    for key, (_, required) in spec.items():
+        if required and key not in fields:
+            raise ProtocolError(f"field {key!r}: required for command {cmd!r}")
+    return Request(cmd, fields)
+
+
+def encode(obj: dict[str, Any]) -> bytes:
+    """One response or request line (compact JSON + newline; NaN/inf become null)."""
+    return (json.dumps(_finite(obj), separators=(",", ":")) + "\n").encode("utf-8")
+
+
+def error_response(message: str, errors: list[str] | None = None) -> dict[str, Any]:
+    response: dict[str, Any] = {"ok": False, "error": message.replace("\n", " ")}
+    if errors:
+        response["errors"] = errors
+    return response
+
+
+def _finite(obj: Any) -> Any:
+    """Replace non-finite floats by None (JSON has no NaN)."""
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite(v) for v in obj]
+    return obj

@@ -1,0 +1,125 @@
+"""Job records: one folder per job under ``<data_dir>/jobs/<timestamp>-<id>/``.
+
+Written in the order that loses nothing when a job ends badly: the program as submitted and
+the plan (summary + trace) before any motion, ``outcome.json`` when the job has ended. A job
+folder without an outcome belongs to a daemon that died; the next daemon marks it
+``interrupted`` at start. Every file is written to a temporary name, flushed and renamed.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+PROGRAM_FILE = "program"  # suffix added from the submitted name (.nc, .yaml ...)
+PLAN_FILE = "plan.json"
+TRACE_FILE = "trace.csv"
+OUTCOME_FILE = "outcome.json"
+DRIVES_DIR = "drives"  # simulated drives' set-point recordings (simulate: true)
+OUTCOMES = ("completed", "stopped", "aborted", "fault", "interrupted")
+
+
+def new_job_id() -> str:
+    return uuid.uuid4().hex[:8]
+
+
+def write_atomic(path: Path, data: bytes) -> None:
+    """Write ``data`` so that ``path`` holds either the old or the complete new content."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    with open(tmp, "wb") as out:
+        out.write(data)
+        out.flush()
+        os.fsync(out.fileno())
+    os.replace(tmp, path)
+
+
+def write_json(path: Path, obj: dict[str, Any]) -> None:
+    write_atomic(path, (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode("utf-8"))
+
+
+def _safe_suffix(name: str) -> str:
+    suffix = Path(name).suffix.lower()
+    return suffix if re.fullmatch(r"\.[a-z0-9]{1,8}", suffix) else ".txt"
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    job_id: str
+    folder: Path
+
+    def write_program(self, name: str, text: str) -> Path:
+        path = self.folder / f"{PROGRAM_FILE}{_safe_suffix(name)}"
+        write_atomic(path, text.encode("utf-8"))
+        return path
+
+    def write_plan(self, summary: dict[str, Any], write_trace: Callable[[Path], None]) -> None:
+        """The plan summary and the trace CSV (``write_trace(path)`` writes it)."""
+        tmp = self.folder / f".{TRACE_FILE}.tmp"
+        write_trace(tmp)
+        os.replace(tmp, self.folder / TRACE_FILE)
+        write_json(self.folder / PLAN_FILE, summary)
+
+    def write_outcome(self, outcome: dict[str, Any]) -> None:
+        if outcome.get("outcome") not in OUTCOMES:
+            raise ValueError(f"unknown outcome {outcome.get('outcome')!r}")
+        write_json(self.folder / OUTCOME_FILE, outcome)
+
+    def outcome(self) -> dict[str, Any] | None:
+        try:
+            return json.loads((self.folder / OUTCOME_FILE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+
+    def plan(self) -> dict[str, Any] | None:
+        try:
+            return json.loads((self.folder / PLAN_FILE).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+
+    @property
+    def drives_dir(self) -> Path:
+        return self.folder / DRIVES_DIR
+
+
+class JobRecords:
+    """The ``jobs`` folder of the data directory."""
+
+    def __init__(self, data_dir: str | Path) -> None:
+        self.root = Path(data_dir) / "jobs"
+
+    def create(self, name: str, text: str) -> JobRecord:
+        """A new job folder holding the program as submitted."""
+        self.root.mkdir(parents=True, exist_ok=True)
+        job_id = new_job_id()
+        folder = self.root / f"{time.strftime('%Y%m%d-%H%M%S')}-{job_id}"
+        folder.mkdir()
+        record = JobRecord(job_id, folder)
+        record.write_program(name, text)
+        return record
+
+    def find(self, job_id: str) -> JobRecord | None:
+        if not re.fullmatch(r"[0-9a-f]{1,32}", job_id) or not self.root.is_dir():
+            return None
+        for folder in self.root.glob(f"*-{job_id}"):
+            return JobRecord(job_id, folder)
+        return None
+
+    def mark_interrupted(self) -> list[JobRecord]:
+        """Give every job folder without an outcome the outcome 'interrupted'."""
+        marked = []
+        if not self.root.is_dir():
+            return marked
+        for folder in sorted(p for p in self.root.iterdir() if p.is_dir()):
+            record = JobRecord(folder.name.rsplit("-", 1)[-1], folder)
+            if not (folder / OUTCOME_FILE).exists():
+                record.write_outcome({"outcome": "interrupted", "job": record.job_id,
+                                      "reason": "the daemon ended while this job was in progress",
+                                      "recorded_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+                marked.append(record)
+        return marked

@@ -1,0 +1,203 @@
+"""The control socket: a Unix stream socket (mode 0660, no TCP), one thread per client.
+
+Each line a client sends is one request (see protocol); each gets one response line.
+A malformed, oversized or refused request gets an error line and the daemon keeps serving;
+a client that disappears mid-request only ends its own thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import stat
+import threading
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from nurbsmotion.errors import InputError
+from nurbsmotion.log import kv
+from nurbsmotion.service import access
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, Request, encode, error_response, parse_request
+
+log = logging.getLogger(__name__)
+
+Handler = Callable[[Request], dict[str, Any]]
+SOCKET_MODE = 0o660
+_CHUNK = 1 << 20
+
+
+class ControlServer:
+    """Serves ``handler`` on the Unix socket ``path`` until :meth:`close`."""
+
+    def __init__(self, path: str | Path, handler: Handler, control_group: str | None = None,
+                 max_clients: int = 16, idle_timeout_s: float = 600.0) -> None:
+        self.path = Path(path)
+        self.handler = handler
+        self.control_group = control_group
+        try:
+            self.control_gid = access.group_id(control_group)
+        except KeyError:
+            raise InputError("control.group", f"unknown group {control_group!r}") from None
+        self.daemon_uid = os.getuid()
+        self.idle_timeout_s = idle_timeout_s
+        self._slots = threading.BoundedSemaphore(max_clients)
+        self._listener: socket.socket | None = None
+        self._thread: threading.Thread | None = None
+        self._clients: set[socket.socket] = set()
+        self._lock = threading.Lock()
+        self._stopping = threading.Event()
+
+    # ------------------------------------------------------------------ life cycle
+    def start(self) -> None:
+        """Bind (replacing a stale socket file, refusing a live one), set the mode, listen."""
+        self._remove_stale_socket()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        old_umask = os.umask(0o117)  # the socket is created 0660, never wider, even for a moment
+        try:
+            listener.bind(str(self.path))
+        except OSError as err:
+            listener.close()
+            raise InputError("control.socket", f"cannot bind {self.path}: {err.strerror or err}") from None
+        finally:
+            os.umask(old_umask)
+        os.chmod(self.path, SOCKET_MODE)
+        if self.control_gid is not None:
+            try:
+                os.chown(self.path, -1, self.control_gid)
+            except OSError as err:
+                log.warning(kv("socket_group_not_set", path=self.path, group=self.control_group, error=err.strerror))
+        listener.listen(8)
+        listener.settimeout(0.2)
+        self._listener = listener
+        self._thread = threading.Thread(target=self._accept_loop, name="control-accept", daemon=True)
+        self._thread.start()
+        log.info(kv("control_socket", path=self.path))
+
+    def _remove_stale_socket(self) -> None:
+        if not self.path.exists() and not self.path.is_symlink():
+            return
+        if not stat.S_ISSOCK(self.path.lstat().st_mode):
+            raise InputError("control.socket", f"{self.path} exists and is not a socket")
+        probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        probe.settimeout(1.0)
+        try:
+            probe.connect(str(self.path))
+        except OSError:
+            self.path.unlink()  # nobody listens: left over from a daemon that died
+            return
+        finally:
+            probe.close()
+        raise InputError("control.socket", f"another daemon is already serving {self.path}")
+
+    def close(self) -> None:
+        """Stop accepting, drop the clients, remove the socket file."""
+        self._stopping.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+        if self._listener is not None:
+            self._listener.close()
+            self._listener = None
+            try:
+                self.path.unlink()
+            except FileNotFoundError:
+                pass
+        with self._lock:
+            clients = list(self._clients)
+        for conn in clients:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+
+    # ------------------------------------------------------------------ clients
+    def _accept_loop(self) -> None:
+        assert self._listener is not None
+        while not self._stopping.is_set():
+            try:
+                conn, _ = self._listener.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                if self._stopping.is_set():
+                    return
+                continue
+            if not self._slots.acquire(blocking=False):
+                self._send(conn, error_response("busy: too many control clients connected"))
+                conn.close()
+                continue
+            threading.Thread(target=self._client, args=(conn,), name="control-client", daemon=True).start()
+
+    def _client(self, conn: socket.socket) -> None:
+        with self._lock:
+            self._clients.add(conn)
+        try:
+            peer = access.peer_credentials(conn)
+            if not access.peer_allowed(peer, self.daemon_uid, self.control_gid):
+                log.warning(kv("control_refused", pid=peer.pid, uid=peer.uid, gid=peer.gid))
+                self._send(conn, error_response(access.refusal(peer, self.control_group)))
+                return
+            conn.settimeout(self.idle_timeout_s)
+            for line in _request_lines(conn):
+                response = self._respond(line) if line is not None else \
+                    error_response(f"request: longer than the {MAX_REQUEST_BYTES // (1024 * 1024)} MB limit")
+                if not self._send(conn, response):
+                    return
+        except OSError:
+            pass  # the client went away or idled out: only its own connection ends
+        finally:
+            with self._lock:
+                self._clients.discard(conn)
+            conn.close()
+            self._slots.release()
+
+    def _respond(self, line: bytes) -> dict[str, Any]:
+        try:
+            request = parse_request(line)
+        except ProtocolError as err:
+            return error_response(str(err))
+        try:
+            return self.handler(request)
+        except InputError as err:
+            return error_response(str(err).splitlines()[0], str(err).splitlines())
+        except Exception as err:  # noqa: BLE001 - one bad request must not end the daemon
+            log.exception("control request %s failed", request.cmd)
+            return error_response(f"internal error: {type(err).__name__}: {err}")
+
+    @staticmethod
+    def _send(conn: socket.socket, response: dict[str, Any]) -> bool:
+        try:
+            conn.sendall(encode(response))
+            return True
+        except OSError:
+            return False
+
+
+def _request_lines(conn: socket.socket) -> Iterator[bytes | None]:
+    """Yield each complete line (without the newline); None as soon as a line passes the
+    size limit: the rest of that line is read and dropped, so the connection stays usable."""
+    buf = bytearray()
+    scanned = 0
+    dropping = False
+    while True:
+        newline = buf.find(b"\n", scanned)
+        if newline >= 0:
+            line = bytes(buf[:newline])
+            del buf[:newline + 1]
+            scanned = 0
+            if not dropping and line.strip():
+                yield line
+            dropping = False
+            continue
+        if len(buf) > MAX_REQUEST_BYTES:
+            if not dropping:
+                yield None
+            dropping = True
+            buf.clear()
+        scanned = len(buf)
+        chunk = conn.recv(_CHUNK)
+        if not chunk:
+            return
+        buf += chunk

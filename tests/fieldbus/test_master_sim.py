@@ -1,0 +1,292 @@
+"""The master against simulated CiA-402 drives on a private virtual bus (same process).
+
+Assertions are on content (recorded set-points, reports, states), never on timing; every
+wait has a generous time-out so a loaded 2-core machine does not make them flaky.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+import uuid
+from typing import Iterator
+
+import can
+import numpy as np
+import pytest
+
+from nurbsmotion.cia402 import State
+from nurbsmotion.config import parse_config
+from nurbsmotion.errors import FieldbusError, InputError
+from nurbsmotion.fieldbus import Master
+
+sim_package = pytest.importorskip("nurbsmotion.sim")
+FaultInjection, SimNetwork = sim_package.FaultInjection, sim_package.SimNetwork
+
+WAIT_S = 30.0
+
+
+def make_config(channel: str, mode: str = "csp", n_axes: int = 3, period_ms: float = 4, extra: str = "",
+                identity: str = ""):
+    axes = "".join(f"  - {{name: {'XYZABC'[i]}, node_id: {i + 1}, mode: {mode}, counts_per_mm: 1000,"
+                   f" max_accel_mm_s2: 2000{identity if i == 0 else ''}}}\n" for i in range(n_axes))
+    text = (f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
+            f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 200}}\n{extra}axes:\n{axes}")
+    return parse_config(text, "test.yaml")
+
+
+@contextlib.contextmanager
+def rig(mode: str = "csp", n_axes: int = 3, simulated: int | None = None, bring_up: bool = True,
+        identity: str = "", **master_kw) -> Iterator[tuple[Master, SimNetwork, can.BusABC]]:
+    """Simulated drives 1..simulated, a master for axes 1..n_axes, and a probe bus on which a
+    test can send frames of its own (a bus does not hear itself); torn down whatever happens."""
+    channel = "fb-" + uuid.uuid4().hex
+    sim = SimNetwork(channel=channel)
+    for node in range(1, (simulated if simulated is not None else n_axes) + 1):
+        sim.add_drive(node, identity=(0x1234, 0x42))
+    sim.start()
+    bus = can.Bus(interface="virtual", channel=channel)
+    probe = can.Bus(interface="virtual", channel=channel)
+    master = Master(make_config(channel, mode, n_axes, identity=identity), bus, bootup_timeout_s=1.0, **master_kw)
+    try:
+        if bring_up:
+            master.bring_up()
+        yield master, sim, probe
+    finally:
+        master.shutdown()
+        probe.shutdown()
+        bus.shutdown()
+        sim.stop()
+
+
+def sine_counts(n: int = 300, n_axes: int = 3, amplitude: int = 5000) -> np.ndarray:
+    k = np.arange(n)
+    cols = [np.round(amplitude * np.sin(2 * np.pi * (j + 1) * k / n)) for j in range(n_axes)]
+    return np.column_stack(cols).astype(np.int32)
+
+
+def wait_for(predicate, timeout_s: float = WAIT_S) -> None:
+    end = time.monotonic() + timeout_s
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError("condition not reached in time")
+        time.sleep(0.01)
+
+
+def recorded(sim: SimNetwork, node: int) -> tuple[list[int], list[int]]:
+    records = sim[node].recorder.records()
+    return [r.sync_index for r in records], [r.setpoint_counts for r in records]
+
+
+def find_run(values: list[int], planned: list[int]) -> int:
+    """Start of ``planned`` as a contiguous run inside ``values`` (-1 if absent)."""
+    n = len(planned)
+    for start in range(len(values) - n + 1):
+        if values[start:start + n] == planned:
+            return start
+    return -1
+
+
+@pytest.mark.parametrize("mode", ["ip", "csp"])
+def test_stream_reaches_every_drive_once_per_sync(mode):
+    counts = sine_counts()
+    with rig(mode) as (master, sim, _):
+        assert [a.state for a in master.status().axes] == ["OPERATION ENABLED"] * 3
+        job = master.stream(counts)
+        result = job.wait(WAIT_S)
+        assert result is not None and result.outcome == "done" and result.sent == len(counts)
+        wait_for(lambda: all(len(sim[n].recorder) > 0 and recorded(sim, n)[1][-1] == counts[-1, n - 1]
+                             for n in (1, 2, 3)))
+        for node in (1, 2, 3):
+            syncs, setpoints = recorded(sim, node)
+            start = find_run(setpoints, counts[:, node - 1].tolist())
+            assert start >= 0, f"node {node}: planned set-points not found in order"
+            window = syncs[start:start + len(counts)]
+            assert window == list(range(window[0], window[0] + len(counts)))  # one per SYNC, none missing
+        assert master.status().phase == "holding"
+
+
+def test_hold_keeps_drives_enabled_at_the_last_setpoint():
+    counts = sine_counts(100)
+    progress: list[tuple[int, int]] = []
+    with rig() as (master, sim, _):
+        assert master.stream(counts, on_progress=lambda sent, n: progress.append((sent, n))).wait(WAIT_S).outcome \
+            == "done"
+        assert progress and all(n == len(counts) for _, n in progress)
+        assert [sent for sent, _ in progress] == sorted(sent for sent, _ in progress)
+        cycle = master.status().cycle
+        wait_for(lambda: master.status().cycle > cycle + 20)
+        status = master.status()
+        assert status.phase == "holding"
+        assert [a.setpoint_counts for a in status.axes] == counts[-1].tolist()
+        assert all(sim[n].state is State.OPERATION_ENABLED for n in (1, 2, 3))
+
+
+def test_fault_bit_quick_stops_every_axis_and_names_node_and_code():
+    with rig() as (master, sim, _):
+        job = master.stream(sine_counts(2000))
+        wait_for(lambda: (master.status().job_index or 0) > 50)
+        sim.inject(FaultInjection("fault", node_id=2, code=0x2310))
+        result = job.wait(WAIT_S)
+        assert result.outcome == "faulted"
+        kinds = {(f.node_id, f.kind) for f in result.faults}
+        assert (2, "fault_bit") in kinds
+        emcy = [f for f in result.faults if f.kind == "emcy"]
+        assert emcy and emcy[0].node_id == 2 and emcy[0].code == 0x2310 and "0x2310" in emcy[0].message
+        assert all(f.cycle > 0 for f in result.faults)
+        wait_for(lambda: master.status().phase == "disabled")
+        assert sim[2].state is State.FAULT
+        assert all(sim[n].state is not State.OPERATION_ENABLED for n in (1, 3))
+
+
+def test_emcy_while_drives_follow_gives_a_controlled_stop_on_the_path():
+    counts = sine_counts(2000, amplitude=20000)
+    with rig() as (master, sim, probe):
+        job = master.stream(counts)
+        wait_for(lambda: (master.status().job_index or 0) > 200)
+        probe.send(can.Message(arbitration_id=0x80 + 3, data=bytes([0x10, 0x42, 0x08, 0, 0, 0, 0, 0]),
+                             is_extended_id=False))  # temperature warning, drive keeps running
+        result = job.wait(WAIT_S)
+        assert result.outcome == "faulted"
+        assert [(f.node_id, f.kind, f.code) for f in result.faults] == [(3, "emcy", 0x4210)]
+        assert result.sent < len(counts)
+        assert master.status().phase == "holding"
+        assert all(sim[n].state is State.OPERATION_ENABLED for n in (1, 2, 3))
+        cycle = master.status().cycle
+        wait_for(lambda: master.status().cycle > cycle + 10)  # the drives applied the last ones
+        # the stop stays on the planned polyline of axis 1 -> 2 (they move as sin(t), sin(2t))
+        syncs, x = recorded(sim, 1)
+        _, y = recorded(sim, 2)
+        start = find_run(x, counts[:200, 0].tolist())
+        tail_x = np.array(x[start:], dtype=float)
+        tail_y = np.array(y[start:], dtype=float)
+        planned_x, planned_y = counts[:, 0].astype(float), counts[:, 1].astype(float)
+        s = np.arange(len(counts))
+        for px, py in zip(tail_x[-50:], tail_y[-50:]):
+            d = np.hypot(planned_x - px, planned_y - py)
+            assert d.min() <= 40.0  # within one planned step of the path (interpolated between rows)
+        steps = np.abs(np.diff(tail_x[-60:]))
+        assert steps[-1] <= 1  # came to rest
+        assert s.size
+
+
+def test_heartbeat_loss_is_reported_and_stops_the_axes():
+    with rig() as (master, sim, _):
+        job = master.stream(sine_counts(3000))
+        wait_for(lambda: (master.status().job_index or 0) > 50)
+        sim.inject(FaultInjection("heartbeat_stop", node_id=3))
+        result = job.wait(WAIT_S)
+        assert result.outcome == "faulted"
+        beat = [f for f in result.faults if f.kind == "heartbeat"]
+        assert beat and beat[0].node_id == 3 and "no heartbeat" in beat[0].message
+        wait_for(lambda: master.status().phase == "disabled")
+        assert all(sim[n].state is not State.OPERATION_ENABLED for n in (1, 2))
+
+
+@pytest.mark.parametrize("kind", ["stall", "following_error"])
+def test_following_error_quick_stops(kind):
+    with rig() as (master, sim, _):
+        job = master.stream(sine_counts(2000, amplitude=50000))
+        wait_for(lambda: (master.status().job_index or 0) > 50)
+        sim.inject(FaultInjection(kind, node_id=1))
+        result = job.wait(WAIT_S)
+        assert result.outcome == "faulted"
+        fe = [f for f in result.faults if f.kind == "following_error"]
+        assert fe and fe[0].node_id == 1 and fe[0].axis == "X"
+        wait_for(lambda: master.status().phase == "disabled")
+
+
+def test_sdo_abort_during_bring_up_names_node_step_and_code():
+    with rig(bring_up=False) as (master, sim, _):
+        sim.inject(FaultInjection("sdo_abort", node_id=2, index=0x6060, code=0x0609_0030))
+        with pytest.raises(FieldbusError) as info:
+            master.bring_up()
+        text = str(info.value)
+        assert text.startswith("node 2: bring-up step 'set mode': SDO abort")
+        assert "0x06090030" in text and "\n" not in text
+        assert master.faults()[-1].kind == "bringup"
+
+
+def test_missing_node_at_start_up_is_named():
+    with rig(n_axes=3, simulated=2, bring_up=False) as (master, _, _):
+        with pytest.raises(FieldbusError, match=r"^node 3: bring-up step 'boot-up': no boot-up message"):
+            master.bring_up()
+
+
+def test_identity_check_passes_for_the_configured_drive():
+    with rig(identity=", identity: {vendor_id: 0x1234, product_code: 0x42}") as (master, _, _):
+        assert master.status().phase == "holding"
+
+
+def test_identity_mismatch_is_refused():
+    with rig(bring_up=False, identity=", identity: {vendor_id: 0x1234, product_code: 0x43}") as (master, _, _):
+        with pytest.raises(FieldbusError, match=r"^node 1: bring-up step 'identity check': drive reports vendor "
+                           r".* axis X expects vendor 0x00001234 product 0x00000043$"):
+            master.bring_up()
+
+
+def test_tpdo_of_wrong_length_is_counted_and_never_used_as_position():
+    with rig() as (master, _, probe):
+        before = master.status().axes[0].position_counts
+        probe.send(can.Message(arbitration_id=0x181, data=bytes([0x27, 0x06, 0x40]), is_extended_id=False))
+        wait_for(lambda: master.status().axes[0].bad_tpdo_count == 1)
+        cycle = master.status().cycle
+        wait_for(lambda: master.status().cycle > cycle + 3)
+        status = master.status()
+        assert status.axes[0].position_counts == before
+        assert status.phase == "holding" and not status.faults
+
+
+def test_request_stop_then_reset_and_new_job():
+    counts = sine_counts(2000, amplitude=20000)
+    with rig("ip") as (master, sim, _):
+        job = master.stream(counts)
+        wait_for(lambda: (master.status().job_index or 0) > 100)
+        job.request_stop()
+        result = job.wait(WAIT_S)
+        assert result.outcome == "stopped" and not result.faults and result.sent < len(counts)
+        held = [a.setpoint_counts for a in master.status().axes]
+        back = np.linspace(held, [0, 0, 0], 200).round().astype(np.int32)
+        assert master.stream(back).wait(WAIT_S).outcome == "done"
+
+
+def test_abort_quick_stops_and_reset_faults_re_enables():
+    with rig() as (master, sim, _):
+        job = master.stream(sine_counts(2000))
+        wait_for(lambda: (master.status().job_index or 0) > 50)
+        job.abort()
+        assert job.wait(WAIT_S).outcome == "aborted"
+        wait_for(lambda: master.status().phase == "disabled")
+        with pytest.raises(FieldbusError, match="not holding"):
+            master.stream(sine_counts(10))
+        master.reset_faults()
+        assert master.status().phase == "holding"
+        assert all(sim[n].state is State.OPERATION_ENABLED for n in (1, 2, 3))
+
+
+def test_reset_faults_after_a_drive_fault():
+    with rig() as (master, sim, _):
+        job = master.stream(sine_counts(2000))
+        wait_for(lambda: (master.status().job_index or 0) > 50)
+        sim.inject(FaultInjection("fault", node_id=1))
+        assert job.wait(WAIT_S).outcome == "faulted"
+        wait_for(lambda: master.status().phase == "disabled")
+        master.reset_faults()
+        held = [a.setpoint_counts for a in master.status().axes]
+        assert master.stream(np.array([held] * 20, dtype=np.int32)).wait(WAIT_S).outcome == "done"
+
+
+def test_job_far_from_the_held_position_is_refused_before_motion():
+    with rig() as (master, _, _):
+        far = sine_counts(10) + 100_000
+        with pytest.raises(InputError, match="axis X: the job starts at"):
+            master.stream(far)
+        assert master.status().phase == "holding"
+
+
+def test_traffic_log_records_sync_rpdo_and_tpdo(tmp_path):
+    path = tmp_path / "bus.log"
+    with rig(traffic_log=str(path)) as (master, _, _):
+        assert master.stream(sine_counts(200)).wait(WAIT_S).outcome == "done"
+    text = path.read_text()
+    assert " 080#" in text and " 201#" in text and " 181#" in text and " 000#" in text

@@ -1,0 +1,120 @@
+"""Run ``python -m nurbsmotion daemon`` as a subprocess with in-process simulated drives on a
+private virtual bus, a private socket and a private data directory."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import nurbsmotion
+from nurbsmotion.config import MachineConfig, load_config
+from nurbsmotion.service.client import Client, DaemonUnavailable
+
+SRC_DIR = Path(nurbsmotion.__file__).resolve().parents[1]
+START_TIMEOUT_S = 20.0
+
+CONFIG = """\
+cycle_period_ms: 4
+simulate: true
+bus: {{interface: virtual, channel: {channel}}}
+interpolation: {{algorithm: wang, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
+                max_jerk_mm_s3: 50000, acc_time_s: 0.1}}
+axes:
+  - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
+     max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
+  - {{name: Y, node_id: 2, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
+     max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
+  - {{name: Z, node_id: 3, mode: ip, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
+     max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
+control: {{socket: {socket}}}
+data_dir: {data_dir}
+"""
+
+
+def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02) -> Any:
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = condition()
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(poll_s)
+
+
+class DaemonProcess:
+    """The daemon subprocess and its files; ``close()`` always ends it."""
+
+    def __init__(self, data_dir: Path) -> None:
+        self.folder = Path(tempfile.mkdtemp(prefix="nm-"))  # short: AF_UNIX paths are <= 107 bytes
+        self.socket = self.folder / "ctl.sock"
+        self.data_dir = data_dir
+        self.config_path = self.folder / "machine.yaml"
+        self.config_path.write_text(CONFIG.format(channel=f"it-{uuid.uuid4().hex}", socket=self.socket,
+                                                  data_dir=data_dir))
+        self.config: MachineConfig = load_config(self.config_path)
+        self.log_path = self.folder / "daemon.log"
+        self.proc: subprocess.Popen[bytes] | None = None
+        self.notify_socket: Path | None = None  # set: the daemon gets it as $NOTIFY_SOCKET
+
+    def environment(self) -> dict[str, str]:
+        """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if asked for."""
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(SRC_DIR), env.get("PYTHONPATH", "")) if p)
+        env.pop("NOTIFY_SOCKET", None)
+        if self.notify_socket is not None:
+            env["NOTIFY_SOCKET"] = str(self.notify_socket)
+        return env
+
+    def start(self) -> "DaemonProcess":
+        with open(self.log_path, "wb") as log:
+            self.proc = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "-v", "daemon", "--config",
+                                          str(self.config_path)], stdout=log, stderr=subprocess.STDOUT,
+                                         env=self.environment())
+        wait_until(self._answers, START_TIMEOUT_S, "the daemon to answer on its socket", poll_s=0.05)
+        return self
+
+    def _answers(self) -> bool:
+        assert self.proc is not None
+        if self.proc.poll() is not None:
+            raise AssertionError(f"daemon exited with {self.proc.returncode}: {self.log()[-2000:]}")
+        try:
+            with Client(self.socket, timeout_s=5.0) as client:
+                return bool(client.request("status").get("ok"))
+        except DaemonUnavailable:
+            return False
+
+    def log(self) -> str:
+        return self.log_path.read_text(errors="replace")
+
+    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+        with Client(self.socket, timeout_s=30.0) as client:
+            return client.request(cmd, **fields)
+
+    def wait_job_end(self, job_id: str, timeout_s: float = 20.0) -> dict[str, Any]:
+        def ended() -> dict[str, Any] | None:
+            job = self.request("job", id=job_id)["job"]
+            return job if job["outcome"] is not None else None
+        return wait_until(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
+
+    def wait_progress(self, fraction: float, timeout_s: float = 20.0) -> dict[str, Any]:
+        def reached() -> dict[str, Any] | None:
+            status = self.request("status")
+            job = status["job"]
+            return status if job and job["cycle"] >= fraction * job["total"] else None
+        return wait_until(reached, timeout_s, f"{fraction:.0%} of the job", poll_s=0.01)
+
+    def close(self, timeout_s: float = 15.0) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout_s)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(5.0)

@@ -1,0 +1,133 @@
+"""A small in-test MotionLink: a thread plays the set-points one per (short) cycle."""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from nurbsmotion.axes import AxisMap
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import FieldbusError, InputError
+from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
+from nurbsmotion.planning import Trajectory
+from nurbsmotion.service.planner import PlannedJob
+
+
+class FakeJob:
+    def __init__(self, link: "FakeLink", counts: np.ndarray) -> None:
+        self.link, self.counts = link, counts
+        self.index = -1
+        self.stop_flag = ""
+        self.done = threading.Event()
+        self.result: JobResult | None = None
+
+    def wait(self, timeout: float | None = None) -> JobResult | None:
+        return self.result if self.done.wait(timeout) else None
+
+    def request_stop(self) -> None:
+        self.stop_flag = "stopped"
+
+    def abort(self) -> None:
+        self.stop_flag = "aborted"
+
+
+class FakeLink:
+    def __init__(self, config: MachineConfig, cycle_s: float = 0.001) -> None:
+        self.axis_map = AxisMap.from_config(config)
+        self.names = [a.name for a in config.axes]
+        self.held = [0] * len(self.names)
+        self.phase = "holding"
+        self.faults: list[FaultReport] = []
+        self.job: FakeJob | None = None
+        self.rate = 1.0
+        self.cycle_s = cycle_s
+        self.shut = False
+        self.fault_at: int | None = None  # index at which the running job faults
+
+    def bring_up(self) -> None:
+        self.phase = "holding"
+
+    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> FakeJob:
+        if self.phase != "holding" or self.job is not None:
+            raise FieldbusError(f"stream: the axes are not holding (phase {self.phase})")
+        if np.any(counts[0] != self.held):
+            raise InputError("set-points", "the job does not start at the held position")
+        job = self.job = FakeJob(self, counts)
+        self.phase = "streaming"
+        threading.Thread(target=self._play, args=(job,), daemon=True).start()
+        return job
+
+    def _play(self, job: FakeJob) -> None:
+        outcome = "done"
+        stop = threading.Event()
+        for i in range(len(job.counts)):
+            stop.wait(self.cycle_s)
+            job.index = i
+            self.held = [int(c) for c in job.counts[i]]
+            if self.fault_at is not None and i >= self.fault_at:
+                self.faults.append(FaultReport(2, "Y", "emcy", 0x2310, i, f"node 2 (axis Y): EMCY 0x2310 at cycle {i}"))
+                self.phase, outcome = "quick_stop", "faulted"
+                break
+            if job.stop_flag:
+                self.phase = "quick_stop" if job.stop_flag == "aborted" else "holding"
+                outcome = job.stop_flag
+                break
+        else:
+            self.phase = "holding"
+        self.job = None
+        job.result = JobResult(outcome, job.index + 1, len(job.counts), tuple(self.faults if outcome == "faulted" else ()),
+                               0, 0)
+        job.done.set()
+
+    def status(self) -> MasterStatus:
+        job = self.job
+        axes = tuple(AxisStatus(n, i + 1, "OPERATION ENABLED", 0x1237, self.held[i], self.held[i], 0, 0, 0, None)
+                     for i, n in enumerate(self.names))
+        return MasterStatus(self.phase, 0, axes, CycleStats(0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0),
+                            job.index if job else None, len(job.counts) if job else None, tuple(self.faults))
+
+    def reset_faults(self) -> None:
+        if self.job is not None:
+            raise FieldbusError("reset faults: a job is still running")
+        self.phase = "holding"
+
+    def set_rate(self, rate: float) -> None:
+        self.rate = rate
+
+    def shutdown(self, timeout_s: float = 5.0) -> None:
+        if self.job is not None:
+            self.job.request_stop()
+            self.job.done.wait(timeout_s)
+        self.shut = True
+        self.phase = "offline"
+
+
+class FakePlannedJob(PlannedJob):
+    def write_trace(self, path) -> None:
+        np.savetxt(path, self.trajectory.position_mm, delimiter=",", header="x_mm,y_mm,z_mm", comments="")
+
+
+def line_plan(config: MachineConfig, start_mm: np.ndarray, end_x_mm: float, cycles: int) -> PlannedJob:
+    """A straight X move of ``cycles`` set-points (stand-in for the real planner)."""
+    x = np.linspace(start_mm[0], end_x_mm, cycles)
+    pos = np.column_stack([x, np.full(cycles, start_mm[1]), np.full(cycles, start_mm[2])])
+    traj = Trajectory("fake", config.cycle_period_s, np.zeros(cycles, np.int32), np.linspace(0, 1, cycles), pos,
+                      np.full(cycles, 10.0))
+    counts = AxisMap.from_config(config).to_counts(pos)
+    return FakePlannedJob(traj, counts, {"program": "line", "cycles": cycles}, 1.2)
+
+
+def fake_planner(config: MachineConfig, cycles: int = 200) -> Callable[[str, str, np.ndarray], PlannedJob]:
+    """Programs are 'X<end>' (one line) or 'bad' (rejected with a file:line error)."""
+    def planner(name: str, text: str, start_mm: np.ndarray) -> PlannedJob:
+        if not text.startswith("X"):
+            raise InputError(f"{name}:1", f"unknown word {text.split()[0]!r}")
+        return line_plan(config, start_mm, float(text[1:]), cycles)
+    return planner
+
+
+def with_data_dir(config: MachineConfig, data_dir: str, socket: str) -> MachineConfig:
+    return replace(config, data_dir=data_dir, control=replace(config.control, socket=socket))

@@ -1,0 +1,44 @@
+"""Every bad request gets a one-line error that names the field."""
+
+import json
+
+import pytest
+
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, encode, parse_request
+
+
+def test_a_valid_request_is_decoded_with_its_fields():
+    request = parse_request(b'{"cmd": "submit", "name": "a.nc", "program": "G01 X1"}')
+    assert request.cmd == "submit"
+    assert request.fields == {"name": "a.nc", "program": "G01 X1"}
+
+
+@pytest.mark.parametrize("line, field", [
+    (b'{"cmd": "submit", "name": "a.nc"', "request"),  # malformed JSON
+    (b'[1, 2]', "request"),
+    (b'\xff\xfe', "request"),
+    (b'{"name": "a.nc"}', "'cmd'"),
+    (b'{"cmd": 5}', "'cmd'"),
+    (b'{"cmd": "fly"}', "'cmd'"),
+    (b'{"cmd": "submit", "name": "a.nc"}', "'program'"),
+    (b'{"cmd": "submit", "name": 3, "program": "x"}', "'name'"),
+    (b'{"cmd": "override", "percent": "fast"}', "'percent'"),
+    (b'{"cmd": "override", "percent": true}', "'percent'"),
+    (b'{"cmd": "status", "verbose": 1}', "'verbose'"),
+])
+def test_bad_requests_name_the_field(line, field):
+    with pytest.raises(ProtocolError) as info:
+        parse_request(line)
+    message = str(info.value)
+    assert field in message and "\n" not in message
+
+
+def test_oversized_requests_are_refused_before_decoding():
+    with pytest.raises(ProtocolError, match="MB limit"):
+        parse_request(b" " * (MAX_REQUEST_BYTES + 1))
+
+
+def test_responses_are_one_line_of_json_without_nan():
+    line = encode({"ok": True, "value": float("nan"), "text": "a\nb"})
+    assert line.endswith(b"\n") and line.count(b"\n") == 1
+    assert json.loads(line)["value"] is None

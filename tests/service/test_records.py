@@ -1,0 +1,44 @@
+"""Job records keep the program and plan before motion and the outcome after it."""
+
+import json
+
+import pytest
+
+from nurbsmotion.service.records import JobRecords
+
+
+def test_a_job_folder_holds_program_plan_trace_and_outcome(tmp_path):
+    records = JobRecords(tmp_path)
+    record = records.create("part.nc", "G01 X1\n")
+    record.write_plan({"cycles": 3}, lambda path: path.write_text("t,x\n"))
+    assert (record.folder / "program.nc").read_text() == "G01 X1\n"
+    assert record.plan() == {"cycles": 3}
+    assert (record.folder / "trace.csv").read_text() == "t,x\n"
+    assert record.outcome() is None
+    record.write_outcome({"outcome": "completed"})
+    assert json.loads((record.folder / "outcome.json").read_text())["outcome"] == "completed"
+    assert records.find(record.job_id) == record
+    assert record.folder.parent == tmp_path / "jobs"
+
+
+def test_unknown_outcomes_are_refused(tmp_path):
+    record = JobRecords(tmp_path).create("a.nc", "")
+    with pytest.raises(ValueError):
+        record.write_outcome({"outcome": "fine"})
+
+
+def test_jobs_without_outcome_are_marked_interrupted_at_start(tmp_path):
+    records = JobRecords(tmp_path)
+    ended = records.create("a.nc", "x")
+    ended.write_outcome({"outcome": "stopped"})
+    left = records.create("b.nc", "y")
+    assert records.mark_interrupted() == [left]
+    assert left.outcome()["outcome"] == "interrupted"
+    assert ended.outcome()["outcome"] == "stopped"
+    assert records.mark_interrupted() == []
+
+
+def test_find_refuses_names_that_are_not_job_ids(tmp_path):
+    records = JobRecords(tmp_path)
+    records.create("a.nc", "x")
+    assert records.find("../..") is None and records.find("*") is None
