@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-INT8, INT16, INT32, UINT8, UINT16, UINT32 = 0x2, 0x3, 0x4, 0x5, 0x6, 0x7
+INT8, INT16, INT32, UINT8, UINT16, UINT32, VISIBLE_STRING = 0x2, 0x3, 0x4, 0x5, 0x6, 0x7, 0x9
 VAR, ARRAY, RECORD = 0x7, 0x8, 0x9
 
 # (name, data type, access, default, pdo-mappable)
@@ -46,6 +46,8 @@ OBJECTS: dict[int, tuple[str, int, object]] = {
     0x1001: ("Error register", VAR, var("", UINT8, "ro")),
     0x1003: ("Pre-defined error field", ARRAY, [var(f"Standard error field {i}", UINT32, "ro") for i in range(1, 9)]),
     0x1005: ("COB-ID SYNC message", VAR, var("", UINT32, "rw", "0x00000080")),
+    0x1008: ("Manufacturer device name", VAR, var("", VISIBLE_STRING, "const", "nurbsmotion simulated servo")),
+    0x100A: ("Manufacturer software version", VAR, var("", VISIBLE_STRING, "const", "1.0")),
     0x1006: ("Communication cycle period", VAR, var("", UINT32, "rw", "1000")),
     0x1014: ("COB-ID EMCY", VAR, var("", UINT32, "rw", "$NODEID+0x80")),
     0x1016: ("Consumer heartbeat time", ARRAY, [var(f"Consumer heartbeat time {i}", UINT32, "rw") for i in range(1, 5)]),

@@ -111,3 +111,11 @@ def test_shutdown_stops_the_running_job_and_records_it(parts):
     assert link.shut
     outcome = controller.job_info(job["id"])["job"]["outcome"]
     assert outcome["outcome"] == "stopped" and "daemon" in outcome["reason"]
+
+
+@pytest.mark.parametrize("name", ["", "a\nb.nc", "x" * 256])
+def test_program_names_must_be_printable_file_names(parts, name):
+    controller, link = parts
+    with pytest.raises(InputError, match="'name'"):
+        controller.submit(name, "X1")
+    assert link.job is None

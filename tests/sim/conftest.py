@@ -74,6 +74,13 @@ class Bench:
         wait_until(lambda: bytes([0]) in self.frames.of(0x700 + node_id), what=f"boot-up of node {node_id}")
         return drive, node
 
+    def add_enabled(self, node_id: int, mode: int = 8, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
+        """A drive in NMT OPERATIONAL and OPERATION ENABLED in ``mode`` (IP with bit 4)."""
+        drive, node = self.add(node_id, **drive_kwargs)
+        self.operational(node_id)
+        self.enable(node_id, mode)
+        return drive, node
+
     def send(self, can_id: int, data: bytes) -> None:
         self.master.send_message(can_id, data)
 

@@ -115,3 +115,19 @@ def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Pat
             proc.kill()
             proc.wait()
     assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["node1.csv", "node2.csv"]
+
+
+def test_an_eds_that_does_not_load_names_the_axis_field(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "m.yaml"
+    config.write_text("bus: {interface: virtual, channel: x}\naxes:\n  - {name: X, node_id: 1}\n  - {name: Y, node_id: 2, eds: none.eds}\n")
+    assert main(["sim", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{config}:4: axes[1].eds: cannot simulate axis Y" in err[0]
+
+
+def test_a_bus_that_does_not_open_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    config = tmp_path / "m.yaml"
+    config.write_text("bus: {interface: socketcan, channel: nurbs-no-such-if}\naxes:\n  - {name: X, node_id: 1}\n")
+    assert main(["sim", "--config", str(config)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bus: cannot open socketcan channel nurbs-no-such-if" in err[0]

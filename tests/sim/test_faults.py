@@ -23,15 +23,8 @@ def statuswords(bench: Bench, node_id: int) -> list[int]:
     return [struct.unpack_from("<H", data)[0] for data in bench.frames.of(0x180 + node_id)]
 
 
-def running(bench: Bench, node_id: int, **kwargs: object):
-    drive, node = bench.add(node_id, **kwargs)
-    bench.operational(node_id)
-    bench.enable(node_id, 8)
-    return drive, node
-
-
 def test_fault_at_sync_sends_emcy_and_sets_the_fault_bit_in_that_syncs_tpdo(bench: Bench) -> None:
-    drive, node = running(bench, 2)
+    drive, node = bench.add_enabled(2)
     drive.inject(FaultInjection("fault", at_sync=3, code=0x2310))
     bench.sync()
     bench.sync()
@@ -45,7 +38,7 @@ def test_fault_at_sync_sends_emcy_and_sets_the_fault_bit_in_that_syncs_tpdo(benc
 
 
 def test_fault_reset_on_rising_edge_clears_and_sends_emcy_reset(bench: Bench) -> None:
-    drive, node = running(bench, 2)
+    drive, node = bench.add_enabled(2)
     drive.inject(FaultInjection("fault", code=0x4210))
     assert state_of_statusword(node.sdo[0x6041].raw) is State.FAULT
     node.sdo[0x6040].raw = 0x80
@@ -56,14 +49,14 @@ def test_fault_reset_on_rising_edge_clears_and_sends_emcy_reset(bench: Bench) ->
 
 
 def test_fault_at_time(bench: Bench) -> None:
-    drive, node = running(bench, 3)
+    drive, node = bench.add_enabled(3)
     bench.sim.inject(FaultInjection("fault", node_id=3, at_s=0.0, code=0x3210))
     wait_until(lambda: emcys(bench, 3), what="timed fault EMCY")
     assert emcys(bench, 3) == [(0x3210, 0x05)]
 
 
 def test_heartbeat_stop_makes_the_node_silent(bench: Bench) -> None:
-    drive, node = running(bench, 4)
+    drive, node = bench.add_enabled(4)
     node.sdo[0x1017].raw = 10
     wait_until(lambda: len(bench.frames.of(0x704)) >= 3, what="heartbeats")
     drive.inject(FaultInjection("heartbeat_stop"))
@@ -84,7 +77,7 @@ def test_heartbeat_stop_makes_the_node_silent(bench: Bench) -> None:
 
 
 def test_ignore_sync_sends_no_tpdo_and_applies_nothing(bench: Bench) -> None:
-    drive, _ = running(bench, 5)
+    drive, _ = bench.add_enabled(5)
     bench.sync()
     drive.inject(FaultInjection("ignore_sync", count=2))
     bench.send(0x205, rpdo(0x0F, 50))
@@ -98,7 +91,7 @@ def test_ignore_sync_sends_no_tpdo_and_applies_nothing(bench: Bench) -> None:
 
 
 def test_forced_following_error(bench: Bench) -> None:
-    drive, _ = running(bench, 6)
+    drive, _ = bench.add_enabled(6)
     drive.inject(FaultInjection("following_error", at_sync=2))
     bench.sync()
     bench.sync()
@@ -108,7 +101,7 @@ def test_forced_following_error(bench: Bench) -> None:
 
 
 def test_stall_trips_the_following_error_window_after_the_timeout(bench: Bench) -> None:
-    drive, node = running(bench, 7)
+    drive, node = bench.add_enabled(7)
     node.sdo[0x6065].raw = 100  # window, counts
     node.sdo[0x6066].raw = 3  # time-out, ms (3 SYNCs of 1 ms)
     drive.inject(FaultInjection("stall"))
@@ -123,7 +116,7 @@ def test_stall_trips_the_following_error_window_after_the_timeout(bench: Bench) 
 
 
 def test_following_error_window_disabled_by_all_ones(bench: Bench) -> None:
-    drive, node = running(bench, 7)
+    drive, node = bench.add_enabled(7)
     node.sdo[0x6065].raw = 0xFFFFFFFF
     drive.inject(FaultInjection("stall"))
     bench.send(0x207, rpdo(0x0F, 10**6))
@@ -133,7 +126,7 @@ def test_following_error_window_disabled_by_all_ones(bench: Bench) -> None:
 
 
 def test_drop_rpdo(bench: Bench) -> None:
-    drive, _ = running(bench, 8)
+    drive, _ = bench.add_enabled(8)
     bench.sync()
     drive.inject(FaultInjection("drop_rpdo", count=2))
     for value in (1, 2, 3, 4):
@@ -165,7 +158,7 @@ def test_sdo_abort_for_one_object_leaves_others_alone(bench: Bench) -> None:
 
 
 def test_software_limit_refuses_the_setpoint_with_a_fault(bench: Bench) -> None:
-    drive, node = running(bench, 10)
+    drive, node = bench.add_enabled(10)
     node.sdo[0x607D][1].raw = -100
     node.sdo[0x607D][2].raw = 100
     bench.sync()
@@ -180,7 +173,7 @@ def test_software_limit_refuses_the_setpoint_with_a_fault(bench: Bench) -> None:
 
 @pytest.mark.parametrize("option,end,transitions", [(2, State.SWITCH_ON_DISABLED, [11, 12]), (6, State.QUICK_STOP_ACTIVE, [11]), (0, State.SWITCH_ON_DISABLED, [11, 12])])
 def test_quick_stop_ramps_down_then_follows_the_option(bench: Bench, option: int, end: State, transitions: list[int]) -> None:
-    drive, node = running(bench, 11, lag_cycles=0)
+    drive, node = bench.add_enabled(11, lag_cycles=0)
     node.sdo[0x605A].raw = option
     node.sdo[0x6085].raw = 1_000_000  # counts/s^2: 1000 counts/s less per 1 ms SYNC
     bench.sync()
@@ -229,3 +222,30 @@ def test_bad_fault_spec_is_one_line_naming_the_spec(text: str, message: str) -> 
     with pytest.raises(InputError) as err:
         parse_fault_spec(text)
     assert message in str(err.value) and text in str(err.value) and "\n" not in str(err.value)
+
+
+def test_fault_injected_before_start_fires_right_after_boot(channel: str) -> None:
+    import can
+
+    from nurbsmotion.sim import SimNetwork
+
+    listener = can.Bus(interface="virtual", channel=channel)
+    sim = SimNetwork(channel=channel)
+    drive = sim.add_drive(12)
+    drive.inject(FaultInjection("fault", code=0x4210))
+    drive.inject(FaultInjection("fault", at_s=0.0, code=0x3210))
+    try:
+        sim.start()
+        frames: list[can.Message] = []
+
+        def emcy_codes() -> list[bytes]:
+            while (msg := listener.recv(0)) is not None:
+                frames.append(msg)
+            return [bytes(m.data[:2]) for m in frames if m.arbitration_id == 0x8C]
+
+        wait_until(lambda: emcy_codes() == [b"\x10\x42", b"\x10\x32"], what="both EMCYs after the boot-up")
+        assert frames[0].arbitration_id == 0x70C and bytes(frames[0].data) == b"\x00"
+        assert drive.state is State.FAULT
+    finally:
+        sim.stop()
+        listener.shutdown()

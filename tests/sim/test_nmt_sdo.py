@@ -81,23 +81,25 @@ def test_sdo_write_then_read_back(bench: Bench) -> None:
 
 def test_segmented_upload_of_a_long_object_is_served(bench: Bench) -> None:
     _, node = bench.add(6)
-    # 0x1018 sub 1..4 are 4 bytes; read the whole EDS-visible string-free record entry by entry
-    assert [node.sdo[0x1018][i].raw for i in (1, 2, 3)] == [0, 0x4E4D0402, 0x00010000]
+    assert node.sdo[0x1008].raw == "nurbsmotion simulated servo"  # 27 bytes: segmented
 
 
 @pytest.mark.parametrize(
-    "index,subindex,value,code",
+    "index,subindex,data,code",
     [
-        (0x6041, 0, 1, 0x06010002),  # read-only
-        (0x2000, 0, 1, 0x06020000),  # no such object
-        (0x607D, 9, 1, 0x06090011),  # no such sub-index
-        (0x6060, 0, 3, 0x06090030),  # unsupported mode
+        (0x6041, 0, b"\x01\x00", 0x06010002),  # read-only
+        (0x2000, 0, b"\x01\x00\x00\x00", 0x06020000),  # no such object
+        (0x607D, 9, b"\x01\x00\x00\x00", 0x06090011),  # no such sub-index
+        (0x6065, 0, b"\x01\x00", 0x06070010),  # wrong length
+        (0x6060, 0, b"\x03", 0x06090030),  # unsupported mode
+        (0x60C0, 0, b"\x01\x00", 0x06090030),  # only linear interpolation
+        (0x1400, 2, b"\xF5", 0x06090030),  # reserved transmission type 245
     ],
 )
-def test_sdo_write_aborts(bench: Bench, index: int, subindex: int, value: int, code: int) -> None:
+def test_sdo_write_aborts(bench: Bench, index: int, subindex: int, data: bytes, code: int) -> None:
     _, node = bench.add(7)
     with pytest.raises(SdoAbortedError) as err:
-        node.sdo.download(index, subindex, value.to_bytes(1 if index == 0x6060 else 4, "little", signed=True))
+        node.sdo.download(index, subindex, data)
     assert err.value.code == code
 
 

@@ -19,16 +19,9 @@ def tpdo1(data: bytes) -> tuple[int, int]:
     return struct.unpack("<Hi", data)
 
 
-def ready(bench: Bench, node_id: int, mode: int, **kwargs: object):
-    drive, node = bench.add(node_id, **kwargs)
-    bench.operational(node_id)
-    bench.enable(node_id, mode)
-    return drive, node
-
-
 @pytest.mark.parametrize("mode,cob,controlword", [(CSP, 0x200, 0x0F), (IP, 0x300, 0x1F)])
 def test_setpoint_received_after_sync_n_is_applied_at_sync_n_plus_1(bench: Bench, mode: int, cob: int, controlword: int) -> None:
-    drive, _ = ready(bench, 2, mode, lag_cycles=0)
+    drive, _ = bench.add_enabled(2, mode, lag_cycles=0)
     bench.sync()  # SYNC 1
     bench.send(cob + 2, rpdo(controlword, 1000))
     wait_until(lambda: drive.stats.rpdos_received == 1, what="RPDO received")
@@ -42,7 +35,7 @@ def test_setpoint_received_after_sync_n_is_applied_at_sync_n_plus_1(bench: Bench
 
 
 def test_ip_active_bit_needs_controlword_bit_4(bench: Bench) -> None:
-    drive, node = ready(bench, 3, IP)
+    drive, node = bench.add_enabled(3, IP)
     node.sdo[0x6040].raw = 0x0F
     assert not node.sdo[0x6041].raw & (1 << 12)
     bench.send(0x303, rpdo(0x0F, 500))
@@ -53,7 +46,7 @@ def test_ip_active_bit_needs_controlword_bit_4(bench: Bench) -> None:
 
 
 def test_stream_of_setpoints_is_recorded_once_each_in_order(bench: Bench) -> None:
-    drive, _ = ready(bench, 4, CSP)
+    drive, _ = bench.add_enabled(4, CSP)
     bench.sync()
     sent = [10 * k * k for k in range(1, 41)]
     for k, value in enumerate(sent):
@@ -67,7 +60,7 @@ def test_stream_of_setpoints_is_recorded_once_each_in_order(bench: Bench) -> Non
 
 
 def test_two_rpdos_before_one_sync_the_last_wins_and_is_counted(bench: Bench) -> None:
-    drive, _ = ready(bench, 4, CSP)
+    drive, _ = bench.add_enabled(4, CSP)
     bench.sync()
     bench.send(0x204, rpdo(0x0F, 100))
     bench.send(0x204, rpdo(0x0F, 200))
@@ -99,7 +92,7 @@ def test_controlword_by_rpdo_drives_the_state_machine_at_sync(bench: Bench) -> N
 
 
 def test_enable_holds_position_until_the_first_setpoint(bench: Bench) -> None:
-    drive, _ = ready(bench, 6, CSP)
+    drive, _ = bench.add_enabled(6, CSP)
     for _ in range(3):
         bench.sync()
     assert drive.position_actual == 0 and len(drive.recorder) == 0
@@ -107,7 +100,7 @@ def test_enable_holds_position_until_the_first_setpoint(bench: Bench) -> None:
 
 
 def test_recording_csv_round_trip(bench: Bench, tmp_path) -> None:
-    drive, _ = ready(bench, 7, CSP)
+    drive, _ = bench.add_enabled(7, CSP)
     bench.sync()
     for value in (5, 6, 7):
         bench.send(0x207, rpdo(0x0F, value))
@@ -118,7 +111,7 @@ def test_recording_csv_round_trip(bench: Bench, tmp_path) -> None:
 
 
 def test_sync_index_restarts_when_entering_operational(bench: Bench) -> None:
-    drive, _ = ready(bench, 8, CSP)
+    drive, _ = bench.add_enabled(8, CSP)
     bench.sync()
     bench.sync()
     assert drive.sync_index == 2
@@ -131,7 +124,7 @@ def test_sync_index_restarts_when_entering_operational(bench: Bench) -> None:
 
 def test_velocity_limit_and_lag_shape_the_actual_position(bench: Bench) -> None:
     # 1 ms period, 100000 counts/s: at most 100 counts per SYNC; lag 2 SYNCs
-    drive, _ = ready(bench, 9, CSP, lag_cycles=2, max_velocity_counts_s=100_000)
+    drive, _ = bench.add_enabled(9, CSP, lag_cycles=2, max_velocity_counts_s=100_000)
     bench.sync()
     bench.send(0x209, rpdo(0x0F, 1000))
     actual = []
@@ -139,3 +132,12 @@ def test_velocity_limit_and_lag_shape_the_actual_position(bench: Bench) -> None:
         bench.sync()
         actual.append(tpdo1(bench.frames.of(0x189)[-1])[1])
     assert actual == [0, 0, 100, 200, 300]
+
+
+@pytest.mark.parametrize("mode,expected_s", [(CSP, 0.004), (IP, 0.002)])
+def test_servo_period_is_0x1006_in_csp_and_0x60c2_in_ip(bench: Bench, mode: int, expected_s: float) -> None:
+    drive, node = bench.add(10)
+    node.sdo[0x1006].raw = 4000
+    node.sdo[0x60C2][1].raw = 2
+    node.sdo[0x6060].raw = mode
+    assert drive.period_s == pytest.approx(expected_s)

@@ -10,10 +10,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import can
+
 from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim import FaultInjection, SimNetwork, parse_fault_spec
+from nurbsmotion.sim.network import DriveSetupError
 
 HELP = "run simulated CiA-402 drives for the configuration's axes until SIGINT/SIGTERM"
 
@@ -67,9 +70,17 @@ def serve(
     record_dir: str | Path | None = None,
     on_ready: Callable[[SimNetwork], Any] | None = None,
 ) -> SimNetwork:
-    """Run the drives until ``stop`` is set; then stop them and write the recordings."""
-    net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s)
-    net.start()
+    """Run the drives until ``stop`` is set; then stop them and write the recordings
+    (set-points are recorded only when ``record_dir`` is given)."""
+    try:
+        net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s,
+                                     record=record_dir is not None)
+    except DriveSetupError as err:
+        raise InputError(machine.where(f"axes[{err.axis_index}].eds"), err.message) from None
+    try:
+        net.start()
+    except (OSError, can.CanError) as err:
+        raise InputError(machine.where("bus"), f"cannot open {net.interface} channel {net.channel}: {err}") from None
     try:
         for fault in faults:
             net.inject(fault)

@@ -66,6 +66,7 @@ class Controller:
     # ------------------------------------------------------------------ requests
     def submit(self, name: str, text: str) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors."""
+        check_program_name(name)
         with self._lock:
             self._check_can_start()
             self._planning = True
@@ -236,12 +237,16 @@ class Controller:
                 outcome["drive_recordings"] = self.simulation.write_recordings(str(job.record.drives_dir))
             except OSError as err:
                 log.warning(kv("recording_not_written", job=job.record.job_id, error=err))
-        job.record.write_outcome(outcome)
-        log.info(kv("job_ended", job=job.record.job_id, outcome=outcome["outcome"]))
-        with self._lock:
-            self._last = {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), **{
-                k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")}}
-            self._job = None
+        try:
+            job.record.write_outcome(outcome)
+        except OSError as err:  # the record is incomplete, but the daemon must stay usable
+            log.error(kv("outcome_not_written", job=job.record.job_id, error=err))
+        finally:
+            log.info(kv("job_ended", job=job.record.job_id, outcome=outcome["outcome"]))
+            with self._lock:
+                self._last = {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), **{
+                    k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")}}
+                self._job = None
 
     def _outcome(self, job: ActiveJob, result: JobResult) -> dict[str, Any]:
         outcome = OUTCOME_OF_RESULT.get(result.outcome, "fault")
@@ -269,6 +274,12 @@ class Controller:
             if job.watcher is not None:
                 job.watcher.join(timeout_s)
         self.link.shutdown(timeout_s)
+
+
+def check_program_name(name: str) -> None:
+    """A program name is a file name: it appears in every error line and names the record file."""
+    if not name or len(name) > 255 or any(ord(ch) < 32 or ch == "\x7f" for ch in name):
+        raise InputError("field 'name'", "must be a file name of 1-255 printable characters")
 
 
 def fault_dict(fault: FaultReport) -> dict[str, Any]:

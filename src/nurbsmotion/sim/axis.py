@@ -35,13 +35,20 @@ class UnsupportedMode(ValueError):
 class AxisParameters:
     """The object-dictionary parameters the per-SYNC step uses (cached by the drive)."""
 
-    period_s: float = 1e-3  # 0x60C2 (or 0x1006)
+    ip_period_s: float = 1e-3  # 0x60C2, the IP cycle
+    sync_period_s: float = 1e-3  # 0x1006, the SYNC cycle (0 -> 0x60C2)
     fe_window_counts: int = 10000  # 0x6065; 0xFFFFFFFF disables the monitor
     fe_timeout_ms: int = 20  # 0x6066
     quick_stop_option: int = 2  # 0x605A
     quick_stop_decel_counts_s2: float = 1e7  # 0x6085
     limit_min_counts: int = 0  # 0x607D sub 1; min >= max disables the limits
     limit_max_counts: int = 0  # 0x607D sub 2
+
+    def period_s(self, mode: int) -> float:
+        """The cycle one SYNC stands for: 0x60C2 in IP, 0x1006 in CSP (0x60C2 if 0x1006 is 0)."""
+        if mode == Mode.INTERPOLATED_POSITION or self.sync_period_s <= 0:
+            return self.ip_period_s
+        return self.sync_period_s
 
 
 def error_register_bits(code: int) -> int:
@@ -172,7 +179,7 @@ class Cia402Axis:
     # ------------------------------------------------------------------ per SYNC
     def step(self, sync_index: int, sync_counter: int) -> None:
         """One SYNC: take the new set-point (recorded), move, check the following error."""
-        period_s = self.params.period_s
+        period_s = self.params.period_s(self.mode_display)
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip
         self._fresh_target = self._fresh_ip = False

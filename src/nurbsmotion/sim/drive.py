@@ -45,6 +45,8 @@ log = logging.getLogger(__name__)
 
 EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
+IP_LINEAR = 0  # 0x60C0 sub-mode
+DEFAULT_PERIOD_S = 1e-3  # if 0x60C2 is 0
 TICK_MAX_S = 0.05  # the ticker looks at a drive at least this often
 _FOREVER = math.inf
 
@@ -106,7 +108,8 @@ class SimDrive:
     Create it, then :meth:`attach` it to a connected ``canopen.Network`` (``SimNetwork`` does
     both). ``lag_cycles`` and ``max_velocity_counts_s`` set the servo model; ``identity``
     (vendor id, product code) overrides 0x1018 sub 1/2; ``parameters`` {(index, subindex):
-    value} are the drive's stored values, restored instead of the EDS defaults on every reset.
+    value} are the drive's stored values, restored instead of the EDS defaults on every reset;
+    ``record`` keeps every applied set-point in ``recorder``.
     """
 
     def __init__(
@@ -118,6 +121,7 @@ class SimDrive:
         max_velocity_counts_s: float = 1e9,
         identity: tuple[int, int] | None = None,
         parameters: dict[tuple[int, int], int] | None = None,
+        record: bool = True,
         name: str | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -133,7 +137,7 @@ class SimDrive:
             self._stored[(c.IDENTITY, 1)] = struct.pack("<I", identity[0])
             self._stored[(c.IDENTITY, 2)] = struct.pack("<I", identity[1])
         self.servo = ServoModel(lag_cycles, max_velocity_counts_s)
-        self.recorder = SetpointRecorder()
+        self.recorder = SetpointRecorder(enabled=record)
         self.stats = DriveStats()
         self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode())
         self.network: canopen.Network | None = None
@@ -207,8 +211,8 @@ class SimDrive:
 
     @property
     def period_s(self) -> float:
-        """The cycle the servo model assumes (0x60C2, else 0x1006)."""
-        return self.axis.params.period_s
+        """The cycle the servo model assumes now: 0x60C2 in IP, 0x1006 in CSP."""
+        return self.axis.params.period_s(self.axis.mode_display)
 
     @property
     def sync_index(self) -> int:
@@ -226,6 +230,9 @@ class SimDrive:
             self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
             self._t0 = self._clock()
             self._boot(reset_application=True)
+            for fault in self._deferred:
+                self._apply_injection(fault)
+            self._deferred.clear()
 
     def detach(self) -> None:
         """Leave the network (no more frames in or out)."""
@@ -241,13 +248,16 @@ class SimDrive:
             self.network = None
 
     def inject(self, fault: FaultInjection) -> None:
-        """Inject ``fault`` now, at its SYNC index or at its time (seconds after attach)."""
+        """Inject ``fault`` at once, at its SYNC index, or ``at_s`` seconds after the drive
+        was attached (an immediate fault injected before attach fires right after boot)."""
         with self._lock:
             self._fault_seq += 1
             if fault.at_sync is not None:
                 bisect.insort(self._sync_faults, (fault.at_sync, self._fault_seq, fault))
             elif fault.at_s is not None:
-                bisect.insort(self._time_faults, (self._t0 + fault.at_s, self._fault_seq, fault))
+                bisect.insort(self._time_faults, (fault.at_s, self._fault_seq, fault))
+            elif self.network is None:
+                self._deferred.append(fault)
             else:
                 self._apply_injection(fault)
 
@@ -267,11 +277,15 @@ class SimDrive:
         """Send a due heartbeat, fire due timed faults, watch consumed heartbeats; returns
         the time this should be called again."""
         with self._lock:
-            while self._time_faults and self._time_faults[0][0] <= now:
+            if self.network is None:
+                return now + TICK_MAX_S
+            while self._time_faults and self._t0 + self._time_faults[0][0] <= now:
                 self._apply_injection(self._time_faults.pop(0)[2])
             if self._heartbeat_period_s > 0 and not self.silent and now >= self._next_heartbeat:
                 self._send_heartbeat()
-                self._next_heartbeat = max(self._next_heartbeat + self._heartbeat_period_s, now)
+                self._next_heartbeat += self._heartbeat_period_s
+                if self._next_heartbeat <= now:  # fell behind: no burst of catch-up heartbeats
+                    self._next_heartbeat = now + self._heartbeat_period_s
             for producer in self._heartbeat_consumer.newly_failed(now):
                 if not self.silent:
                     log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer))
@@ -280,8 +294,13 @@ class SimDrive:
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
-                deadline = min(deadline, self._time_faults[0][0])
+                deadline = min(deadline, self._t0 + self._time_faults[0][0])
             return deadline
+
+    def value(self, index: int, subindex: int = 0) -> Any:
+        """An object's current value, as an SDO upload would read it."""
+        with self._lock:
+            return self._od_value(index, subindex)
 
     def write_recording(self, path: str | Path) -> Path:
         """Write the applied set-points as CSV (see ``recording``)."""
@@ -306,8 +325,9 @@ class SimDrive:
         self._ignore_syncs: float = 0
         self._drop_rpdos = 0
         self._sdo_refusals: list[list[Any]] = []  # [index|None, subindex|None, code, remaining]
-        self._time_faults: list[tuple[float, int, FaultInjection]] = []
-        self._sync_faults: list[tuple[int, int, FaultInjection]] = []
+        self._time_faults: list[tuple[float, int, FaultInjection]] = []  # (at_s, order, fault)
+        self._sync_faults: list[tuple[int, int, FaultInjection]] = []  # (at_sync, order, fault)
+        self._deferred: list[FaultInjection] = []  # immediate, injected before attach
 
     def _boot(self, reset_application: bool) -> None:
         """Reset communication (and the application): stored values back, boot-up message,
@@ -413,10 +433,9 @@ class SimDrive:
         """Cache the parameters SYNC handling uses (after boot and every SDO write)."""
         params = self.axis.params
         value, exponent = self._od_value(c.IP_TIME_PERIOD, 1), self._od_value(c.IP_TIME_PERIOD, 2)
-        period_s = value * 10.0**exponent
-        if period_s <= 0:
-            period_s = self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
-        params.period_s = period_s if period_s > 0 else 1e-3
+        ip_period_s = value * 10.0**exponent
+        params.ip_period_s = ip_period_s if ip_period_s > 0 else DEFAULT_PERIOD_S
+        params.sync_period_s = self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
         params.fe_window_counts = self._od_value(c.FOLLOWING_ERROR_WINDOW)
         params.fe_timeout_ms = self._od_value(c.FOLLOWING_ERROR_TIMEOUT)
         params.quick_stop_option = self._od_value(c.QUICK_STOP_OPTION)
@@ -465,6 +484,8 @@ class SimDrive:
             self.axis.error_history.clear()
         elif index in (c.SYNC_COB_ID, c.EMCY_COB_ID) and value & pdo_layout.COB_ID_EXTENDED_BIT:
             raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
+        elif index == c.IP_SUB_MODE and value != IP_LINEAR:
+            raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)  # only linear interpolation
         setter = self._live_write.get((index, subindex))
         if setter is not None:
             setter(value)

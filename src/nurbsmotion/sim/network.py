@@ -40,6 +40,15 @@ def period_as_value_exponent(period_s: float) -> tuple[int, int]:
     raise ValueError(f"period {period_s} s cannot be encoded in 0x60C2")
 
 
+class DriveSetupError(ValueError):
+    """A drive of axis ``axis_index`` could not be built (e.g. its EDS does not load)."""
+
+    def __init__(self, axis_index: int, message: str) -> None:
+        super().__init__(message)
+        self.axis_index = axis_index
+        self.message = message
+
+
 class SimNetwork:
     """Any number of :class:`SimDrive` on one bus (``interface``/``channel`` as python-can).
 
@@ -71,7 +80,9 @@ class SimNetwork:
         return drive
 
     @classmethod
-    def for_machine(cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None) -> "SimNetwork":
+    def for_machine(
+        cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True
+    ) -> "SimNetwork":
         """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
         bus.interface/channel/bitrate, cycle_period_s, axes[].name/node_id/mode/eds/identity).
 
@@ -81,7 +92,7 @@ class SimNetwork:
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
         value, exponent = period_as_value_exponent(machine.cycle_period_s)
-        for axis in machine.axes:
+        for axis_index, axis in enumerate(machine.axes):
             identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
             parameters = {
                 (0x6060, 0): MODE_OF_AXIS[axis.mode],
@@ -89,22 +100,27 @@ class SimNetwork:
                 (0x60C2, 1): value,
                 (0x60C2, 2): exponent,
             }
-            net.add_drive(
-                axis.node_id,
-                axis.eds,
-                lag_cycles=lag_cycles,
-                max_velocity_counts_s=max_velocity_counts_s or UNLIMITED_VELOCITY_COUNTS_S,
-                identity=identity,
-                parameters=parameters,
-                name=f"{axis.name}/node{axis.node_id}",
-            )
+            try:
+                net.add_drive(
+                    axis.node_id,
+                    axis.eds,
+                    lag_cycles=lag_cycles,
+                    max_velocity_counts_s=max_velocity_counts_s or UNLIMITED_VELOCITY_COUNTS_S,
+                    identity=identity,
+                    parameters=parameters,
+                    record=record,
+                    name=f"{axis.name}/node{axis.node_id}",
+                )
+            except Exception as err:  # noqa: BLE001 - canopen raises many kinds for a bad EDS
+                raise DriveSetupError(axis_index, f"cannot simulate axis {axis.name}: {type(err).__name__}: {err}") from err
         return net
 
     def __getitem__(self, node_id: int) -> SimDrive:
         return self.drives[node_id]
 
     def start(self) -> "SimNetwork":
-        """Open the bus, boot every drive (boot-up messages) and start the heartbeats."""
+        """Open the bus, boot every drive (boot-up messages) and start the heartbeats.
+        A bus that cannot be opened raises OSError or can.CanError and starts nothing."""
         if self.network is not None:
             return self
         network = canopen.Network()

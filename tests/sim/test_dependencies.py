@@ -1,0 +1,32 @@
+"""Architecture rule: the simulated drives are an independent implementation of the drive
+side; they never import the master (nurbsmotion.fieldbus) or higher layers."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import nurbsmotion.sim
+
+ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log"}
+ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses",
+                     "logging", "math", "numpy", "pathlib", "struct", "threading", "time", "typing"}
+
+
+def imported_modules(path: Path) -> set[str]:
+    names: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module:
+            names.add(node.module)
+    return names
+
+
+def test_sim_imports_only_the_shared_modules_and_its_libraries() -> None:
+    package = Path(nurbsmotion.sim.__file__).parent
+    for path in sorted(package.glob("*.py")):
+        for name in imported_modules(path):
+            if name.startswith("nurbsmotion.sim") or name.split(".")[0] in ALLOWED_TOP_LEVEL:
+                continue
+            assert name in ALLOWED_NURBSMOTION, f"{path.name} imports {name}"
