@@ -343,6 +343,11 @@ class Master:
             raise FieldbusError("reset faults: the drives are not brought up (call bring_up())")
         if self._job is not None:
             raise FieldbusError("reset faults: a job is still running")
+        if any(state != c.NmtState.OPERATIONAL for state in self._hb_state) or \
+                min(self._fb_cycle) < self._cycle - 3:  # a drive restarted or went silent (power loss):
+            self.shutdown()  # it lost its configuration, so bring every axis up again (or name the missing node)
+            self.bring_up()
+            return
         self._ready.clear()
         self._enable_error = None
         self._request("enable", None)
