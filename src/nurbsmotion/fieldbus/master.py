@@ -769,6 +769,11 @@ class Master:
                              f"node {node} (axis {self._names[i]}): no heartbeat for "
                              f"{(now - self._hb_time[i]) * 1000:.0f} ms (consumer time "
                              f"{self._hb_timeout_s * 1000:.0f} ms) at cycle {k}")
+            elif running and k - self._fb_cycle[i] > max(self._fe_timeout_cycles[i] + 3,
+                                                          self._hb_timeout_s / self._period_s):
+                node = self._node_ids[i]  # alive but its feedback stopped: the following error is unknown
+                self._report(node, self._names[i], "following_error", 0, k, f"node {node} (axis {self._names[i]}): "
+                             f"no TPDO1 (position actual) for {k - self._fb_cycle[i]} cycles at cycle {k}")
 
     def _check_statusword(self, i: int, k: int, running: bool) -> None:
         """Following error bit 13, fault bit 3, and (running) leaving OPERATION ENABLED."""
