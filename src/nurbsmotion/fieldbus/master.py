@@ -294,8 +294,9 @@ class Master:
         try:
             self._bring_up_by_sdo(self._network)
         except FieldbusError as err:
+            err = self._twin_error() or err  # duplicate SDO answers make some step fail first: name the cause
             self._faults.append(FaultReport(None, None, "bringup", 0, -1, str(err)))
-            raise
+            raise err from None
         for node_id in self._node_ids:
             self._network.send_message(c.COB_NMT, bytes([c.NmtCommand.START, node_id]))
         now = time.perf_counter()
@@ -327,6 +328,17 @@ class Master:
             self._hold[i] = self._sp[i] = self._fb_pos[i]
             log.info(kv("drive_configured", node=axis.node_id, axis=axis.name, mode=axis.mode,
                         position=self._fb_pos[i], statusword=f"0x{self._fb_status[i]:04X}"))
+        twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
+        if twin is not None:
+            raise twin
+
+    def _twin_error(self) -> FieldbusError | None:
+        """Two boot-ups of one node after one NMT reset: two devices with that node id."""
+        for node_id, count in self._bootup.count.items():
+            if count > 1:
+                return FieldbusError(f"node {node_id}: bring-up step 'boot-up': {count} boot-up messages after one "
+                                     f"NMT reset: two devices with the same node id?")
+        return None
 
     def _wait_enabled(self) -> None:
         """Wait for the loop's state machine: every axis ready, or a named error."""
