@@ -12,6 +12,7 @@ import uuid
 from typing import Iterator
 
 import can
+from can.interfaces.virtual import VirtualBus
 import numpy as np
 import pytest
 
@@ -31,7 +32,7 @@ def make_config(channel: str, mode: str = "csp", n_axes: int = 3, period_ms: flo
     axes = "".join(f"  - {{name: {'XYZABC'[i]}, node_id: {i + 1}, mode: {mode}, counts_per_mm: 1000,"
                    f" max_accel_mm_s2: 2000{identity if i == 0 else ''}}}\n" for i in range(n_axes))
     text = (f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
-            f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 200}}\n{extra}axes:\n{axes}")
+            f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 600}}\n{extra}axes:\n{axes}")
     return parse_config(text, "test.yaml")
 
 
@@ -290,3 +291,49 @@ def test_traffic_log_records_sync_rpdo_and_tpdo(tmp_path):
         assert master.stream(sine_counts(200)).wait(WAIT_S).outcome == "done"
     text = path.read_text()
     assert " 080#" in text and " 201#" in text and " 181#" in text and " 000#" in text
+
+
+def test_drive_that_never_answers_sync_is_named_with_step_and_state():
+    with rig(bring_up=False) as (master, sim, _):
+        sim.inject(FaultInjection("ignore_sync", node_id=2))
+        with pytest.raises(FieldbusError) as info:
+            master.bring_up()
+        text = str(info.value)
+        assert text.startswith("node 2: bring-up step 'shutdown': no TPDO1 received")
+        assert "SWITCH ON DISABLED" in text and "after" in text and "\n" not in text
+        assert master.faults()[-1].kind == "bringup" and master.faults()[-1].node_id == 2
+
+
+class FlakyBus(VirtualBus):
+    """A virtual bus whose sends fail once ``failing`` is set (a cable pulled, bus-off)."""
+
+    failing = False
+
+    def send(self, msg, timeout=None):
+        if self.failing:
+            raise can.CanOperationError("simulated bus-off")
+        super().send(msg, timeout)
+
+
+def test_send_failure_is_a_bus_error_and_stops_the_job():
+    channel = "fb-" + uuid.uuid4().hex
+    with SimNetwork(channel=channel) as sim:
+        for node in (1, 2, 3):
+            sim.add_drive(node)
+        bus = FlakyBus(channel=channel)
+        master = Master(make_config(channel), bus)
+        try:
+            master.bring_up()
+            job = master.stream(sine_counts(2000))
+            wait_for(lambda: (master.status().job_index or 0) > 50)
+            bus.failing = True
+            result = job.wait(WAIT_S)
+            assert result.outcome == "faulted"
+            assert [(f.node_id, f.kind) for f in result.faults][:1] == [(None, "bus_error")]
+            assert "simulated bus-off" in result.faults[0].message
+            assert master.status().timing.send_errors >= 1
+            wait_for(lambda: master.status().phase == "disabled")
+        finally:
+            bus.failing = False
+            master.shutdown()
+            bus.shutdown()

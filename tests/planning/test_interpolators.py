@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from nurbsmotion.errors import InputError
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import arc_curve, line_curve
 from nurbsmotion.planning import PlanLimits, plan
@@ -142,3 +143,17 @@ def test_zhang_correction_survives_a_very_sharp_nurbs_corner():
     assert np.all(np.diff(trajectory.u) >= 0)
     assert m.end_error_mm < 1e-9
     assert m.max_chord_error_mm <= limits.chord_error_mm
+
+
+def test_a_program_with_a_gap_is_refused_naming_the_block():
+    prog = program_of((line_curve((0, 0, 0), (1, 0, 0)), 10.0, BlockKind.LINE),
+                      (line_curve((1, 1, 0), (2, 1, 0)), 10.0, BlockKind.LINE))
+    with pytest.raises(InputError, match="t:2: block starts 1 mm away"):
+        plan(prog, WANG_LIMITS, "wang")
+
+
+def test_a_step_longer_than_the_whole_program_is_one_cycle_to_the_end():
+    prog = program_of((line_curve((0, 0, 0), (1e-4, 0, 0)), 10.0, BlockKind.LINE))
+    trajectory = plan(prog, WANG_LIMITS, "zhang")
+    assert len(trajectory) == 2
+    np.testing.assert_array_equal(trajectory.position_mm[-1], (1e-4, 0, 0))

@@ -62,7 +62,6 @@ class Bench:
         self.master = master
         self.frames = frames
         self.nodes: dict[int, canopen.RemoteNode] = {}
-        self.syncs_sent = 0
 
     def add(self, node_id: int, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
         """Start drive ``node_id``; wait for its boot-up; return it and its master-side node."""
@@ -93,13 +92,12 @@ class Bench:
         before = [d.stats.syncs for d in drives]
         operational = [d.nmt_state == 0x05 and not d.silent for d in drives]
         self.send(0x80, b"" if counter is None else bytes([counter]))
-        self.syncs_sent += 1
         wait_until(
             lambda: all(d.stats.syncs > b or not op for d, b, op in zip(drives, before, operational)),
             what="SYNC processed",
         )
-        # The TPDOs of this SYNC are sent before the counter is read again: wait for the
-        # receive thread of the master to have them too (a round trip through an SDO-free ping).
+        # The drives sent this SYNC's TPDOs before counting it; wait until the master's
+        # receive thread has logged them too.
         self.flush()
 
     def flush(self) -> None:

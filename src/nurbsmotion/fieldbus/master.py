@@ -156,6 +156,8 @@ class Master:
         self._fb_pos: list[int] = [0] * n
         self._fb_fe: list[int | None] = [None] * n
         self._fb_cycle = [-1] * n
+        self._fb_time = [0.0] * n  # receive timestamp of the last TPDO1 (time.time() based)
+        self._fe_checked_time = [0.0] * n
         self._bad_tpdo = [0] * n
         self._emcy_count = [0] * n
         self._last_emcy: list[int | None] = [None] * n
@@ -189,6 +191,8 @@ class Master:
         self._sync_task: can.broadcastmanager.CyclicSendTaskABC | None = None
         self._sync_bus: can.BusABC | None = None
         self._sync_seen_s = 0.0  # perf_counter when a SYNC sent by the kernel was last received
+        self._sync_seen_stamp = 0.0  # its frame timestamp
+        self._sync_time = [0.0] * _HISTORY  # time.time() of the SYNC each cycle's RPDOs follow
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         self._rpdo_msgs = [can.Message(arbitration_id=c.COB_RPDO[0] + node, is_extended_id=False,
                                        data=bytearray(RPDO_FORMAT.size)) for node in self._node_ids]
@@ -246,6 +250,7 @@ class Master:
                 return
             self._fb_status[i], self._fb_pos[i] = unpack(data)
             self._fb_cycle[i] = self._cycle
+            self._fb_time[i] = timestamp
         return on_tpdo1
 
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
@@ -348,6 +353,8 @@ class Master:
                                 f"(states: {', '.join(f'node {a.node_id} {a.state}' for a in self.status().axes)})")
         if self._enable_error is not None:
             raise self._enable_error
+        if self._phase != "holding":
+            raise FieldbusError(f"bring-up: the cycle loop stopped in phase {self._phase} (see the log)")
 
     def reset_faults(self) -> None:
         """Acknowledge faults and re-enable every axis (fault reset, state machine), then hold."""
@@ -422,13 +429,14 @@ class Master:
         """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
         stats = self._stats
         axes = []
+        sent = self._sp_history[self._cycle % _HISTORY] if self._cycle else self._sp
         for i in range(self._n):
             sw = self._fb_status[i]
             fe = self._fb_fe[i]
-            if fe is None and self._fb_cycle[i] >= 1:
+            if fe is None and self._fb_cycle[i] >= 1:  # no TPDO2: the master's estimate
                 fe = self._sp_history[(self._fb_cycle[i] - 1) % _HISTORY][i] - self._fb_pos[i]
             axes.append(AxisStatus(self._names[i], self._node_ids[i], state_name(sw), sw, self._fb_pos[i],
-                                   self._sp[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
+                                   sent[i], fe, self._bad_tpdo[i], self._emcy_count[i], self._last_emcy[i]))
         timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
                             stats.percentile_s(0.99), stats.max_s, self._send_errors)
         job = self._job
@@ -503,7 +511,12 @@ class Master:
         return self._bus
 
     def _on_sync_seen(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        self._sync_seen_s = time.perf_counter()
+        """A SYNC the kernel sent: its frame timestamp (time.time based) says when, even if
+        this receive thread runs late; convert it to perf_counter for the loop's grid."""
+        now_wall, now_perf = time.time(), time.perf_counter()
+        age = now_wall - timestamp
+        self._sync_seen_s = now_perf - age if 0.0 <= age < 1.0 else now_perf
+        self._sync_seen_stamp = timestamp
 
     def _use_kernel_sync(self) -> bool:
         if self._sync_source == "auto":
@@ -526,6 +539,7 @@ class Master:
         spin_s = self._spin_s
         stats = self._stats
         history = self._sp_history
+        sync_time = self._sync_time
         k = 0
         anchor_s = 0.0
         self._set_realtime_priority()
@@ -544,7 +558,10 @@ class Master:
                 self._cycle = k
                 try:
                     if sync_msg is not None:
+                        sync_time[k % _HISTORY] = time.time()  # frame timestamps are time.time() based
                         send(sync_msg)
+                    else:
+                        sync_time[k % _HISTORY] = self._sync_seen_stamp
                     for i in range(n):
                         msg = msgs[i]
                         pack(msg.data, 0, cw[i], sp[i])
@@ -759,7 +776,7 @@ class Master:
             return
         if self._phase in ("enabling", "offline"):
             return
-        if kind == 1 and value != 0:
+        if kind == 1 and value & 0xFF00:  # 0x00xx = error reset / no error (CiA 301)
             self._report(node, name, "emcy", value, k,
                          f"node {node} (axis {name}): EMCY 0x{value:04X}{_emcy_text(value)} at cycle {k}")
         elif kind == 2 and value != c.NmtState.OPERATIONAL:
@@ -804,11 +821,31 @@ class Master:
                          f"now {state_name(sw)} at cycle {k}")
 
     def _check_following_error(self, i: int, k: int) -> None:
-        """|set-point effective at the TPDO's SYNC - actual| > window for longer than the time-out."""
-        fb_cycle = self._fb_cycle[i]
-        if fb_cycle <= self._phase_cycle + 1 or fb_cycle < k - 2:  # stale: its set-point left the history
+        """|set-point in force at the answered SYNC - actual| > window for longer than the time-out.
+
+        The TPDO answers the latest SYNC sent before its receive timestamp (so a lagging
+        receive thread does not matter); the set-point in force at SYNC c was sent in cycle
+        c-1. Servo lag: the nearest of the set-points of cycles c-1, c-2, c-3 counts. Each
+        TPDO is judged once; one older than the set-point history is not judged (the drive's
+        own check, statusword bit 13, still is)."""
+        stamp = self._fb_time[i]
+        if stamp == self._fe_checked_time[i]:
             return
-        error = self._sp_history[(fb_cycle - 1) % _HISTORY][i] - self._fb_pos[i]
+        self._fe_checked_time[i] = stamp
+        times, history = self._sync_time, self._sp_history
+        answered = -1
+        for c in range(k, k - _HISTORY + 3, -1):
+            if 0.0 < times[c % _HISTORY] <= stamp:
+                answered = c
+                break
+        if answered < _HISTORY:
+            return
+        actual = self._fb_pos[i]
+        error = history[(answered - 1) % _HISTORY][i] - actual
+        for back in (2, 3):
+            e = history[(answered - back) % _HISTORY][i] - actual
+            if abs(e) < abs(error):
+                error = e
         if abs(error) <= self._fe_window[i]:
             self._fe_cycles[i] = 0
             return
@@ -888,6 +925,10 @@ class Master:
         job = self._job
         assert job is not None
         job.outcome = outcome
+        if job.index < 0:  # nothing of the job sent yet: keep holding
+            self._set_phase("holding", k)
+            self._finish_job(outcome)
+            return
         job.ramp.start(job.index)
         self._set_phase("stopping", k)
 

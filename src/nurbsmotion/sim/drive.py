@@ -118,7 +118,7 @@ class SimDrive:
         eds: str | Path | None = None,
         *,
         lag_cycles: int = 1,
-        max_velocity_counts_s: float = 1e9,
+        max_velocity_counts_s: float = math.inf,
         identity: tuple[int, int] | None = None,
         parameters: dict[tuple[int, int], int] | None = None,
         record: bool = True,
@@ -409,6 +409,8 @@ class SimDrive:
         """EMCY (CiA 301): code, error register, 5 zero bytes; not in STOPPED or if disabled."""
         if self._emcy_cob & pdo_layout.COB_ID_INVALID_BIT or self.nmt_state == NmtState.STOPPED:
             return
+        if self.silent or self.network is None:
+            return
         self._send(self._emcy_cob & 0x7FF, EMCY_STRUCT.pack(code, register))
         self.stats.emcys_sent += 1
 
@@ -491,6 +493,7 @@ class SimDrive:
             setter(value)
 
     def _after_sdo_write(self, index: int, subindex: int) -> None:
+        log.debug(kv("sim.sdo_write", node=self.node_id, object=f"0x{index:04X}:{subindex:02X}"))
         if pdo_layout.is_pdo_parameter(index):
             self._rebuild_all_pdos()
         elif index == c.CONSUMER_HEARTBEAT_TIME:

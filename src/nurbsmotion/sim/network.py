@@ -4,6 +4,7 @@ ticker thread (heartbeats, timed fault injections) they share."""
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from pathlib import Path
@@ -23,7 +24,7 @@ NOTIFIER_CYCLE_S = 0.1
 
 
 MODE_OF_AXIS = {"ip": 7, "csp": 8}
-UNLIMITED_VELOCITY_COUNTS_S = 1e12
+UNLIMITED_VELOCITY_COUNTS_S = math.inf
 
 
 def period_as_value_exponent(period_s: float) -> tuple[int, int]:

@@ -17,7 +17,7 @@ import math
 class ServoModel:
     """Position loop of one axis, advanced once per SYNC."""
 
-    def __init__(self, lag_cycles: int = 1, max_velocity_counts_s: float = 1e9) -> None:
+    def __init__(self, lag_cycles: int = 1, max_velocity_counts_s: float = math.inf) -> None:
         if lag_cycles < 0:
             raise ValueError("lag_cycles must be >= 0")
         if not max_velocity_counts_s > 0:

@@ -25,6 +25,8 @@ METHODS = {
     "taylor2": Method("taylor2", taylor_order=2, adaptive=False, correct=False),
     "wang": Method("wang", taylor_order=2, adaptive=True, correct=False),
     "zhang": Method("zhang", taylor_order=2, adaptive=True, correct=True),
+    # not registered as an algorithm: Wang's feed adaptation exactly as printed, for comparison
+    "wang-as-printed": Method("wang-as-printed", taylor_order=2, adaptive=True, correct=False, as_printed=True),
 }
 
 

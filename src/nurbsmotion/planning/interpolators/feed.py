@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from math import sqrt
 
+import numpy as np
+
 NEWTON_ITERATIONS = 30
 
 
@@ -85,12 +87,41 @@ class FeedLimits:
         normal = sqrt(max(self.max_accel * self.max_accel - tangential_mm_s2 * tangential_mm_s2, 0.0))
         return min(chord_limited_step_mm(radius_mm, self.chord_error_mm) / self.period_s, sqrt(radius_mm * normal))
 
+    def caps(self, radius_mm: np.ndarray, tangential_mm_s2: float) -> np.ndarray:
+        """``cap`` for an array of radii (numpy)."""
+        if not self.adaptive:
+            return np.full(len(radius_mm), np.inf)
+        r = np.asarray(radius_mm, dtype=float)
+        d = self.chord_error_mm
+        with np.errstate(invalid="ignore", over="ignore"):
+            chord = np.where(2.0 * r <= d, 2.0 * r, 2.0 * np.sqrt(d * np.maximum(2.0 * r - d, 0.0)))
+            normal = np.sqrt(max(self.max_accel**2 - tangential_mm_s2**2, 0.0))
+            cap = np.minimum(chord / self.period_s, np.sqrt(r * normal))
+        return np.where(np.isinf(r), np.inf, cap)
+
+    def feed_as_printed(self, wanted_mm_s: float, radius_mm: float, a_t_before: float) -> float:
+        """Wang eq. 21-28 as printed: ΔL = min(V T, ΔL_c, ΔL_a) with ρ at the current point and
+        δ_a = T²/8 sqrt(a_max² - a_t²), a_t the change of feed in the previous cycle."""
+        if not self.adaptive or radius_mm == float("inf"):
+            return wanted_mm_s
+        delta_a = self.period_s**2 / 8.0 * sqrt(max(self.max_accel**2 - a_t_before**2, 0.0))
+        step_c = chord_limited_step_mm(radius_mm, self.chord_error_mm)
+        step_a = chord_limited_step_mm(radius_mm, delta_a) if delta_a > 0.0 else 0.0
+        return min(wanted_mm_s, step_c / self.period_s, step_a / self.period_s)
+
     def feed(self, wanted_mm_s: float, v_in_mm_s: float, radius_mm: float) -> float:
+        """The outgoing feed of this cycle: wanted, capped by eq. 22 and the resultant rule."""
         if not self.adaptive:
             return wanted_mm_s
-        cap = min(wanted_mm_s, chord_limited_step_mm(radius_mm, self.chord_error_mm) / self.period_s)
         if radius_mm == float("inf"):
-            return accel_limited_feed_straight(v_in_mm_s, cap, self.max_accel, self.period_s)
+            return min(wanted_mm_s, v_in_mm_s + self.max_accel * self.period_s)
+        d = self.chord_error_mm
+        chord_step = 2.0 * radius_mm if 2.0 * radius_mm <= d else 2.0 * sqrt(d * (2.0 * radius_mm - d))
+        cap = min(wanted_mm_s, chord_step / self.period_s)
+        a_n = (v_in_mm_s * v_in_mm_s + cap * cap) / (2.0 * radius_mm)
+        a_t = (cap - v_in_mm_s) / self.period_s
+        if a_n * a_n + a_t * a_t <= self.max_accel * self.max_accel:
+            return cap
         return accel_limited_feed(v_in_mm_s, cap, radius_mm, self.max_accel, self.period_s)
 
 

@@ -45,7 +45,6 @@ class ReverseTable:
     remaining_mm: list[float] = field(default_factory=list)  # Λ_k
     feed_mm_s: list[float] = field(default_factory=list)  # V_k = L_k / T (V_0 = 0)
     complete: bool = False  # True when the table reaches back to the start of the run
-    final_ramp: int = 0  # entries 0..final_ramp: the uncapped a_l deceleration into the stop itself
 
     def __len__(self) -> int:
         return len(self.u)
@@ -89,12 +88,11 @@ class ReverseTable:
 
 def build_reverse_table(reversed_path: CurvePath, feeds_mm_s: list[float], accel_mm_s2: float,
                         limits: FeedLimits, stepper: Stepper, period_s: float) -> ReverseTable:
-    """Interpolate the whole reversed run from rest at the linear acc/dec a_l (Wang eq. 19-20).
+    """Interpolate the reversed run from rest at the linear acc/dec a_l (Wang eq. 19-20).
 
-    Each reverse step's feed is min(V + a_l T, the curve's feed, the static adaptive cap at
-    both ends of the step): so V_achieve also plans the slow-downs for tight curvature
-    ahead, decelerating into them at a_l (see docs/planning.md: Wang's purely reactive
-    adaptation cannot keep the resultant acceleration under a_max there).
+    Builds the final ramp only: it stops where the feed reaches the run's highest feed or
+    where a cap (the curve's feed, the adaptive limits at either end of the step) would cut
+    the ramp; beyond that the slow-down profile (slowdown.py) gives the cap.
     ``feeds_mm_s``: the feed of each reversed curve.
     """
     table = ReverseTable(reversed_path)
@@ -107,18 +105,14 @@ def build_reverse_table(reversed_path: CurvePath, feeds_mm_s: list[float], accel
     table.feed_mm_s.append(0.0)
     v, previous_step = 0.0, 0.0
     ramp = accel_mm_s2 * period_s
-    ramping = True  # still on the pure a_l ramp from the stop
-    while True:
-        v_ramp = v + ramp
-        v_step = min(v_ramp, feeds_mm_s[here.j], limits.cap(radius_of_curvature(here.d1, here.d2), accel_mm_s2))
+    top = max(feeds_mm_s)
+    while v < top:
+        v_step = v + ramp
+        if v_step > min(feeds_mm_s[here.j], limits.cap(radius_of_curvature(here.d1, here.d2), accel_mm_s2)):
+            break
         point, planned, at_end = stepper.step(reversed_path, here, v_step * period_s, previous_step)
-        cap_after = limits.cap(radius_of_curvature(point.d1, point.d2), accel_mm_s2)
-        if v_step > cap_after and not at_end:  # the step ends in tighter curvature: shorten it
-            v_step = cap_after
-            point, planned, at_end = stepper.step(reversed_path, here, v_step * period_s, previous_step)
-        ramping = ramping and v_step >= v_ramp
-        if ramping:
-            table.final_ramp = len(table.u)
+        if not at_end and v_step > limits.cap(radius_of_curvature(point.d1, point.d2), accel_mm_s2):
+            break
         chord = distance(point.x, here.x)
         if chord <= 0.0:
             table.complete = True
@@ -128,11 +122,11 @@ def build_reverse_table(reversed_path: CurvePath, feeds_mm_s: list[float], accel
         table.x.append(point.x)
         table.step_mm.append(chord)
         table.remaining_mm.append(table.remaining_mm[-1] + chord)
-        # the last, clamped step reaching the run's start keeps the feed it was planned with
-        table.feed_mm_s.append(planned / period_s if at_end else chord / period_s)
+        # V_k = L_k / T exactly (this keeps the phase, see the module doc); the last, clamped
+        # step that reaches the run's start keeps the feed it was planned with
+        table.feed_mm_s.append(v_step if at_end else chord / period_s)
         if at_end:
             table.complete = True
             break
         here, previous_step, v = point, planned, chord / period_s
-    table.final_ramp = min(table.final_ramp, len(table.u) - 1)
     return table

@@ -8,7 +8,9 @@ a step that passes the end of a block carries its leftover into the next block.
 Each cycle of a run:
 1. the pre-interpolation linear acc/dec (Wang §III.A) raises the profile feed by a_l T up to
    the block's feed (a_l = V0 / t_l, V0 the run's highest feed, capped at a_max);
-2. the method's feed adaptation caps it (wang/zhang: chord error and resultant acceleration);
+2. the slow-downs still to come cap it (slowdown.py), and the method's feed adaptation
+   (wang/zhang: chord error and resultant acceleration at both ends of the step, then the
+   resultant acceleration checked on the set-points themselves);
 3. the reverse table gives V_achieve at the current remaining length; in the cycle where
    V_achieve <= V_next the step follows the table instead (reverse.py), which lands
    exactly on the stop;
@@ -29,7 +31,8 @@ import numpy as np
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.interpolators.feed import FeedLimits
-from nurbsmotion.planning.interpolators.reverse import ReverseTable, build_reverse_table
+from nurbsmotion.planning.interpolators.reverse import build_reverse_table
+from nurbsmotion.planning.interpolators.slowdown import SlowdownProfile
 from nurbsmotion.planning.interpolators.stepping import (
     CurvePath,
     PathPoint,
@@ -44,6 +47,7 @@ from nurbsmotion.program import BlockKind, Program
 
 CORNER_ANGLE_DEG = 1.0  # tangent turn above which a junction is a stop
 MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped
+MAX_GAP_MM = 1e-6  # consecutive blocks must meet (Program's contract)
 MAX_CYCLES = 50_000_000
 
 
@@ -55,6 +59,9 @@ class Method:
     taylor_order: int
     adaptive: bool
     correct: bool
+    # Wang exactly as printed: limits at the current point only, eq. 27 with the previous
+    # cycle's a_t, no planned slow-downs and no check on the set-points (for comparison)
+    as_printed: bool = False
 
 
 def tangent_angle_deg(a: tuple[float, ...], b: tuple[float, ...]) -> float:
@@ -76,7 +83,9 @@ def split_runs(program: Program, corner_angle_deg: float = CORNER_ANGLE_DEG) -> 
             end_tangent = previous.curve.point_and_derivatives(previous.curve.u_max)[1]
             start_tangent = block.curve.point_and_derivatives(block.curve.u_min)[1]
             gap = distance(tuple(previous.end), tuple(block.start))
-            if gap > 1e-6 or tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
+            if gap > MAX_GAP_MM:
+                raise InputError(str(block.source), f"block starts {gap:.6g} mm away from the end of the block before it")
+            if tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
                 runs.append([])
         if not runs:
             runs.append([])
@@ -99,10 +108,16 @@ class RunPlanner:
         self.limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2, method.adaptive)
         # wang: the Taylor predictor's relative step error, measured on the last step, scales
         # the next step, so the limits hold for the feed the set-points really show
-        self.compensate = method.adaptive and not method.correct
+        self.compensate = method.adaptive and not method.correct and not method.as_printed
         self.stepper = Stepper(method.taylor_order, method.correct, limits.chord_error_mm)
+        # the reverse interpolation uses Wang's eq. 19 (second-order Taylor) for every method:
+        # its chords are measured, so the predictor's error does not enter V_achieve
         self.table = build_reverse_table(self.reversed_path, self.feeds[::-1], self.accel, self.limits,
-                                         self.stepper, self.period)
+                                         Stepper(2, False, limits.chord_error_mm), self.period)
+        ahead_limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2,
+                                  method.adaptive and not method.as_printed)
+        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, ahead_limits, self.accel)
+        self.as_printed = method.as_printed
         self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
@@ -174,11 +189,11 @@ class RunPlanner:
         profile = 0.0  # Wang's pre-interpolation linear acc/dec feed
         ramp = self.accel * period
         k_ahead = len(table) - 1  # index of the first table point not yet passed
-        final_zone = table.remaining_mm[table.final_ramp]  # S below which the table places the points
         tracked = None  # remaining length while the table places the points
         radius_before = math.inf  # radius of curvature at the previous set-point
         before_x = here.x  # the previous set-point (at rest before the start)
         ratio = 1.0  # wang: measured chord / predicted step length of the last step
+        a_t_before = 0.0  # tangential acceleration of the last cycle (Wang eq. 27 as printed)
         end_x = self.end_x
         for _ in range(MAX_CYCLES):
             if tracked is None:
@@ -189,9 +204,18 @@ class RunPlanner:
             profile = min(profile + ramp, self.feeds[here.j])
             radius_here = radius_of_curvature(here.d1, here.d2)
             radius = min(radius_here, radius_before)  # the set-point's acceleration spans both steps
-            v_next = self.limits.feed(profile, v_in, radius)
+            # slow-downs still to come, read where this step will end (first-order estimate)
+            d1 = here.d1
+            u_end = here.u + (v_in + ramp) * period / math.sqrt(d1[0] * d1[0] + d1[1] * d1[1] + d1[2] * d1[2])
+            ahead = self.slowdown.feed(here.j, u_end)
+            if v_achieve != math.inf and v_achieve > ahead:
+                ahead = v_achieve  # near the stop the table decides (it lands exactly)
+            if self.as_printed:
+                v_next = self.limits.feed_as_printed(min(profile, ahead), radius_here, a_t_before)
+            else:
+                v_next = self.limits.feed(min(profile, ahead), v_in, radius)
             done = False
-            if v_achieve <= v_next and s_now <= final_zone:  # Wang: decelerate into the stop
+            if v_achieve <= v_next:  # Wang: decelerate into the stop
                 step = v_achieve * period
                 tracked = s_now - step
                 if tracked <= 1e-12 * (1.0 + s_now) or step <= 0.0:
@@ -200,17 +224,21 @@ class RunPlanner:
                 else:
                     point = self.forward_point(table.point_at(tracked))
             else:  # the method's own step, at most V_achieve (slow-downs ahead)
-                v_step = min(v_next, v_achieve)
+                v_step = v_next
                 point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
-                radius_after = radius_of_curvature(point.d1, point.d2)
-                if radius_after < radius and not done:  # the step ends in tighter curvature: limit by it too
-                    v_tighter = self.limits.feed(profile, v_in, radius_after)
-                    if v_tighter < v_step * (1.0 - 1e-12):
-                        v_step = v_tighter
+                if not done and not self.as_printed:  # the step must also respect the limits where it ends
+                    radius_after = radius_of_curvature(point.d1, point.d2)
+                    v_after = self.slowdown.feed(point.j, point.u)
+                    if radius_after < radius:
+                        v_after = min(v_after, self.limits.feed(profile, v_in, radius_after))
+                    if v_after < v_step * (1.0 - 1e-12):
+                        v_step = v_after
                         point, step, done = self.stepper.step(path, here, v_step * period / ratio, previous_step)
-                if self.limits.adaptive and not done:
-                    point, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
-                    v_step = min(v_step, step * ratio / period)
+                v_step = min(v_step, step * ratio / period)  # Zhang's midpoint rule may shorten it
+                if self.limits.adaptive and not done and not self.as_printed:
+                    checked, step, done = self.keep_resultant_accel(here, before_x, point, step, previous_step)
+                    if checked is not point:
+                        point, v_step = checked, step * ratio / period
                 if self.compensate and step > 0.0 and not done:
                     ratio = distance(point.x, here.x) / step
                 step = v_step * period  # the commanded feed of this step, times T
@@ -222,7 +250,8 @@ class RunPlanner:
             if done:
                 x_rows[-1] = end_x
                 return
-            v_in = distance(point.x, here.x) / period
+            v_out = distance(point.x, here.x) / period
+            a_t_before, v_in = (v_out - v_in) / period, v_out
             previous_step = step
             before_x = here.x
             here = point

@@ -23,6 +23,7 @@ from math import sqrt
 from typing import Callable, Sequence
 
 from nurbsmotion.geometry import NurbsCurve
+from nurbsmotion.planning.interpolators.fastcurve import scalar_evaluators
 
 Vec = tuple[float, ...]
 CHORD_TOLERANCE_MM = 1e-10  # Zhang correction: |chord - ΔL| below this is exact
@@ -61,7 +62,9 @@ class CurvePath:
 
     def __init__(self, curves: Sequence[NurbsCurve]):
         self.curves = list(curves)
-        self.evaluate: list[Callable[[float], tuple[Vec, Vec, Vec]]] = [c.point_and_derivatives for c in curves]
+        evaluators = [scalar_evaluators(c) for c in self.curves]
+        self.evaluate: list[Callable[[float], tuple[Vec, Vec, Vec]]] = [e[0] for e in evaluators]
+        self.point: list[Callable[[float], Vec]] = [e[1] for e in evaluators]
         self.u_min = [c.u_min for c in curves]
         self.u_max = [c.u_max for c in curves]
         self.last = len(curves) - 1
@@ -153,7 +156,7 @@ def midpoint_chord_error(path: CurvePath, a: PathPoint, b: PathPoint) -> float:
     """Zhang eq. 12: |(x(u_a) + x(u_b))/2 - x((u_a + u_b)/2)| (0 across a curve junction)."""
     if a.j != b.j:
         return 0.0
-    m = path.evaluate[a.j](0.5 * (a.u + b.u))[0]
+    m = path.point[a.j](0.5 * (a.u + b.u))
     return distance(((a.x[0] + b.x[0]) * 0.5, (a.x[1] + b.x[1]) * 0.5, (a.x[2] + b.x[2]) * 0.5), m)
 
 

@@ -1,0 +1,25 @@
+"""``lookahead``: our planner. Look-ahead over the whole program, jerk-limited, near
+time-optimal, and verified on every cycle the drives see.
+
+Public API:
+- ``plan_lookahead(program, limits) -> Trajectory`` (the registered algorithm);
+- ``plan_lookahead_chunks(program, limits, chunk_cycles=2000, state=None) -> Iterator[Trajectory]``:
+  the same set-points in consecutive chunks, planned with a bounded look-ahead window
+  (bounded memory for programs of any length); ``Trajectory.concatenate`` joins them;
+- ``plan_from_state(program, limits, state, chunk_cycles=2000) -> Iterator[Trajectory]``:
+  re-plan from a moving state ``PlanState(s_mm, v_mm_s, a_mm_s2)`` (s along the whole
+  program from its start), e.g. after a feed override: the first chunk starts with the
+  set-point one cycle after the state.
+See docs/lookahead.md for the method and the guarantees.
+"""
+
+from __future__ import annotations
+
+from nurbsmotion.planning.lookahead.api import (DEFAULT_CHUNK_CYCLES, GUARANTEES, PlanState, plan_from_state,
+                                                plan_lookahead, plan_lookahead_chunks)
+from nurbsmotion.planning.lookahead.planner import PlanningError
+
+ALGORITHMS = {"lookahead": plan_lookahead}
+
+__all__ = ["ALGORITHMS", "DEFAULT_CHUNK_CYCLES", "GUARANTEES", "PlanState", "PlanningError", "plan_from_state",
+           "plan_lookahead", "plan_lookahead_chunks"]

@@ -1,0 +1,179 @@
+"""The planner's entry points: whole plan, chunks, and re-planning from a moving state."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.planning.limits import PlanLimits
+from nurbsmotion.planning.lookahead import jerk_profile as jp
+from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
+from nurbsmotion.planning.lookahead.planner import Cursor, PlanSettings, WindowPlan, plan_run, settings_for
+from nurbsmotion.planning.lookahead.runs import Run, program_pieces, split_runs
+from nurbsmotion.planning.lookahead.speed_limits import MARGIN
+from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
+from nurbsmotion.planning.trajectory import Trajectory
+from nurbsmotion.program import Program
+
+DEFAULT_CHUNK_CYCLES = 2000
+ALGORITHM = "lookahead"
+GUARANTEES = ("chord_error", "accel", "jerk", "axis_velocity", "axis_accel", "arc_fluctuation", "exact_end")
+
+
+@dataclass(frozen=True)
+class PlanState:
+    """A moving state along the program: arc length from the program start, speed, acceleration."""
+
+    s_mm: float
+    v_mm_s: float = 0.0
+    a_mm_s2: float = 0.0
+
+
+def window_trajectory(plan: WindowPlan, period_s: float, started: float) -> Trajectory:
+    feed = plan.planned_ds / period_s
+    return Trajectory(algorithm=ALGORITHM, period_s=period_s, block=plan.blocks, u=plan.samples.u.copy(),
+                      position_mm=plan.samples.position_mm, feed_mm_s=feed,
+                      planning_time_s=time.perf_counter() - started)
+
+
+def max_feed(pieces: list[BlockPiece]) -> float:
+    return max((p.feed_mm_s for p in pieces), default=1.0)
+
+
+class _Figures:
+    """Running maxima of the verified figures over all windows, for Trajectory.notes."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, float] = {}
+        self.repairs = 0
+        self.windows = 0
+        self.runs = 0
+
+    def add(self, plan: WindowPlan) -> None:
+        for key, value in plan.check.figures.items():
+            self.values[key] = max(self.values.get(key, 0.0), value)
+        self.repairs += plan.repairs
+        self.windows += 1
+
+
+def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, float | str]:
+    notes: dict[str, float | str] = {
+        "guarantees": ", ".join(GUARANTEES),
+        "tolerance": TOLERANCE,
+        "planning_margin": MARGIN,
+        "fluctuation_limit": FLUCTUATION_LIMIT,
+        "fluctuation_definition": "arc length between consecutive set-points vs planned step (feed_mm_s * T)",
+        "chord_error_limit_mm": limits.chord_error_mm,
+        "accel_limit_mm_s2": limits.max_accel_mm_s2,
+        "repairs": float(figures.repairs),
+        "windows": float(figures.windows),
+        "runs": float(runs),
+        "stops": float(max(runs - 1, 0)),  # exact stops inside the program (corners)
+    }
+    if limits.max_jerk_mm_s3 is not None:
+        notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3
+    notes.update({f"verified_{k}": v for k, v in figures.values.items()})
+    return notes
+
+
+def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures) -> Iterator[Trajectory]:
+    before = np.zeros((0, 3))
+    period = settings.limits.period_s
+    for index, run in enumerate(runs):
+        started = time.perf_counter()
+        cursor = first if index == 0 and first is not None else None
+        for plan in plan_run(run, settings, before, cursor):
+            figures.add(plan)
+            if len(plan.samples.u):
+                yield window_trajectory(plan, period, started)
+                before = np.concatenate([before, plan.samples.position_mm])[-3:]
+            started = time.perf_counter()
+
+
+def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
+                          state: PlanState | None = None, _figures: _Figures | None = None) -> Iterator[Trajectory]:
+    """The plan in consecutive chunks of roughly ``chunk_cycles`` set-points (see module docs).
+
+    Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
+    from the highest feed), not by the program's length."""
+    pieces = program_pieces(program, limits)
+    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
+    runs = split_runs(pieces, limits, settings.min_pass_mm_s)
+    figures = _figures if _figures is not None else _Figures()
+    if not runs:
+        yield Trajectory(ALGORITHM, limits.period_s, np.zeros(1, np.int32), np.zeros(1),
+                         np.asarray(program.start_position, float).reshape(1, -1)[:, :3], np.zeros(1))
+        return
+    first = None
+    if state is not None:
+        runs, first = start_from_state(program, runs, state, settings)
+    figures.runs = len(runs)
+    yield from _chunks(runs, settings, first, figures)
+
+
+def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:
+    """Plan the whole program (the registered ``lookahead`` algorithm)."""
+    started = time.perf_counter()
+    figures = _Figures()
+    chunks = list(plan_lookahead_chunks(program, limits, _figures=figures))
+    trajectory = Trajectory.concatenate(chunks)
+    trajectory.planning_time_s = time.perf_counter() - started
+    trajectory.notes = notes_for(limits, figures, figures.runs)
+    return trajectory
+
+
+def plan_from_state(program: Program, limits: PlanLimits, state: PlanState,
+                    chunk_cycles: int = DEFAULT_CHUNK_CYCLES) -> Iterator[Trajectory]:
+    """Re-plan from a moving state (e.g. after a feed override): chunks as plan_lookahead_chunks,
+    the first set-point one cycle after the state."""
+    return plan_lookahead_chunks(program, limits, chunk_cycles, state=state)
+
+
+def path_point(runs: list[Run], s_mm: float) -> tuple[int, int, float]:
+    """(run, piece, u) at arc length s_mm along the runs (clamped to the path)."""
+    remaining = max(s_mm, 0.0)
+    for r, run in enumerate(runs):
+        for p, piece in enumerate(run.pieces):
+            length = piece.curve.length
+            if remaining <= length or (r == len(runs) - 1 and p == len(run.pieces) - 1):
+                return r, p, float(piece.curve.u_at_arc_length(min(remaining, length)))
+            remaining -= length
+    raise AssertionError("unreachable")
+
+
+def start_from_state(program: Program, runs: list[Run], state: PlanState, settings: PlanSettings) -> tuple[list[Run], Cursor]:
+    """Runs from the state on and the cursor that starts the first of them moving.
+
+    The jerk filter's memory is seeded with a raw motion of constant acceleration a over the
+    last tau_f: raw speed v_r = v + a tau_f / 2, whose average over tau_f is the state."""
+    r, p, u = path_point(runs, state.s_mm)
+    run = runs[r]
+    tail = Run(run.pieces[p:], run.junction_speed_mm_s[p:])
+    v, a, tau = state.v_mm_s, state.a_mm_s2, settings.tau_f
+    period = settings.limits.period_s
+    back = np.array([2.0, 1.0, 0.0]) * period  # the last is the state itself
+    before_s = state.s_mm - v * back + 0.5 * a * back**2
+    before = np.array([point_at(runs, s) for s in before_s])
+    if v <= 0.0 and a <= 0.0:
+        return [tail] + runs[r + 1:], Cursor(0, u, before=before)
+    if tau > 0:
+        v_raw = v + a * tau / 2.0
+        offset = v_raw * tau / 2.0 - a * tau**2 / 6.0
+        history = jp.RawProfile(t=np.array([-tau, 0.0]), s=np.array([offset - v_raw * tau + a * tau**2 / 2.0, offset]),
+                                v=np.array([v_raw - a * tau, v_raw]), a=np.array([a]))
+    else:
+        v_raw, offset, history = v, 0.0, None
+    last = point_at(runs, state.s_mm)
+    from nurbsmotion.planning.lookahead.sampling import Samples
+    previous = Samples(np.zeros(1, np.int32), np.array([u]), last[None, :])
+    cursor = Cursor(0, u, offset, v_raw, history, before, previous, at_rest=False)
+    return [tail] + runs[r + 1:], cursor
+
+
+def point_at(runs: list[Run], s_mm: float) -> NDArray[np.float64]:
+    r, p, u = path_point(runs, s_mm)
+    return to_3d(runs[r].pieces[p].curve.points(np.array([u])))[0]

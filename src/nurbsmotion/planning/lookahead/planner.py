@@ -1,0 +1,397 @@
+"""The look-ahead planner: windows of path, verify-and-repair, set-points in chunks.
+
+A run (runs.py: blocks between exact stops) is planned window by window. A window starts
+at the last committed set-point (its raw-profile state carried along) and reaches far
+enough ahead that the profile of its first part no longer depends on where it ends: the
+window is scanned twice, once ending at rest and once ending free, and only the set-points
+planned before the two scans part are committed. The last window of a run ends at rest on a
+cycle boundary (jerk_profile.cycle_times / warped_cycle_times).
+
+Every window is verified on its set-points (verify.py); where a cycle violates a limit, the
+speed cap is lowered around it by the violation ratio (REPAIR_MARGIN, exponent of the
+figure's speed dependence) and the window re-planned, at most MAX_REPAIR_ROUNDS times; a
+window that stays in violation raises PlanningError naming the block.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.errors import InputError
+from nurbsmotion.planning.limits import PlanLimits
+from nurbsmotion.planning.lookahead import jerk_profile as jp
+from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid
+from nurbsmotion.planning.lookahead.runs import Run
+from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
+from nurbsmotion.planning.lookahead.scan import speed_profile
+from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
+                                                         static_speed_limit, widen_dips)
+from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
+
+MAX_REPAIR_ROUNDS = 16
+REPAIR_MARGIN = 0.97
+ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
+EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
+MAX_SPACING_MM = 0.5
+MIN_SPACING_MM = 0.005
+WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
+PART_TOLERANCE = 1e-9
+START_BRAKE_SHARE = 0.7  # share of A used to brake from a running start above the new caps
+MAX_BACKTRACKS = 4  # re-plans of a held-back window for the sake of the next one
+NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
+
+
+class PlanningError(InputError):
+    """The limits cannot be held on every cycle at some place of the program."""
+
+
+
+def caps_for(limits: PlanLimits) -> Caps:
+    def axis(values: tuple[float, ...] | None) -> NDArray[np.float64] | None:
+        if values is None:
+            return None
+        out = np.full(3, np.inf)
+        out[: len(values)] = np.asarray(values[:3], dtype=float) * MARGIN
+        return out
+
+    return Caps(period_s=limits.period_s, chord_error_mm=MARGIN * limits.chord_error_mm,
+                accel_mm_s2=MARGIN * limits.max_accel_mm_s2,
+                jerk_mm_s3=None if limits.max_jerk_mm_s3 is None else MARGIN * limits.max_jerk_mm_s3,
+                axis_velocity_mm_s=axis(limits.axis_max_velocity_mm_s), axis_accel_mm_s2=axis(limits.axis_max_accel_mm_s2))
+
+
+def machine_for(limits: PlanLimits) -> MachineLimits:
+    def axis(values: tuple[float, ...] | None) -> NDArray[np.float64] | None:
+        if values is None:
+            return None
+        out = np.full(3, np.inf)
+        out[: len(values)] = np.asarray(values[:3], dtype=float)
+        return out
+
+    return MachineLimits(limits.period_s, limits.chord_error_mm, limits.max_accel_mm_s2, limits.max_jerk_mm_s3,
+                         axis(limits.axis_max_velocity_mm_s), axis(limits.axis_max_accel_mm_s2))
+
+
+def averaging_time_s(limits: PlanLimits) -> float:
+    """tau_f = A / J of the jerk filter (0 without a jerk limit)."""
+    return 0.0 if limits.max_jerk_mm_s3 is None else limits.max_accel_mm_s2 / limits.max_jerk_mm_s3
+
+
+@dataclass
+class Cursor:
+    """Where the next window of a run starts: the last committed set-point and the raw state."""
+
+    piece_index: int  # into run.pieces
+    u: float
+    raw_offset_mm: float = 0.0  # raw position ahead of the set-point
+    raw_speed_mm_s: float = 0.0
+    history: jp.RawProfile | None = None  # raw pieces before t = 0 (window coordinates)
+    before: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 3)))
+    previous: Samples | None = None
+    at_rest: bool = True  # the run starts here: sample t = 0 too
+    run_s_mm: float = 0.0  # arc length along the run at the cursor
+    carry: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None  # repairs so far
+
+
+@dataclass(eq=False)
+class WindowPlan:
+    samples: Samples
+    s: NDArray[np.float64]
+    planned_ds: NDArray[np.float64]
+    check: Check
+    repairs: int
+    final: bool
+    cursor: Cursor | None
+    blocks: NDArray[np.int32]
+
+
+@dataclass
+class PlanSettings:
+    limits: PlanLimits
+    caps: Caps
+    machine: MachineLimits
+    tau_f: float
+    spacing_mm: float
+    window_mm: float
+    stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
+
+    @property
+    def min_pass_mm_s(self) -> float:
+        """Slowest junction speed passed moving: its widened plateau must span a grid interval."""
+        return 0.0 if self.tau_f <= 0 else self.spacing_mm / (DIP_WIDTH_FACTOR * self.tau_f)
+
+
+def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
+    tau_f = averaging_time_s(limits)
+    spacing = float(np.clip(max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
+    stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
+    window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop)
+
+
+def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
+    """Pieces from the cursor on, about ``length_mm`` long (or to the run's end); a long block
+    is cut inside (at the arc length that completes the window)."""
+    pieces: list[BlockPiece] = []
+    total = 0.0
+    i = cursor.piece_index
+    while True:
+        piece = run.pieces[i]
+        u_start = cursor.u if i == cursor.piece_index else piece.u_start
+        s_start = float(piece.curve.arc_length(u_start)) if u_start > piece.curve.u_min else 0.0
+        s_end = float(piece.curve.arc_length(piece.u_end)) if piece.u_end < piece.curve.u_max else piece.curve.length
+        if total + (s_end - s_start) > WINDOW_CUT_FACTOR * length_mm:
+            u_cut = float(piece.curve.u_at_arc_length(s_start + max(length_mm - total, MIN_SPACING_MM)))
+            pieces.append(BlockPiece(piece.block, piece.curve, u_start, u_cut, piece.feed_mm_s))
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
+        pieces.append(BlockPiece(piece.block, piece.curve, u_start, piece.u_end, piece.feed_mm_s))
+        total += s_end - s_start
+        if i + 1 == len(run.pieces):
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], True
+        if total >= length_mm:
+            return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
+        i += 1
+
+
+def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[float, ...],
+               speed_cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:
+    """x = v^2 cap of every grid point from all constraints, dips widened for the jerk filter."""
+    v = np.minimum(static_speed_limit(grid, settings.caps, np.ones(len(grid))), speed_cap)
+    ends = np.flatnonzero(grid.junction)
+    for i, vj in zip(ends, junction_speeds):
+        v[i] = min(v[i], vj)
+        v[i + 1] = min(v[i + 1], vj)
+    x = bounds.max_speed_squared(v**2)
+    if settings.tau_f > 0:
+        x = widen_dips(grid.s, np.sqrt(x), settings.tau_f) ** 2
+    return x
+
+
+def scan_grid(grid: PathGrid, start_mm: float) -> NDArray[np.intp]:
+    """Grid indices the raw profile runs over: the first point at or after ``start_mm`` on."""
+    return np.arange(int(np.searchsorted(grid.s, start_mm - 1e-12, side="left")), len(grid))
+
+
+def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], bounds: AccelBounds,
+            cursor: Cursor, end_free: bool, tau_f: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
+    with the jerk filter, sharp speed peaks are flattened (jp.peak_plateau_caps)."""
+    s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
+    cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
+    if s[1] - s[0] <= 1e-12:  # start on a grid point
+        s, cap = s[1:], cap[1:]
+        cap[0] = cursor.raw_speed_mm_s**2
+        sub = AccelBounds(bounds.tangent[idx], bounds.curv[idx], bounds.caps, bounds.tangential_cap[idx])
+    else:
+        take = np.concatenate([idx[:1], idx])
+        sub = AccelBounds(bounds.tangent[take], bounds.curv[take], bounds.caps, bounds.tangential_cap[take])
+    if cursor.raw_speed_mm_s > 0:
+        # a running start above the caps (a lowered feed override): brake down to them
+        ramp = cursor.raw_speed_mm_s**2 - 2.0 * START_BRAKE_SHARE * bounds.caps.accel_mm_s2 * (s - s[0])
+        cap = np.maximum(cap, ramp)
+    if not end_free:
+        cap[-1] = 0.0
+    x = speed_profile(s, cap, sub)
+    if tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
+        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3)
+        if plateaus is not None:
+            x = speed_profile(s, np.minimum(cap, plateaus), sub)
+    return s, x
+
+
+def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool) -> NDArray[np.float64]:
+    """Times of the set-points of this window (t = 0 is the cursor's set-point): to rest on a
+    cycle boundary at the run's end; else every cycle until the window's stop."""
+    period = settings.limits.period_s
+    duration = raw.end_time_s + settings.tau_f
+    if final:
+        times = jp.cycle_times(duration, period) if cursor.at_rest else jp.warped_cycle_times(duration, period)
+    else:
+        times = np.arange(int(np.floor(duration / period)) + 1) * period
+    return times if cursor.at_rest else times[1:]
+
+
+def carried_repairs(grid: PathGrid, cursor: Cursor) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Speed caps and acceleration scales the previous window's repairs set on this window's path."""
+    speed_cap = np.full(len(grid), NO_CAP)
+    accel_scale = np.ones(len(grid))
+    if cursor.carry is not None:
+        run_s, caps, scales = cursor.carry
+        here = grid.s + cursor.run_s_mm
+        speed_cap = np.interp(here, run_s, caps, left=NO_CAP, right=NO_CAP)
+        accel_scale = np.interp(here, run_s, scales, left=1.0, right=1.0)
+    return speed_cap, accel_scale
+
+
+def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: float) -> WindowPlan:
+    """Plan, sample, verify and repair one window of a run.
+
+    A window that does not reach the run's end is sampled and verified up to its stop at the
+    window's end, so the committed set-points always have a verified way to stop."""
+    pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
+    grid = build_grid(pieces, settings.spacing_mm)
+    speed_cap, accel_scale = carried_repairs(grid, cursor)
+    idx = scan_grid(grid, cursor.raw_offset_mm)
+    period = settings.limits.period_s
+    for repairs in range(MAX_REPAIR_ROUNDS + 1):
+        bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
+        x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
+        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
+        commit_t = np.inf
+        raw = jp.raw_profile(s_raw, x)
+        if not reaches_end:
+            _, x_free = raw_for(grid, idx, x_cap, bounds, cursor, True, settings.tau_f)
+            parted = np.flatnonzero(x < x_free * (1 - PART_TOLERANCE) - 1e-12)
+            part_s = s_raw[parted[0]] if len(parted) else s_raw[-1]
+            # leave a stopping distance before the parting point, so a repair the next window
+            # needs where this one did not look still has room to slow down
+            k = int(np.searchsorted(raw.s, part_s - settings.stop_mm, side="left"))
+            commit_t = float(raw.t[min(k, len(raw.t) - 1)]) - 2.0 * period
+            if commit_t < 2.0 * period:
+                raise _WindowTooShort()
+        full_raw = jp.prepend_history(cursor.history, raw) if cursor.history is not None else raw
+        times = sample_times(raw, cursor, settings, reaches_end)
+        s = np.clip(jp.filtered_position(full_raw, times, settings.tau_f), 0.0, grid.length_mm)
+        if reaches_end:
+            s[-1] = grid.length_mm
+        s = np.maximum.accumulate(s)
+        samples = sample_path(grid, s)
+        previous_s = np.concatenate([[0.0], s[:-1]]) if not cursor.at_rest else np.concatenate([[s[0]], s[:-1]])
+        planned_ds = s - previous_s
+        end = samples.position_mm[-1:]
+        after = np.repeat(end, 3, axis=0)
+        before = cursor.before if len(cursor.before) else np.repeat(samples.position_mm[:1], 3, axis=0)
+        result = check(grid, samples, s, planned_ds, settings.machine, before, after, cursor.previous)
+        bad = result.violations()
+        if not bad:
+            break
+        if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
+            raise _violation_error(pieces, samples, result, bad)
+        repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
+    if not reaches_end:
+        keep = times <= commit_t
+        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep], samples.arc_residual_mm[keep])
+        s, planned_ds, times = s[keep], planned_ds[keep], times[keep]
+    blocks = np.array([pieces[p].block for p in samples.piece], dtype=np.int32)
+    next_cursor = None
+    if not reaches_end:
+        next_cursor = next_window_cursor(run, cursor, pieces, samples, s, times, full_raw, settings)
+        carry = merge_carry(cursor.carry, (grid.s + cursor.run_s_mm, speed_cap, accel_scale))
+        ahead = carry[0] >= next_cursor.run_s_mm - settings.stop_mm  # bounded memory: forget what is passed
+        next_cursor.carry = (carry[0][ahead], carry[1][ahead], carry[2][ahead])
+    return WindowPlan(samples, s, planned_ds, result, repairs, reaches_end, next_cursor, blocks)
+
+
+class _WindowTooShort(Exception):
+    pass
+
+
+def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: Check, bad: dict) -> PlanningError:
+    name, rows = next(iter(bad.items()))
+    row = int(rows[0])
+    block = pieces[int(samples.piece[row])].block
+    value = float(getattr(result, name if name != "fluctuation" else "arc_fluctuation")[row])
+    return PlanningError(f"block {block + 1}", f"lookahead cannot hold the {name} limit here "
+                         f"(figure {value:.6g} x the limit after {MAX_REPAIR_ROUNDS} repairs)")
+
+
+def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDArray[np.float64],
+           s_raw: NDArray[np.float64], bad: dict[str, NDArray[np.intp]], result: Check, settings: PlanSettings,
+           speed_cap: NDArray[np.float64], accel_scale: NDArray[np.float64]) -> None:
+    """Lower the speed cap around every violating set-point by its violation ratio."""
+    v_grid = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+    v_rows = np.sqrt(np.maximum(np.interp(s, s_raw, x), 0.0))
+    touched = np.zeros(len(grid), dtype=bool)
+    for name, rows in bad.items():
+        if name == "fluctuation":
+            continue
+        ratio = getattr(result, name)[rows]
+        factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
+        reach = settings.tau_f * v_rows[rows] + 2.0 * settings.spacing_mm
+        lo = s[np.maximum(rows - 3, 0)] - reach
+        hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
+        k_lo = np.searchsorted(grid.s, lo, side="left")
+        k_hi = np.searchsorted(grid.s, hi, side="right")
+        for a, b, f, v_row in zip(k_lo, k_hi, factor, v_rows[rows]):
+            # slower points nearby (a start from rest) are not pulled down below f x the row's speed
+            speed_cap[a:b] = np.minimum(speed_cap[a:b], f * np.maximum(v_grid[a:b], v_row))
+            if name in ("accel", "jerk", "axis_accel"):
+                touched[a:b] = True
+    accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
+
+
+def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
+                       s: NDArray[np.float64], times: NDArray[np.float64], raw: jp.RawProfile,
+                       settings: PlanSettings) -> Cursor:
+    """The cursor at the window's last committed set-point (raw state and history moved along)."""
+    t_cut, s_cut = float(times[-1]), float(s[-1])
+    raw_s = float(raw.position(np.array([t_cut]))[0])
+    k, tau = raw.locate(np.array([t_cut]))
+    raw_v = float(raw.v[k[0]] + raw.a[k[0]] * tau[0])
+    history = None
+    if settings.tau_f > 0:
+        history = jp.shifted(jp.history_before(raw, t_cut, settings.tau_f + settings.limits.period_s), -t_cut, -s_cut)
+    piece = pieces[int(samples.piece[-1])]
+    piece_index = cursor.piece_index + int(samples.piece[-1])
+    assert run.pieces[piece_index].block == piece.block
+    positions = np.concatenate([cursor.before, samples.position_mm])[-3:]
+    last = Samples(samples.piece[-1:] * 0, samples.u[-1:], samples.position_mm[-1:], np.zeros(1))
+    return Cursor(piece_index, float(samples.u[-1]), raw_s - s_cut, raw_v, history, positions, last, at_rest=False,
+                  run_s_mm=cursor.run_s_mm + s_cut)
+
+
+def merge_carry(a: tuple | None, b: tuple | None) -> tuple | None:
+    """Repairs of two windows on one run-coordinate grid (the tighter of both everywhere)."""
+    if a is None or b is None:
+        return a if b is None else b
+    s = np.union1d(a[0], b[0])
+    caps = np.minimum(np.interp(s, a[0], a[1], left=NO_CAP, right=NO_CAP),
+                      np.interp(s, b[0], b[1], left=NO_CAP, right=NO_CAP))
+    scales = np.minimum(np.interp(s, a[0], a[2], left=1.0, right=1.0), np.interp(s, b[0], b[2], left=1.0, right=1.0))
+    return s, caps, scales
+
+
+def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
+             cursor: Cursor | None = None) -> Iterator[WindowPlan]:
+    """All windows of one run, to rest at its end; from rest at its start unless ``cursor`` says otherwise.
+
+    One window is held back: when a window cannot be repaired (typically because the repair
+    would have to start before its first set-point), the held-back window is planned again
+    with twice the look-ahead, so it meets the trouble far enough ahead to slow down for it
+    (at most MAX_BACKTRACKS times in a row)."""
+    cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
+    length = settings.window_mm
+    pending: WindowPlan | None = None
+    pending_cursor: Cursor | None = None
+    backtracks = 0
+    while True:
+        try:
+            plan = plan_window(run, cursor, settings, length)
+        except _WindowTooShort:
+            length *= 2.0
+            continue
+        except PlanningError:
+            if pending is None or backtracks >= MAX_BACKTRACKS:
+                raise
+            backtracks += 1
+            length *= 2.0
+            pending = plan_window(run, pending_cursor, settings, length)
+            if pending.final:
+                yield pending
+                return
+            cursor = pending.cursor
+            continue
+        backtracks = 0
+        if pending is not None:
+            yield pending
+        if plan.final:
+            yield plan
+            return
+        pending, pending_cursor = plan, cursor
+        cursor = plan.cursor
+        length = settings.window_mm

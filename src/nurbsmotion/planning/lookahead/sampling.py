@@ -1,0 +1,107 @@
+"""Exact sampling: the parameter u of every set-point from its planned arc length.
+
+On grid interval k (s_k..s_k+1) u(s) is first the quintic Hermite interpolant of u, du/ds
+and d2u/ds2 at both ends; then Newton corrections on the true arc length,
+  s(u) = s_k + integral_{u_k}^{u} |x'| du  (5-point Gauss-Legendre on the short interval),
+  u <- u - (s(u) - s*) du/ds,
+until |s(u) - s*| <= ARC_TOLERANCE_MM (at most NEWTON_STEPS). The final residual of every
+set-point is kept: the arc length of a step differs from its planned length by exactly
+the difference of the residuals at its ends, which is what the verification checks.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, gauss_lengths, to_3d
+
+ARC_TOLERANCE_MM = 1e-12
+NEWTON_STEPS = 4
+
+
+@dataclass(eq=False)
+class Samples:
+    """Set-points of one stretch of a plan."""
+
+    piece: NDArray[np.int32]
+    u: NDArray[np.float64]
+    position_mm: NDArray[np.float64]
+    arc_residual_mm: NDArray[np.float64] | None = None  # s(u) - planned s of every set-point
+
+
+def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Quintic Hermite interpolation of u(s) on grid interval k."""
+    h = grid.s[k + 1] - grid.s[k]
+    safe = np.where(h > 0, h, 1.0)
+    r = np.clip((s - grid.s[k]) / safe, 0.0, 1.0)
+    r2, r3 = r * r, r * r * r
+    h00 = 1 - 10 * r3 + 15 * r3 * r - 6 * r3 * r2
+    h10 = r - 6 * r3 + 8 * r3 * r - 3 * r3 * r2
+    h20 = 0.5 * (r2 - 3 * r3 + 3 * r3 * r - r3 * r2)
+    h01 = 10 * r3 - 15 * r3 * r + 6 * r3 * r2
+    h11 = -4 * r3 + 7 * r3 * r - 3 * r3 * r2
+    h21 = 0.5 * (r3 - 2 * r3 * r + r3 * r2)
+    u0, u1 = grid.u[k], grid.u[k + 1]
+    return (h00 * u0 + h10 * safe * grid.u_s[k] + h20 * safe**2 * grid.u_ss[k]
+            + h01 * u1 + h11 * safe * grid.u_s[k + 1] + h21 * safe**2 * grid.u_ss[k + 1])
+
+
+def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
+    """Interval k with s_k <= s < s_k+1; at a junction the interval of the later piece."""
+    k = np.clip(np.searchsorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
+    # a zero-length (junction) interval at the very end of the grid: step back into the piece
+    while True:
+        zero = grid.s[k + 1] <= grid.s[k]
+        if not zero.any():
+            return k
+        k = np.where(zero, k - 1, k)
+
+
+def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64],
+                  curve) -> NDArray[np.float64]:
+    """s(u) - s* with s(u) = s_k + integral_{u_k}^{u} |x'| (5-point Gauss-Legendre)."""
+    return grid.s[k] + gauss_lengths(curve, grid.u[k], u) - s
+
+
+def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64],
+                         u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Newton corrections of u on the true arc length (module docstring), per piece.
+    Returns u and the final residual s(u) - s* of every point (the measured arc error)."""
+    u = u.copy()
+    residual = np.empty(len(u))
+    pieces = grid.piece[k]
+    for p in np.unique(pieces):
+        sel = np.flatnonzero(pieces == p)
+        curve = grid.pieces[int(p)].curve
+        ks, target, uu = k[sel], s[sel], u[sel]
+        err = arc_residuals(grid, ks, target, uu, curve)
+        for _ in range(NEWTON_STEPS):
+            todo = np.flatnonzero(np.abs(err) > ARC_TOLERANCE_MM)
+            if len(todo) == 0:
+                break
+            kt = ks[todo]
+            speed = np.linalg.norm(curve.derivatives(uu[todo], 1)[1], axis=1)
+            uu[todo] = np.clip(uu[todo] - err[todo] / np.maximum(speed, TINY_SPEED), grid.u[kt], grid.u[kt + 1])
+            err[todo] = arc_residuals(grid, kt, target[todo], uu[todo], curve)
+        u[sel] = uu
+        residual[sel] = err
+    return u, residual
+
+
+def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
+    """Set-points at arc lengths ``s`` (non-decreasing) of the grid's path."""
+    k = grid_interval(grid, s)
+    u, residual = newton_on_arc_length(grid, k, s, hermite_u(grid, k, s))
+    pieces = grid.piece[k]
+    position = np.empty((len(s), 3))
+    for p in np.unique(pieces):
+        sel = pieces == p
+        curve = grid.pieces[int(p)].curve
+        position[sel] = to_3d(curve.points(u[sel]))
+        # a block's ends are its first and last control points exactly (clamped knots)
+        position[sel & (u == curve.u_max)] = to_3d(curve.control_points[-1:])[0]
+        position[sel & (u == curve.u_min)] = to_3d(curve.control_points[:1])[0]
+    return Samples(piece=pieces.astype(np.int32), u=u, position_mm=position, arc_residual_mm=residual)

@@ -1,0 +1,57 @@
+"""Bidirectional scan in x = v^2 over the whole grid (Klipper/TOPP style), vectorised.
+
+With a constant tangential acceleration a_k on interval k (length ds_k), x changes by
+2 a_k ds_k. The backward pass (decelerations, from the end) and the forward pass
+(accelerations, from the start) have closed forms:
+
+  forward:  x_i = C_i + min_{j<=i} (m_j - C_j),   C_i = sum_{k<i} 2 hi_k ds_k
+  backward: x_i = min_{j>=i} (m_j + E_j) - E_i,   E_i = sum_{k<i} 2 (-lo_k) ds_k
+
+(m the speed cap), i.e. a cumulative sum and a running minimum. The admissible a_t depends
+on the speed (resultant and axis accelerations), so the passes are repeated with the bounds
+evaluated at the previous result; the verify-and-repair loop checks what remains.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.planning.lookahead.speed_limits import AccelBounds
+
+SCAN_ROUNDS = 3
+
+
+def forward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], accel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest x <= cap reachable from x_0 = cap_0 with x_{i+1} <= x_i + 2 accel_i ds_i."""
+    c = np.concatenate([[0.0], np.cumsum(2.0 * accel * ds)])
+    return c + np.minimum.accumulate(cap - c)
+
+
+def backward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], decel: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest x <= cap from which x_{i} <= x_{i+1} + 2 decel_i ds_i reaches the end cap."""
+    e = np.concatenate([[0.0], np.cumsum(2.0 * decel * ds)])
+    return np.minimum.accumulate((cap + e)[::-1])[::-1] - e
+
+
+def interval_bounds(bounds: AccelBounds, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two ends."""
+    lo, hi = bounds.at(x)
+    accel = np.minimum(hi[:-1], hi[1:])
+    decel = np.minimum(-lo[:-1], -lo[1:])
+    return np.maximum(decel, 0.0), np.maximum(accel, 0.0)
+
+
+def speed_profile(s: NDArray[np.float64], cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:
+    """x = v^2 at every grid point: under ``cap`` (x), decelerating into and accelerating out
+    of every limit within the admissible tangential acceleration. cap[0] and cap[-1] carry
+    the start and end speeds."""
+    ds = np.diff(s)
+    x = cap.copy()
+    evaluate_at = cap
+    for _ in range(SCAN_ROUNDS):
+        decel, accel = interval_bounds(bounds, evaluate_at)
+        x = forward_pass(backward_pass(cap, ds, decel), ds, accel)
+        x = np.maximum(x, 0.0)
+        evaluate_at = x
+    return x

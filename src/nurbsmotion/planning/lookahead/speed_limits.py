@@ -1,0 +1,244 @@
+"""Speed limits along the path from every constraint at once, and the tangential
+acceleration each point allows at a given speed.
+
+All limits are planned to ``MARGIN`` of the machine's figures (the verify-and-repair loop
+then checks the set-points against the full figures). With x = v^2, a_t = dv/dt, t the unit
+tangent, c = x_ss the curvature vector and c' = x_sss:
+
+- feed: v <= F (limits.feed_for of the block);
+- chord error: a step of length dL on radius rho sags rho - sqrt(rho^2 - dL^2/4), so
+  dL <= 2 sqrt(delta (2 rho - delta)); v <= dL / T with rho the smallest radius within one
+  step either side (a sliding minimum over +-dL, dL starting at F T, not the radius at the
+  point);
+- axis velocity: |t_i| v <= vmax_i;
+- resultant acceleration: a_t^2 + (|c| x)^2 <= A^2;
+- axis acceleration: |t_i a_t + c_i x| <= amax_i;
+- jerk (when J is set): x_sss v^3 + 3 c v a_t + t j dominate the path jerk, so
+  v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J (each term its share,
+  the verify-and-repair loop checks the sum); where the
+  curvature vector jumps (knots of a degree-2 curve, a line meeting an arc) the second
+  difference jumps within two cycles: |dc| v^2 / (2 T) <= J.
+The acceleration constraints are convex in (x, a_t), so the speeds at which some a_t is
+admissible form an interval [0, x_max]: found by vectorised bisection.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.planning.lookahead.path import PathGrid, arc_length_derivatives, to_3d
+
+MARGIN = 0.995  # fraction of every machine limit the planner aims at
+JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
+BISECTION_STEPS = 40
+TINY = 1e-12
+
+
+@dataclass(frozen=True)
+class Caps:
+    """The limits the planner aims at (machine limits x MARGIN). Units in the names."""
+
+    period_s: float
+    chord_error_mm: float
+    accel_mm_s2: float
+    jerk_mm_s3: float | None
+    axis_velocity_mm_s: NDArray[np.float64] | None  # (3,) inf where not limited
+    axis_accel_mm_s2: NDArray[np.float64] | None
+
+
+def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+    """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per query)."""
+    table = [values]
+    width = 1
+    while 2 * width <= len(values):
+        prev = table[-1]
+        table.append(np.minimum(prev[:-width], prev[width:]))
+        width *= 2
+    span = np.maximum(hi - lo + 1, 1)
+    level = np.floor(np.log2(span)).astype(np.intp)
+    out = np.empty(len(lo))
+    for k in np.unique(level):
+        sel = level == k
+        row = table[k]
+        out[sel] = np.minimum(row[lo[sel]], row[hi[sel] - (1 << k) + 1])
+    return out
+
+
+def sliding_min(s: NDArray[np.float64], values: NDArray[np.float64], half_width: NDArray[np.float64]) -> NDArray[np.float64]:
+    """min of ``values`` over the grid points within +-half_width (in s) of each point."""
+    lo = np.searchsorted(s, s - half_width, side="left")
+    hi = np.searchsorted(s, s + half_width, side="right") - 1
+    return range_min(values, lo, np.maximum(hi, lo))
+
+
+def chord_step_mm(kappa: NDArray[np.float64], chord_mm: float) -> NDArray[np.float64]:
+    """Longest step whose chord sags at most chord_mm on radius 1/kappa: 2 sqrt(d (2 rho - d))."""
+    rho = 1.0 / np.maximum(kappa, TINY)
+    return np.where(rho > chord_mm, 2.0 * np.sqrt(chord_mm * np.maximum(2.0 * rho - chord_mm, 0.0)), 2.0 * rho)
+
+
+def chord_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """v <= dL(rho_min over +-dL) / T, rho_min the smallest radius within a step either side."""
+    kappa = np.linalg.norm(grid.curv, axis=1)
+    step = np.minimum(chord_step_mm(kappa, caps.chord_error_mm), grid.feed_mm_s * caps.period_s)
+    for _ in range(3):  # the window depends on the step it limits: fixed-point passes
+        kappa_max = -sliding_min(grid.s, -kappa, step)
+        step = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
+    return step / caps.period_s
+
+
+def axis_velocity_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """v <= min_i vmax_i / |t_i|."""
+    if caps.axis_velocity_mm_s is None:
+        return np.full(len(grid), np.inf)
+    with np.errstate(divide="ignore"):
+        return np.min(caps.axis_velocity_mm_s[None, :] / np.abs(grid.tangent), axis=1)
+
+
+def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """v^3 (|c'| + |c|^2) <= JERK_SHARE J."""
+    if caps.jerk_mm_s3 is None:
+        return np.full(len(grid), np.inf)
+    k = np.linalg.norm(grid.dcurv, axis=1) + np.einsum("ij,ij->i", grid.curv, grid.curv)
+    with np.errstate(divide="ignore"):
+        return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
+
+
+@dataclass(eq=False)
+class AccelBounds:
+    """Admissible tangential acceleration [lo, hi] at each grid point for a given x = v^2."""
+
+    tangent: NDArray[np.float64]
+    curv: NDArray[np.float64]
+    caps: Caps
+    tangential_cap: NDArray[np.float64]  # (N,) |a_t| cap (A x the repair loop's local scale)
+
+    @classmethod
+    def for_grid(cls, grid: PathGrid, caps: Caps, scale: NDArray[np.float64]) -> "AccelBounds":
+        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale)
+
+    def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
+        t, c = self.tangent[idx], self.curv[idx]
+        kappa = np.linalg.norm(c, axis=1)
+        a = self.caps.accel_mm_s2
+        hi = np.minimum(np.sqrt(np.maximum(a * a - (kappa * x) ** 2, 0.0)), self.tangential_cap[idx])
+        hi = np.where(kappa * x > a, -np.inf, hi)
+        lo = -hi
+        if self.caps.jerk_mm_s3 is not None:
+            with np.errstate(divide="ignore"):
+                cap = JERK_SHARE * self.caps.jerk_mm_s3 / (3.0 * kappa * np.sqrt(x))
+            hi = np.minimum(hi, cap)
+            lo = np.maximum(lo, -cap)
+        if self.caps.axis_accel_mm_s2 is not None:
+            for i, amax in enumerate(self.caps.axis_accel_mm_s2):
+                if not np.isfinite(amax):
+                    continue
+                ti, ci = t[:, i], c[:, i] * x
+                moving = np.abs(ti) > TINY
+                safe = np.where(moving, ti, 1.0)
+                b1, b2 = (-amax - ci) / safe, (amax - ci) / safe
+                lo = np.where(moving, np.maximum(lo, np.minimum(b1, b2)), np.where(np.abs(ci) > amax, np.inf, lo))
+                hi = np.where(moving, np.minimum(hi, np.maximum(b1, b2)), hi)
+        return lo, hi
+
+    def max_speed_squared(self, x_cap: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Largest x <= x_cap at which some a_t is admissible (bisection; feasible x form [0, x_max])."""
+        x = np.array(x_cap, dtype=float)
+        lo, hi = self.at(x)
+        bad = np.flatnonzero(~(lo <= hi))
+        if len(bad) == 0:
+            return x
+        kappa = np.linalg.norm(self.curv[bad], axis=1)
+        top = np.minimum(x[bad], self.caps.accel_mm_s2 / np.maximum(kappa, TINY))
+        bottom = np.zeros(len(bad))
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (bottom + top)
+            l, h = self.at(mid, bad)
+            ok = l <= h
+            bottom = np.where(ok, mid, bottom)
+            top = np.where(ok, top, mid)
+        x[bad] = bottom
+        return x
+
+
+def curvature_jumps(grid: PathGrid) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(s, |c+ - c-|) at every place where the curvature vector jumps: interior knots of a
+    piece (a degree-2 curve is only C1 there) and junctions of pieces (a line meeting an arc)."""
+    where, size = [], []
+    for index, piece in enumerate(grid.pieces):
+        knots = piece.curve.breakpoints
+        inner = knots[(knots > piece.u_start) & (knots < piece.u_end)]
+        if len(inner) == 0 or piece.curve.degree > 3:
+            continue
+        eps = 1e-9 * (piece.curve.u_max - piece.curve.u_min)
+        left = arc_length_derivatives(piece.curve, inner - eps)[2]
+        right = arc_length_derivatives(piece.curve, inner + eps)[2]
+        on_piece = np.flatnonzero(grid.piece == index)
+        k = on_piece[np.clip(np.searchsorted(grid.u[on_piece], inner), 0, len(on_piece) - 1)]
+        where.append(grid.s[k])
+        size.append(np.linalg.norm(to_3d(right - left), axis=1))
+    ends = np.flatnonzero(grid.junction)
+    where.append(grid.s[ends])
+    size.append(np.linalg.norm(grid.curv[ends + 1] - grid.curv[ends], axis=1))
+    return np.concatenate(where), np.concatenate(size)
+
+
+def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """Where the curvature vector jumps by dc, the second difference of the set-points jumps by
+    by |dc| v^2 T^2, shared between the two cycles around the step that crosses the jump:
+    third difference / T^3 ~ |dc| v^2 / (2 T) <= J, applied within one step (F T) of the
+    jump (the verify-and-repair loop checks what this estimate misses)."""
+    v = np.full(len(grid), np.inf)
+    if caps.jerk_mm_s3 is None:
+        return v
+    s_jump, dc = curvature_jumps(grid)
+    big = dc > TINY
+    for s0, jump in zip(s_jump[big], dc[big]):
+        limit = np.sqrt(2.0 * caps.jerk_mm_s3 * caps.period_s / jump)
+        reach = float(grid.feed_mm_s.max()) * caps.period_s
+        lo, hi = np.searchsorted(grid.s, [s0 - reach, s0 + reach])
+        v[lo:hi] = np.minimum(v[lo:hi], limit)
+    return v
+
+
+def static_speed_limit(grid: PathGrid, caps: Caps, feed_scale: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s)."""
+    v = np.minimum(grid.feed_mm_s, chord_speed_limit(grid, caps))
+    v = np.minimum(v, axis_velocity_limit(grid, caps))
+    v = np.minimum(v, jerk_speed_limit(grid, caps))
+    v = np.minimum(v, curvature_jump_speed_limit(grid, caps))
+    return v * feed_scale
+
+
+DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
+DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
+
+
+def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
+    """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
+    moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
+
+    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels): the limits in a band
+    spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
+    side). The two ends (the run's start and end states) are not dips and do not spread."""
+    inner = v.copy()
+    inner[0] = inner[-1] = np.inf
+    finite = inner[np.isfinite(inner)]
+    if averaging_s <= 0 or len(finite) == 0:
+        return v
+    top = float(finite.max())
+    level = max(float(finite.min()), 1e-3 * top, 1e-9)
+    out = v.copy()
+    floor = -np.inf
+    while True:
+        band = np.where((inner <= level) & (inner > floor), inner, np.inf)
+        width = np.full(len(s), DIP_WIDTH_FACTOR * level * averaging_s)
+        out = np.minimum(out, sliding_min(s, band, width))
+        if level >= top:
+            out[0], out[-1] = v[0], v[-1]
+            return out
+        floor, level = level, min(level * DIP_LEVEL_RATIO, top)

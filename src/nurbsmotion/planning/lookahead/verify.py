@@ -1,0 +1,231 @@
+"""The discrete check of planned set-points: what the drives see, cycle by cycle.
+
+Same definitions as planning.measure (the shared ruler), computed here on the planner's own
+stretch of set-points so violations can be located and repaired:
+- step n (from set-point n-1 to n): chord error = largest distance of the curve between the
+  two set-points from their chord (Gauss nodes of every part between knots, a parabola
+  through the three best and its vertex evaluated, every path grid point inside the step,
+  and any block junction inside the step); arc length on the true curve: the planned step
+  plus the difference of the two set-points' arc-length residuals (sampling.py: s(u) by
+  Gauss-Legendre from the nearest grid point, minus the planned s);
+- at set-point n: |p_n+1 - 2 p_n + p_n-1| / T^2 (acceleration), per axis too, and
+  |p_n+1 - 3 p_n + 3 p_n-1 - p_n-2| / T^3 (jerk), with the positions before the stretch
+  (history, or the start held at rest) and after it (the end held at rest) included;
+- per-axis velocity |p_n - p_n-1| / T;
+- feed fluctuation on the arc: |arc(step) - planned ds| / planned ds.
+Every figure is compared with the machine's full limit; a set-point passes when
+figure <= limit * (1 + TOLERANCE).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.planning.lookahead.path import _GL_NODES, _GL_WEIGHTS, PathGrid, gauss_lengths, to_3d
+from nurbsmotion.planning.lookahead.sampling import Samples
+
+TOLERANCE = 1e-9  # relative: rounding of the checks themselves
+FLUCTUATION_LIMIT = 1e-6  # guaranteed |arc step - planned step| / planned step
+MIN_STEP_FOR_FLUCTUATION_MM = 1e-6  # steps shorter than 1 nm (coming to rest) are exempt
+
+
+@dataclass(frozen=True)
+class MachineLimits:
+    """The full machine limits the set-points are checked against."""
+
+    period_s: float
+    chord_error_mm: float
+    accel_mm_s2: float
+    jerk_mm_s3: float | None
+    axis_velocity_mm_s: NDArray[np.float64] | None
+    axis_accel_mm_s2: NDArray[np.float64] | None
+
+
+@dataclass(eq=False)
+class Check:
+    """Per-set-point figures as ratios to their limits (1.0 = at the limit) and the maxima."""
+
+    chord: NDArray[np.float64]  # step ending at n
+    accel: NDArray[np.float64]
+    jerk: NDArray[np.float64]
+    axis_velocity: NDArray[np.float64]
+    axis_accel: NDArray[np.float64]
+    arc_fluctuation: NDArray[np.float64]  # absolute figure (not a ratio)
+    chord_fluctuation: NDArray[np.float64]  # |chord - planned ds| / planned ds, for the report
+    figures: dict[str, float]
+
+    def violations(self) -> dict[str, NDArray[np.intp]]:
+        """Set-point indices where a figure exceeds its limit (beyond the tolerance)."""
+        out = {}
+        for name in ("chord", "accel", "jerk", "axis_velocity", "axis_accel"):
+            bad = np.flatnonzero(getattr(self, name) > 1.0 + TOLERANCE)
+            if len(bad):
+                out[name] = bad
+        bad = np.flatnonzero(self.arc_fluctuation > FLUCTUATION_LIMIT)
+        if len(bad):
+            out["fluctuation"] = bad
+        return out
+
+
+def parabola_vertex(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Abscissa of the vertex of the parabola through three points per row (x, y: (m, 3))."""
+    a, b = x[:, 1] - x[:, 0], x[:, 1] - x[:, 2]
+    fa, fb = y[:, 1] - y[:, 2], y[:, 1] - y[:, 0]
+    den = a * fa - b * fb
+    num = a * a * fa - b * b * fb
+    safe = np.where(np.abs(den) > 0, den, 1.0)
+    return np.where(np.abs(den) > 0, x[:, 1] - 0.5 * num / safe, x[:, 1])
+
+
+def distance_to_chord(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance of points (m, k, 3) from segments a-b (m, 3), clamped to the segment."""
+    ab = b - a
+    l2 = np.einsum("md,md->m", ab, ab)
+    rel = points - a[:, None, :]
+    t = np.einsum("mkd,md->mk", rel, ab) / np.where(l2 > 0, l2, 1.0)[:, None]
+    t = np.clip(np.where(l2[:, None] > 0, t, 0.0), 0.0, 1.0)
+    return np.linalg.norm(rel - t[..., None] * ab[:, None, :], axis=-1)
+
+
+def part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
+                 b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(arc length of [u0, u1], largest distance of that curve part from chord a-b)."""
+    half = (u1 - u0) / 2.0
+    u = ((u0 + u1) / 2.0)[:, None] + half[:, None] * _GL_NODES[None, :]
+    values = curve.derivatives(u.ravel(), 1)
+    x = to_3d(values[0]).reshape(len(u0), 5, 3)
+    speed = np.linalg.norm(values[1], axis=1).reshape(u.shape)
+    arc = (speed * _GL_WEIGHTS[None, :]).sum(axis=1) * half
+    dist = distance_to_chord(x, a, b)
+    k = np.clip(np.argmax(dist, axis=1), 1, 3)
+    rows = np.arange(len(u0))
+    cols = np.stack([k - 1, k, k + 1], axis=1)
+    vertex = np.clip(parabola_vertex(u[rows[:, None], cols], dist[rows[:, None], cols]),
+                     np.minimum(u0, u1), np.maximum(u0, u1))
+    at_vertex = distance_to_chord(to_3d(curve.points(vertex))[:, None, :], a, b)[:, 0]
+    return arc, np.maximum(dist.max(axis=1), at_vertex)
+
+
+def smooth_part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
+                        b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """part_figures with every [u0, u1] split at the curve's knots (where x'' may jump, and
+    Gauss-Legendre would lose its accuracy)."""
+    knots = curve.breakpoints
+    first = np.searchsorted(knots, u0, side="right")
+    last = np.searchsorted(knots, u1, side="left")
+    arc, dist = part_figures(curve, u0, np.where(last > first, knots[np.minimum(first, len(knots) - 1)], u1), a, b)
+    for i in np.flatnonzero(last > first):
+        cuts = np.concatenate([knots[first[i]:last[i]], [u1[i]]])
+        lo, hi = cuts[:-1], cuts[1:]
+        m = len(lo)
+        extra_arc, extra_dist = part_figures(curve, lo, hi, np.repeat(a[i:i + 1], m, 0), np.repeat(b[i:i + 1], m, 0))
+        arc[i] += extra_arc.sum()
+        dist[i] = max(dist[i], extra_dist.max())
+    return arc, dist
+
+
+def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np.float64], a: NDArray[np.float64],
+                      b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest distance of the grid points inside each step (s_prev, s) from its chord a-b:
+    catches sharp turns shorter than the step, which a few samples per step could miss."""
+    out = np.zeros(len(s))
+    step = np.searchsorted(s, grid.s, side="left")
+    inside = (step < len(s)) & (grid.s > s_prev[np.minimum(step, len(s) - 1)])
+    k = step[inside]
+    d = distance_to_chord(grid.position[inside][:, None, :], a[k], b[k])[:, 0]
+    np.maximum.at(out, k, d)
+    return out
+
+
+def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
+                      previous: Samples | None) -> NDArray[np.float64]:
+    """Chord error of every step ending at a set-point of ``samples``
+    (step 0 joins the last set-point of ``previous`` at s = 0; without one it is 0)."""
+    piece, u, p = samples.piece, samples.u, samples.position_mm
+    start = previous is not None and len(previous.u) > 0
+    if start:
+        piece = np.concatenate([previous.piece[-1:], piece])
+        u = np.concatenate([previous.u[-1:], u])
+        p = np.concatenate([previous.position_mm[-1:], p])
+        s = np.concatenate([[0.0], s])
+    same = piece[1:] == piece[:-1]
+    chord = np.zeros(len(u) - 1)
+    for q in np.unique(piece[1:][same]):
+        sel = np.flatnonzero(same & (piece[1:] == q))
+        curve = grid.pieces[int(q)].curve
+        chord[sel] = smooth_part_figures(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])[1]
+    for i in np.flatnonzero(~same):  # steps across junctions: the parts of every piece touched
+        a, b = p[i:i + 1], p[i + 1:i + 2]
+        for q in range(int(piece[i]), int(piece[i + 1]) + 1):
+            part = grid.pieces[q]
+            lo = u[i] if q == piece[i] else part.u_start
+            hi = u[i + 1] if q == piece[i + 1] else part.u_end
+            dist = smooth_part_figures(part.curve, np.array([lo]), np.array([hi]), a, b)[1]
+            ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
+            chord[i] = max(chord[i], dist[0], float(distance_to_chord(ends, a, b).max()))
+    chord = np.maximum(chord, grid_chord_errors(grid, s[:-1], s[1:], p[:-1], p[1:]))
+    return chord if start else np.concatenate([[0.0], chord])
+
+
+def rows_max(values: NDArray[np.float64], rows: NDArray[np.intp], n: int) -> NDArray[np.float64]:
+    """Per-row maximum of ``values`` (rows clipped into 0..n-1)."""
+    out = np.zeros(n)
+    np.maximum.at(out, np.clip(rows, 0, n - 1), values)
+    return out
+
+
+def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: NDArray[np.float64], limits: MachineLimits,
+          before: NDArray[np.float64], after: NDArray[np.float64], previous: Samples | None) -> Check:
+    """All figures of a stretch of n set-points. ``before``: the 3 positions preceding it (the
+    start held at rest, or the previous stretch's last three); ``after``: the positions
+    following it (the end held at rest, or none when the plan goes on). Differences that
+    involve a previous set-point are attributed to row 0."""
+    period = limits.period_s
+    p = samples.position_mm
+    n, nb = len(p), len(before)
+    full = np.concatenate([before, p, after])
+    step = np.diff(full, axis=0)[nb - 1: nb - 1 + n]  # p_n - p_n-1
+    second = full[2:] - 2.0 * full[1:-1] + full[:-2]  # centred on full[j + 1]
+    third = full[3:] - 3.0 * full[2:-1] + 3.0 * full[1:-2] - full[:-3]  # row of full[j + 2]
+    j2 = np.arange(nb - 2, len(second))
+    j3 = np.arange(nb - 3, len(third))
+    accel_vec = second[j2] / period**2
+    accel = rows_max(np.linalg.norm(accel_vec, axis=1), j2 + 1 - nb, n)
+    jerk = rows_max(np.linalg.norm(third[j3], axis=1) / period**3, j3 + 2 - nb, n)
+    chord = step_chord_errors(grid, samples, s, previous)
+    planned = np.asarray(planned_ds, dtype=float)
+    moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
+    safe = np.where(moving, planned, 1.0)
+    residual = samples.arc_residual_mm
+    residual_before = np.concatenate([[0.0 if previous is None or previous.arc_residual_mm is None
+                                       else previous.arc_residual_mm[-1]], residual[:-1]])
+    arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
+    chord_fl = np.where(moving, np.abs(np.linalg.norm(step, axis=1) - planned) / safe, 0.0)
+    zeros = np.zeros(n)
+    axis_v = (np.max(np.abs(step) / period / limits.axis_velocity_mm_s, axis=1)
+              if limits.axis_velocity_mm_s is not None else zeros)
+    axis_a = (rows_max(np.max(np.abs(accel_vec) / limits.axis_accel_mm_s2, axis=1), j2 + 1 - nb, n)
+              if limits.axis_accel_mm_s2 is not None else zeros)
+    figures = {
+        "max_chord_error_mm": float(chord.max(initial=0.0)),
+        "max_accel_mm_s2": float(accel.max(initial=0.0)),
+        "max_jerk_mm_s3": float(jerk.max(initial=0.0)),
+        "max_arc_fluctuation": float(arc_fl.max(initial=0.0)),
+        "max_chord_fluctuation": float(chord_fl.max(initial=0.0)),
+    }
+    for i, name in enumerate("xyz"):
+        figures[f"max_{name}_velocity_mm_s"] = float(np.abs(step[:, i]).max(initial=0.0) / period)
+        figures[f"max_{name}_accel_mm_s2"] = float(np.abs(accel_vec[:, i]).max(initial=0.0))
+    return Check(
+        chord=chord / limits.chord_error_mm,
+        accel=accel / limits.accel_mm_s2,
+        jerk=jerk / limits.jerk_mm_s3 if limits.jerk_mm_s3 is not None else zeros,
+        axis_velocity=axis_v,
+        axis_accel=axis_a,
+        arc_fluctuation=arc_fl,
+        chord_fluctuation=chord_fl,
+        figures=figures,
+    )

@@ -1,0 +1,85 @@
+"""``nurbsmotion plan`` and ``compare`` on the papers' example, in process."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+from nurbsmotion.cli import main
+from nurbsmotion.planning.trace import TRACE_COLUMNS, read_trace
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+WANG_NC = str(EXAMPLES / "wang_table1.nc")
+WANG_CONFIG = str(EXAMPLES / "wang_experiment.yaml")
+
+
+def test_plan_summary_trace_and_plot(capsys, tmp_path):
+    trace, png = tmp_path / "wang.csv", tmp_path / "wang.png"
+    assert main(["plan", WANG_NC, "--config", WANG_CONFIG, "--algorithm", "wang",
+                 "--trace", str(trace), "--plot", str(png)]) == 0
+    out = capsys.readouterr()
+    assert out.err == ""
+    assert "max chord error" in out.out and "max resultant accel" in out.out and "planning" in out.out
+    data = read_trace(trace)
+    assert tuple(data) == TRACE_COLUMNS
+    assert data["t"][1] == pytest.approx(0.004)  # the config's 4 ms period
+    assert data["chord_error"].max() <= 0.010 and data["accel"].max() <= 2500.0 * (1 + 1e-5)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_plan_json_reports_measured_figures_and_cli_overrides(capsys):
+    assert main(["plan", WANG_NC, "--config", WANG_CONFIG, "--algorithm", "taylor2", "--period-ms", "2",
+                 "--feed-mm-min", "6000", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["algorithm"] == "taylor2"
+    assert data["limits"]["period_ms"] == pytest.approx(2.0)
+    assert data["measured"]["max_speed_mm_s"] == pytest.approx(100.0, rel=0.02)  # 6000 mm/min overrides F12000
+    assert data["measured"]["end_error_mm"] < 1e-9
+
+
+def test_compare_table_has_a_row_per_algorithm(capsys):
+    assert main(["compare", WANG_NC, "--config", WANG_CONFIG, "--algorithms", "taylor2,zhang,lookahead", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    names = [r["algorithm"] for r in data["results"]]
+    assert names[:2] == ["taylor2", "zhang"]
+    assert "lookahead" in names or "lookahead" in data["skipped"]
+    by_name = {r["algorithm"]: r["measured"] for r in data["results"]}
+    assert by_name["zhang"]["max_fluctuation"] < by_name["taylor2"]["max_fluctuation"]
+
+
+def test_compare_text_table(capsys):
+    assert main(["compare", WANG_NC, "--algorithms", "taylor1,wang", "--period-ms", "4"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert "max chord um" in lines[1] and "max accel mm/s2" in lines[1]
+    assert lines[2].split()[0] == "taylor1" and lines[3].split()[0] == "wang"
+
+
+@pytest.mark.parametrize("argv, where", [
+    (["plan", WANG_NC, "--algorithm", "wang", "--period-ms", "-4"], "--period-ms"),
+    (["plan", WANG_NC, "--algorithm", "wang", "--period-ms", "250"], "--period-ms"),
+    (["plan", WANG_NC, "--algorithm", "nope"], "--algorithm"),
+    (["plan", WANG_NC, "--algorithm", "wang", "--chord-error-mm", "abc"], "--chord-error-mm"),
+    (["plan", str(EXAMPLES / "missing.nc"), "--algorithm", "wang"], "missing.nc"),
+    (["plan", WANG_NC, "--algorithm", "wang", "--config", str(EXAMPLES / "wang_table1.nc")], "wang_table1.nc"),
+    (["compare", WANG_NC, "--algorithms", "wang,bogus"], "--algorithms"),
+])
+def test_bad_options_are_one_line_and_exit_2(capsys, argv, where):
+    try:
+        code = main(argv)
+    except SystemExit as exit_:  # argparse's own checks exit from inside the parser
+        code = exit_.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and where in err
+
+
+def test_plot_without_matplotlib_is_one_line_before_any_work(capsys, tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib -> ImportError
+    trace, png = tmp_path / "t.csv", tmp_path / "p.png"
+    assert main(["plan", WANG_NC, "--algorithm", "taylor2", "--trace", str(trace), "--plot", str(png)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--plot" in err[0] and "matplotlib" in err[0]
+    assert not trace.exists() and not png.exists()
