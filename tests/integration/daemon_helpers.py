@@ -23,7 +23,7 @@ CONFIG = """\
 cycle_period_ms: 4
 simulate: true
 bus: {{interface: virtual, channel: {channel}}}
-interpolation: {{algorithm: wang, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
+interpolation: {{algorithm: lookahead, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
                 max_jerk_mm_s3: 50000, acc_time_s: 0.1}}
 axes:
   - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
@@ -48,6 +48,16 @@ def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02
         time.sleep(poll_s)
 
 
+def subprocess_environment(notify_socket: Path | None = None) -> dict[str, str]:
+    """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if given."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(SRC_DIR), env.get("PYTHONPATH", "")) if p)
+    env.pop("NOTIFY_SOCKET", None)
+    if notify_socket is not None:
+        env["NOTIFY_SOCKET"] = str(notify_socket)
+    return env
+
+
 class DaemonProcess:
     """The daemon subprocess and its files; ``close()`` always ends it."""
 
@@ -64,13 +74,7 @@ class DaemonProcess:
         self.notify_socket: Path | None = None  # set: the daemon gets it as $NOTIFY_SOCKET
 
     def environment(self) -> dict[str, str]:
-        """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if asked for."""
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in (str(SRC_DIR), env.get("PYTHONPATH", "")) if p)
-        env.pop("NOTIFY_SOCKET", None)
-        if self.notify_socket is not None:
-            env["NOTIFY_SOCKET"] = str(self.notify_socket)
-        return env
+        return subprocess_environment(self.notify_socket)
 
     def start(self) -> "DaemonProcess":
         with open(self.log_path, "wb") as log:

@@ -22,6 +22,9 @@ from tests.integration.daemon_helpers import DaemonProcess, wait_until
 
 SHORT = "G21 G90\nG01 X4 Y2 F3000\nG01 X0 Y3 Z1\n"  # ~0.3 s at 50 mm/s
 LONG = "G21 G90\nG01 X60 Y20 F6000\n"  # ~0.8 s, 100 mm/s at cruise
+# Stopped by SIGTERM: long enough that a signal delayed by a loaded machine still lands in the
+# cruise (a controlled stop during the plan's own deceleration adds both: fieldbus issue).
+LONGER = "G21 G90\nG01 X90 Y40 F6000\n"  # ~1.1 s
 
 
 @pytest.fixture(scope="module")
@@ -139,6 +142,33 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     _back_home(daemon)
 
 
+def test_a_stop_during_the_plans_deceleration_stays_within_the_axis_limits(daemon):
+    job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
+    daemon.wait_progress(0.85)
+    assert daemon.request("stop")["ok"]
+    job = daemon.wait_job_end(job_id)
+    assert job["outcome"]["outcome"] in ("stopped", "completed")  # the job may end before the stop lands
+    _assert_within_axis_limits(recorded_counts(Path(job["folder"]), daemon.config)[0], daemon.config)
+    _back_home(daemon)
+
+
+def test_abort_quick_stops_and_reset_brings_the_drives_back(daemon):
+    job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
+    daemon.wait_progress(0.3)
+    assert daemon.request("abort")["ok"]
+    outcome = daemon.wait_job_end(job_id)["outcome"]
+    assert outcome["outcome"] == "aborted" and outcome["sent"] < outcome["planned"]
+    wait_until(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
+    first = [a["actual_mm"] for a in daemon.request("status")["axes"]]
+    assert daemon.request("status")["state"] == "fault"
+    assert daemon.request("submit", name="short.nc", program=SHORT)["ok"] is False
+    assert daemon.request("reset")["ok"]
+    status = daemon.request("status")
+    assert status["state"] == "idle"
+    assert np.allclose([a["actual_mm"] for a in status["axes"]], first, atol=0.05)  # stopped where it was
+    _back_home(daemon)
+
+
 def test_feed_override_changes_the_playback_rate_within_the_axis_limits(daemon):
     job_id = daemon.request("submit", name="long.nc", program=LONG)["job"]["id"]
     daemon.wait_progress(0.2)
@@ -173,8 +203,8 @@ def test_sigterm_mid_job_stops_along_the_path_and_exits_cleanly(tmp_path):
         proc.start()
         assert notify.recv(64) == b"READY=1"  # systemd Type=notify
         assert orphan.outcome()["outcome"] == "interrupted"
-        job_id = proc.request("submit", name="long.nc", program=LONG)["job"]["id"]
-        proc.wait_progress(0.4)
+        job_id = proc.request("submit", name="longer.nc", program=LONGER)["job"]["id"]
+        proc.wait_progress(0.3)
         assert proc.proc is not None
         proc.proc.send_signal(signal.SIGTERM)
         assert proc.proc.wait(15.0) == 0, proc.log()[-2000:]

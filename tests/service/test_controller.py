@@ -119,3 +119,13 @@ def test_program_names_must_be_printable_file_names(parts, name):
     with pytest.raises(InputError, match="'name'"):
         controller.submit(name, "X1")
     assert link.job is None
+
+
+def test_a_job_whose_record_cannot_be_written_does_not_start(tmp_path):
+    config = load_config(ROOT / "config" / "demo.yaml")
+    link = FakeLink(config)
+    (tmp_path / "jobs").write_text("not a folder")
+    controller = Controller(config, link, fake_planner(config), JobRecords(tmp_path))
+    with pytest.raises(InputError, match="data_dir"):
+        controller.submit("a.nc", "X5")
+    assert link.job is None and controller.status()["state"] == "idle"

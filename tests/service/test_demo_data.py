@@ -1,4 +1,4 @@
-"""The packaged demo files are the repository's config/demo.yaml and examples/wang_table1.nc."""
+"""The packaged demo files are copies of the repository's config, example program and EDS."""
 
 from pathlib import Path
 
@@ -10,6 +10,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("name, original", [("demo.yaml", "config/demo.yaml"),
-                                            ("wang_table1.nc", "examples/wang_table1.nc")])
+                                            ("wang_table1.nc", "examples/wang_table1.nc"),
+                                            ("nurbsmotion-servo.eds", "eds/nurbsmotion-servo.eds")])
 def test_packaged_copy_equals_the_repository_file(name, original):
     assert data.read_text(name) == (ROOT / original).read_text(encoding="utf-8")

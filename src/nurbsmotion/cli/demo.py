@@ -6,6 +6,7 @@ the record and the plot are.
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import tempfile
 from dataclasses import replace
@@ -14,7 +15,7 @@ from typing import Any
 
 from nurbsmotion import data
 from nurbsmotion.cli.run import _display, follow
-from nurbsmotion.config import MachineConfig, load_config, parse_config
+from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.service.client import Client, RequestFailed
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.service.verify import drive_report
@@ -37,8 +38,21 @@ def demo_config(args: argparse.Namespace, socket_path: Path) -> MachineConfig:
         from nurbsmotion.errors import InputError
 
         raise InputError(config.where("simulate"), "the demo runs simulated drives: set simulate: true")
-    return replace(config, data_dir=args.data_dir or config.data_dir,
+    return replace(config, data_dir=args.data_dir or config.data_dir, axes=_with_findable_eds(config.axes),
                    control=replace(config.control, socket=str(socket_path), group=None))
+
+
+def _with_findable_eds(axes: tuple[AxisConfig, ...]) -> tuple[AxisConfig, ...]:
+    """Axes without an EDS use the simulated drives' default (the repository's eds/); in a
+    non-editable install that folder is absent, so use the packaged copy."""
+    from nurbsmotion.sim import default_eds_path
+
+    try:
+        default_eds_path()
+        return axes
+    except FileNotFoundError:
+        eds = str(data.path("nurbsmotion-servo.eds"))
+        return tuple(a if a.eds else replace(a, eds=eds) for a in axes)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -100,11 +114,26 @@ def _report(info: dict[str, Any], config: MachineConfig) -> int:
 
 
 def _plot(folder: Path, config: MachineConfig) -> Path | None:
-    """The trace plot (planning.plot) as a PNG next to the record; None without matplotlib."""
+    """The six-panel figure of the run (planning.plot) from the job record, as plot.png in
+    the record; None when matplotlib is missing (the demo extra installs it)."""
     try:
-        from nurbsmotion.planning.plot import plot_trace_file
+        import matplotlib  # noqa: F401
     except ImportError:
         return None
+    import numpy as np
+
+    from nurbsmotion.cli._planning_options import limits_from_config
+    from nurbsmotion.planning import Trajectory
+    from nurbsmotion.planning.measure import measure
+    from nurbsmotion.planning.plot import plot_run
+    from nurbsmotion.planning.trace import read_trace
+    from nurbsmotion.service.planner import parse
+
+    plan = json.loads((folder / "plan.json").read_text(encoding="utf-8"))
+    trace = read_trace(folder / "trace.csv")
+    program = parse(PROGRAM_NAME, data.read_text(PROGRAM_NAME), np.zeros(3))
+    trajectory = Trajectory(plan["algorithm"], plan["period_s"], trace["block"].astype(np.int32), trace["u"],
+                            np.column_stack([trace["x"], trace["y"], trace["z"]]), trace["feed"])
     path = folder / "plot.png"
-    plot_trace_file(folder / "trace.csv", path)
+    plot_run(path, program, trajectory, measure(trajectory, program), limits_from_config(config))
     return path

@@ -74,8 +74,7 @@ class Controller:
             status = self.link.status()
             start_mm = self._held_position_mm(status)
             plan = self.planner(name, text, start_mm)
-            record = self.records.create(name, text)
-            record.write_plan(plan.summary, plan.write_trace)
+            record = self._record(name, text, plan)
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
             if self.simulation is not None:
@@ -209,6 +208,19 @@ class Controller:
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
+
+    def _record(self, name: str, text: str, plan: PlannedJob) -> JobRecord:
+        """The job folder with program, plan and trace, complete before any motion."""
+        record = None
+        try:
+            record = self.records.create(name, text)
+            record.write_plan(plan.summary, plan.write_trace)
+            return record
+        except OSError as err:
+            if record is not None:
+                shutil.rmtree(record.folder, ignore_errors=True)
+            raise InputError("data_dir", f"cannot write the job record in {self.records.root}: "
+                             f"{err.strerror or err}") from None
 
     def _running_job(self, what: str) -> ActiveJob:
         job = self._job

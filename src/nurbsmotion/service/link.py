@@ -5,7 +5,9 @@ RateMaster is a small wrapper owned by the service: fieldbus.Master streams one 
 per cycle; here the streaming phase plays the rows at a rate r (fractional rows per cycle,
 linear interpolation between rows, like the master's own controlled-stop ramp) and r moves
 towards the requested rate by RAMP_SHARE of the master's stop-ramp slope per cycle, so a
-rate change adds at most RAMP_SHARE·a_max (see fieldbus.stop_ramp and service.rate). A controlled stop starts from the current
+rate change adds at most RAMP_SHARE·a_max (see fieldbus.stop_ramp and service.rate). A controlled stop
+starts from the current position and rate, with a slope that leaves room for the plan's
+own acceleration (service.rate.stop_slope). A controlled stop starts from the current
 position and rate. Replace it by the master's own rate control once it has one.
 """
 
@@ -21,7 +23,7 @@ import numpy as np
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Job, Master
 from nurbsmotion.log import kv
-from nurbsmotion.service.rate import RAMP_SHARE
+from nurbsmotion.service.rate import RAMP_SHARE, stop_slope
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +34,7 @@ class RateMaster(Master):
     def __init__(self, config: MachineConfig, *args: Any, **kwargs: Any) -> None:
         super().__init__(config, *args, **kwargs)
         self._rate_target = 1.0
+        self._accel_limits = [float(a) for a in self.axis_map.max_accel_counts_s2(config.interpolation.max_accel_mm_s2)]
 
     def set_rate(self, rate: float) -> None:
         """Playback rate for the running and the next jobs (1.0 = as planned, 0 = pause)."""
@@ -39,8 +42,14 @@ class RateMaster(Master):
 
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
         job = super().stream(counts, on_progress)
+        arr = np.asarray(counts, dtype=np.int64)
         job.playback_s = 0.0  # type: ignore[attr-defined]
         job.playback_r = self._rate_target  # type: ignore[attr-defined]
+        # per-axis figures for the stop slope, as plain floats for the cycle loop
+        job.max_step = (np.abs(np.diff(arr, axis=0)).max(axis=0) if len(arr) > 1  # type: ignore[attr-defined]
+                        else np.zeros(arr.shape[1])).astype(float).tolist()
+        job.planned_accel = ((np.abs(np.diff(arr, n=2, axis=0)).max(axis=0) if len(arr) > 2  # type: ignore[attr-defined]
+                              else np.zeros(arr.shape[1])) / self._period_s**2).astype(float).tolist()
         return job
 
     def _compute(self, k: int) -> None:
@@ -81,6 +90,8 @@ class RateMaster(Master):
         if job is not None and hasattr(job, "playback_s"):
             job.ramp.s = job.playback_s
             job.ramp.r = job.playback_r
+            job.ramp.dr = stop_slope(job.max_step, job.planned_accel, self._accel_limits, self._period_s,
+                                     job.playback_r, job.ramp.dr)
 
 
 class SimulatedDrives:

@@ -16,9 +16,10 @@ from typing import Any
 import numpy as np
 
 from nurbsmotion.axes import AxisMap
+from nurbsmotion.cli._planning_options import limits_from_config  # the limits `nurbsmotion plan --config` uses
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
-from nurbsmotion.planning import PlanLimits, Trajectory, plan
+from nurbsmotion.planning import Trajectory, plan
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
 from nurbsmotion.program import AXES, Program, parse_curve_yaml, parse_gcode
@@ -39,21 +40,6 @@ class PlannedJob:
         """The same CSV as ``nurbsmotion plan --trace`` (planning.trace)."""
         assert self.measurements is not None
         write_trace(path, self.trajectory, self.measurements)
-
-
-def plan_limits(config: MachineConfig) -> PlanLimits:
-    """The planner's limits from the machine configuration (axis limits in X, Y, Z order)."""
-    ip = config.interpolation
-    by_name = {a.name: a for a in config.axes}
-    v_axes = tuple(by_name[n].max_velocity_mm_s if n in by_name and by_name[n].max_velocity_mm_s else 1e9
-                   for n in AXES)
-    a_axes = tuple(by_name[n].max_accel_mm_s2 if n in by_name and by_name[n].max_accel_mm_s2 else ip.max_accel_mm_s2
-                   for n in AXES)
-    return PlanLimits(period_s=config.cycle_period_s, chord_error_mm=ip.chord_error_mm,
-                      max_accel_mm_s2=ip.max_accel_mm_s2, max_jerk_mm_s3=ip.max_jerk_mm_s3,
-                      default_feed_mm_s=ip.feed_mm_s, rapid_feed_mm_s=ip.rapid_feed_mm_s, acc_time_s=ip.acc_time_s,
-                      junction_deviation_mm=ip.junction_deviation_mm, axis_max_velocity_mm_s=v_axes,
-                      axis_max_accel_mm_s2=a_axes)
 
 
 def axis_columns(config: MachineConfig) -> list[int]:
@@ -98,7 +84,7 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
     if not program.blocks:
         raise InputError(name, "the program has no motion")
     t0 = time.perf_counter()
-    trajectory = plan(program, plan_limits(config), config.interpolation.algorithm)
+    trajectory = plan(program, limits_from_config(config), config.interpolation.algorithm)
     planning_s = time.perf_counter() - t0
     positions = axis_positions(trajectory, config, name)
     try:

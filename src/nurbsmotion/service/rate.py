@@ -44,3 +44,21 @@ def effective_rate(requested: float, rate_limit: float) -> float:
     if requested <= 1.0:
         return requested
     return min(requested, max(1.0, rate_limit))
+
+
+def stop_slope(max_step_counts: list[float], planned_accel_counts_s2: list[float], accel_limit_counts_s2: list[float],
+               period_s: float, rate: float, fallback: float) -> float:
+    """Rate decrease per cycle for a controlled stop started at playback rate ``rate``.
+
+    The stop ramp adds |Δc_j|·dr/T² to axis j on top of the plan's own acceleration, which
+    at rate r is r²·a_planned_j; keeping the sum within a_max_j gives
+    dr = min_j (a_max_j - r²·a_planned_j)·T² / max|Δc_j| (fieldbus.stop_ramp uses a_max_j
+    alone, so a stop during the plan's deceleration exceeded the limit). Never below 10 %
+    of ``fallback`` (the master's slope), so a stop always ends, and never above it.
+    """
+    dr = fallback
+    for step, planned, limit in zip(max_step_counts, planned_accel_counts_s2, accel_limit_counts_s2):
+        if step > 0:
+            room = limit - rate * rate * planned
+            dr = min(dr, room * period_s * period_s / step)
+    return max(dr, 0.1 * fallback)
