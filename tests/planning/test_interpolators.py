@@ -157,3 +157,15 @@ def test_a_step_longer_than_the_whole_program_is_one_cycle_to_the_end():
     trajectory = plan(prog, WANG_LIMITS, "zhang")
     assert len(trajectory) == 2
     np.testing.assert_array_equal(trajectory.position_mm[-1], (1e-4, 0, 0))
+
+
+def test_a_kink_inside_a_block_is_a_stop_on_its_vertex():
+    # one degree-1 NURBS with a 90-degree vertex: the curve is cut there and the motion stops on it
+    polyline = NurbsCurve.create(1, [(0, 0, 0), (10, 0, 0), (10, 10, 0)], [1, 1, 1], [0, 0, 0.5, 1, 1])
+    prog = program_of((polyline, 50.0, BlockKind.NURBS))
+    trajectory = plan(prog, PlanLimits(period_s=0.004, acc_time_s=0.2), "wang")
+    at_vertex = np.flatnonzero(np.all(trajectory.position_mm == (10.0, 0.0, 0.0), axis=1))
+    assert len(at_vertex) == 1 and trajectory.notes["stops"] == 1
+    assert np.all(trajectory.block == 0)
+    m = measure(trajectory, prog)
+    assert m.max_chord_error_mm < 1e-12 and m.end_error_mm < 1e-9

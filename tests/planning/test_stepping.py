@@ -19,6 +19,7 @@ CURVES = {
     "wang": NurbsCurve.create(2, WANG_POINTS, WANG_WEIGHTS, WANG_KNOTS),
     "arc": arc_curve((1, 2, 3), (6, 2, 3), 4.0, (0, 1, 1)),
     "line": line_curve((0, 0, 0), (1, 2, 3)),
+    "polyline": NurbsCurve.create(1, [(0, 0, 0), (1, 2, 3), (2, 2, 2), (5, 0, 1)], [1, 2, 0.5, 1], [0, 0, 0.2, 0.7, 1, 1]),
     "cubic": NurbsCurve.create(3, [(0, 0, 0), (1, 2, 0), (3, 1, 1), (4, 4, 2), (6, 0, 1)], [1, 2, 1, 0.5, 1]),
 }
 

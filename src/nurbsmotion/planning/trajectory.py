@@ -14,8 +14,9 @@ class Trajectory:
     """Set-point i is commanded at t = i * period_s. Row 0 is the start point (at rest),
     the last row the end point (at rest).
 
-    ``feed_mm_s`` is the feed the planner intended at each set-point (its own figure); what
-    the drives really see is measured from ``position_mm`` by planning.measure.
+    ``feed_mm_s[i]`` is the feed the planner commanded for the step ending at row i (row 0
+    is 0): its own figure; what the drives really see is measured from ``position_mm`` by
+    planning.measure.
     """
 
     algorithm: str
@@ -23,7 +24,7 @@ class Trajectory:
     block: NDArray[np.int32]  # (N,) index of the program block of each set-point
     u: NDArray[np.float64]  # (N,) curve parameter within that block
     position_mm: NDArray[np.float64]  # (N, 3)
-    feed_mm_s: NDArray[np.float64]  # (N,)
+    feed_mm_s: NDArray[np.float64]  # (N,) commanded feed of the step ending at each row
     planning_time_s: float = 0.0
     notes: dict[str, float | str] = field(default_factory=dict)
 

@@ -15,7 +15,8 @@ Jerk and per-axis limits are not used by these methods (the ``lookahead`` planne
 
 from __future__ import annotations
 
-from nurbsmotion.planning.interpolators.runner import CORNER_ANGLE_DEG, Method, interpolate, split_runs
+from nurbsmotion.planning.interpolators.pieces import CORNER_ANGLE_DEG, split_runs
+from nurbsmotion.planning.interpolators.runner import Method, interpolate
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program

@@ -28,11 +28,19 @@ class FastCurve:
     def __init__(self, curve: NurbsCurve):
         if curve.dim != 3 or curve.degree > MAX_FAST_DEGREE:
             raise ValueError("FastCurve needs a 3-D curve of degree <= 3")
-        lefts = curve.breakpoints[:-1]
-        derivs = curve.homogeneous_derivatives(np.asarray(lefts, dtype=float), order=curve.degree)
-        coeffs = np.zeros((len(lefts), 4, MAX_FAST_DEGREE + 1))  # span, coordinate, power
-        for k, a_k in enumerate(derivs):
-            coeffs[:, :, k] = a_k.T / factorial(k)
+        if curve.degree == 1:  # lines and polylines: A is linear between consecutive control points
+            nodes = curve.knots[1:-1]  # the parameter of each control point
+            q = curve.homogeneous
+            lefts = nodes[:-1]
+            coeffs = np.zeros((len(lefts), 4, MAX_FAST_DEGREE + 1))
+            coeffs[:, :, 0] = q[:-1]
+            coeffs[:, :, 1] = (q[1:] - q[:-1]) / np.diff(nodes)[:, None]
+        else:
+            lefts = curve.breakpoints[:-1]
+            derivs = curve.homogeneous_derivatives(np.asarray(lefts, dtype=float), order=curve.degree)
+            coeffs = np.zeros((len(lefts), 4, MAX_FAST_DEGREE + 1))  # span, coordinate, power
+            for k, a_k in enumerate(derivs):
+                coeffs[:, :, k] = a_k.T / factorial(k)
         self.lefts = [float(v) for v in lefts]
         self.spans = [tuple(float(v) for v in span.ravel()) for span in coeffs]
         self.u_min, self.u_max = curve.u_min, curve.u_max

@@ -1,8 +1,8 @@
 """Cycle-by-cycle interpolation of a whole Program, as a controller runs it.
 
-The program is cut into runs at sharp corners: where the tangent turns by more than
-CORNER_ANGLE_DEG between blocks the motion stops exactly on the junction (the reverse
-table of the run ends there) and restarts from rest. Inside a run the motion is continuous:
+The program is cut into runs at sharp corners (pieces.py): where the tangent turns by more
+than CORNER_ANGLE_DEG between blocks (or at a kink inside a block) the motion stops exactly
+on the junction (the reverse table of the run ends there) and restarts from rest. Inside a run the motion is continuous:
 a step that passes the end of a block carries its leftover into the next block.
 
 Each cycle of a run:
@@ -31,6 +31,7 @@ import numpy as np
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.interpolators.feed import FeedLimits
+from nurbsmotion.planning.interpolators.pieces import Piece, split_runs
 from nurbsmotion.planning.interpolators.reverse import build_reverse_table
 from nurbsmotion.planning.interpolators.slowdown import SlowdownProfile
 from nurbsmotion.planning.interpolators.stepping import (
@@ -43,12 +44,11 @@ from nurbsmotion.planning.interpolators.stepping import (
 )
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.trajectory import Trajectory
-from nurbsmotion.program import BlockKind, Program
+from nurbsmotion.program import Program
 
-CORNER_ANGLE_DEG = 1.0  # tangent turn above which a junction is a stop
-MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped
-MAX_GAP_MM = 1e-6  # consecutive blocks must meet (Program's contract)
 MAX_CYCLES = 50_000_000
+CHECK_ITERATIONS = 6  # re-steps of the set-point acceleration check
+CHECK_TARGET = 0.99999  # aim this far inside a_max: lengthening a step also bends it more
 
 
 @dataclass(frozen=True)
@@ -64,47 +64,19 @@ class Method:
     as_printed: bool = False
 
 
-def tangent_angle_deg(a: tuple[float, ...], b: tuple[float, ...]) -> float:
-    na, nb = math.sqrt(sum(x * x for x in a)), math.sqrt(sum(x * x for x in b))
-    if na == 0.0 or nb == 0.0:
-        return 180.0
-    cos = sum(x * y for x, y in zip(a, b)) / (na * nb)
-    return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
-
-
-def split_runs(program: Program, corner_angle_deg: float = CORNER_ANGLE_DEG) -> list[list[int]]:
-    """Block indices grouped into runs of tangent-continuous blocks (stops between runs)."""
-    runs: list[list[int]] = []
-    previous = None
-    for index, block in enumerate(program.blocks):
-        if block.curve.length < MIN_BLOCK_LENGTH_MM:
-            continue
-        if previous is not None:
-            end_tangent = previous.curve.point_and_derivatives(previous.curve.u_max)[1]
-            start_tangent = block.curve.point_and_derivatives(block.curve.u_min)[1]
-            gap = distance(tuple(previous.end), tuple(block.start))
-            if gap > MAX_GAP_MM:
-                raise InputError(str(block.source), f"block starts {gap:.6g} mm away from the end of the block before it")
-            if tangent_angle_deg(end_tangent, start_tangent) > corner_angle_deg:
-                runs.append([])
-        if not runs:
-            runs.append([])
-        runs[-1].append(index)
-        previous = block
-    return runs
-
-
 class RunPlanner:
     """Interpolates one run (from rest to rest) and appends its rows."""
 
-    def __init__(self, program: Program, block_indices: list[int], method: Method, limits: PlanLimits):
-        self.indices = block_indices
-        blocks = [program.blocks[i] for i in block_indices]
+    def __init__(self, pieces: list[Piece], method: Method, limits: PlanLimits):
+        self.indices = [piece.block for piece in pieces]
+        curves = [piece.curve for piece in pieces]
         self.period = limits.period_s
-        self.feeds = [limits.feed_for(b.feed_mm_s, rapid=b.kind == BlockKind.RAPID) for b in blocks]
+        self.feeds = [piece.feed_mm_s for piece in pieces]
         self.accel = min(max(self.feeds) / limits.acc_time_s, limits.max_accel_mm_s2)  # a_l = V0 / t_l
-        self.path = CurvePath([b.curve for b in blocks])
-        self.reversed_path = CurvePath([b.curve.reversed() for b in reversed(blocks)])
+        self.path = CurvePath(curves)
+        last = len(curves) - 1
+        self.reversed_path = CurvePath(lambda j: curves[last - j].reversed(),
+                                       [(c.u_min, c.u_max) for c in reversed(curves)])
         self.limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2, method.adaptive)
         # wang: the Taylor predictor's relative step error, measured on the last step, scales
         # the next step, so the limits hold for the feed the set-points really show
@@ -116,9 +88,9 @@ class RunPlanner:
                                          Stepper(2, False, limits.chord_error_mm), self.period)
         ahead_limits = FeedLimits(self.period, limits.chord_error_mm, limits.max_accel_mm_s2,
                                   method.adaptive and not method.as_printed)
-        self.slowdown = SlowdownProfile([b.curve for b in blocks], self.feeds, ahead_limits, self.accel)
+        self.slowdown = SlowdownProfile(curves, self.feeds, ahead_limits, self.accel)
         self.as_printed = method.as_printed
-        self.end_x = tuple(float(v) for v in blocks[-1].end)  # the exact end point (last control point)
+        self.end_x = tuple(float(v) for v in curves[-1].control_points[-1])  # the exact end point
         last = self.path.last
         self.table_j = [last - j for j in self.table.j]  # forward coordinates of the table points
         self.table_u = [self.path.u_min[last - j] + self.path.u_max[last - j] - u
@@ -141,7 +113,7 @@ class RunPlanner:
         """
         limit = self.limits.max_accel * self.period * self.period
         done = False
-        for _ in range(3):
+        for _ in range(CHECK_ITERATIONS):
             x, h = point.x, here.x
             d = (x[0] - 2.0 * h[0] + before_x[0], x[1] - 2.0 * h[1] + before_x[1], x[2] - 2.0 * h[2] + before_x[2])
             d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
@@ -156,7 +128,7 @@ class RunPlanner:
             if across2 >= limit * limit:  # the bend alone is too much: take the smallest resultant
                 change = -along
             else:
-                change = -along + math.copysign(math.sqrt(limit * limit - across2), along) * 0.999999
+                change = -along + math.copysign(math.sqrt(limit * limit - across2), along) * CHECK_TARGET
                 if abs(change) > abs(along):
                     change = -along
             new_step = max(chord + change, 0.0) * step / chord
@@ -263,9 +235,9 @@ def interpolate(program: Program, limits: PlanLimits, method: Method) -> Traject
     """Plan ``program`` cycle by cycle with ``method``; one set-point per period."""
     started = time.perf_counter()
     rows: tuple[list, list, list, list] = ([], [], [], [])
-    runs = split_runs(program)
-    for r, indices in enumerate(runs):
-        RunPlanner(program, indices, method, limits).run(rows, include_start=(r == 0))
+    runs = split_runs(program, limits)
+    for r, pieces in enumerate(runs):
+        RunPlanner(pieces, method, limits).run(rows, include_start=(r == 0))
     block_rows, u_rows, x_rows, feed_rows = rows
     if not block_rows:
         if not program.blocks:

@@ -16,7 +16,7 @@ node and its neighbours, so a curvature peak between nodes is not missed.
 from __future__ import annotations
 
 from bisect import bisect_right
-from math import ceil
+from math import ceil, sqrt
 
 import numpy as np
 
@@ -28,7 +28,13 @@ MIN_NODES_PER_BLOCK = 64
 
 
 class SlowdownProfile:
-    """V_ahead(j, u): the feed cap from the slow-downs still to come, per block of a run."""
+    """V_ahead(j, u): the feed cap from the slow-downs still to come, per block of a run.
+
+    Between two nodes the profile is read back from the later node along the a_l ramp,
+    V² = min(V²_{i+1} + 2 a_l (s_{i+1} - s), cap²_i) with cap_i the smaller cap of the two
+    nodes: exact on a ramp (V² is linear in s there), so a long straight line needs only
+    its two end nodes.
+    """
 
     def __init__(self, curves: list[NurbsCurve], feeds_mm_s: list[float], limits: FeedLimits, accel_mm_s2: float):
         grids, caps, lengths = [], [], []
@@ -37,31 +43,39 @@ class SlowdownProfile:
             grids.append(u)
             caps.append(cap)
             lengths.append(seg)
-        ds = np.concatenate(lengths)  # node spacing along the run, one entry per node (first 0)
-        s = np.cumsum(ds)
+        s = np.cumsum(np.concatenate(lengths))  # path length of every node along the run
         back = s[-1] - s[::-1]  # distance back from the stop, ascending
-        cap = np.concatenate(caps)[::-1].copy()
-        cap[0] = 0.0  # the stop
-        v2 = 2.0 * accel_mm_s2 * back + np.minimum.accumulate(cap * cap - 2.0 * accel_mm_s2 * back)
-        v = np.sqrt(np.maximum(v2, 0.0))[::-1]
+        cap = np.concatenate(caps)
+        interval_cap2 = np.minimum(cap, np.r_[cap[1:], cap[-1]]) ** 2
+        cap_back = cap[::-1].copy()
+        cap_back[0] = 0.0  # the stop
+        v2 = (2.0 * accel_mm_s2 * back + np.minimum.accumulate(cap_back * cap_back - 2.0 * accel_mm_s2 * back))[::-1]
+        self.accel2 = 2.0 * accel_mm_s2
         self.u: list[list[float]] = []
-        self.v: list[list[float]] = []
+        self.s: list[list[float]] = []
+        self.v2: list[list[float]] = []
+        self.cap2: list[list[float]] = []
         start = 0
         for grid in grids:
+            stop = start + len(grid)
             self.u.append(grid.tolist())
-            self.v.append(v[start: start + len(grid)].tolist())
-            start += len(grid)
+            self.s.append(s[start:stop].tolist())
+            self.v2.append(np.maximum(v2[start:stop], 0.0).tolist())
+            self.cap2.append(interval_cap2[start:stop].tolist())
+            start = stop
 
     def feed(self, j: int, u: float) -> float:
-        """Linear interpolation of the profile at parameter u of block j."""
-        grid, v = self.u[j], self.v[j]
+        """The profile at parameter u of block j (see the class doc)."""
+        grid, v2 = self.u[j], self.v2[j]
         i = bisect_right(grid, u) - 1
         if i < 0:
-            return v[0]
+            return sqrt(v2[0])
         if i >= len(grid) - 1:
-            return v[-1]
+            return sqrt(v2[-1])
+        s = self.s[j]
         f = (u - grid[i]) / (grid[i + 1] - grid[i])
-        return v[i] + f * (v[i + 1] - v[i])
+        ahead = (s[i + 1] - s[i]) * (1.0 - f)  # path length to the later node (linear in u)
+        return sqrt(min(v2[i + 1] + self.accel2 * ahead, self.cap2[j][i]))
 
 
 def subdivide(u: np.ndarray, seg: np.ndarray, spacing_mm: float) -> np.ndarray:
@@ -76,7 +90,12 @@ def subdivide(u: np.ndarray, seg: np.ndarray, spacing_mm: float) -> np.ndarray:
 def _block_caps(curve: NurbsCurve, feed: float, limits: FeedLimits, accel_mm_s2: float):
     """Dense u grid of one block (node spacing <= about GRID_SPACING_MM along the path),
     the cap at each node, and the path length before each node."""
-    nodes = max(MIN_NODES_PER_BLOCK, ceil(curve.length / GRID_SPACING_MM) // 4 + 1)
+    points = curve.control_points
+    if curve.degree == 1 and len(points) == 2:  # a straight line: no curvature, two nodes
+        return (np.array([curve.u_min, curve.u_max]), np.full(2, feed),
+                np.array([0.0, float(np.linalg.norm(points[1] - points[0]))]))
+    polygon_mm = float(np.linalg.norm(np.diff(points, axis=0), axis=1).sum())
+    nodes = max(MIN_NODES_PER_BLOCK, ceil(polygon_mm / GRID_SPACING_MM) // 4 + 1)
     u = np.linspace(curve.u_min, curve.u_max, nodes)
     for _ in range(3):
         points, d1, d2 = curve.derivatives(u, 2)

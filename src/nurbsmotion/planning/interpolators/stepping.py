@@ -58,16 +58,34 @@ class PathPoint:
 
 
 class CurvePath:
-    """Curves traversed one after the other (a run of blocks between stops, or its reverse)."""
+    """Curves traversed one after the other (a run of blocks between stops, or its reverse).
 
-    def __init__(self, curves: Sequence[NurbsCurve]):
-        self.curves = list(curves)
-        evaluators = [scalar_evaluators(c) for c in self.curves]
-        self.evaluate: list[Callable[[float], tuple[Vec, Vec, Vec]]] = [e[0] for e in evaluators]
-        self.point: list[Callable[[float], Vec]] = [e[1] for e in evaluators]
-        self.u_min = [c.u_min for c in curves]
-        self.u_max = [c.u_max for c in curves]
-        self.last = len(curves) - 1
+    ``curves`` may be lazy: a callable giving curve j, with ``u_ranges`` [(u_min, u_max)];
+    a curve's scalar evaluators are built the first time the path reaches it (a reversed
+    run is only visited near its stop, a long G-code run has thousands of blocks).
+    """
+
+    def __init__(self, curves: Sequence[NurbsCurve] | Callable[[int], NurbsCurve],
+                 u_ranges: Sequence[tuple[float, float]] | None = None):
+        if callable(curves):
+            if u_ranges is None:
+                raise ValueError("a lazy CurvePath needs the u range of every curve")
+            self.curve_at = curves
+        else:
+            listed = list(curves)
+            self.curve_at = listed.__getitem__
+            u_ranges = [(c.u_min, c.u_max) for c in listed]
+        self.u_min = [float(a) for a, _ in u_ranges]
+        self.u_max = [float(b) for _, b in u_ranges]
+        self.last = len(self.u_min) - 1
+        self.evaluate: list[Callable[[float], tuple[Vec, Vec, Vec]]] = [self._loader(j, 0) for j in range(self.last + 1)]
+        self.point: list[Callable[[float], Vec]] = [self._loader(j, 1) for j in range(self.last + 1)]
+
+    def _loader(self, j: int, which: int) -> Callable:
+        def load(u: float):
+            self.evaluate[j], self.point[j] = scalar_evaluators(self.curve_at(j))
+            return (self.evaluate[j], self.point[j])[which](u)
+        return load
 
     def at(self, j: int, u: float) -> PathPoint:
         x, d1, d2 = self.evaluate[j](u)
