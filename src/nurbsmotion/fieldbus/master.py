@@ -359,7 +359,10 @@ class Master:
     def reset_faults(self) -> None:
         """Acknowledge faults and re-enable every axis (fault reset, state machine), then hold."""
         if self._thread is None:
-            raise FieldbusError("reset faults: the drives are not brought up (call bring_up())")
+            if not self._faults:
+                raise FieldbusError("reset faults: the drives are not brought up (call bring_up())")
+            self.bring_up()  # an earlier bring-up failed (e.g. a drive was still off): try it again
+            return
         if self._job is not None:
             raise FieldbusError("reset faults: a job is still running")
         if any(state != c.NmtState.OPERATIONAL for state in self._hb_state) or \
