@@ -116,19 +116,26 @@ def demand_per_sync(records: np.ndarray) -> np.ndarray:
     return filled[last]
 
 
-def worst_steps(demand_counts: np.ndarray, period_s: float) -> tuple[float, float]:
+def worst_steps(demand_counts: np.ndarray, period_s: float, counts_per_mm: float = COUNTS_PER_MM) -> tuple[float, float]:
     """(max |Δ|/T in mm/s, max |Δ²|/T² in mm/s²) of one drive's per-SYNC demand."""
-    mm = demand_counts / COUNTS_PER_MM
+    mm = demand_counts / counts_per_mm
     v = np.abs(np.diff(mm)) / period_s if len(mm) > 1 else np.zeros(1)
     a = np.abs(np.diff(mm, n=2)) / period_s**2 if len(mm) > 2 else np.zeros(1)
     return float(v.max(initial=0.0)), float(a.max(initial=0.0))
 
 
-def assert_no_jump(sim: SimNetwork, nodes: list[int], period_s: float, tol: float = 0.02) -> None:
-    """Every drive's applied set-points stay within v_max and a_max (+ tol and one count of
-    rounding per difference): no jump, also not while stopping."""
-    count_mm = 1.0 / COUNTS_PER_MM
-    for node in nodes:
-        v, a = worst_steps(demand_per_sync(sim[node].recorder.as_array()), period_s)
-        assert v <= V_MAX_MM_S * (1 + tol) + count_mm / period_s, f"node {node}: set-point step {v:.1f} mm/s"
-        assert a <= A_MAX_MM_S2 * (1 + tol) + 2 * count_mm / period_s**2, f"node {node}: {a:.0f} mm/s² step"
+def assert_records_within_limits(records: dict[int, np.ndarray], period_s: float, v_max_mm_s: float = V_MAX_MM_S,
+                                 a_max_mm_s2: float = A_MAX_MM_S2, counts_per_mm: float = COUNTS_PER_MM,
+                                 tol: float = 0.02) -> None:
+    """Every drive's applied set-points (recorder rows per node) stay within v_max and a_max
+    (+ tol and one count of rounding per difference): no jump, also not while stopping."""
+    count_mm = 1.0 / counts_per_mm
+    for node, rows in records.items():
+        v, a = worst_steps(demand_per_sync(rows), period_s, counts_per_mm)
+        assert v <= v_max_mm_s * (1 + tol) + count_mm / period_s, f"node {node}: set-point step {v:.1f} mm/s"
+        assert a <= a_max_mm_s2 * (1 + tol) + 2 * count_mm / period_s**2, f"node {node}: {a:.0f} mm/s² step"
+
+
+def assert_no_jump(sim: SimNetwork, nodes: list[int], period_s: float) -> None:
+    """assert_records_within_limits for the live recordings of ``nodes``."""
+    assert_records_within_limits({n: sim[n].recorder.as_array() for n in nodes}, period_s)
