@@ -69,7 +69,8 @@ def test_tpdos_of_the_wrong_length_are_counted_and_never_used(caplog):
         assert applied_plan_exactly(r, counts)
         status = r.master.status()
         assert sum(a.bad_tpdo_count for a in status.axes) == 60
-        assert [a.position_counts for a in status.axes] == [r.sim[n].position_actual for n in NODES]
+        wait_for(lambda: [a.position_counts for a in r.master.status().axes] ==
+                 [r.sim[n].position_actual for n in NODES] == counts[-1].tolist(), what="positions from good TPDOs")
         warnings = [rec.getMessage() for rec in caplog.records if "bad_tpdo_length" in rec.getMessage()]
         assert 1 <= len(warnings) <= 3  # logged once per node, not per frame
 
