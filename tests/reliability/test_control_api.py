@@ -245,3 +245,25 @@ def test_the_daemon_opens_no_network_port(daemon):
     ours = _socket_inodes(pid)
     assert ours, "the daemon should at least have its control socket"
     assert not ours & _network_inodes(pid)
+
+
+def test_abuse_during_a_job_does_not_disturb_the_motion(daemon):
+    from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
+
+    response = daemon.request("submit", name="run.nc", program="G21 G90\nG01 X30 Y-20 Z4 F3000\n")
+    assert response["ok"], response
+    daemon.wait_progress(0.1)
+    for name, line in BAD_LINES.items():
+        if name == "stop without job":  # with a job running, that one is a valid request
+            continue
+        with connect(daemon.socket) as s:
+            answer = ask(s, line)
+            assert answer["ok"] is False and "internal error" not in answer["error"]
+    busy = daemon.request("submit", name="second.nc", program="G01 X1 F100\n")
+    assert busy["ok"] is False and "busy" in busy["error"]
+    job = daemon.wait_job_end(response["job"]["id"])
+    assert job["outcome"]["outcome"] == "completed", job["outcome"]
+    folder = Path(job["folder"])
+    assert held_plan_held(recorded_counts(folder, daemon.config)[0], planned_counts(folder, daemon.config))
+    home = daemon.request("submit", name="home.nc", program="G01 X0 Y0 Z0 F3000\n")
+    assert daemon.wait_job_end(home["job"]["id"])["outcome"]["outcome"] == "completed"
