@@ -156,7 +156,7 @@ def ruckig_comparison(period_s: float) -> str:
         return f"ruckig is not installed ({err}); `pip install ruckig` to run this comparison."
     v, a, j = 200.0, 2500.0, JERK_MM_S3
     rows = ["| line mm | lookahead s | ruckig s | ratio | target <= 1.01 | max accel | max jerk |", "|---|---|---|---|---|---|---|"]
-    for length in (5.0, 20.0, 50.0, 100.0, 500.0):
+    for length in (2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 500.0):
         program = line_program(length)
         limits = PlanLimits(period_s=period_s, chord_error_mm=0.01, max_accel_mm_s2=a, max_jerk_mm_s3=j, feed_mm_s=v)
         ours = plan_lookahead(program, limits)

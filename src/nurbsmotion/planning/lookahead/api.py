@@ -20,6 +20,7 @@ from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program
 
 DEFAULT_CHUNK_CYCLES = 2000
+WHOLE_PLAN_CHUNK_CYCLES = 20000  # plan_lookahead keeps everything anyway: fewer, longer windows
 ALGORITHM = "lookahead"
 GUARANTEES = ("chord_error", "accel", "jerk", "axis_velocity", "axis_accel", "arc_fluctuation", "exact_end")
 
@@ -69,10 +70,10 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "fluctuation_definition": "arc length between consecutive set-points vs planned step (feed_mm_s * T)",
         "chord_error_limit_mm": limits.chord_error_mm,
         "accel_limit_mm_s2": limits.max_accel_mm_s2,
-        "repairs": float(figures.repairs),
-        "windows": float(figures.windows),
-        "runs": float(runs),
-        "stops": float(max(runs - 1, 0)),  # exact stops inside the program (corners)
+        "repairs": figures.repairs,  # ints are floats to the notes' type (numeric tower)
+        "windows": figures.windows,
+        "runs": runs,
+        "stops": max(runs - 1, 0),  # exact stops inside the program (corners)
     }
     if limits.max_jerk_mm_s3 is not None:
         notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3
@@ -119,7 +120,7 @@ def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:
     """Plan the whole program (the registered ``lookahead`` algorithm)."""
     started = time.perf_counter()
     figures = _Figures()
-    chunks = list(plan_lookahead_chunks(program, limits, _figures=figures))
+    chunks = list(plan_lookahead_chunks(program, limits, WHOLE_PLAN_CHUNK_CYCLES, _figures=figures))
     trajectory = Trajectory.concatenate(chunks)
     trajectory.planning_time_s = time.perf_counter() - started
     trajectory.notes = notes_for(limits, figures, figures.runs)

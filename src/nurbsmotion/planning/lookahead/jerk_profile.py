@@ -162,6 +162,20 @@ def superlevel_width(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, 
     return right - left
 
 
+def plateau_level(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, tau_f: float,
+                  allowance_mm: float) -> float:
+    """Highest x = v^2 whose superlevel stretch around ``peak`` is PLATEAU_MARGIN v tau_f +
+    allowance long (bisection)."""
+    lo, hi = 0.0, float(x[peak])
+    for _ in range(PLATEAU_SEARCH_STEPS):
+        mid = 0.5 * (lo + hi)
+        if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f + allowance_mm:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
 def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float,
                       jerk: float) -> NDArray[np.float64] | None:
     """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
@@ -181,14 +195,11 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     if len(sharp) == 0:
         return None
     caps = np.full(len(s), np.inf)
+    spacing = float(np.diff(s).max())  # the cap only acts on grid points: allow one interval each side
     for peak in sharp:
-        lo, hi = 0.0, float(x[peak])
-        for _ in range(PLATEAU_SEARCH_STEPS):
-            mid = 0.5 * (lo + hi)
-            if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f:
-                lo = mid
-            else:
-                hi = mid
+        lo = plateau_level(s, x, peak, tau_f, 2.0 * spacing)
+        if lo <= 0.0:  # a move shorter than two grid intervals: no allowance for the grid
+            lo = plateau_level(s, x, peak, tau_f, 0.0)
         near = np.abs(s - s[peak]) <= superlevel_width(s, x, peak, lo) + 1e-9
         caps[near & (x > lo)] = np.minimum(caps[near & (x > lo)], lo)
     return caps

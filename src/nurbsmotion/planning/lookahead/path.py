@@ -68,6 +68,17 @@ class PathGrid:
         return self.piece[1:] != self.piece[:-1]
 
 
+def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(u, approximate arc length from u_start) on a coarse polyline (COARSE_PER_SPAN points per
+    knot span): enough to size look-ahead windows, without the curve's exact quadrature."""
+    knots = curve.breakpoints
+    edges = np.concatenate([[u_start], knots[(knots > u_start) & (knots < u_end)], [u_end]])
+    frac = np.linspace(0.0, 1.0, COARSE_PER_SPAN + 1)[:-1]
+    u = np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), u_end)
+    x = curve.points(u)
+    return u, np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+
+
 def gauss_lengths(curve: NurbsCurve, u0: NDArray[np.float64], u1: NDArray[np.float64]) -> NDArray[np.float64]:
     """Arc length of each [u0, u1] by 5-point Gauss-Legendre (intervals are short)."""
     half = (u1 - u0) / 2.0

@@ -35,10 +35,6 @@ class Run:
     pieces: tuple[BlockPiece, ...]
     junction_speed_mm_s: tuple[float, ...]
 
-    @property
-    def length_mm(self) -> float:
-        return float(sum(p.curve.length for p in self.pieces))
-
 
 def end_tangents(piece: BlockPiece) -> tuple[np.ndarray, np.ndarray]:
     """Unit tangents at the start and the end of a piece."""
@@ -69,8 +65,8 @@ def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
     """Every block with motion, as a whole piece with its feed."""
     pieces = []
     for index, block in enumerate(program.blocks):
-        if block.curve.length <= MIN_BLOCK_LENGTH_MM:
-            continue
+        if np.ptp(block.curve.control_points, axis=0).max() <= MIN_BLOCK_LENGTH_MM:
+            continue  # every control point in one place: no motion
         feed = limits.feed_for(block.feed_mm_s, rapid=block.kind == BlockKind.RAPID)
         pieces.append(BlockPiece(index, block.curve, block.curve.u_min, block.curve.u_max, feed))
     return pieces

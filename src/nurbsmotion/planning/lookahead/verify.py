@@ -3,9 +3,9 @@
 Same definitions as planning.measure (the shared ruler), computed here on the planner's own
 stretch of set-points so violations can be located and repaired:
 - step n (from set-point n-1 to n): chord error = largest distance of the curve between the
-  two set-points from their chord (Gauss nodes of every part between knots, a parabola
-  through the three best and its vertex evaluated, every path grid point inside the step,
-  and any block junction inside the step); arc length on the true curve: the planned step
+  two set-points from their chord (three samples of every part between knots and the vertex
+  of the parabola through them, every path grid point inside the step, and any block
+  junction inside the step); arc length on the true curve: the planned step
   plus the difference of the two set-points' arc-length residuals (sampling.py: s(u) by
   Gauss-Legendre from the nearest grid point, minus the planned s);
 - at set-point n: |p_n+1 - 2 p_n + p_n-1| / T^2 (acceleration), per axis too, and
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import _GL_NODES, _GL_WEIGHTS, PathGrid, gauss_lengths, to_3d
+from nurbsmotion.planning.lookahead.path import PathGrid, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
 
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
@@ -82,49 +82,41 @@ def parabola_vertex(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[n
 
 def distance_to_chord(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance of points (m, k, 3) from segments a-b (m, 3), clamped to the segment."""
-    ab = b - a
-    l2 = np.einsum("md,md->m", ab, ab)
+    ab = (b - a)[:, None, :]
+    l2 = (ab * ab).sum(axis=2)
     rel = points - a[:, None, :]
-    t = np.einsum("mkd,md->mk", rel, ab) / np.where(l2 > 0, l2, 1.0)[:, None]
-    t = np.clip(np.where(l2[:, None] > 0, t, 0.0), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * ab[:, None, :], axis=-1)
+    t = np.clip((rel * ab).sum(axis=2) / np.where(l2 > 0, l2, 1.0), 0.0, 1.0)
+    off = rel - t[..., None] * ab
+    return np.sqrt((off * off).sum(axis=2))
 
 
-def part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
-                 b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(arc length of [u0, u1], largest distance of that curve part from chord a-b)."""
-    half = (u1 - u0) / 2.0
-    u = ((u0 + u1) / 2.0)[:, None] + half[:, None] * _GL_NODES[None, :]
-    values = curve.derivatives(u.ravel(), 1)
-    x = to_3d(values[0]).reshape(len(u0), 5, 3)
-    speed = np.linalg.norm(values[1], axis=1).reshape(u.shape)
-    arc = (speed * _GL_WEIGHTS[None, :]).sum(axis=1) * half
-    dist = distance_to_chord(x, a, b)
-    k = np.clip(np.argmax(dist, axis=1), 1, 3)
-    rows = np.arange(len(u0))
-    cols = np.stack([k - 1, k, k + 1], axis=1)
-    vertex = np.clip(parabola_vertex(u[rows[:, None], cols], dist[rows[:, None], cols]),
-                     np.minimum(u0, u1), np.maximum(u0, u1))
+CHORD_FRACTIONS = np.array([0.25, 0.5, 0.75])
+
+
+def part_chord_errors(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
+                      b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest distance of the curve part [u0, u1] from chord a-b: three samples, then the
+    vertex of the parabola through them (exact for the parabolic sag of a short smooth part)."""
+    u = u0[:, None] + (u1 - u0)[:, None] * CHORD_FRACTIONS[None, :]
+    dist = distance_to_chord(to_3d(curve.points(u.ravel())).reshape(len(u0), 3, 3), a, b)
+    vertex = np.clip(parabola_vertex(u, dist), np.minimum(u0, u1), np.maximum(u0, u1))
     at_vertex = distance_to_chord(to_3d(curve.points(vertex))[:, None, :], a, b)[:, 0]
-    return arc, np.maximum(dist.max(axis=1), at_vertex)
+    return np.maximum(dist.max(axis=1), at_vertex)
 
 
-def smooth_part_figures(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
-                        b: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """part_figures with every [u0, u1] split at the curve's knots (where x'' may jump, and
-    Gauss-Legendre would lose its accuracy)."""
+def smooth_chord_errors(curve, u0: NDArray[np.float64], u1: NDArray[np.float64], a: NDArray[np.float64],
+                        b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """part_chord_errors with every [u0, u1] split at the curve's knots (where x'' may jump)."""
     knots = curve.breakpoints
     first = np.searchsorted(knots, u0, side="right")
     last = np.searchsorted(knots, u1, side="left")
-    arc, dist = part_figures(curve, u0, np.where(last > first, knots[np.minimum(first, len(knots) - 1)], u1), a, b)
+    dist = part_chord_errors(curve, u0, np.where(last > first, knots[np.minimum(first, len(knots) - 1)], u1), a, b)
     for i in np.flatnonzero(last > first):
         cuts = np.concatenate([knots[first[i]:last[i]], [u1[i]]])
-        lo, hi = cuts[:-1], cuts[1:]
-        m = len(lo)
-        extra_arc, extra_dist = part_figures(curve, lo, hi, np.repeat(a[i:i + 1], m, 0), np.repeat(b[i:i + 1], m, 0))
-        arc[i] += extra_arc.sum()
-        dist[i] = max(dist[i], extra_dist.max())
-    return arc, dist
+        m = len(cuts) - 1
+        extra = part_chord_errors(curve, cuts[:-1], cuts[1:], np.repeat(a[i:i + 1], m, 0), np.repeat(b[i:i + 1], m, 0))
+        dist[i] = max(dist[i], extra.max())
+    return dist
 
 
 def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np.float64], a: NDArray[np.float64],
@@ -156,16 +148,16 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
     for q in np.unique(piece[1:][same]):
         sel = np.flatnonzero(same & (piece[1:] == q))
         curve = grid.pieces[int(q)].curve
-        chord[sel] = smooth_part_figures(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])[1]
+        chord[sel] = smooth_chord_errors(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])
     for i in np.flatnonzero(~same):  # steps across junctions: the parts of every piece touched
         a, b = p[i:i + 1], p[i + 1:i + 2]
         for q in range(int(piece[i]), int(piece[i + 1]) + 1):
             part = grid.pieces[q]
             lo = u[i] if q == piece[i] else part.u_start
             hi = u[i + 1] if q == piece[i + 1] else part.u_end
-            dist = smooth_part_figures(part.curve, np.array([lo]), np.array([hi]), a, b)[1]
+            dist = smooth_chord_errors(part.curve, np.array([lo]), np.array([hi]), a, b)[0]
             ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
-            chord[i] = max(chord[i], dist[0], float(distance_to_chord(ends, a, b).max()))
+            chord[i] = max(chord[i], dist, float(distance_to_chord(ends, a, b).max()))
     chord = np.maximum(chord, grid_chord_errors(grid, s[:-1], s[1:], p[:-1], p[1:]))
     return chord if start else np.concatenate([[0.0], chord])
 
