@@ -69,6 +69,20 @@ class SoakResult:
     rss_mb: list[tuple[float, float]] = field(default_factory=list)  # (elapsed s, MB)
     load_before: tuple[float, float, float] = (0.0, 0.0, 0.0)
     load_after: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    drive_threads: str = "normal priority"
+
+
+def run_as_hardware(priority: int) -> str:
+    """SCHED_FIFO ``priority`` for this process' threads from now on (the simulated drives
+    stand in for hardware: a drive thread preempted while holding the GIL would stall the
+    master, which real drives cannot do), as benchmarks/bench_fieldbus.py does."""
+    if priority <= 0:
+        return "normal priority"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+        return f"SCHED_FIFO {priority}"
+    except (PermissionError, OSError):
+        return "normal priority (no permission for SCHED_FIFO)"
 
 
 def soak(seconds: float, period_ms: float = 1.0, sample_s: float = 2.0) -> SoakResult:
@@ -130,6 +144,7 @@ def report(r: SoakResult) -> str:
     faults = "; ".join(r.faults[:5]) if r.faults else "none"
     return f"""Master + three simulated drives (X, Y CSP, Z IP) in one process on the virtual bus,
 T = {r.period_ms:g} ms, jobs streamed back to back for {r.seconds:g} s (each a {MOVE_S:g} s move and back).
+Simulated drives' threads: {r.drive_threads}; the master's cycle thread SCHED_FIFO 20, its receive thread 19.
 Load average of the machine (other work on the 2 cores) before / after: {r.load_before[0]:.2f} / {r.load_after[0]:.2f}.
 
 | figure | value |
@@ -150,11 +165,15 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--period-ms", type=float, default=1.0)
     parser.add_argument("--sample-s", type=float, default=2.0)
+    parser.add_argument("--sim-priority", type=int, default=10,
+                        help="SCHED_FIFO priority of the simulated drives' threads (0: normal)")
     parser.add_argument("--no-write", action="store_true", help="print only; leave docs/benchmarks.md alone")
     args = parser.parse_args()
+    drive_threads = run_as_hardware(args.sim_priority)
     result = soak(args.seconds, args.period_ms, args.sample_s)
+    result.drive_threads = drive_threads
     body = report(result)
-    command = f"PYTHONPATH=src python benchmarks/bench_soak.py --seconds {args.seconds:g}"
+    command = f"PYTHONPATH=src python benchmarks/bench_soak.py --seconds {args.seconds:g} --sim-priority {args.sim_priority}"
     if args.no_write:
         print(body)
     else:
