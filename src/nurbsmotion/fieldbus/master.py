@@ -326,7 +326,8 @@ class Master:
             bringup.check_supported_mode(sdo, axis, mode)
             writes = drive_configuration(axis.node_id, mode, self._period_s,
                                          self.config.monitoring.heartbeat_producer_ms, self._fe_window[i],
-                                         axis.following_error_timeout_ms, self.following_error_tpdo)
+                                         axis.following_error_timeout_ms, self.following_error_tpdo,
+                                         int(self._accel_counts_s2[i]))
             bringup.configure_drive(sdo, axis.node_id, writes)
             self._fb_pos[i] = bringup.read_position(sdo, axis.node_id)
             self._fb_status[i] = bringup.sdo_upload(sdo, axis.node_id, "read statusword", c.STATUSWORD, 0, "<H")
