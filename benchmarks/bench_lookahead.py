@@ -33,7 +33,7 @@ from benchmarks._report import write_section  # noqa: E402
 from nurbsmotion.geometry import NurbsCurve  # noqa: E402
 from nurbsmotion.geometry.primitives import arc_curve, line_curve  # noqa: E402
 from nurbsmotion.planning import ALGORITHM_MODULES, PlanLimits, plan  # noqa: E402
-from nurbsmotion.planning.lookahead import plan_lookahead, plan_lookahead_chunks  # noqa: E402
+from nurbsmotion.planning.lookahead import plan_lookahead  # noqa: E402
 from nurbsmotion.planning.measure import measure  # noqa: E402
 from nurbsmotion.program import Block, BlockKind, Program, SourceRef, read_program  # noqa: E402
 from tests.conftest import WANG_KNOTS, WANG_POINTS, WANG_WEIGHTS  # noqa: E402

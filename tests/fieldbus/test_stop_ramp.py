@@ -11,7 +11,7 @@ def _path(n=2000):
 
 
 def _stop(counts, accel, period_s, start):
-    ramp = StopRamp(counts.astype(np.int64).tolist(), ramp_slope(counts, accel, period_s))
+    ramp = StopRamp(memoryview(counts.astype(np.int64)), ramp_slope(counts, accel, period_s))
     ramp.start(start)
     out, points = [0, 0, 0], [counts[start].tolist()]
     while ramp.step(out):

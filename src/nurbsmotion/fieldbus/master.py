@@ -56,12 +56,12 @@ _HISTORY = 8  # cycles of sent set-points kept for the computed following error
 class Job:
     """Handle of one streamed set-point sequence; every method is thread-safe."""
 
-    def __init__(self, master: "Master", rows: list[list[int]], dr: float,
+    def __init__(self, master: "Master", rows: memoryview, dr: float,
                  on_progress: Callable[[int, int], None] | None, progress_every: int) -> None:
         self._master = master
         self.rows = rows
-        self.length = len(rows)
-        self.last = len(rows) - 1
+        self.length = rows.shape[0]
+        self.last = rows.shape[0] - 1
         self.ramp = StopRamp(rows, dr)
         self.index = -1  # index of the last planned set-point handed to the bus
         self.on_progress = on_progress
@@ -405,7 +405,10 @@ class Master:
                 raise InputError("set-points", f"axis {self._names[j]}: the job starts at {int(arr[0, j])} counts "
                                  f"but the axis holds {hold[j]} counts (more than the following-error window "
                                  f"{self._fe_window[j]} counts away)")
-        job = Job(self, arr.astype(np.int64).tolist(), ramp_slope(arr, self._accel_counts_s2, self._period_s),
+        # A 2-D memoryview: 8 bytes per set-point, read per cycle as rows[i, j] -> int
+        # (nested lists would cost ~10x the memory for a long program).
+        rows = memoryview(np.ascontiguousarray(arr, dtype=np.int64))
+        job = Job(self, rows, ramp_slope(arr, self._accel_counts_s2, self._period_s),
                   on_progress, self._progress_every)
         self._quiet_gc()
         self._request("job", job)
@@ -645,13 +648,13 @@ class Master:
             job = self._job
             assert job is not None
             idx = job.index + 1
-            row = job.rows[idx]
+            rows = job.rows
             for i in range(n):
-                sp[i] = row[i]
+                sp[i] = rows[idx, i]
             cw[:] = self._run_cw
             job.index = idx
             if idx == job.last:
-                self._hold[:] = row
+                self._hold[:] = sp
                 self._set_phase("holding", k)
                 job.outcome, job.finish_cycle = "done", k + 1
         elif phase == "holding":

@@ -31,11 +31,12 @@ class StopRamp:
 
     __slots__ = ("rows", "last", "dr", "s", "r", "n_axes")
 
-    def __init__(self, rows: list[list[int]], dr: float) -> None:
+    def __init__(self, rows: memoryview, dr: float) -> None:
+        """``rows``: a 2-D memoryview (cycles x axes) of int64 counts."""
         self.rows = rows
-        self.last = len(rows) - 1
+        self.last = rows.shape[0] - 1
         self.dr = dr
-        self.n_axes = len(rows[0]) if rows else 0
+        self.n_axes = rows.shape[1]
         self.s = 0.0
         self.r = 0.0
 
@@ -57,12 +58,12 @@ class StopRamp:
         self.s = s
         i = int(s)
         f = s - i
-        row = self.rows[i]
+        rows = self.rows
         if f > 0.0:
-            nxt = self.rows[i + 1]
             for j in range(self.n_axes):
-                out[j] = int(round(row[j] + f * (nxt[j] - row[j])))
+                a = rows[i, j]
+                out[j] = int(round(a + f * (rows[i + 1, j] - a)))
         else:
             for j in range(self.n_axes):
-                out[j] = row[j]
+                out[j] = rows[i, j]
         return r > 0.0

@@ -69,18 +69,18 @@ class RateMaster(Master):
         job.playback_s = s
         i = int(s)
         f = s - i
-        row = job.rows[i]
+        rows = job.rows  # 2-D memoryview (cycles x axes) of int64 counts
         if f > 0.0:
-            nxt = job.rows[i + 1]
             for j in range(n):
-                sp[j] = int(round(row[j] + f * (nxt[j] - row[j])))
+                a = rows[i, j]
+                sp[j] = int(round(a + f * (rows[i + 1, j] - a)))
         else:
             for j in range(n):
-                sp[j] = row[j]
+                sp[j] = rows[i, j]
         self._cw[:] = self._run_cw
         job.index = i
         if i == job.last:
-            self._hold[:] = row
+            self._hold[:] = sp
             self._set_phase("holding", k)
             job.outcome, job.finish_cycle = "done", k + 1
 

@@ -8,9 +8,12 @@ import numpy as np
 import pytest
 
 from nurbsmotion.planning import Trajectory
-from nurbsmotion.planning.lookahead import PlanState, plan_from_state, plan_lookahead, plan_lookahead_chunks
+from nurbsmotion.errors import InputError
+from nurbsmotion.planning.lookahead import (PlanningError, PlanState, plan_from_state, plan_lookahead,
+                                            plan_lookahead_chunks, plan_lookahead_resumable)
 from nurbsmotion.planning.measure import measure
-from tests.planning.lookahead.conftest import WANG_LIMITS, assert_within_limits, polyline
+from nurbsmotion.program import read_program
+from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits, polyline
 
 NO_JERK = replace(WANG_LIMITS, max_jerk_mm_s3=None)
 
@@ -61,3 +64,69 @@ def test_replanning_from_a_moving_state_with_a_lower_feed(wang_program, limits):
     assert np.linalg.norm(rest.position_mm[0] - first.position_mm[i]) <= state.v_mm_s * period * 1.1
     late = rest.feed_mm_s[len(rest) // 2:]
     assert late.max() <= 120.0 * (1 + 1e-9)
+
+
+def program_arc_lengths(program, trajectory) -> np.ndarray:
+    """Arc length along the whole program of every set-point (from the curves themselves)."""
+    starts = np.concatenate([[0.0], np.cumsum([b.curve.length for b in program.blocks])])
+    return np.array([starts[b] + program.blocks[b].curve.arc_length(u) for b, u in zip(trajectory.block, trajectory.u)])
+
+
+@pytest.fixture(scope="module")
+def mixed_plans():
+    program = read_program(EXAMPLES / "mixed.nc")
+    plans = {}
+    for name, limits in (("jerk", WANG_LIMITS), ("no-jerk", NO_JERK)):
+        trajectory = plan_lookahead(program, limits)
+        plans[name] = (limits, trajectory, program_arc_lengths(program, trajectory))
+    return program, plans
+
+
+@pytest.mark.parametrize("name", ["jerk", "no-jerk"])
+@pytest.mark.parametrize("where", [0.0, 0.4])
+def test_replanning_mixed_program_from_states_along_it(mixed_plans, name, where):
+    """mixed.nc (lines, arcs, NURBS, stops): re-plan at 150 mm/s from the state of a set-point
+    a fraction ``where`` into the plan; old set-points + new ones hold every limit."""
+    program, plans = mixed_plans
+    limits, first, s = plans[name]
+    i, period = max(int(where * len(first)), 1), limits.period_s
+    state = PlanState(float(s[i]), (s[i + 1] - s[i - 1]) / (2 * period), (s[i + 1] - 2 * s[i] + s[i - 1]) / period**2)
+    rest = Trajectory.concatenate(list(plan_from_state(program, replace(limits, feed_mm_s=150.0), state)))
+    head = Trajectory(first.algorithm, period, first.block[: i + 1], first.u[: i + 1], first.position_mm[: i + 1],
+                      first.feed_mm_s[: i + 1])
+    assert_within_limits(measure(Trajectory.concatenate([head, rest]), program), limits)
+
+
+def test_replanning_too_close_to_the_end_is_a_clear_error(wang_program):
+    first = plan_lookahead(wang_program, WANG_LIMITS)
+    s = np.asarray(wang_program.blocks[0].curve.arc_length(first.u))
+    i, period = len(first) - 3, WANG_LIMITS.period_s
+    state = PlanState(float(s[i]), (s[i + 1] - s[i - 1]) / (2 * period), (s[i + 1] - 2 * s[i] + s[i - 1]) / period**2)
+    try:
+        rest = Trajectory.concatenate(list(plan_from_state(wang_program, WANG_LIMITS, state)))
+    except PlanningError as err:
+        assert "re-plan" in str(err) or "cannot hold" in str(err)
+    else:
+        np.testing.assert_array_equal(rest.position_mm[-1], wang_program.end_position)
+
+
+@pytest.mark.parametrize("limits", [WANG_LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+@pytest.mark.parametrize("feed_mm_s", [80.0, 250.0])
+def test_feed_override_resumes_exactly_at_a_chunk_boundary(mixed_plans, limits, feed_mm_s):
+    """Stop consuming a chunked plan after 3 chunks, resume from its Resume with a new feed:
+    old chunks + resumed ones hold every limit and end exactly."""
+    program = mixed_plans[0]
+    chunks = plan_lookahead_resumable(program, limits, chunk_cycles=150)
+    head = [next(chunks) for _ in range(3)]
+    tail = [chunk for chunk, _ in plan_lookahead_resumable(program, replace(limits, feed_mm_s=feed_mm_s), 150,
+                                                           head[-1][1])]
+    assert tail
+    joined = Trajectory.concatenate([chunk for chunk, _ in head] + tail)
+    assert_within_limits(measure(joined, program), limits)
+
+
+def test_resuming_with_other_acceleration_limits_is_refused(mixed_plans):
+    program = mixed_plans[0]
+    _, resume = next(plan_lookahead_resumable(program, WANG_LIMITS, chunk_cycles=150))
+    with pytest.raises(InputError, match="acceleration and jerk"):
+        list(plan_lookahead_resumable(program, replace(WANG_LIMITS, max_jerk_mm_s3=20000.0), 150, resume))

@@ -3,17 +3,19 @@
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Iterator
 
 import numpy as np
 from numpy.typing import NDArray
 
+from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
 from nurbsmotion.planning.lookahead.planner import Cursor, PlanSettings, WindowPlan, plan_run, settings_for
 from nurbsmotion.planning.lookahead.runs import Run, program_pieces, split_runs
+from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.planning.trajectory import Trajectory
@@ -81,8 +83,23 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
     return notes
 
 
-def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures) -> Iterator[Trajectory]:
-    before = np.zeros((0, 3))
+@dataclass(frozen=True, eq=False)
+class Resume:
+    """Where a chunked plan stands after one of its chunks: the last set-point (block, u), the
+    three last positions and, while moving, the raw profile's state and the jerk filter's
+    memory. Opaque: hand it to plan_lookahead_resumable(..., resume=...) to continue exactly
+    (e.g. with a new feed override)."""
+
+    block: int
+    u: float
+    before: NDArray[np.float64]
+    cursor: Cursor | None  # None: at rest there
+    tau_f: float
+
+
+def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures,
+            before: NDArray[np.float64] | None = None) -> Iterator[tuple[Trajectory, Resume]]:
+    before = np.zeros((0, 3)) if before is None else before
     period = settings.limits.period_s
     for index, run in enumerate(runs):
         started = time.perf_counter()
@@ -90,9 +107,25 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
         for plan in plan_run(run, settings, before, cursor):
             figures.add(plan)
             if len(plan.samples.u):
-                yield window_trajectory(plan, period, started)
                 before = np.concatenate([before, plan.samples.position_mm])[-3:]
+                if plan.cursor is not None:
+                    piece = run.pieces[plan.cursor.piece_index]
+                    resume = Resume(piece.block, plan.cursor.u, before, plan.cursor, settings.tau_f)
+                else:
+                    resume = Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, settings.tau_f)
+                yield window_trajectory(plan, period, started), resume
             started = time.perf_counter()
+
+
+def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings]:
+    pieces = program_pieces(program, limits)
+    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
+    return split_runs(pieces, limits, settings.min_pass_mm_s), settings
+
+
+def _rest_chunk(program: Program, limits: PlanLimits) -> Trajectory:
+    return Trajectory(ALGORITHM, limits.period_s, np.zeros(1, np.int32), np.zeros(1),
+                      np.asarray(program.start_position, float).reshape(1, -1)[:, :3], np.zeros(1))
 
 
 def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
@@ -101,19 +134,62 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
 
     Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
     from the highest feed), not by the program's length."""
-    pieces = program_pieces(program, limits)
-    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
-    runs = split_runs(pieces, limits, settings.min_pass_mm_s)
+    runs, settings = _setup(program, limits, chunk_cycles)
     figures = _figures if _figures is not None else _Figures()
     if not runs:
-        yield Trajectory(ALGORITHM, limits.period_s, np.zeros(1, np.int32), np.zeros(1),
-                         np.asarray(program.start_position, float).reshape(1, -1)[:, :3], np.zeros(1))
+        yield _rest_chunk(program, limits)
         return
     first = None
     if state is not None:
         runs, first = start_from_state(program, runs, state, settings)
     figures.runs = len(runs)
-    yield from _chunks(runs, settings, first, figures)
+    for chunk, _ in _chunks(runs, settings, first, figures):
+        yield chunk
+
+
+def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
+                             resume: Resume | None = None) -> Iterator[tuple[Trajectory, Resume]]:
+    """Chunks as plan_lookahead_chunks, each with the Resume after it. Given ``resume`` (from an
+    earlier plan of the same program), continue from there with ``limits``: the first
+    set-point is the one after the resumed chunk's last, and the join is verified against the
+    real last set-points and the real filter memory. The acceleration and jerk limits must
+    be those of the resumed plan (the filter memory depends on A/J); the feed, chord error and
+    axis limits may change."""
+    runs, settings = _setup(program, limits, chunk_cycles)
+    if not runs:
+        return
+    if resume is None:
+        yield from _chunks(runs, settings, None, _Figures())
+        return
+    if abs(resume.tau_f - settings.tau_f) > 1e-12:
+        raise InputError("limits", "resuming needs the acceleration and jerk limits of the resumed plan "
+                         "(the jerk filter's memory depends on A/J); use plan_from_state to re-plan")
+    runs, first = resume_runs(runs, resume)
+    if not runs:
+        return
+    yield from _chunks(runs, settings, first, _Figures(), resume.before)
+
+
+def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | None]:
+    """The runs from a Resume on, and the cursor that starts the first of them."""
+    for r, run in enumerate(runs):
+        for p, piece in enumerate(run.pieces):
+            if piece.block != resume.block or not piece.u_start <= resume.u <= piece.u_end:
+                continue
+            at_piece_end = resume.u >= piece.u_end
+            if resume.cursor is None and at_piece_end and p + 1 == len(run.pieces):
+                return runs[r + 1:], None  # at rest at a run's end: the next run starts there
+            if at_piece_end and p + 1 < len(run.pieces):
+                p, u = p + 1, run.pieces[p + 1].u_start
+            else:
+                u = resume.u
+            tail = Run(run.pieces[p:], run.junction_speed_mm_s[p:])
+            if resume.cursor is None:
+                return [tail] + runs[r + 1:], Cursor(0, u, before=resume.before)
+            last = Samples(np.zeros(1, np.int32), np.array([u]), resume.before[-1:], np.zeros(1))
+            cursor = replace(resume.cursor, piece_index=0, u=u, run_s_mm=0.0, carry=None, previous=last)
+            return [tail] + runs[r + 1:], cursor
+    raise InputError("resume", f"block {resume.block + 1} is not part of this program's motion")
 
 
 def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:
@@ -169,7 +245,6 @@ def start_from_state(program: Program, runs: list[Run], state: PlanState, settin
     else:
         v_raw, offset, history = v, 0.0, None
     last = point_at(runs, state.s_mm)
-    from nurbsmotion.planning.lookahead.sampling import Samples
     previous = Samples(np.zeros(1, np.int32), np.array([u]), last[None, :])
     cursor = Cursor(0, u, offset, v_raw, history, before, previous, at_rest=False)
     return [tail] + runs[r + 1:], cursor

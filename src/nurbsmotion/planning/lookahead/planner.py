@@ -27,7 +27,7 @@ from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths
 from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
-from nurbsmotion.planning.lookahead.scan import speed_profile
+from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
 from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
                                                          static_speed_limit, widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
@@ -40,7 +40,9 @@ MAX_SPACING_MM = 0.5
 MIN_SPACING_MM = 0.005
 WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
 PART_TOLERANCE = 1e-9
-START_BRAKE_SHARE = 0.7  # share of A used to brake from a running start above the new caps
+START_BRAKE_SHARE = 1.0  # share of A (already x MARGIN) used to brake from a running start above the new caps
+BRAKE_ROUNDS = 3
+START_BRAKE_SHARE_FILTERED = 0.7  # with the jerk filter: the step into braking is a jerk of share x J
 MAX_BACKTRACKS = 4  # re-plans of a held-back window for the sake of the next one
 MAX_WINDOW_CYCLES = 10_000_000  # a window planned slower than this cannot move: an error, not a crawl
 NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be interpolated)  # relative difference at which the stop and free scans are said to part
@@ -178,6 +180,18 @@ def scan_grid(grid: PathGrid, start_mm: float) -> NDArray[np.intp]:
     return np.arange(int(np.searchsorted(grid.s, start_mm - 1e-12, side="left")), len(grid))
 
 
+def braking_ramp(s: NDArray[np.float64], x0: float, bounds: AccelBounds, share: float) -> NDArray[np.float64]:
+    """x = v^2 of braking from x0 at ``share`` of the deceleration every point allows at that
+    speed (curvature and axis limits leave less than A): x_i = x0 - sum 2 d_k ds_k, with the
+    bounds re-evaluated at the ramp's own speeds (they loosen as it slows)."""
+    ds = np.diff(s)
+    x = np.full(len(s), x0)
+    for _ in range(BRAKE_ROUNDS):
+        decel, _ = interval_bounds(bounds, np.maximum(x, 0.0))
+        x = x0 - np.concatenate([[0.0], np.cumsum(2.0 * share * decel * ds)])
+    return x
+
+
 def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], bounds: AccelBounds,
             cursor: Cursor, end_free: bool, tau_f: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
@@ -193,8 +207,8 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
         sub = AccelBounds(bounds.tangent[take], bounds.curv[take], bounds.caps, bounds.tangential_cap[take])
     if cursor.raw_speed_mm_s > 0:
         # a running start above the caps (a lowered feed override): brake down to them
-        ramp = cursor.raw_speed_mm_s**2 - 2.0 * START_BRAKE_SHARE * bounds.caps.accel_mm_s2 * (s - s[0])
-        cap = np.maximum(cap, ramp)
+        share = START_BRAKE_SHARE if tau_f <= 0 else START_BRAKE_SHARE_FILTERED
+        cap = np.maximum(cap, braking_ramp(s, cursor.raw_speed_mm_s**2, sub, share))
     if not end_free:
         cap[-1] = 0.0
     x = speed_profile(s, cap, sub)
@@ -239,6 +253,9 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
     idx = scan_grid(grid, cursor.raw_offset_mm)
+    if len(idx) < 2:  # a running start whose filter memory already reaches past the run's end
+        raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
+                            "from this state; keep the current plan")
     period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
