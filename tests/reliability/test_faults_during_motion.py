@@ -65,7 +65,7 @@ def run_seed(r: Rig, kind: str, seed: int) -> None:
     start = held_counts(r.master)
     sign = [1 if s <= 0 else -1 for s in start]  # move back towards 0: positions stay bounded
     distance = [sign[j] * rng.uniform(5.0, 15.0) for j in range(3)]
-    counts = smooth_move(start, distance, duration_s=0.4)
+    counts = smooth_move(start, distance, duration_s=0.6)
     at = rng.randint(5, len(counts) // 2)  # the rest of the move (> 2.5 mm) exceeds the 2 mm window
     for drive in r.sim.drives.values():
         drive.recorder.clear()
