@@ -21,11 +21,20 @@ ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
 
 
+SYNC_SOURCES = ("loop", "kernel")
+
+
 @dataclass(frozen=True)
 class BusConfig:
+    """``sync_source``: 'loop' sends SYNC from the cycle loop right before that cycle's RPDOs
+    (a late cycle delays SYNC, it never loses a set-point); 'kernel' lets the SocketCAN
+    broadcast manager send SYNC on its own clock (less SYNC jitter, but a cycle later than
+    half a period loses its set-point: measured on vcan0, docs/vcan.md)."""
+
     interface: str = "virtual"
     channel: str = "nurbsmotion"
     bitrate: int = 1_000_000
+    sync_source: str = "loop"
 
 
 @dataclass(frozen=True)
@@ -65,11 +74,18 @@ class AxisConfig:
     identity: IdentityConfig | None = None
 
 
+TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
+
+
 @dataclass(frozen=True)
 class MonitoringConfig:
+    """``traffic_log``: each job's folder gets every bus frame of the job as ``traffic.log``
+    (candump) or ``traffic.asc`` (Vector ASCII); 'none' records nothing."""
+
     heartbeat_producer_ms: int = 100
     heartbeat_consumer_ms: int = 300
     max_bus_load: float = 0.8
+    traffic_log: str = "none"
 
 
 @dataclass(frozen=True)
@@ -307,6 +323,7 @@ def _interpolation(doc: _Doc) -> Any:
 _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "cycle_period_ms": (_number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
     "bus": (_section(BusConfig, {"interface": (_string, {}), "channel": (_string, {}),
+                                 "sync_source": (_string, {"choices": SYNC_SOURCES}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),
@@ -315,6 +332,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
         "heartbeat_producer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "heartbeat_consumer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "max_bus_load": (_number, {"minimum": 0, "maximum": 1}),
+        "traffic_log": (_string, {"choices": TRAFFIC_LOG_FORMATS}),
     }), {}),
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),

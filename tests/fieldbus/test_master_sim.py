@@ -293,6 +293,33 @@ def test_traffic_log_records_sync_rpdo_and_tpdo(tmp_path):
     assert " 080#" in text and " 201#" in text and " 181#" in text and " 000#" in text
 
 
+def rpdo_setpoints(path, node_id: int) -> list[int]:
+    """Set-points (int32 after the controlword) of the RPDO frames of one node in a log file."""
+    cob_id = 0x200 + node_id
+    return [int.from_bytes(m.data[2:6], "little", signed=True)
+            for m in can.LogReader(str(path)) if m.arbitration_id == cob_id and not m.is_rx]
+
+
+@pytest.mark.parametrize("suffix", [".log", ".asc"])
+def test_one_traffic_log_per_job(tmp_path, suffix):
+    first, second = sine_counts(120), sine_counts(80) // 2
+    with rig() as (master, _, _):
+        master.record_traffic(tmp_path / f"job1{suffix}")
+        assert master.stream(first).wait(WAIT_S).outcome == "done"
+        master.record_traffic(None)
+        wait_for(lambda: master.status().phase == "holding")
+        master.record_traffic(tmp_path / f"job2{suffix}")
+        assert master.stream(second).wait(WAIT_S).outcome == "done"
+        master.record_traffic(None)
+    for name, job in (("job1", first), ("job2", second)):
+        sent = rpdo_setpoints(tmp_path / f"{name}{suffix}", 1)
+        # The job's set-points appear once each, in order, inside the file (held before/after).
+        text = ",".join(map(str, sent))
+        assert ",".join(map(str, job[:, 0].tolist())) in text, name
+        frames = list(can.LogReader(str(tmp_path / f"{name}{suffix}")))
+        assert any(m.arbitration_id == 0x80 for m in frames) and any(m.arbitration_id == 0x181 for m in frames)
+
+
 def test_drive_that_never_answers_sync_is_named_with_step_and_state():
     with rig(bring_up=False) as (master, sim, _):
         sim.inject(FaultInjection("ignore_sync", node_id=2))

@@ -23,6 +23,7 @@ import os
 import sys
 import threading
 import time
+from pathlib import Path
 from typing import Callable
 
 import can
@@ -105,14 +106,17 @@ class Master:
     ``bus``: an open python-can bus to use (not closed at shutdown); None opens
     ``config.bus``. ``sync_source``: 'loop' (the cycle loop sends SYNC right before the
     RPDOs), 'kernel' (SocketCAN broadcast manager via send_periodic), 'auto' (kernel on
-    socketcan, else loop). ``traffic_log``: file for every frame (.log candump, .asc ...).
+    socketcan, else loop); None (default) takes ``config.bus.sync_source`` ('loop' unless
+    configured: it never loses a set-point to a late cycle). ``traffic_log``: file for every frame (.log candump, .asc ...).
     """
 
     def __init__(self, config: MachineConfig, bus: can.BusABC | None = None, *,
-                 traffic_log: str | None = None, sync_source: str = "auto", check_load: bool = True,
+                 traffic_log: str | None = None, sync_source: str | None = None, check_load: bool = True,
                  bootup_timeout_s: float = 2.0, stuck_timeout_s: float = 0.5, enable_timeout_s: float = 5.0,
                  sdo_timeout_s: float = 0.5, spin_s: float = 60e-6, late_threshold_s: float | None = None,
                  progress_period_s: float = 0.05, rt_priority: int | None = 20, gc_mode: str = "freeze") -> None:
+        if sync_source is None:
+            sync_source = config.bus.sync_source
         if sync_source not in ("auto", "loop", "kernel"):
             raise InputError("sync_source", f"must be auto, loop or kernel, got {sync_source!r}")
         if gc_mode not in ("freeze", "disable", "none"):
@@ -127,7 +131,8 @@ class Master:
         self._bus = bus
         self._own_bus = bus is None
         self._traffic_path = traffic_log
-        self._traffic: TrafficLog | None = None
+        self._traffic_log: TrafficLog | None = None
+        self._traffic: TrafficLog | None = None  # the log while it records (the loop's fast check)
         self._sync_source = sync_source
         self._bootup_timeout_s = bootup_timeout_s
         self._enable_timeout_s = enable_timeout_s
@@ -209,10 +214,10 @@ class Master:
             except (can.CanError, OSError, ValueError, ImportError) as err:
                 raise FieldbusError(f"bus {bus_cfg.interface}:{bus_cfg.channel}: cannot open ({err})") from None
         network = canopen.Network(self._bus)
-        if self._traffic_path:
-            self._traffic = TrafficLog(self._traffic_path)
-            network.listeners.append(self._traffic)
-            self._wrap_network_send(network, self._traffic)
+        self._traffic_log = TrafficLog(self._traffic_path)  # paused without a path
+        network.listeners.append(self._traffic_log)
+        self._wrap_network_send(network, self._traffic_log)
+        self._traffic = self._traffic_log if self._traffic_path else None
         network.connect()
         for i, node_id in enumerate(self._node_ids):
             node = canopen.RemoteNode(node_id, ObjectDictionary())
@@ -453,6 +458,18 @@ class Master:
     def faults(self) -> list[FaultReport]:
         return list(self._faults)
 
+    def record_traffic(self, path: str | Path | None) -> None:
+        """Record every frame into ``path`` from now on (candump .log, .asc, ... by extension),
+        closing the previous file; None stops recording. Used for one traffic log per job."""
+        if self._traffic_log is None:
+            raise FieldbusError("record_traffic: connect() first")
+        if path is None:
+            self._traffic = None
+            self._traffic_log.switch(None)
+        else:
+            self._traffic_log.switch(path)
+            self._traffic = self._traffic_log
+
     def shutdown(self, timeout_s: float = 5.0) -> None:
         """Controlled stop of a running job, disable the drives, NMT stop, close (if ours)."""
         if self._thread is not None:
@@ -481,9 +498,10 @@ class Master:
             if self._network.notifier is not None:
                 self._network.notifier.stop(2.0)
             self._network = None
-        if self._traffic is not None:
-            self._traffic.stop()
-            self._traffic = None
+        self._traffic = None
+        if self._traffic_log is not None:
+            self._traffic_log.stop()
+            self._traffic_log = None
         if self._own_bus and self._bus is not None:
             self._bus.shutdown()
             self._bus = None
