@@ -7,7 +7,8 @@ Unknown keys are errors too (a typo must not silently fall back to a default).
 
 from __future__ import annotations
 
-import math
+import reprlib
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -162,28 +163,30 @@ class _Doc:
     def value(self) -> Any:
         try:
             return yaml.safe_load(yaml.serialize(self.node))
-        except yaml.YAMLError as err:  # pragma: no cover - node came from a valid document
-            self.fail(f"unreadable value ({err})")
+        except (yaml.YAMLError, ValueError, RecursionError) as err:  # '!!int 1.5', nested thousands deep
+            self.fail(f"unreadable value ({' '.join(str(err).split())[:200]})")
             return None
 
 
 _MISSING = object()
+_SHOWN = reprlib.Repr()  # a value in an error message: short even for an alias bomb or a huge list
+_SHOWN.maxlevel, _SHOWN.maxlist, _SHOWN.maxdict, _SHOWN.maxstring, _SHOWN.maxlong = 2, 4, 4, 60, 60
 
 
 def _number(doc: _Doc, *, integer: bool = False, minimum: float | None = None, exclusive_min: bool = True,
             maximum: float | None = None) -> Any:
     value = doc.value()
     if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-        doc.fail(f"must be {'an integer' if integer else 'a number'}, got {value!r}")
+        doc.fail(f"must be {'an integer' if integer else 'a number'}, got {_SHOWN.repr(value)}")
         return _MISSING
-    if not math.isfinite(value):
-        doc.fail(f"must be finite, got {value!r}")
+    if not abs(value) <= sys.float_info.max:  # inf, nan, or an integer beyond the float range
+        doc.fail(f"must be finite, got {_SHOWN.repr(value)}")
         return _MISSING
     if minimum is not None and (value <= minimum if exclusive_min else value < minimum):
-        doc.fail(f"must be {'>' if exclusive_min else '>='} {minimum:g}, got {value!r}")
+        doc.fail(f"must be {'>' if exclusive_min else '>='} {minimum:g}, got {_SHOWN.repr(value)}")
         return _MISSING
     if maximum is not None and value > maximum:
-        doc.fail(f"must be <= {maximum:g}, got {value!r}")
+        doc.fail(f"must be <= {maximum:g}, got {_SHOWN.repr(value)}")
         return _MISSING
     return value
 
@@ -191,10 +194,10 @@ def _number(doc: _Doc, *, integer: bool = False, minimum: float | None = None, e
 def _string(doc: _Doc, choices: tuple[str, ...] | None = None) -> Any:
     value = doc.value()
     if not isinstance(value, str) or not value:
-        doc.fail(f"must be a non-empty string, got {value!r}")
+        doc.fail(f"must be a non-empty string, got {_SHOWN.repr(value)}")
         return _MISSING
     if choices is not None and value not in choices:
-        doc.fail(f"must be one of {', '.join(choices)}, got {value!r}")
+        doc.fail(f"must be one of {', '.join(choices)}, got {_SHOWN.repr(value)}")
         return _MISSING
     return value
 
@@ -202,7 +205,7 @@ def _string(doc: _Doc, choices: tuple[str, ...] | None = None) -> Any:
 def _boolean(doc: _Doc) -> Any:
     value = doc.value()
     if not isinstance(value, bool):
-        doc.fail(f"must be true or false, got {value!r}")
+        doc.fail(f"must be true or false, got {_SHOWN.repr(value)}")
         return _MISSING
     return value
 
@@ -358,7 +361,9 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         line = err.problem_mark.line + 1 if err.problem_mark else 0
         raise InputError(f"{source}:{line}", f"not valid YAML: {err.problem}") from None
     except yaml.YAMLError as err:
-        raise InputError(source, f"not valid YAML: {err}") from None
+        raise InputError(source, f"not valid YAML: {' '.join(str(err).split())}") from None
+    except RecursionError:
+        raise InputError(source, "not valid YAML: nested too deeply") from None
     if root is None:
         raise InputError(source, "empty configuration")
     errors: list[InputError] = []

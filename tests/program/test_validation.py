@@ -138,3 +138,21 @@ YAML_ERRORS = [
 @pytest.mark.parametrize("text,where,fragment", YAML_ERRORS, ids=[e[1] + " " + e[2] for e in YAML_ERRORS])
 def test_yaml_error_names_line_and_field(text, where, fragment):
     assert_rejected(parse_curve_yaml, text, "c.yaml", where, fragment)
+
+
+# A curve that stops dead (zero parametric speed) cannot be interpolated at any feed: the
+# planners divide by |x'|. Found by feeding mutated programs to the planners (issue 9).
+@pytest.mark.parametrize(
+    "text, where, fragment",
+    [
+        ("G21 G90 G01 X0 Y0 F600\nG06.2 P3 K0 X0 Y0 Z0\nK0 X5 Y5 Z0\nK0 X5 Y5 Z0\nK0.5 X10 Y0 Z0\nK1\nK1\nK1\n",
+         "t.nc:4", "control point 3 repeats control point 2"),
+        ("G21 G90 G1 X1 Y2 F100\nG5.2 X1 Y1 P2 L3\nX3 Y0\nX4 Y2 P0.5\nX4 Y2 P0.5\nG5.3\n",
+         "t.nc:5", "control point 5 repeats control point 4"),
+        # folds back on itself: x(t) = 2t(1-t) (10, 0, 0) has x' = 0 at t = 1/2
+        ("G21 G90 G01 X0 Y0 F600\nG06.2 P3 K0 X0 Y0 Z0\nK0 X10 Y0 Z0\nK0 X0 Y0 Z0\nK1\nK1\nK1\n",
+         "t.nc:3", "zero speed, a cusp"),
+    ],
+)
+def test_curves_that_stop_dead_are_rejected_naming_the_line(text, where, fragment):
+    assert_rejected(parse_gcode, text, "t.nc", where, fragment)

@@ -30,13 +30,16 @@ class BootupWatch:
 
     def __init__(self, node_ids: Iterable[int]) -> None:
         self._events = {n: threading.Event() for n in node_ids}
+        self.count = {n: 0 for n in node_ids}  # boot-ups per node: 2 or more = two devices with one id
 
     def arm(self) -> None:
         for event in self._events.values():
             event.clear()
+        self.count = dict.fromkeys(self.count, 0)
 
     def heard(self, node_id: int, state_byte: int) -> None:
         if state_byte & 0x7F == c.NmtState.BOOTUP and node_id in self._events:
+            self.count[node_id] += 1
             self._events[node_id].set()
 
     def wait(self, timeout_s: float) -> list[int]:

@@ -304,8 +304,9 @@ class Master:
         try:
             self._bring_up_by_sdo(self._network)
         except FieldbusError as err:
+            err = self._twin_error() or err  # duplicate SDO answers make some step fail first: name the cause
             self._faults.append(FaultReport(None, None, "bringup", 0, -1, str(err)))
-            raise
+            raise err from None
         for node_id in self._node_ids:
             self._network.send_message(c.COB_NMT, bytes([c.NmtCommand.START, node_id]))
         now = time.perf_counter()
@@ -330,13 +331,25 @@ class Master:
             bringup.check_supported_mode(sdo, axis, mode)
             writes = drive_configuration(axis.node_id, mode, self._period_s,
                                          self.config.monitoring.heartbeat_producer_ms, self._fe_window[i],
-                                         axis.following_error_timeout_ms, self.following_error_tpdo)
+                                         axis.following_error_timeout_ms, self.following_error_tpdo,
+                                         int(self._accel_counts_s2[i]))
             bringup.configure_drive(sdo, axis.node_id, writes)
             self._fb_pos[i] = bringup.read_position(sdo, axis.node_id)
             self._fb_status[i] = bringup.sdo_upload(sdo, axis.node_id, "read statusword", c.STATUSWORD, 0, "<H")
             self._hold[i] = self._sp[i] = self._fb_pos[i]
             log.info(kv("drive_configured", node=axis.node_id, axis=axis.name, mode=axis.mode,
                         position=self._fb_pos[i], statusword=f"0x{self._fb_status[i]:04X}"))
+        twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
+        if twin is not None:
+            raise twin
+
+    def _twin_error(self) -> FieldbusError | None:
+        """Two boot-ups of one node after one NMT reset: two devices with that node id."""
+        for node_id, count in self._bootup.count.items():
+            if count > 1:
+                return FieldbusError(f"node {node_id}: bring-up step 'boot-up': {count} boot-up messages after one "
+                                     f"NMT reset: two devices with the same node id?")
+        return None
 
     def _wait_enabled(self) -> None:
         """Wait for the loop's state machine: every axis ready, or a named error."""
@@ -352,9 +365,17 @@ class Master:
     def reset_faults(self) -> None:
         """Acknowledge faults and re-enable every axis (fault reset, state machine), then hold."""
         if self._thread is None:
-            raise FieldbusError("reset faults: the drives are not brought up (call bring_up())")
+            if not self._faults:
+                raise FieldbusError("reset faults: the drives are not brought up (call bring_up())")
+            self.bring_up()  # an earlier bring-up failed (e.g. a drive was still off): try it again
+            return
         if self._job is not None:
             raise FieldbusError("reset faults: a job is still running")
+        if any(state != c.NmtState.OPERATIONAL for state in self._hb_state) or \
+                min(self._fb_cycle) < self._cycle - 3:  # a drive restarted or went silent (power loss):
+            self.shutdown()  # it lost its configuration, so bring every axis up again (or name the missing node)
+            self.bring_up()
+            return
         self._ready.clear()
         self._enable_error = None
         self._request("enable", None)
@@ -802,6 +823,11 @@ class Master:
                              f"node {node} (axis {self._names[i]}): no heartbeat for "
                              f"{(now - self._hb_time[i]) * 1000:.0f} ms (consumer time "
                              f"{self._hb_timeout_s * 1000:.0f} ms) at cycle {k}")
+            elif running and k - self._fb_cycle[i] > max(self._fe_timeout_cycles[i] + 3,
+                                                          self._hb_timeout_s / self._period_s):
+                node = self._node_ids[i]  # alive but its feedback stopped: the following error is unknown
+                self._report(node, self._names[i], "following_error", 0, k, f"node {node} (axis {self._names[i]}): "
+                             f"no TPDO1 (position actual) for {k - self._fb_cycle[i]} cycles at cycle {k}")
 
     def _check_statusword(self, i: int, k: int, running: bool) -> None:
         """Following error bit 13, fault bit 3, and (running) leaving OPERATION ENABLED."""

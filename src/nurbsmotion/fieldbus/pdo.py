@@ -69,7 +69,7 @@ def _pdo_writes(kind: str, number: int, node_id: int, entries: list[int] | None)
 
 def drive_configuration(node_id: int, mode: c.Mode, cycle_period_s: float, heartbeat_producer_ms: int,
                         following_error_window_counts: int, following_error_timeout_ms: int,
-                        following_error_tpdo: bool) -> list[SdoWrite]:
+                        following_error_tpdo: bool, quick_stop_decel_counts_s2: int | None = None) -> list[SdoWrite]:
     """Every SDO write of bring-up for one drive, in order (done in NMT PRE-OPERATIONAL)."""
     ip = mode == c.Mode.INTERPOLATED_POSITION
     setpoint = mapping_entry(c.IP_DATA_RECORD, 1, 32) if ip else mapping_entry(c.TARGET_POSITION, 0, 32)
@@ -91,6 +91,9 @@ def drive_configuration(node_id: int, mode: c.Mode, cycle_period_s: float, heart
     writes += [SdoWrite("set following error window", c.FOLLOWING_ERROR_WINDOW, 0, "<I", following_error_window_counts),
                SdoWrite("set following error time-out", c.FOLLOWING_ERROR_TIMEOUT, 0, "<H", following_error_timeout_ms),
                SdoWrite("set heartbeat producer", c.PRODUCER_HEARTBEAT_TIME, 0, "<H", heartbeat_producer_ms)]
+    if quick_stop_decel_counts_s2 is not None:  # the drive's own quick-stop ramp: within the axis' a_max
+        writes.append(SdoWrite("set quick stop deceleration", c.QUICK_STOP_DECELERATION, 0, "<I",
+                               min(max(quick_stop_decel_counts_s2, 1), 2**32 - 1), optional=True))
     return writes
 
 

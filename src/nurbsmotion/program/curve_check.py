@@ -98,6 +98,39 @@ def zero_length_problems(points: np.ndarray, tolerance_mm: float) -> list[CurveP
     return []
 
 
+def repeated_point_problems(points: np.ndarray, tolerance_mm: float) -> list[CurveProblem]:
+    """Consecutive coincident control points: the curve's speed dx/du drops to (near) zero
+    there, a cusp no feed can pass; the planners divide by |x'|."""
+    if len(points) < 2:
+        return []
+    gaps = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    return [CurveProblem("control_points", f"control point {i + 2} repeats control point {i + 1}: the curve would "
+                                           f"stop dead there (zero speed); remove the repeated point", int(i) + 1)
+            for i in np.flatnonzero(gaps <= tolerance_mm)]
+
+
+ZERO_SPEED_RATIO = 1e-6  # |x'| below this fraction of the mean parametric speed is a cusp
+SPEED_SAMPLES_PER_SPAN = 64
+
+
+def zero_speed_problems(curve: NurbsCurve) -> list[CurveProblem]:
+    """Points of (near) zero parametric speed found on a dense sample of every knot span,
+    its ends included; located at the control point with the nearest Greville abscissa."""
+    breaks = curve.breakpoints
+    u = np.unique(np.concatenate([np.linspace(a, b, SPEED_SAMPLES_PER_SPAN + 1) for a, b in zip(breaks[:-1], breaks[1:])]))
+    speed = np.linalg.norm(curve.derivatives(u, 1)[1], axis=1)
+    mean_speed = curve.length / (curve.u_max - curve.u_min)
+    slow = np.flatnonzero(speed < ZERO_SPEED_RATIO * mean_speed)
+    if not len(slow):
+        return []
+    u0 = float(u[slow[0]])
+    p = curve.degree
+    greville = np.convolve(curve.knots[1:-1], np.ones(p) / p, mode="valid")
+    index = int(np.argmin(np.abs(greville - u0)))
+    return [CurveProblem("control_points", f"the curve stops dead (zero speed, a cusp) at u = {u0:g} near control "
+                                           f"point {index + 1}; split the curve there", index)]
+
+
 def build_curve(degree: int, points: Sequence[Sequence[float]], weights: Sequence[float], knots: Sequence[float],
                 locate: Callable[[CurveProblem], str], *, min_degree: int = 1, max_degree: int = 9,
                 degree_name: str = "degree", zero_length_mm: float = 1e-9) -> NurbsCurve:
@@ -113,8 +146,14 @@ def build_curve(degree: int, points: Sequence[Sequence[float]], weights: Sequenc
         problems += knot_problems(knots, len(pts), degree)
     problems += zero_length_problems(pts, zero_length_mm)
     if not problems:
+        problems += repeated_point_problems(pts, zero_length_mm)
+    if not problems:
         try:
-            return NurbsCurve.create(degree, pts, weights, knots)
+            curve = NurbsCurve.create(degree, pts, weights, knots)
         except CurveError as err:  # a rule checked only by the geometry: still located
             problems = [CurveProblem(err.field, err.message, err.index)]
+        else:
+            problems = zero_speed_problems(curve)
+            if not problems:
+                return curve
     raise InputErrors([InputError(locate(p), p.message) for p in problems])

@@ -84,7 +84,10 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
     if not program.blocks:
         raise InputError(name, "the program has no motion")
     t0 = time.perf_counter()
-    trajectory = plan(program, limits_from_config(config), config.interpolation.algorithm)
+    try:
+        trajectory = plan(program, limits_from_config(config), config.interpolation.algorithm)
+    except InputError as err:  # a planner names 'block N': say which program it is
+        raise InputError(f"{name}: {err.where}" if err.where else name, err.message) from None
     planning_s = time.perf_counter() - t0
     positions = axis_positions(trajectory, config, name)
     try:

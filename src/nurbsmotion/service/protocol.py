@@ -42,7 +42,7 @@ class Request:
 def _type_ok(value: Any, type_name: str) -> bool:
     if type_name == "string":
         return isinstance(value, str)
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= 1e308  # no NaN/inf/huge int
 
 
 def parse_request(line: bytes) -> Request:
@@ -55,6 +55,8 @@ def parse_request(line: bytes) -> Request:
         raise ProtocolError(f"request: not UTF-8 ({err.reason} at byte {err.start})") from None
     except json.JSONDecodeError as err:
         raise ProtocolError(f"request: malformed JSON ({err.msg} at column {err.colno})") from None
+    except (RecursionError, ValueError) as err:  # nested too deeply; an integer of over 4300 digits
+        raise ProtocolError(f"request: malformed JSON ({str(err).split(':')[0]})") from None
     if not isinstance(obj, dict):
         raise ProtocolError(f"request: must be a JSON object, got {type(obj).__name__}")
     cmd = obj.get("cmd")

@@ -68,7 +68,7 @@ class ControlServer:
                 os.chown(self.path, -1, self.control_gid)
             except OSError as err:
                 log.warning(kv("socket_group_not_set", path=self.path, group=self.control_group, error=err.strerror))
-        listener.listen(8)
+        listener.listen(64)  # a burst of clients must not see EAGAIN
         listener.settimeout(0.2)
         self._listener = listener
         self._thread = threading.Thread(target=self._accept_loop, name="control-accept", daemon=True)
