@@ -11,10 +11,11 @@ import argparse
 import math
 from dataclasses import replace
 
-from nurbsmotion.config import MachineConfig, load_config
+from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import DEFAULT_ALGORITHM, PlanLimits, algorithm
-from nurbsmotion.program import AXES, Program, read_program
+from nurbsmotion.planning.limits import limits_from_config
+from nurbsmotion.program import Program, read_program
 
 
 def positive_number(text: str) -> float:
@@ -40,29 +41,6 @@ def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-jerk-mm-s3", type=positive_number, metavar="J", help="largest jerk (planners that use it)")
     parser.add_argument("--acc-time-s", type=positive_number, metavar="TL", help="linear acc/dec time t_l (a_l = V0 / t_l)")
     parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
-
-
-def axis_limits(config: MachineConfig, attribute: str) -> tuple[float | None, ...] | None:
-    """Per-axis limit in X, Y, Z order from the configuration's axes (None where not given)."""
-    by_name = {axis.name.upper(): getattr(axis, attribute) for axis in config.axes}
-    values = tuple(by_name.get(name) for name in AXES)
-    return values if any(v is not None for v in values) else None
-
-
-def limits_from_config(config: MachineConfig) -> PlanLimits:
-    interp = config.interpolation
-    return PlanLimits(
-        period_s=config.cycle_period_s,
-        chord_error_mm=interp.chord_error_mm,
-        max_accel_mm_s2=interp.max_accel_mm_s2,
-        max_jerk_mm_s3=interp.max_jerk_mm_s3,
-        default_feed_mm_s=interp.feed_mm_s,
-        rapid_feed_mm_s=interp.rapid_feed_mm_s,
-        acc_time_s=interp.acc_time_s,
-        junction_deviation_mm=interp.junction_deviation_mm,
-        axis_max_velocity_mm_s=axis_limits(config, "max_velocity_mm_s"),
-        axis_max_accel_mm_s2=axis_limits(config, "max_accel_mm_s2"),
-    )
 
 
 def planning_setup(args: argparse.Namespace) -> tuple[Program, PlanLimits, str]:

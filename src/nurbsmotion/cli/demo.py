@@ -122,7 +122,7 @@ def _plot(folder: Path, config: MachineConfig) -> Path | None:
         return None
     import numpy as np
 
-    from nurbsmotion.cli._planning_options import limits_from_config
+    from nurbsmotion.planning.limits import limits_from_config
     from nurbsmotion.planning import Trajectory
     from nurbsmotion.planning.measure import measure
     from nurbsmotion.planning.plot import plot_run

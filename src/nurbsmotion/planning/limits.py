@@ -5,7 +5,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
+from nurbsmotion.program.model import AXES
 
 
 @dataclass(frozen=True)
@@ -52,3 +54,28 @@ class PlanLimits:
         if self.feed_mm_s is not None:
             return self.feed_mm_s
         return programmed_mm_s if programmed_mm_s is not None else self.default_feed_mm_s
+
+
+def axis_limits(config: MachineConfig, attribute: str) -> tuple[float | None, ...] | None:
+    """Per-axis limit in X, Y, Z order from the configuration's axes (None where not given)."""
+    by_name = {axis.name.upper(): getattr(axis, attribute) for axis in config.axes}
+    values = tuple(by_name.get(name) for name in AXES)
+    return values if any(v is not None for v in values) else None
+
+
+def limits_from_config(config: MachineConfig) -> PlanLimits:
+    """The limits a job plans with on this machine: the configuration's interpolation
+    defaults, cycle period and per-axis limits (``plan --config`` and the daemon alike)."""
+    interp = config.interpolation
+    return PlanLimits(
+        period_s=config.cycle_period_s,
+        chord_error_mm=interp.chord_error_mm,
+        max_accel_mm_s2=interp.max_accel_mm_s2,
+        max_jerk_mm_s3=interp.max_jerk_mm_s3,
+        default_feed_mm_s=interp.feed_mm_s,
+        rapid_feed_mm_s=interp.rapid_feed_mm_s,
+        acc_time_s=interp.acc_time_s,
+        junction_deviation_mm=interp.junction_deviation_mm,
+        axis_max_velocity_mm_s=axis_limits(config, "max_velocity_mm_s"),
+        axis_max_accel_mm_s2=axis_limits(config, "max_accel_mm_s2"),
+    )

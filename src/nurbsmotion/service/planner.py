@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from nurbsmotion.axes import AxisMap
-from nurbsmotion.cli._planning_options import limits_from_config  # the limits `nurbsmotion plan --config` uses
+from nurbsmotion.planning.limits import limits_from_config
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import Trajectory, plan
