@@ -26,6 +26,20 @@ def ramp_slope(counts: np.ndarray, accel_counts_s2: np.ndarray, period_s: float)
     return float(min(1.0, slopes.min()))
 
 
+def setpoints_at(rows: memoryview, s: float, out: list[int], n_axes: int) -> None:
+    """Write into ``out`` the set-points at fractional row ``s``: linear between rows
+    floor(s) and floor(s) + 1 (exactly row s when s is whole). Floats only, no allocation."""
+    i = int(s)
+    f = s - i
+    if f > 0.0:
+        for j in range(n_axes):
+            a = rows[i, j]
+            out[j] = int(round(a + f * (rows[i + 1, j] - a)))
+    else:
+        for j in range(n_axes):
+            out[j] = rows[i, j]
+
+
 class StopRamp:
     """Per-cycle state of a controlled stop; :meth:`step` only does float arithmetic."""
 
@@ -56,14 +70,5 @@ class StopRamp:
             s = float(self.last)
             self.r = r = 0.0
         self.s = s
-        i = int(s)
-        f = s - i
-        rows = self.rows
-        if f > 0.0:
-            for j in range(self.n_axes):
-                a = rows[i, j]
-                out[j] = int(round(a + f * (rows[i + 1, j] - a)))
-        else:
-            for j in range(self.n_axes):
-                out[j] = rows[i, j]
+        setpoints_at(self.rows, s, out, self.n_axes)
         return r > 0.0

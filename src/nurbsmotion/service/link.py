@@ -22,6 +22,7 @@ import numpy as np
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Job, Master
+from nurbsmotion.fieldbus.stop_ramp import setpoints_at
 from nurbsmotion.log import kv
 from nurbsmotion.service.rate import RAMP_SHARE, stop_slope
 
@@ -67,17 +68,9 @@ class RateMaster(Master):
             job.playback_r = r
             s = min(job.playback_s + r, float(job.last))
         job.playback_s = s
-        i = int(s)
-        f = s - i
-        rows = job.rows  # 2-D memoryview (cycles x axes) of int64 counts
-        if f > 0.0:
-            for j in range(n):
-                a = rows[i, j]
-                sp[j] = int(round(a + f * (rows[i + 1, j] - a)))
-        else:
-            for j in range(n):
-                sp[j] = rows[i, j]
+        setpoints_at(job.rows, s, sp, n)
         self._cw[:] = self._run_cw
+        i = int(s)
         job.index = i
         if i == job.last:
             self._hold[:] = sp
