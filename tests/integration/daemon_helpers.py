@@ -12,6 +12,8 @@ import uuid
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 import nurbsmotion
 from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.service.client import Client, DaemonUnavailable
@@ -123,3 +125,13 @@ class DaemonProcess:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(5.0)
+
+
+@pytest.fixture(scope="module")
+def daemon(tmp_path_factory):
+    """One daemon process (simulated drives) for a whole test module; always closed."""
+    proc = DaemonProcess(tmp_path_factory.mktemp("data"))
+    try:
+        yield proc.start()
+    finally:
+        proc.close()

@@ -18,7 +18,7 @@ from nurbsmotion.cli import main
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
-from tests.integration.daemon_helpers import DaemonProcess, wait_until
+from tests.integration.daemon_helpers import DaemonProcess, daemon, wait_until  # noqa: F401 (fixture)
 
 SHORT = "G21 G90\nG01 X4 Y2 F3000\nG01 X0 Y3 Z1\n"  # ~0.3 s at 50 mm/s
 LONG = "G21 G90\nG01 X60 Y20 F6000\n"  # ~0.8 s, 100 mm/s at cruise
@@ -26,14 +26,6 @@ LONG = "G21 G90\nG01 X60 Y20 F6000\n"  # ~0.8 s, 100 mm/s at cruise
 # cruise (a controlled stop during the plan's own deceleration adds both: fieldbus issue).
 LONGER = "G21 G90\nG01 X90 Y40 F6000\n"  # ~1.1 s
 
-
-@pytest.fixture(scope="module")
-def daemon(tmp_path_factory):
-    proc = DaemonProcess(tmp_path_factory.mktemp("data"))
-    try:
-        yield proc.start()
-    finally:
-        proc.close()
 
 
 def _back_home(daemon: DaemonProcess) -> None:

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES
-from tests.integration.daemon_helpers import DaemonProcess
+from tests.integration.daemon_helpers import DaemonProcess, daemon  # noqa: F401 (fixture)
 
 NOBODY = 65534
 TIMEOUT_S = 30.0
@@ -50,14 +50,6 @@ BAD_LINES = {
     "stop without job": b'{"cmd": "stop"}',
 }
 
-
-@pytest.fixture(scope="module")
-def daemon(tmp_path_factory):
-    proc = DaemonProcess(tmp_path_factory.mktemp("data"))
-    try:
-        yield proc.start()
-    finally:
-        proc.close()
 
 
 def connect(path: Path) -> socket.socket:
