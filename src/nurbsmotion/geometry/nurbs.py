@@ -7,8 +7,10 @@ A(u) = [C, W] = sum_i N_{i,p}(u) [w_i P_i, w_i].
 Derivatives of A are B-splines of degree p-k on U[k:-k] whose control points are the
 k-th differences of the homogeneous control points (Piegl & Tiller eq. 3.8):
 Q^(k)_i = (p-k+1) (Q^(k-1)_{i+1} - Q^(k-1)_i) / (u_{i+p+1} - u_{i+k}).
-They are evaluated by de Boor's algorithm; the rational derivatives follow from the
-quotient rule (reference §1):
+De Boor's algorithm evaluates them once per knot span at its left knot u_s: on a span A is a
+polynomial of degree p, so A(u) = sum_k A^(k)(u_s) (u - u_s)^k / k! exactly, and every
+evaluation after that is Horner's scheme on these Taylor coefficients (value and derivatives
+together). The rational derivatives follow from the quotient rule (reference §1):
   x'   = (C'   - W' x) / W
   x''  = (C''  - 2 W' x' - W'' x) / W
   x''' = (C''' - 3 W' x'' - 3 W'' x' - W''' x) / W
@@ -166,6 +168,7 @@ def rational_derivatives(homogeneous_derivs: Sequence[NDArray[np.float64]]) -> l
 
 _GAUSS_16 = np.polynomial.legendre.leggauss(16)
 EVALUATION_CHUNK = 4096  # points per block of work: keeps the arrays in the CPU cache
+SPEED_CHUNK = 2048  # the same for speeds() (measured fastest on the Table 1 curve)
 
 
 @dataclass(frozen=True, eq=False)
@@ -244,18 +247,35 @@ class NurbsCurve:
         n = len(self.control_points) - 1
         return np.clip(np.searchsorted(self.knots, u, side="right") - 1, self.degree, n)
 
-    def homogeneous_derivatives(self, u: NDArray[np.float64], order: int = 0) -> list[NDArray[np.float64]]:
-        """A, A', ... up to A^(order) at each u, each a coordinate-major array (dim+1, len(u))."""
-        spans = self.spans(u)
+    @cached_property
+    def _taylor_coefficients(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(lefts, c): the left knot of every non-empty span and c[k, :, i] = A^(k)(lefts[i]) / k!,
+        shape (p+1, dim+1, spans), from de Boor on the derivative control points."""
+        lefts = self.breakpoints[:-1]
+        spans = np.searchsorted(self.knots, lefts, side="right") - 1
         points = self._derivative_points
-        out = []
-        for k in range(order + 1):
-            if k > self.degree:
-                out.append(np.zeros((self.dim + 1, len(u))))
-                continue
+        coeffs = []
+        factorial = 1.0
+        for k in range(self.degree + 1):
+            factorial *= max(k, 1)
             knots_k = self.knots[k: len(self.knots) - k] if k else self.knots
-            out.append(de_boor(points[k], knots_k, self.degree - k, spans - k, u))
-        return out
+            coeffs.append(de_boor(points[k], knots_k, self.degree - k, spans - k, lefts) / factorial)
+        return lefts, np.ascontiguousarray(np.stack(coeffs))
+
+    def homogeneous_derivatives(self, u: NDArray[np.float64], order: int = 0) -> list[NDArray[np.float64]]:
+        """A, A', ... up to A^(order) at each u, each a coordinate-major array (dim+1, len(u)):
+        Horner's scheme on the span's Taylor coefficients, d_k <- d_k t + k d_(k-1)."""
+        lefts, coeffs = self._taylor_coefficients
+        i = np.clip(np.searchsorted(lefts, u, side="right") - 1, 0, len(lefts) - 1)
+        t = u - lefts.take(i)
+        g = coeffs.take(i, axis=2)
+        p = self.degree
+        d: list = [g[p]] + [0.0] * order
+        for j in range(p - 1, -1, -1):
+            for k in range(min(order, p - j), 0, -1):
+                d[k] = d[k] * t + k * d[k - 1]
+            d[0] = d[0] * t + g[j]
+        return [dk if isinstance(dk, np.ndarray) else np.zeros((self.dim + 1, len(u))) for dk in d]
 
     def derivatives(self, u: ArrayLike, order: int = 2) -> NDArray[np.float64]:
         """x and its derivatives up to ``order`` at u: array (order+1, len(u), dim); (order+1, dim) for scalar u.
@@ -273,6 +293,43 @@ class NurbsCurve:
                 out[k, start: start + len(chunk)] = x_k.T
         return out[:, 0] if np.ndim(u) == 0 else out
 
+    @cached_property
+    def _speed_polynomials(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Per span, the Taylor coefficients of N = C' W - C W' (the numerator of x' = N / W^2,
+        degree <= 2p - 2) and of W: arrays (2p - 1, dim, spans) and (p + 1, spans)."""
+        _, coeffs = self._taylor_coefficients
+        p = self.degree
+        c, w = coeffs[:, :-1, :], coeffs[:, -1, :]
+        numerator = np.zeros((2 * p + 1, self.dim, c.shape[2]))
+        for a in range(p + 1):
+            for b in range(p + 1):
+                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b
+                if a + b >= 1:
+                    numerator[a + b - 1] += (a - b) * c[a] * w[b]
+        return np.ascontiguousarray(numerator[: max(2 * p - 1, 1)]), np.ascontiguousarray(w)
+
+    def speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """|x'(u)| for an array of u (the integrand of the arc length): |N(u)| / W(u)^2 with
+        N = C' W - C W' by Horner's scheme on the span's coefficients."""
+        uu = np.asarray(u, dtype=np.float64)
+        lefts = self._taylor_coefficients[0]
+        numerator, weight = self._speed_polynomials
+        out = np.empty(len(uu))
+        for start in range(0, len(uu), SPEED_CHUNK):
+            chunk = uu[start: start + SPEED_CHUNK]
+            i = np.clip(np.searchsorted(lefts, chunk, side="right") - 1, 0, len(lefts) - 1)
+            t = chunk - lefts.take(i)
+            n_c = numerator.take(i, axis=2)
+            w_c = weight.take(i, axis=1)
+            n = n_c[-1]
+            for j in range(len(n_c) - 2, -1, -1):
+                n = n * t + n_c[j]
+            w = w_c[-1]
+            for j in range(len(w_c) - 2, -1, -1):
+                w = w * t + w_c[j]
+            out[start: start + len(chunk)] = np.sqrt(np.einsum("ij,ij->j", n, n)) / (w * w)
+        return out
+
     def points(self, u: ArrayLike) -> NDArray[np.float64]:
         """x(u) for an array of u: (len(u), dim); (dim,) for scalar u."""
         return self.derivatives(u, 0)[0]
@@ -288,22 +345,10 @@ class NurbsCurve:
     # ---- fast scalar path -----------------------------------------------------------------
     @cached_property
     def _span_polynomials(self) -> tuple[list[float], list[tuple[tuple[float, ...], ...]]]:
-        """Per non-empty span, the Taylor coefficients of A around the span's left knot.
-
-        On one span A is a polynomial of degree p, so A(u) = sum_k A^(k)(u_s) (u - u_s)^k / k!
-        exactly; the coefficients come from the de Boor derivatives at u_s.
-        """
-        lefts = self.breakpoints[:-1]
-        spans = np.searchsorted(self.knots, lefts, side="right") - 1
-        points = self._derivative_points
-        coeffs = []
-        factorial = 1.0
-        for k in range(self.degree + 1):
-            factorial *= max(k, 1)
-            knots_k = self.knots[k: len(self.knots) - k] if k else self.knots
-            coeffs.append(de_boor(points[k], knots_k, self.degree - k, spans - k, lefts).T / factorial)
-        stacked = np.stack(coeffs, axis=1)  # (spans, p+1, dim+1)
-        return lefts.tolist(), [tuple(tuple(float(v) for v in column) for column in span.T) for span in stacked]
+        """The Taylor coefficients of every span as tuples of floats (the scalar path)."""
+        lefts, coeffs = self._taylor_coefficients
+        return lefts.tolist(), [tuple(tuple(float(v) for v in column) for column in span.T)
+                                for span in np.transpose(coeffs, (2, 0, 1))]
 
     def point_and_derivatives(self, u: float) -> tuple[tuple[float, ...], tuple[float, ...], tuple[float, ...]]:
         """(x, x', x'') at one parameter value as tuples of floats: the per-cycle fast path."""

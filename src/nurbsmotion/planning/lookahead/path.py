@@ -11,6 +11,13 @@ arc-length derivatives of the path (reference §1 derivatives, chain rule with s
 
 and du/ds = 1/sigma, d2u/ds2 = -sigma' / sigma^3 for the s -> u table. A block junction is
 two grid points at the same s (one per block), so every interval lies inside one block.
+
+Every knot of a block is a grid point; where the curve is only C1 there (degree 2) x_ss
+jumps, so each point also keeps the left limits of x_ss, x_sss and d2u/ds2 (x evaluated one
+ulp below the knot). The largest |x_ss| on each interval (``kappa_max``) comes from the cubic Hermite
+of the curvature vector through both ends (x_ss, x_sss) (interval_curvature_max):
+a curve part of arc length L with |x_ss| <= kappa_max lies within kappa_max L^2 / 8 of its
+chord (verify.py), which is what the chord-error limit plans and checks.
 """
 
 from __future__ import annotations
@@ -24,7 +31,9 @@ from nurbsmotion.geometry import NurbsCurve
 
 MAX_TURN_RAD = 0.02  # tangent turn per grid interval
 COARSE_PER_SPAN = 32  # first look at each knot span
-_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(5)
+GAUSS_POINTS = 3  # per grid interval: intervals are short and inside one knot span (error ~ (h / R)^6 / 2e6)
+_GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_POINTS)
+CURVATURE_SAMPLES = np.linspace(0.0, 1.0, 5)
 TINY_SPEED = 1e-300
 
 
@@ -54,6 +63,10 @@ class PathGrid:
     feed_mm_s: NDArray[np.float64]  # (N,) programmed feed of the point's block
     position: NDArray[np.float64]  # (N, 3) x
     pieces: tuple[BlockPiece, ...]
+    curv_left: NDArray[np.float64]  # (N, 3) x_ss approached from below (differs from curv at C1 knots)
+    dcurv_left: NDArray[np.float64]  # (N, 3) x_sss approached from below
+    u_ss_left: NDArray[np.float64]  # (N,) d2u/ds2 approached from below
+    kappa_max: NDArray[np.float64]  # (N-1,) largest |x_ss| on each interval (both ends at a junction)
 
     def __len__(self) -> int:
         return len(self.s)
@@ -68,6 +81,11 @@ class PathGrid:
         return self.piece[1:] != self.piece[:-1]
 
 
+def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|a_i| of every row of an (N, k) array."""
+    return np.sqrt(np.einsum("ij,ij->i", a, a))
+
+
 def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(u, approximate arc length from u_start) on a coarse polyline (COARSE_PER_SPAN points per
     knot span): enough to size look-ahead windows, without the curve's exact quadrature."""
@@ -76,15 +94,14 @@ def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDA
     frac = np.linspace(0.0, 1.0, COARSE_PER_SPAN + 1)[:-1]
     u = np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), u_end)
     x = curve.points(u)
-    return u, np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
+    return u, np.concatenate([[0.0], np.cumsum(row_norms(np.diff(x, axis=0)))])
 
 
 def gauss_lengths(curve: NurbsCurve, u0: NDArray[np.float64], u1: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Arc length of each [u0, u1] by 5-point Gauss-Legendre (intervals are short)."""
+    """Arc length of each [u0, u1] by GAUSS_POINTS-point Gauss-Legendre (short parts of one knot span)."""
     half = (u1 - u0) / 2.0
     u = ((u0 + u1) / 2.0)[:, None] + half[:, None] * _GL_NODES[None, :]
-    speed = np.linalg.norm(curve.derivatives(u.ravel(), 1)[1], axis=1).reshape(u.shape)
-    return (speed * _GL_WEIGHTS[None, :]).sum(axis=1) * half
+    return (curve.speeds(u.ravel()).reshape(u.shape) @ _GL_WEIGHTS) * half
 
 
 def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
@@ -98,7 +115,7 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
     frac = np.linspace(0.0, 1.0, per_span + 1)[:-1]
     coarse = np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), edges[-1])
     d = curve.derivatives(coarse, 1)[1]
-    speed = np.linalg.norm(d, axis=1)
+    speed = row_norms(d)
     t = d / np.maximum(speed, TINY_SPEED)[:, None]
     du = np.diff(coarse)
     length = 0.5 * (speed[1:] + speed[:-1]) * du
@@ -113,7 +130,7 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
 def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
     """(x, x_s, x_ss, x_sss, du/ds, d2u/ds2) at each u (module docstring)."""
     x, d1, d2, d3 = curve.derivatives(u, 3)
-    sigma = np.maximum(np.linalg.norm(d1, axis=1), TINY_SPEED)
+    sigma = np.maximum(row_norms(d1), TINY_SPEED)
     t = d1 / sigma[:, None]
     sigma1 = np.einsum("ij,ij->i", t, d2)
     sigma2 = (np.einsum("ij,ij->i", d2, d2) + np.einsum("ij,ij->i", d1, d3) - sigma1**2) / sigma
@@ -133,22 +150,66 @@ def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
+def left_limits(curve: NurbsCurve, u: NDArray[np.float64], curv: NDArray[np.float64], dcurv: NDArray[np.float64],
+                u_ss: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """x_ss, x_sss and d2u/ds2 at each u approached from below: re-evaluated one ulp below the
+    interior knots."""
+    knots = curve.breakpoints[1:-1]
+    nearest = np.clip(np.searchsorted(u, knots), 0, len(u) - 1)
+    at_knot = nearest[u[nearest] == knots]
+    if len(at_knot) == 0 or curve.degree > 3:  # degree >= 4 is C2 or better at simple knots
+        return curv, dcurv, u_ss
+    curv, dcurv, u_ss = curv.copy(), dcurv.copy(), u_ss.copy()
+    _, _, c, dc, _, uss = arc_length_derivatives(curve, np.nextafter(u[at_knot], -np.inf))
+    curv[at_knot], dcurv[at_knot], u_ss[at_knot] = c, dc, uss
+    return curv, dcurv, u_ss
+
+
+def interval_curvature_max(s: NDArray[np.float64], curv: NDArray[np.float64], dcurv: NDArray[np.float64],
+                           curv_left: NDArray[np.float64], dcurv_left: NDArray[np.float64]) -> NDArray[np.float64]:
+    """max |x_ss| on each grid interval, bounded on the cubic Hermite of the curvature vector
+    through (x_ss, x_sss) at its start and the left limits at its end: c(r) = A + B r + C r^2 +
+    D r^3 on r in [0, 1]; the largest |c| at r = 0, 1/4, ..., 1 plus half the sample spacing
+    times a bound of |c'(r)| (|B| + 2|C| + 3|D|)."""
+    h = np.diff(s)[:, None]
+    a, c1 = curv[:-1], curv_left[1:]
+    b, d1 = h * dcurv[:-1], h * dcurv_left[1:]
+    c = 3.0 * (c1 - a) - 2.0 * b - d1
+    d = 2.0 * (a - c1) + b + d1
+    best = np.maximum(np.einsum("ij,ij->i", a, a), np.einsum("ij,ij->i", c1, c1))
+    for r in CURVATURE_SAMPLES[1:-1]:
+        v = ((d * r + c) * r + b) * r + a
+        best = np.maximum(best, np.einsum("ij,ij->i", v, v))
+    slope = (np.sqrt(np.einsum("ij,ij->i", b, b)) + 2.0 * np.sqrt(np.einsum("ij,ij->i", c, c))
+             + 3.0 * np.sqrt(np.einsum("ij,ij->i", d, d)))
+    return np.sqrt(best) + 0.5 * (CURVATURE_SAMPLES[1] - CURVATURE_SAMPLES[0]) * slope
+
+
 def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     """The grid of a run of pieces (consecutive pieces meet at their ends)."""
-    parts: dict[str, list] = {k: [] for k in ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed", "position")}
+    keys = ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed", "position", "curv_left", "dcurv_left",
+            "u_ss_left")
+    parts: dict[str, list] = {k: [] for k in keys}
     offset = 0.0
     for index, piece in enumerate(pieces):
         u = piece_u_grid(piece, spacing_mm)
         ds = gauss_lengths(piece.curve, u[:-1], u[1:])
         s = offset + np.concatenate([[0.0], np.cumsum(ds)])
         x, t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
-        for key, value in (("s", s), ("u", u), ("u_s", u_s), ("u_ss", u_ss), ("tangent", to_3d(t)),
-                           ("curv", to_3d(curv)), ("dcurv", to_3d(dcurv)), ("position", to_3d(x))):
+        curv_left, dcurv_left, u_ss_left = left_limits(piece.curve, u, curv, dcurv, u_ss)
+        for key, value in (("s", s), ("u", u), ("u_s", u_s), ("u_ss", u_ss), ("u_ss_left", u_ss_left), ("tangent", to_3d(t)),
+                           ("curv", to_3d(curv)), ("dcurv", to_3d(dcurv)), ("position", to_3d(x)),
+                           ("curv_left", to_3d(curv_left)), ("dcurv_left", to_3d(dcurv_left))):
             parts[key].append(value)
         parts["piece"].append(np.full(len(u), index, dtype=np.int32))
         parts["feed"].append(np.full(len(u), piece.feed_mm_s))
         offset = float(s[-1])
     cat = {k: np.concatenate(v) for k, v in parts.items()}
+    kappa_max = interval_curvature_max(cat["s"], cat["curv"], cat["dcurv"], cat["curv_left"], cat["dcurv_left"])
+    junction = cat["piece"][1:] != cat["piece"][:-1]
+    ends = row_norms(cat["curv"])
+    kappa_max[junction] = np.maximum(ends[:-1], ends[1:])[junction]
     return PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"],
-                    tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"], position=cat["position"],
-                    pieces=tuple(pieces))
+                    tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"],
+                    position=cat["position"], pieces=tuple(pieces), curv_left=cat["curv_left"],
+                    dcurv_left=cat["dcurv_left"], u_ss_left=cat["u_ss_left"], kappa_max=kappa_max)

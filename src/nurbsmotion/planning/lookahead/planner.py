@@ -132,7 +132,7 @@ class PlanSettings:
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
     tau_f = averaging_time_s(limits)
-    spacing = float(np.clip(max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
+    spacing = float(np.clip(2.0 * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
     return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)
@@ -201,10 +201,10 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     if s[1] - s[0] <= 1e-12:  # start on a grid point
         s, cap = s[1:], cap[1:]
         cap[0] = cursor.raw_speed_mm_s**2
-        sub = AccelBounds(bounds.tangent[idx], bounds.curv[idx], bounds.caps, bounds.tangential_cap[idx])
+        sub = bounds.subset(idx)
     else:
         take = np.concatenate([idx[:1], idx])
-        sub = AccelBounds(bounds.tangent[take], bounds.curv[take], bounds.caps, bounds.tangential_cap[take])
+        sub = bounds.subset(take)
     if cursor.raw_speed_mm_s > 0:
         # a running start above the caps (a lowered feed override): brake down to them
         share = START_BRAKE_SHARE if tau_f <= 0 else START_BRAKE_SHARE_FILTERED
@@ -299,7 +299,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         keep = times <= commit_t
         samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep], samples.arc_residual_mm[keep])
         s, planned_ds, times = s[keep], planned_ds[keep], times[keep]
-    blocks = np.array([pieces[p].block for p in samples.piece], dtype=np.int32)
+    blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
     next_cursor = None
     if not reaches_end:
         next_cursor = next_window_cursor(run, cursor, pieces, samples, s, times, full_raw, settings)

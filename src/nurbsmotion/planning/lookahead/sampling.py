@@ -2,9 +2,11 @@
 
 On grid interval k (s_k..s_k+1) u(s) is first the quintic Hermite interpolant of u, du/ds
 and d2u/ds2 at both ends; then Newton corrections on the true arc length,
-  s(u) = s_k + integral_{u_k}^{u} |x'| du  (5-point Gauss-Legendre on the short interval),
+  s(u) = s_k + integral_{u_k}^{u} |x'| du  (Gauss-Legendre on the short interval, path.gauss_lengths),
   u <- u - (s(u) - s*) du/ds,
-until |s(u) - s*| <= ARC_TOLERANCE_MM (at most NEWTON_STEPS). The final residual of every
+until |s(u) - s*| <= ARC_TOLERANCE_SHARE x the shorter of the set-point's two steps (or
+ARC_TOLERANCE_FLOOR_MM at rest; at most NEWTON_STEPS): 1 % of the fluctuation limit, so
+the check (difference of two residuals over the step) passes. The final residual of every
 set-point is kept: the arc length of a step differs from its planned length by exactly
 the difference of the residuals at its ends, which is what the verification checks.
 """
@@ -18,7 +20,8 @@ from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, gauss_lengths, to_3d
 
-ARC_TOLERANCE_MM = 1e-12
+ARC_TOLERANCE_SHARE = 1e-8
+ARC_TOLERANCE_FLOOR_MM = 1e-13
 NEWTON_STEPS = 4
 
 
@@ -46,7 +49,7 @@ def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> ND
     h21 = 0.5 * (r3 - 2 * r3 * r + r3 * r2)
     u0, u1 = grid.u[k], grid.u[k + 1]
     return (h00 * u0 + h10 * safe * grid.u_s[k] + h20 * safe**2 * grid.u_ss[k]
-            + h01 * u1 + h11 * safe * grid.u_s[k + 1] + h21 * safe**2 * grid.u_ss[k + 1])
+            + h01 * u1 + h11 * safe * grid.u_s[k + 1] + h21 * safe**2 * grid.u_ss_left[k + 1])
 
 
 def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
@@ -62,8 +65,17 @@ def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
 
 def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64],
                   curve) -> NDArray[np.float64]:
-    """s(u) - s* with s(u) = s_k + integral_{u_k}^{u} |x'| (5-point Gauss-Legendre)."""
+    """s(u) - s* with s(u) = s_k + integral_{u_k}^{u} |x'| (path.gauss_lengths)."""
     return grid.s[k] + gauss_lengths(curve, grid.u[k], u) - s
+
+
+def arc_tolerances(s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Newton's tolerance at every set-point: ARC_TOLERANCE_SHARE x its shorter adjacent step."""
+    step = np.abs(np.diff(s))
+    if len(step) == 0:
+        return np.full(len(s), ARC_TOLERANCE_FLOOR_MM)
+    shorter = np.minimum(np.concatenate([step[:1], step]), np.concatenate([step, step[-1:]]))
+    return np.maximum(ARC_TOLERANCE_SHARE * shorter, ARC_TOLERANCE_FLOOR_MM)
 
 
 def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64],
@@ -72,14 +84,15 @@ def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.floa
     Returns u and the final residual s(u) - s* of every point (the measured arc error)."""
     u = u.copy()
     residual = np.empty(len(u))
+    tolerance = arc_tolerances(s)
     pieces = grid.piece[k]
     for p in np.unique(pieces):
         sel = np.flatnonzero(pieces == p)
         curve = grid.pieces[int(p)].curve
-        ks, target, uu = k[sel], s[sel], u[sel]
+        ks, target, uu, tol = k[sel], s[sel], u[sel], tolerance[sel]
         err = arc_residuals(grid, ks, target, uu, curve)
         for _ in range(NEWTON_STEPS):
-            todo = np.flatnonzero(np.abs(err) > ARC_TOLERANCE_MM)
+            todo = np.flatnonzero(np.abs(err) > tol)
             if len(todo) == 0:
                 break
             kt = ks[todo]

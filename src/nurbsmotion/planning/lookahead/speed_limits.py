@@ -6,10 +6,10 @@ then checks the set-points against the full figures). With x = v^2, a_t = dv/dt,
 tangent, c = x_ss the curvature vector and c' = x_sss:
 
 - feed: v <= F (limits.feed_for of the block);
-- chord error: a step of length dL on radius rho sags rho - sqrt(rho^2 - dL^2/4), so
-  dL <= 2 sqrt(delta (2 rho - delta)); v <= dL / T with rho the smallest radius within one
-  step either side (a sliding minimum over +-dL, dL starting at F T, not the radius at the
-  point);
+- chord error: a step of arc length dL where |x_ss| <= kappa stays within kappa dL^2 / 8
+  of its chord, so dL <= sqrt(8 delta / kappa); v <= dL / T with kappa the largest curvature
+  within one step either side (a sliding maximum over +-dL of the grid intervals' maxima,
+  dL starting at F T, not the curvature at the point);
 - axis velocity: |t_i| v <= vmax_i;
 - resultant acceleration: a_t^2 + (|c| x)^2 <= A^2;
 - axis acceleration: |t_i a_t + c_i x| <= amax_i;
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, arc_length_derivatives, to_3d
+from nurbsmotion.planning.lookahead.path import PathGrid, row_norms
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
@@ -67,22 +67,46 @@ def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.
     return out
 
 
+SHORT_SPAN = 8  # windows of at most this many points: a direct minimum over the offsets
+
+
+def window_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+    """min(values[lo_k : hi_k + 1]) for every k: directly over the offsets when every window is
+    short (steps and chord windows touch few grid points), else by range_min."""
+    width = int((hi - lo).max(initial=0))
+    if width > SHORT_SPAN:
+        return range_min(values, lo, hi)
+    out = values[lo]
+    for offset in range(1, width + 1):
+        out = np.minimum(out, values[np.minimum(lo + offset, hi)])
+    return out
+
+
 def sliding_min(s: NDArray[np.float64], values: NDArray[np.float64], half_width: NDArray[np.float64]) -> NDArray[np.float64]:
     """min of ``values`` over the grid points within +-half_width (in s) of each point."""
     lo = np.searchsorted(s, s - half_width, side="left")
     hi = np.searchsorted(s, s + half_width, side="right") - 1
-    return range_min(values, lo, np.maximum(hi, lo))
+    return window_min(values, lo, np.maximum(hi, lo))
 
 
 def chord_step_mm(kappa: NDArray[np.float64], chord_mm: float) -> NDArray[np.float64]:
-    """Longest step whose chord sags at most chord_mm on radius 1/kappa: 2 sqrt(d (2 rho - d))."""
-    rho = 1.0 / np.maximum(kappa, TINY)
-    return np.where(rho > chord_mm, 2.0 * np.sqrt(chord_mm * np.maximum(2.0 * rho - chord_mm, 0.0)), 2.0 * rho)
+    """Longest step of a curve part with |x_ss| <= kappa whose chord error is at most chord_mm:
+    kappa L^2 / 8 <= delta, L = sqrt(8 delta / kappa) (path.py; on a circle the sag of a step
+    of arc L is rho (1 - cos(L / 2 rho)), at most this)."""
+    return np.sqrt(8.0 * chord_mm / np.maximum(kappa, TINY))
+
+
+def point_curvature_max(grid: PathGrid) -> NDArray[np.float64]:
+    """Largest |x_ss| on the grid intervals either side of each point."""
+    k = grid.kappa_max
+    if len(k) == 0:
+        return row_norms(grid.curv)
+    return np.maximum(np.concatenate([k[:1], k]), np.concatenate([k, k[-1:]]))
 
 
 def chord_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
-    """v <= dL(rho_min over +-dL) / T, rho_min the smallest radius within a step either side."""
-    kappa = np.linalg.norm(grid.curv, axis=1)
+    """v <= dL(kappa_max over +-dL) / T, kappa_max the largest |x_ss| within a step either side."""
+    kappa = point_curvature_max(grid)
     step = np.minimum(chord_step_mm(kappa, caps.chord_error_mm), grid.feed_mm_s * caps.period_s)
     for _ in range(3):  # the window depends on the step it limits: fixed-point passes
         kappa_max = -sliding_min(grid.s, -kappa, step)
@@ -102,7 +126,7 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     """v^3 (|c'| + |c|^2) <= JERK_SHARE J."""
     if caps.jerk_mm_s3 is None:
         return np.full(len(grid), np.inf)
-    k = np.linalg.norm(grid.dcurv, axis=1) + np.einsum("ij,ij->i", grid.curv, grid.curv)
+    k = row_norms(grid.dcurv) + np.einsum("ij,ij->i", grid.curv, grid.curv)
     with np.errstate(divide="ignore"):
         return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
 
@@ -115,15 +139,20 @@ class AccelBounds:
     curv: NDArray[np.float64]
     caps: Caps
     tangential_cap: NDArray[np.float64]  # (N,) |a_t| cap (A x the repair loop's local scale)
+    kappa: NDArray[np.float64]  # (N,) |curv|
 
     @classmethod
     def for_grid(cls, grid: PathGrid, caps: Caps, scale: NDArray[np.float64]) -> "AccelBounds":
-        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale)
+        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, row_norms(grid.curv))
+
+    def subset(self, idx: NDArray[np.intp]) -> "AccelBounds":
+        """The bounds of the points ``idx``."""
+        return AccelBounds(self.tangent[idx], self.curv[idx], self.caps, self.tangential_cap[idx], self.kappa[idx])
 
     def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
         t, c = self.tangent[idx], self.curv[idx]
-        kappa = np.linalg.norm(c, axis=1)
+        kappa = self.kappa[idx]
         a = self.caps.accel_mm_s2
         hi = np.minimum(np.sqrt(np.maximum(a * a - (kappa * x) ** 2, 0.0)), self.tangential_cap[idx])
         hi = np.where(kappa * x > a, -np.inf, hi)
@@ -146,13 +175,20 @@ class AccelBounds:
         return lo, hi
 
     def max_speed_squared(self, x_cap: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Largest x <= x_cap at which some a_t is admissible (bisection; feasible x form [0, x_max])."""
+        """Largest x <= x_cap at which some a_t is admissible (feasible x form [0, x_max]).
+
+        Without axis acceleration limits a_t = 0 is admissible exactly while |c| x <= A (the
+        tangential and jerk caps are positive), so x_max = min(x_cap, A / |c|); with them,
+        bisection."""
         x = np.array(x_cap, dtype=float)
+        if self.caps.axis_accel_mm_s2 is None or not np.isfinite(self.caps.axis_accel_mm_s2).any():
+            with np.errstate(divide="ignore"):
+                return np.minimum(x, self.caps.accel_mm_s2 / self.kappa)
         lo, hi = self.at(x)
         bad = np.flatnonzero(~(lo <= hi))
         if len(bad) == 0:
             return x
-        kappa = np.linalg.norm(self.curv[bad], axis=1)
+        kappa = self.kappa[bad]
         top = np.minimum(x[bad], self.caps.accel_mm_s2 / np.maximum(kappa, TINY))
         bottom = np.zeros(len(bad))
         for _ in range(BISECTION_STEPS):
@@ -167,24 +203,13 @@ class AccelBounds:
 
 def curvature_jumps(grid: PathGrid) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, |c+ - c-|) at every place where the curvature vector jumps: interior knots of a
-    piece (a degree-2 curve is only C1 there) and junctions of pieces (a line meeting an arc)."""
-    where, size = [], []
-    for index, piece in enumerate(grid.pieces):
-        knots = piece.curve.breakpoints
-        inner = knots[(knots > piece.u_start) & (knots < piece.u_end)]
-        if len(inner) == 0 or piece.curve.degree > 3:
-            continue
-        eps = 1e-9 * (piece.curve.u_max - piece.curve.u_min)
-        left = arc_length_derivatives(piece.curve, inner - eps)[2]
-        right = arc_length_derivatives(piece.curve, inner + eps)[2]
-        on_piece = np.flatnonzero(grid.piece == index)
-        k = on_piece[np.clip(np.searchsorted(grid.u[on_piece], inner), 0, len(on_piece) - 1)]
-        where.append(grid.s[k])
-        size.append(np.linalg.norm(to_3d(right - left), axis=1))
+    piece (a degree-2 curve is only C1 there; path.py keeps the left limits) and junctions of
+    pieces (a line meeting an arc)."""
+    at_knot = row_norms(grid.curv - grid.curv_left)
     ends = np.flatnonzero(grid.junction)
-    where.append(grid.s[ends])
-    size.append(np.linalg.norm(grid.curv[ends + 1] - grid.curv[ends], axis=1))
-    return np.concatenate(where), np.concatenate(size)
+    at_knot[ends + 1] = row_norms(grid.curv[ends + 1] - grid.curv[ends])
+    jumps = np.flatnonzero(at_knot > 0)
+    return grid.s[jumps], at_knot[jumps]
 
 
 def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:

@@ -3,9 +3,11 @@
 Same definitions as planning.measure (the shared ruler), computed here on the planner's own
 stretch of set-points so violations can be located and repaired:
 - step n (from set-point n-1 to n): chord error = largest distance of the curve between the
-  two set-points from their chord (three samples of every part between knots and the vertex
-  of the parabola through them, every path grid point inside the step, and any block
-  junction inside the step); arc length on the true curve: the planned step
+  two set-points from their chord: inside a block, the bound kappa_max L^2 / 8 from the
+  largest curvature on the step (step_chord_errors); across a block junction, sampled
+  (three samples of every part between knots and the vertex of the parabola through them,
+  every path grid point inside the step, and the junction itself); arc length on the true
+  curve: the planned step
   plus the difference of the two set-points' arc-length residuals (sampling.py: s(u) by
   Gauss-Legendre from the nearest grid point, minus the planned s);
 - at set-point n: |p_n+1 - 2 p_n + p_n-1| / T^2 (acceleration), per axis too, and
@@ -24,8 +26,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, to_3d
+from nurbsmotion.planning.lookahead.path import PathGrid, row_norms, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
+from nurbsmotion.planning.lookahead.speed_limits import window_min
 
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
 FLUCTUATION_LIMIT = 1e-6  # guaranteed |arc step - planned step| / planned step
@@ -132,10 +135,33 @@ def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np
     return out
 
 
+def junction_chord_error(grid: PathGrid, piece: NDArray[np.int32], u: NDArray[np.float64], p: NDArray[np.float64],
+                         s: NDArray[np.float64], i: int) -> float:
+    """Chord error of step i -> i+1 across block junctions (the path may turn a corner inside
+    it): every piece touched, sampled, with its ends and the grid points inside the step."""
+    a, b = p[i:i + 1], p[i + 1:i + 2]
+    chord = 0.0
+    for q in range(int(piece[i]), int(piece[i + 1]) + 1):
+        part = grid.pieces[q]
+        lo = u[i] if q == piece[i] else part.u_start
+        hi = u[i + 1] if q == piece[i + 1] else part.u_end
+        dist = smooth_chord_errors(part.curve, np.array([lo]), np.array([hi]), a, b)[0]
+        ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
+        chord = max(chord, dist, float(distance_to_chord(ends, a, b).max()))
+    inner = grid_chord_errors(grid, s[i:i + 1], s[i + 1:i + 2], a, b)
+    return max(chord, float(inner[0]))
+
+
 def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
                       previous: Samples | None) -> NDArray[np.float64]:
-    """Chord error of every step ending at a set-point of ``samples``
-    (step 0 joins the last set-point of ``previous`` at s = 0; without one it is 0)."""
+    """Chord error of every step ending at a set-point of ``samples`` (step 0 joins the last
+    set-point of ``previous`` at s = 0; without one it is 0).
+
+    Inside one block: kappa_max L^2 / 8 with kappa_max the largest |x_ss| on the grid intervals
+    the step touches (path.py) and L its arc length, at most the planned step x (1 +
+    FLUCTUATION_LIMIT) (the fluctuation is checked too). The bound follows from the chord being
+    the linear interpolant of x(s): |x(s) - chord(s)| <= max|x_ss| s (L - s) / 2. Across a
+    junction: junction_chord_error."""
     piece, u, p = samples.piece, samples.u, samples.position_mm
     start = previous is not None and len(previous.u) > 0
     if start:
@@ -143,29 +169,32 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
         u = np.concatenate([previous.u[-1:], u])
         p = np.concatenate([previous.position_mm[-1:], p])
         s = np.concatenate([[0.0], s])
-    same = piece[1:] == piece[:-1]
-    chord = np.zeros(len(u) - 1)
-    for q in np.unique(piece[1:][same]):
-        sel = np.flatnonzero(same & (piece[1:] == q))
-        curve = grid.pieces[int(q)].curve
-        chord[sel] = smooth_chord_errors(curve, u[sel], u[sel + 1], p[sel], p[sel + 1])
-    for i in np.flatnonzero(~same):  # steps across junctions: the parts of every piece touched
-        a, b = p[i:i + 1], p[i + 1:i + 2]
-        for q in range(int(piece[i]), int(piece[i + 1]) + 1):
-            part = grid.pieces[q]
-            lo = u[i] if q == piece[i] else part.u_start
-            hi = u[i + 1] if q == piece[i + 1] else part.u_end
-            dist = smooth_chord_errors(part.curve, np.array([lo]), np.array([hi]), a, b)[0]
-            ends = to_3d(part.curve.points(np.array([lo, hi])))[None]
-            chord[i] = max(chord[i], dist, float(distance_to_chord(ends, a, b).max()))
-    chord = np.maximum(chord, grid_chord_errors(grid, s[:-1], s[1:], p[:-1], p[1:]))
+    if len(grid) < 2 or len(s) < 2:
+        return np.zeros(len(samples.u))
+    last = len(grid) - 2
+    k_lo = np.clip(np.searchsorted(grid.s, s[:-1], side="right") - 1, 0, last)
+    k_hi = np.clip(np.searchsorted(grid.s, s[1:], side="left") - 1, 0, last)
+    kappa = -window_min(-grid.kappa_max, k_lo, np.maximum(k_hi, k_lo))
+    arc = np.diff(s) * (1.0 + FLUCTUATION_LIMIT)
+    chord = kappa * arc * arc / 8.0
+    for i in np.flatnonzero(piece[1:] != piece[:-1]):
+        chord[i] = junction_chord_error(grid, piece, u, p, s, int(i))
     return chord if start else np.concatenate([[0.0], chord])
 
 
-def rows_max(values: NDArray[np.float64], rows: NDArray[np.intp], n: int) -> NDArray[np.float64]:
-    """Per-row maximum of ``values`` (rows clipped into 0..n-1)."""
+def rows_max(values: NDArray[np.float64], first_row: int, n: int) -> NDArray[np.float64]:
+    """Per-row maximum of ``values`` placed on consecutive rows first_row, first_row + 1, ...;
+    rows before 0 count for row 0 and rows past n - 1 for row n - 1."""
     out = np.zeros(n)
-    np.maximum.at(out, np.clip(rows, 0, n - 1), values)
+    if n == 0 or len(values) == 0:
+        return out
+    lo, hi = max(-first_row, 0), min(n - first_row, len(values))  # values landing inside 0..n-1
+    if hi > lo:
+        out[first_row + lo: first_row + hi] = values[lo:hi]
+    if lo > 0:
+        out[0] = max(out[0], float(values[:lo].max()))
+    if hi < len(values):
+        out[n - 1] = max(out[n - 1], float(values[max(hi, 0):].max()))
     return out
 
 
@@ -185,8 +214,8 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     j2 = np.arange(nb - 2, len(second))
     j3 = np.arange(nb - 3, len(third))
     accel_vec = second[j2] / period**2
-    accel = rows_max(np.linalg.norm(accel_vec, axis=1), j2 + 1 - nb, n)
-    jerk = rows_max(np.linalg.norm(third[j3], axis=1) / period**3, j3 + 2 - nb, n)
+    accel = rows_max(row_norms(accel_vec), int(j2[0]) + 1 - nb, n)
+    jerk = rows_max(row_norms(third[j3]) / period**3, int(j3[0]) + 2 - nb, n)
     chord = step_chord_errors(grid, samples, s, previous)
     planned = np.asarray(planned_ds, dtype=float)
     moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
@@ -195,11 +224,11 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     residual_before = np.concatenate([[0.0 if previous is None or previous.arc_residual_mm is None
                                        else previous.arc_residual_mm[-1]], residual[:-1]])
     arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
-    chord_fl = np.where(moving, np.abs(np.linalg.norm(step, axis=1) - planned) / safe, 0.0)
+    chord_fl = np.where(moving, np.abs(row_norms(step) - planned) / safe, 0.0)
     zeros = np.zeros(n)
     axis_v = (np.max(np.abs(step) / period / limits.axis_velocity_mm_s, axis=1)
               if limits.axis_velocity_mm_s is not None else zeros)
-    axis_a = (rows_max(np.max(np.abs(accel_vec) / limits.axis_accel_mm_s2, axis=1), j2 + 1 - nb, n)
+    axis_a = (rows_max(np.max(np.abs(accel_vec) / limits.axis_accel_mm_s2, axis=1), int(j2[0]) + 1 - nb, n)
               if limits.axis_accel_mm_s2 is not None else zeros)
     figures = {
         "max_chord_error_mm": float(chord.max(initial=0.0)),
