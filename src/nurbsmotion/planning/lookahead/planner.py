@@ -36,7 +36,10 @@ MAX_REPAIR_ROUNDS = 16
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
+GRID_STEPS = 2.0  # path grid spacing in feed steps (F T), with the jerk filter ...
 MAX_SPACING_MM = 0.5
+GRID_STEPS_FREE = 4.0  # ... and without it: the grid only samples the speed limits, the
+MAX_SPACING_FREE_MM = 1.0  # profile between its points is exact (no plateaus on grid points)
 MIN_SPACING_MM = 0.005
 WINDOW_CUT_FACTOR = 1.5  # a block reaching past this x the window length is cut inside
 PART_TOLERANCE = 1e-9
@@ -132,7 +135,8 @@ class PlanSettings:
 
 def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) -> PlanSettings:
     tau_f = averaging_time_s(limits)
-    spacing = float(np.clip(2.0 * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, MAX_SPACING_MM))
+    steps, widest = (GRID_STEPS, MAX_SPACING_MM) if tau_f > 0 else (GRID_STEPS_FREE, MAX_SPACING_FREE_MM)
+    spacing = float(np.clip(steps * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, widest))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
     return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)

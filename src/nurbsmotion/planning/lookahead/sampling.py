@@ -78,6 +78,13 @@ def arc_tolerances(s: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.maximum(ARC_TOLERANCE_SHARE * shorter, ARC_TOLERANCE_FLOOR_MM)
 
 
+def piece_runs(pieces: NDArray[np.int32]) -> list[tuple[int, slice]]:
+    """(piece, slice) of every run of equal piece numbers (set-points follow the path, so each
+    piece's set-points are one run)."""
+    edges = np.concatenate([[0], np.flatnonzero(pieces[1:] != pieces[:-1]) + 1, [len(pieces)]])
+    return [(int(pieces[a]), slice(int(a), int(b))) for a, b in zip(edges[:-1], edges[1:]) if b > a]
+
+
 def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64],
                          u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Newton corrections of u on the true arc length (module docstring), per piece.
@@ -85,10 +92,8 @@ def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.floa
     u = u.copy()
     residual = np.empty(len(u))
     tolerance = arc_tolerances(s)
-    pieces = grid.piece[k]
-    for p in np.unique(pieces):
-        sel = np.flatnonzero(pieces == p)
-        curve = grid.pieces[int(p)].curve
+    for p, sel in piece_runs(grid.piece[k]):
+        curve = grid.pieces[p].curve
         ks, target, uu, tol = k[sel], s[sel], u[sel], tolerance[sel]
         err = arc_residuals(grid, ks, target, uu, curve)
         for _ in range(NEWTON_STEPS):
@@ -96,10 +101,9 @@ def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.floa
             if len(todo) == 0:
                 break
             kt = ks[todo]
-            speed = np.linalg.norm(curve.derivatives(uu[todo], 1)[1], axis=1)
+            speed = curve.speeds(uu[todo])
             uu[todo] = np.clip(uu[todo] - err[todo] / np.maximum(speed, TINY_SPEED), grid.u[kt], grid.u[kt + 1])
             err[todo] = arc_residuals(grid, kt, target[todo], uu[todo], curve)
-        u[sel] = uu
         residual[sel] = err
     return u, residual
 
@@ -110,11 +114,11 @@ def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
     u, residual = newton_on_arc_length(grid, k, s, hermite_u(grid, k, s))
     pieces = grid.piece[k]
     position = np.empty((len(s), 3))
-    for p in np.unique(pieces):
-        sel = pieces == p
-        curve = grid.pieces[int(p)].curve
-        position[sel] = to_3d(curve.points(u[sel]))
+    for p, sel in piece_runs(pieces):
+        curve = grid.pieces[p].curve
+        here = position[sel]
+        here[:] = to_3d(curve.points(u[sel]))
         # a block's ends are its first and last control points exactly (clamped knots)
-        position[sel & (u == curve.u_max)] = to_3d(curve.control_points[-1:])[0]
-        position[sel & (u == curve.u_min)] = to_3d(curve.control_points[:1])[0]
+        here[u[sel] == curve.u_max] = to_3d(curve.control_points[-1:])[0]
+        here[u[sel] == curve.u_min] = to_3d(curve.control_points[:1])[0]
     return Samples(piece=pieces.astype(np.int32), u=u, position_mm=position, arc_residual_mm=residual)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, row_norms
+from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
@@ -119,7 +119,7 @@ def axis_velocity_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     if caps.axis_velocity_mm_s is None:
         return np.full(len(grid), np.inf)
     with np.errstate(divide="ignore"):
-        return np.min(caps.axis_velocity_mm_s[None, :] / np.abs(grid.tangent), axis=1)
+        return -row_max(-caps.axis_velocity_mm_s[None, :] / np.abs(grid.tangent))
 
 
 def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:

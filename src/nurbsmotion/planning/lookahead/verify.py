@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, row_norms, to_3d
+from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.speed_limits import window_min
 
@@ -211,11 +211,10 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     step = np.diff(full, axis=0)[nb - 1: nb - 1 + n]  # p_n - p_n-1
     second = full[2:] - 2.0 * full[1:-1] + full[:-2]  # centred on full[j + 1]
     third = full[3:] - 3.0 * full[2:-1] + 3.0 * full[1:-2] - full[:-3]  # row of full[j + 2]
-    j2 = np.arange(nb - 2, len(second))
-    j3 = np.arange(nb - 3, len(third))
-    accel_vec = second[j2] / period**2
-    accel = rows_max(row_norms(accel_vec), int(j2[0]) + 1 - nb, n)
-    jerk = rows_max(row_norms(third[j3]) / period**3, int(j3[0]) + 2 - nb, n)
+    first2, first3 = max(nb - 2, 0), max(nb - 3, 0)  # differences that involve a set-point of this stretch
+    accel_vec = second[first2:] / period**2
+    accel = rows_max(row_norms(accel_vec), first2 + 1 - nb, n)
+    jerk = rows_max(row_norms(third[first3:]) / period**3, first3 + 2 - nb, n)
     chord = step_chord_errors(grid, samples, s, previous)
     planned = np.asarray(planned_ds, dtype=float)
     moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
@@ -226,9 +225,9 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
     chord_fl = np.where(moving, np.abs(row_norms(step) - planned) / safe, 0.0)
     zeros = np.zeros(n)
-    axis_v = (np.max(np.abs(step) / period / limits.axis_velocity_mm_s, axis=1)
+    axis_v = (row_max(np.abs(step) / period / limits.axis_velocity_mm_s)
               if limits.axis_velocity_mm_s is not None else zeros)
-    axis_a = (rows_max(np.max(np.abs(accel_vec) / limits.axis_accel_mm_s2, axis=1), int(j2[0]) + 1 - nb, n)
+    axis_a = (rows_max(row_max(np.abs(accel_vec) / limits.axis_accel_mm_s2), first2 + 1 - nb, n)
               if limits.axis_accel_mm_s2 is not None else zeros)
     figures = {
         "max_chord_error_mm": float(chord.max(initial=0.0)),
