@@ -22,6 +22,7 @@ from types import ModuleType
 from nurbsmotion import __version__
 from nurbsmotion.errors import InputError, NurbsmotionError
 from nurbsmotion.log import setup_logging
+from nurbsmotion.runtime import keep_freed_memory
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -68,6 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     setup_logging(getattr(args, "verbose", 0))
+    keep_freed_memory()  # no page faults for every large numpy temporary (runtime.py)
     if not getattr(args, "_run", None):
         parser.print_help(sys.stderr)
         return EXIT_BAD_INPUT

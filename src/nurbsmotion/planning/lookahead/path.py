@@ -1,8 +1,13 @@
 """The path of a run of blocks as one arc-length grid with its differential geometry.
 
 Each block is sampled on a grid in u, fine where the path turns (at most
-``MAX_TURN_RAD`` of tangent turn per interval) and at most ``spacing_mm`` apart; the arc
-length of every interval comes from 5-point Gauss-Legendre. At every grid point we keep the
+``MAX_TURN_RAD`` of tangent turn per interval) and at most ``spacing_mm`` apart. On every
+interval the speed sigma(u) = |x'(u)| is the degree-6 polynomial p(r), r = (u - u_k) / h,
+through sigma and h sigma' at both ends and sigma at the 3 Gauss-Legendre nodes
+(speed_polynomials); the arc length from u_k to any u of the interval is its integral, exact
+for polynomial speeds up to degree 6 (the interval lengths agree with the curve's adaptive
+quadrature to ~1e-10 relative on the example programs; the tests check the set-points'
+steps against that quadrature). At every grid point we keep the
 arc-length derivatives of the path (reference §1 derivatives, chain rule with sigma = |x'|):
 
   t = x_s = x' / sigma,   c = x_ss = (x'' sigma - x' sigma') / sigma^3,
@@ -34,6 +39,7 @@ COARSE_PER_SPAN = 32  # first look at each knot span
 GAUSS_POINTS = 3  # per grid interval: intervals are short and inside one knot span (error ~ (h / R)^6 / 2e6)
 _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_POINTS)
 CURVATURE_SAMPLES = np.linspace(0.0, 1.0, 5)
+SPEED_DEGREE = 6
 TINY_SPEED = 1e-300
 
 
@@ -67,6 +73,7 @@ class PathGrid:
     dcurv_left: NDArray[np.float64]  # (N, 3) x_sss approached from below
     u_ss_left: NDArray[np.float64]  # (N,) d2u/ds2 approached from below
     kappa_max: NDArray[np.float64]  # (N-1,) largest |x_ss| on each interval (both ends at a junction)
+    speed_poly: NDArray[np.float64]  # (SPEED_DEGREE + 1, N-1) coefficients of sigma(r) per interval (zeros at junctions)
 
     def __len__(self) -> int:
         return len(self.s)
@@ -106,11 +113,40 @@ def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDA
     return u, np.concatenate([[0.0], np.cumsum(row_norms(np.diff(x, axis=0)))])
 
 
-def gauss_lengths(curve: NurbsCurve, u0: NDArray[np.float64], u1: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Arc length of each [u0, u1] by GAUSS_POINTS-point Gauss-Legendre (short parts of one knot span)."""
-    half = (u1 - u0) / 2.0
-    u = ((u0 + u1) / 2.0)[:, None] + half[:, None] * _GL_NODES[None, :]
-    return (curve.speeds(u.ravel()).reshape(u.shape) @ _GL_WEIGHTS) * half
+def _speed_fit() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The matrix taking [sigma(0), sigma'(0), sigma(r_1..r_3), sigma(1), sigma'(1)] (r the
+    Gauss nodes on [0, 1], derivatives in r) to the coefficients of p(r), and the weights of
+    the integral of p over [0, 1]."""
+    nodes = (1.0 + _GL_NODES) / 2.0
+    powers = np.arange(SPEED_DEGREE + 1)
+
+    def value(r: float) -> NDArray[np.float64]:
+        return r ** powers
+
+    def slope(r: float) -> NDArray[np.float64]:
+        return np.where(powers > 0, powers * r ** np.maximum(powers - 1, 0), 0.0)
+
+    rows = [value(0.0), slope(0.0), *[value(r) for r in nodes], value(1.0), slope(1.0)]
+    return np.linalg.inv(np.array(rows)), 1.0 / (powers + 1.0)
+
+
+SPEED_FIT, SPEED_INTEGRAL = _speed_fit()
+
+
+def speed_polynomials(curve: NurbsCurve, u: NDArray[np.float64], sigma: NDArray[np.float64],
+                      dsigma: NDArray[np.float64], dsigma_left: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Coefficients (SPEED_DEGREE + 1, N - 1) of sigma on every interval [u_k, u_k+1] in
+    r = (u - u_k) / h (module docstring); sigma' = d sigma / du at the ends (left limit at the end)."""
+    h = np.diff(u)
+    inner = u[:-1, None] + h[:, None] * ((1.0 + _GL_NODES) / 2.0)[None, :]
+    at_nodes = curve.speeds(inner.ravel()).reshape(inner.shape)
+    data = np.column_stack([sigma[:-1], h * dsigma[:-1], at_nodes, sigma[1:], h * dsigma_left[1:]])
+    return SPEED_FIT @ data.T
+
+
+def interval_lengths(speed_poly: NDArray[np.float64], h: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Arc length of every interval: h times the integral of p over [0, 1]."""
+    return h * (SPEED_INTEGRAL @ speed_poly)
 
 
 def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
@@ -199,13 +235,16 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     keys = ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed", "position", "curv_left", "dcurv_left",
             "u_ss_left")
     parts: dict[str, list] = {k: [] for k in keys}
+    polys: list[NDArray[np.float64]] = []
     offset = 0.0
     for index, piece in enumerate(pieces):
         u = piece_u_grid(piece, spacing_mm)
-        ds = gauss_lengths(piece.curve, u[:-1], u[1:])
-        s = offset + np.concatenate([[0.0], np.cumsum(ds)])
         x, t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
         curv_left, dcurv_left, u_ss_left = left_limits(piece.curve, u, curv, dcurv, u_ss)
+        cubed = u_s**3  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
+        poly = speed_polynomials(piece.curve, u, 1.0 / u_s, -u_ss / cubed, -u_ss_left / cubed)
+        polys += [poly, np.zeros((SPEED_DEGREE + 1, 1))]  # the zero-length junction interval after it
+        s = offset + np.concatenate([[0.0], np.cumsum(interval_lengths(poly, np.diff(u)))])
         for key, value in (("s", s), ("u", u), ("u_s", u_s), ("u_ss", u_ss), ("u_ss_left", u_ss_left), ("tangent", to_3d(t)),
                            ("curv", to_3d(curv)), ("dcurv", to_3d(dcurv)), ("position", to_3d(x)),
                            ("curv_left", to_3d(curv_left)), ("dcurv_left", to_3d(dcurv_left))):
@@ -218,7 +257,8 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     junction = cat["piece"][1:] != cat["piece"][:-1]
     ends = row_norms(cat["curv"])
     kappa_max[junction] = np.maximum(ends[:-1], ends[1:])[junction]
-    return PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"],
+    speed_poly = np.concatenate(polys[:-1], axis=1)
+    return PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"], speed_poly=speed_poly,
                     tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"],
                     position=cat["position"], pieces=tuple(pieces), curv_left=cat["curv_left"],
                     dcurv_left=cat["dcurv_left"], u_ss_left=cat["u_ss_left"], kappa_max=kappa_max)

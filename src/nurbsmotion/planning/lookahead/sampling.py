@@ -1,9 +1,9 @@
 """Exact sampling: the parameter u of every set-point from its planned arc length.
 
 On grid interval k (s_k..s_k+1) u(s) is first the quintic Hermite interpolant of u, du/ds
-and d2u/ds2 at both ends; then Newton corrections on the true arc length,
-  s(u) = s_k + integral_{u_k}^{u} |x'| du  (Gauss-Legendre on the short interval, path.gauss_lengths),
-  u <- u - (s(u) - s*) du/ds,
+and d2u/ds2 at both ends; then Newton corrections on the arc length,
+  s(u) = s_k + h integral_0^r p(r') dr'   (p the interval's speed polynomial, path.py),
+  u <- u - (s(u) - s*) / p(r),
 until |s(u) - s*| <= ARC_TOLERANCE_SHARE x the shorter of the set-point's two steps (or
 ARC_TOLERANCE_FLOOR_MM at rest; at most NEWTON_STEPS): 1 % of the fluctuation limit, so
 the check (difference of two residuals over the step) passes. The final residual of every
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, gauss_lengths, to_3d
+from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, to_3d
 
 ARC_TOLERANCE_SHARE = 1e-8
 ARC_TOLERANCE_FLOOR_MM = 1e-13
@@ -63,10 +63,30 @@ def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
         k = np.where(zero, k - 1, k)
 
 
-def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64],
-                  curve) -> NDArray[np.float64]:
-    """s(u) - s* with s(u) = s_k + integral_{u_k}^{u} |x'| (path.gauss_lengths)."""
-    return grid.s[k] + gauss_lengths(curve, grid.u[k], u) - s
+def interval_fraction(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(r, h): where u lies on interval k, r = (u - u_k) / h, and the interval's width h in u."""
+    h = grid.u[k + 1] - grid.u[k]
+    return (u - grid.u[k]) / np.where(h > 0, h, 1.0), h
+
+
+def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """s(u) - s* with s(u) = s_k + h integral_0^r p (Horner on p's coefficients / (j + 1))."""
+    r, h = interval_fraction(grid, k, u)
+    coeffs = grid.speed_poly
+    integral = coeffs[-1].take(k) / len(coeffs)
+    for j in range(len(coeffs) - 2, -1, -1):
+        integral = integral * r + coeffs[j].take(k) / (j + 1)
+    return grid.s[k] + integral * r * h - s
+
+
+def interval_speeds(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|x'(u)| from the interval's speed polynomial."""
+    r, _ = interval_fraction(grid, k, u)
+    coeffs = grid.speed_poly
+    speed = coeffs[-1].take(k)
+    for j in range(len(coeffs) - 2, -1, -1):
+        speed = speed * r + coeffs[j].take(k)
+    return speed
 
 
 def arc_tolerances(s: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -87,25 +107,20 @@ def piece_runs(pieces: NDArray[np.int32]) -> list[tuple[int, slice]]:
 
 def newton_on_arc_length(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64],
                          u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Newton corrections of u on the true arc length (module docstring), per piece.
-    Returns u and the final residual s(u) - s* of every point (the measured arc error)."""
+    """Newton corrections of u on the arc length (module docstring). Returns u and the final
+    residual s(u) - s* of every point (the measured arc error)."""
     u = u.copy()
-    residual = np.empty(len(u))
     tolerance = arc_tolerances(s)
-    for p, sel in piece_runs(grid.piece[k]):
-        curve = grid.pieces[p].curve
-        ks, target, uu, tol = k[sel], s[sel], u[sel], tolerance[sel]
-        err = arc_residuals(grid, ks, target, uu, curve)
-        for _ in range(NEWTON_STEPS):
-            todo = np.flatnonzero(np.abs(err) > tol)
-            if len(todo) == 0:
-                break
-            kt = ks[todo]
-            speed = curve.speeds(uu[todo])
-            uu[todo] = np.clip(uu[todo] - err[todo] / np.maximum(speed, TINY_SPEED), grid.u[kt], grid.u[kt + 1])
-            err[todo] = arc_residuals(grid, kt, target[todo], uu[todo], curve)
-        residual[sel] = err
-    return u, residual
+    err = arc_residuals(grid, k, s, u)
+    for _ in range(NEWTON_STEPS):
+        todo = np.flatnonzero(np.abs(err) > tolerance)
+        if len(todo) == 0:
+            break
+        kt = k[todo]
+        speed = interval_speeds(grid, kt, u[todo])
+        u[todo] = np.clip(u[todo] - err[todo] / np.maximum(speed, TINY_SPEED), grid.u[kt], grid.u[kt + 1])
+        err[todo] = arc_residuals(grid, kt, s[todo], u[todo])
+    return u, err
 
 
 def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
