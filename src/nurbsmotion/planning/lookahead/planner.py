@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
+from nurbsmotion.planning.lookahead import straight
 from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths
 from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
@@ -371,6 +372,54 @@ def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...],
                   run_s_mm=cursor.run_s_mm + s_cut)
 
 
+def is_straight(run: Run) -> bool:
+    """A run of one straight block (a line: degree 1, two control points)."""
+    return len(run.pieces) == 1 and run.pieces[0].curve.degree == 1 and len(run.pieces[0].curve.control_points) == 2
+
+
+def straight_limits(direction: NDArray[np.float64], feed_mm_s: float, machine: MachineLimits) -> tuple[float, float]:
+    """(V, A) along a line of unit ``direction``: the feed and A, and every axis' share of them."""
+    v, a = feed_mm_s, machine.accel_mm_s2
+    moving = np.abs(direction) > 1e-12
+    if machine.axis_velocity_mm_s is not None:
+        v = min(v, float(np.min(machine.axis_velocity_mm_s[moving] / np.abs(direction[moving]))))
+    if machine.axis_accel_mm_s2 is not None:
+        a = min(a, float(np.min(machine.axis_accel_mm_s2[moving] / np.abs(direction[moving]))))
+    return v, a
+
+
+def straight_run_plan(run: Run, cursor: Cursor, settings: PlanSettings) -> WindowPlan | None:
+    """The time-optimal plan of a rest-to-rest run along one straight block (straight.py), to
+    the machine's limits (the 1-D profile holds them exactly: only straight.ROUNDING_MARGIN
+    for the rounding of third differences of large coordinates), verified like
+    every window. None when the run is not one line, starts moving, is longer than one
+    window (chunked planning keeps windows bounded) or fails the check (the general planner
+    then takes it)."""
+    if not cursor.at_rest or not is_straight(run):
+        return None
+    piece = run.pieces[0]
+    grid = build_grid(run.pieces, settings.spacing_mm)
+    if grid.length_mm > settings.window_mm or grid.length_mm <= 0.0:
+        return None
+    direction = grid.tangent[0]
+    v, a = straight_limits(direction, piece.feed_mm_s, settings.machine)
+    j = settings.machine.jerk_mm_s3
+    share = straight.ROUNDING_MARGIN
+    profile = straight.scurve(grid.length_mm, v * share, a * share, None if j is None else j * share)
+    if profile.duration_s > MAX_WINDOW_CYCLES * settings.limits.period_s:
+        return None
+    s = straight.cycle_positions(profile, grid.length_mm, settings.limits.period_s)
+    samples = sample_path(grid, s)
+    planned_ds = s - np.concatenate([[s[0]], s[:-1]])
+    before = cursor.before if len(cursor.before) else np.repeat(samples.position_mm[:1], 3, axis=0)
+    after = np.repeat(samples.position_mm[-1:], 3, axis=0)
+    result = check(grid, samples, s, planned_ds, settings.machine, before, after, cursor.previous)
+    if result.violations():
+        return None
+    blocks = np.full(len(s), piece.block, dtype=np.int32)
+    return WindowPlan(samples, s, planned_ds, result, 0, True, None, blocks)
+
+
 SHORT_RUN_SHARES = (1.0, 0.85, 0.7, 0.55)
 SHORT_RUN_MAX_PIECES = 8
 SHORT_RUN_GRID_POINTS = 400  # a short run gets at least this many grid points (plateau edges)
@@ -426,6 +475,10 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
     (at most MAX_BACKTRACKS times in a row)."""
     cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
     length = settings.window_mm
+    line = straight_run_plan(run, cursor, settings)
+    if line is not None:
+        yield line
+        return
     short = short_run_plan(run, cursor, settings, length)
     if short is not None:
         yield short
