@@ -176,6 +176,28 @@ def plateau_level(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, tau
     return lo
 
 
+def top_starts(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> NDArray[np.intp]:
+    """First grid point of the flat top that ends at each peak (the peak itself when it is sharp)."""
+    starts = peaks.copy()
+    for n, peak in enumerate(peaks):
+        level = x[peak] * (1.0 - 1e-12)
+        below = np.flatnonzero(x[:peak] < level)
+        starts[n] = below[-1] + 1 if len(below) else 0
+    return starts
+
+
+def valleys_around(x: NDArray[np.float64], peak: int) -> tuple[int, int]:
+    """Indices of the lowest points reached going down from ``peak`` (over its flat top) to
+    either side: the extent of this one peak."""
+    left = peak
+    while left > 0 and x[left - 1] <= x[left]:
+        left -= 1
+    right = peak
+    while right + 1 < len(x) and x[right + 1] <= x[right]:
+        right += 1
+    return left, right
+
+
 def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float,
                       jerk: float) -> NDArray[np.float64] | None:
     """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
@@ -188,7 +210,7 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     if len(inner) == 0:
         return None
     raw = raw_profile(s, x)
-    t_peak = np.interp(s[inner], raw.s, raw.t)
+    t_peak = 0.5 * (np.interp(s[top_starts(x, inner)], raw.s, raw.t) + np.interp(s[inner], raw.s, raw.t))
     k_before, _ = raw.locate(t_peak - tau_f / 2.0)
     k_after, _ = raw.locate(t_peak + tau_f / 2.0)
     sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > jerk]
@@ -200,6 +222,8 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
         lo = plateau_level(s, x, peak, tau_f, 2.0 * spacing)
         if lo <= 0.0:  # a move shorter than two grid intervals: no allowance for the grid
             lo = plateau_level(s, x, peak, tau_f, 0.0)
-        near = np.abs(s - s[peak]) <= superlevel_width(s, x, peak, lo) + 1e-9
+        left, right = valleys_around(x, peak)
+        near = np.zeros(len(s), dtype=bool)
+        near[left:right + 1] = True  # this peak only: a low plateau must not cap its neighbours
         caps[near & (x > lo)] = np.minimum(caps[near & (x > lo)], lo)
     return caps

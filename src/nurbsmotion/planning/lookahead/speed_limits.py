@@ -223,7 +223,7 @@ def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64
     s_jump, dc = curvature_jumps(grid)
     big = dc > TINY
     for s0, jump in zip(s_jump[big], dc[big]):
-        limit = np.sqrt(2.0 * caps.jerk_mm_s3 * caps.period_s / jump)
+        limit = np.sqrt(caps.jerk_mm_s3 * caps.period_s / jump)
         reach = float(grid.feed_mm_s.max()) * caps.period_s
         lo, hi = np.searchsorted(grid.s, [s0 - reach, s0 + reach])
         v[lo:hi] = np.minimum(v[lo:hi], limit)
