@@ -364,3 +364,20 @@ def test_send_failure_is_a_bus_error_and_stops_the_job():
             bus.failing = False
             master.shutdown()
             bus.shutdown()
+
+
+def test_half_playback_rate_plays_every_row_and_the_midpoints_between():
+    """set_rate(0.5) before a job: the drives get every planned row on every other cycle and
+    the midpoint between consecutive rows in between (the feed override's playback)."""
+    counts = sine_counts(n=120, n_axes=1)
+    with rig(n_axes=1) as (master, sim, _):
+        master.set_rate(0.5)
+        result = master.stream(counts).wait(WAIT_S)
+        assert result is not None and result.outcome == "done"
+        wait_for(lambda: len(sim[1].recorder) > 0 and recorded(sim, 1)[1][-1] == counts[-1, 0])
+        rows = counts[:, 0].astype(float)
+        between = np.round((rows[:-1] + rows[1:]) / 2.0)
+        expected = np.empty(2 * len(rows) - 1)
+        expected[0::2], expected[1::2] = rows, between
+        _, setpoints = recorded(sim, 1)
+        assert find_run(setpoints, expected.astype(int).tolist()) >= 0

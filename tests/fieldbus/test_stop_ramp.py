@@ -1,8 +1,9 @@
 """Controlled stop: stays on the planned polyline and decelerates within every axis' a_max."""
 
 import numpy as np
+import pytest
 
-from nurbsmotion.fieldbus.stop_ramp import StopRamp, ramp_slope
+from nurbsmotion.fieldbus.stop_ramp import StopRamp, ramp_slope, stop_slope
 
 
 def _path(n=2000):
@@ -53,3 +54,14 @@ def test_stop_near_the_end_ends_at_the_last_row():
 def test_standstill_stops_at_once():
     counts = np.zeros((10, 3), dtype=np.int32)
     assert ramp_slope(counts, np.ones(3), 0.004) == 1.0
+
+
+def test_the_stop_slope_leaves_room_for_the_plans_own_acceleration():
+    period, fallback = 0.004, 0.1
+    # axis 0: 400 counts per cycle at most, plan accelerates 1e6 counts/s², limit 2e6 counts/s²
+    dr = stop_slope([400.0, 0.0], [1e6, 0.0], [2e6, 1e6], period, rate=1.0, fallback=fallback)
+    assert dr == pytest.approx((2e6 - 1e6) * period**2 / 400.0)
+    assert 400.0 * dr / period**2 + 1e6 <= 2e6 + 1e-6  # ramp + plan within the limit
+    assert stop_slope([400.0], [1e6], [2e6], period, rate=0.5, fallback=fallback) > dr  # r² a_planned is less
+    assert stop_slope([400.0], [3e6], [2e6], period, rate=1.0, fallback=fallback) == pytest.approx(0.1 * fallback)
+    assert stop_slope([1.0], [0.0], [2e6], period, rate=1.0, fallback=fallback) == fallback

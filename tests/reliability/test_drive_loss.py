@@ -17,7 +17,8 @@ from nurbsmotion.cia402 import State
 from nurbsmotion.config import MachineConfig, parse_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from nurbsmotion.service.link import RateMaster, SimulatedDrives
+from nurbsmotion.fieldbus import Master
+from nurbsmotion.service.link import SimulatedDrives
 from nurbsmotion.sim import FaultInjection, read_csv
 from tests.reliability.rig import (A_MAX_MM_S2, COUNTS_PER_MM, HEARTBEAT_CONSUMER_MS, HEARTBEAT_PRODUCER_MS,
                                    V_MAX_MM_S, assert_records_within_limits, wait_for)
@@ -40,11 +41,11 @@ def daemon_config(folder: Path) -> MachineConfig:
     return parse_config(text, "drive-loss.yaml")
 
 
-def open_link_normal_priority(config: MachineConfig) -> tuple[RateMaster, SimulatedDrives]:
+def open_link_normal_priority(config: MachineConfig) -> tuple[Master, SimulatedDrives]:
     """service.link.open_link without SCHED_FIFO: in-process drives on 2 loaded cores would
     otherwise be starved into false heartbeat losses (the daemon proper runs them the same)."""
     simulation = SimulatedDrives(config).start()
-    master = RateMaster(config, rt_priority=None)
+    master = Master(config, rt_priority=None)
     master.bring_up()
     return master, simulation
 

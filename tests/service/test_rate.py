@@ -44,16 +44,3 @@ def test_the_clamped_rate_keeps_a_replayed_plan_within_the_axis_limit(a_plan):
     assert r_max > 1.0
     assert _replay_peak_accel(x, r_max, period) <= (1.0 - RAMP_SHARE) * a_max + 1e-6
     assert _replay_peak_accel(x, math.sqrt(a_max / a_plan), period) > a_max
-
-
-def test_the_stop_slope_leaves_room_for_the_plans_own_acceleration():
-    from nurbsmotion.service.rate import stop_slope
-
-    period, fallback = 0.004, 0.1
-    # axis 0: 400 counts per cycle at most, plan accelerates 1e6 counts/s², limit 2e6 counts/s²
-    dr = stop_slope([400.0, 0.0], [1e6, 0.0], [2e6, 1e6], period, rate=1.0, fallback=fallback)
-    assert dr == pytest.approx((2e6 - 1e6) * period**2 / 400.0)
-    assert 400.0 * dr / period**2 + 1e6 <= 2e6 + 1e-6  # ramp + plan within the limit
-    assert stop_slope([400.0], [1e6], [2e6], period, rate=0.5, fallback=fallback) > dr  # r² a_planned is less
-    assert stop_slope([400.0], [3e6], [2e6], period, rate=1.0, fallback=fallback) == pytest.approx(0.1 * fallback)
-    assert stop_slope([1.0], [0.0], [2e6], period, rate=1.0, fallback=fallback) == fallback

@@ -9,7 +9,9 @@ allocation-heavy work and the loop checks them after its sends.
 
 Phases of the loop: 'enabling' (per-cycle CiA-402 state machine towards OPERATION
 ENABLED, target = actual position) -> 'holding' (re-send the held position every cycle so
-CSP/IP drives stay enabled) <-> 'streaming' (one planned set-point per cycle) ->
+CSP/IP drives stay enabled) <-> 'streaming' (the planned set-points played at the
+playback rate of set_rate(): one row per cycle at 1.0, interpolated between rows otherwise,
+see stop_ramp) ->
 'stopping' (controlled stop on the path, see stop_ramp) / 'quick_stop' (quick stop
 controlword to all axes) -> 'disabled'; 'disabling' at shutdown.
 """
@@ -42,7 +44,7 @@ from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_QUICK_STOP,
                                               running_controlword, state_name)
 from nurbsmotion.fieldbus.pdo import RPDO_FORMAT, TPDO1_FORMAT, TPDO2_FORMAT, cycles_of_ms, drive_configuration
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
-from nurbsmotion.fieldbus.stop_ramp import StopRamp, ramp_slope
+from nurbsmotion.fieldbus.stop_ramp import RATE_RAMP_SHARE, StopRamp, ramp_slope, setpoints_at, stop_slope
 from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.log import kv
 
@@ -58,13 +60,19 @@ class Job:
     """Handle of one streamed set-point sequence; every method is thread-safe."""
 
     def __init__(self, master: "Master", rows: memoryview, dr: float,
-                 on_progress: Callable[[int, int], None] | None, progress_every: int) -> None:
+                 on_progress: Callable[[int, int], None] | None, progress_every: int,
+                 max_step: list[float] | None = None, planned_accel: list[float] | None = None) -> None:
         self._master = master
         self.rows = rows
         self.length = rows.shape[0]
         self.last = rows.shape[0] - 1
         self.ramp = StopRamp(rows, dr)
         self.index = -1  # index of the last planned set-point handed to the bus
+        self.playback_s = 0.0  # fractional row played last
+        self.playback_r = 1.0  # rows per cycle
+        n_axes = rows.shape[1]
+        self.max_step = max_step if max_step is not None else [0.0] * n_axes  # counts per cycle, per axis
+        self.planned_accel = planned_accel if planned_accel is not None else [0.0] * n_axes  # counts/s^2
         self.on_progress = on_progress
         self.progress_every = progress_every
         self.faults: list[FaultReport] = []
@@ -156,6 +164,8 @@ class Master:
         self._fe_window = [int(w) for w in self.axis_map.following_error_window_counts()]
         self._fe_timeout_cycles = [cycles_of_ms(a.following_error_timeout_ms, self._period_s) for a in axes]
         self._accel_counts_s2 = self.axis_map.max_accel_counts_s2(config.interpolation.max_accel_mm_s2)
+        self._accel_limits = [float(a) for a in self._accel_counts_s2]
+        self._rate_target = 1.0  # playback rate requested by set_rate (feed override)
         # feedback, written by the notifier thread (plain lists: item stores are atomic)
         self._fb_status: list[int | None] = [None] * n
         self._fb_pos: list[int] = [0] * n
@@ -382,6 +392,12 @@ class Master:
         self._wait_enabled()
 
     # ------------------------------------------------------------------ streaming API
+    def set_rate(self, rate: float) -> None:
+        """Playback rate for the running and the next jobs (1.0 = as planned, 0 = pause). The
+        running job's rate moves there by RATE_RAMP_SHARE of its stop slope per cycle; the
+        caller keeps the rate within what the plan allows (service.rate)."""
+        self._rate_target = max(0.0, float(rate))
+
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
         """Start streaming an (N, n_axes) int32 array of set-points, one row per cycle.
 
@@ -412,9 +428,16 @@ class Master:
                                  f"{self._fe_window[j]} counts away)")
         # A 2-D memoryview: 8 bytes per set-point, read per cycle as rows[i, j] -> int
         # (nested lists would cost ~10x the memory for a long program).
-        rows = memoryview(np.ascontiguousarray(arr, dtype=np.int64))
+        as_int64 = np.ascontiguousarray(arr, dtype=np.int64)
+        rows = memoryview(as_int64)
+        # per-axis figures for the stop slope, as plain floats for the cycle loop
+        max_step = (np.abs(np.diff(as_int64, axis=0)).max(axis=0) if len(arr) > 1 else np.zeros(self._n))
+        planned_accel = (np.abs(np.diff(as_int64, n=2, axis=0)).max(axis=0) if len(arr) > 2
+                         else np.zeros(self._n)) / self._period_s**2
         job = Job(self, rows, ramp_slope(arr, self._accel_counts_s2, self._period_s),
-                  on_progress, self._progress_every)
+                  on_progress, self._progress_every, max_step.astype(float).tolist(),
+                  planned_accel.astype(float).tolist())
+        job.playback_r = self._rate_target
         self._quiet_gc()
         self._request("job", job)
         return job
@@ -665,11 +688,17 @@ class Master:
         if phase == "streaming":
             job = self._job
             assert job is not None
-            idx = job.index + 1
-            rows = job.rows
-            for i in range(n):
-                sp[i] = rows[idx, i]
+            if job.index < 0:
+                s = 0.0
+            else:
+                r, target, dr = job.playback_r, self._rate_target, job.ramp.dr * RATE_RAMP_SHARE
+                r = min(r + dr, target) if r < target else max(r - dr, target)
+                job.playback_r = r
+                s = min(job.playback_s + r, float(job.last))
+            job.playback_s = s
+            setpoints_at(job.rows, s, sp, n)
             cw[:] = self._run_cw
+            idx = int(s)
             job.index = idx
             if idx == job.last:
                 self._hold[:] = sp
@@ -955,6 +984,9 @@ class Master:
             self._finish_job(outcome)
             return
         job.ramp.start(job.index)
+        job.ramp.s, job.ramp.r = job.playback_s, job.playback_r  # from where and how fast it plays now
+        job.ramp.dr = stop_slope(job.max_step, job.planned_accel, self._accel_limits, self._period_s,
+                                 job.playback_r, job.ramp.dr)
         self._set_phase("stopping", k)
 
     def _quick_stop(self, k: int, outcome: str) -> None:

@@ -7,11 +7,17 @@ r·|Δc| counts per cycle, so the ramp adds a deceleration of |Δc|·dr / T² co
 Choosing dr = min_j a_j·T² / max|Δc_j| keeps that extra deceleration within every
 axis' a_max (the path's own curvature accelerations scale with r² <= 1). The positions
 stay on the planned polyline, so the stop stays on the path.
+
+The same playback carries the feed override: while streaming, r moves towards the requested
+rate by RATE_RAMP_SHARE of the stop slope per cycle, so a rate change adds at most
+RATE_RAMP_SHARE·a_max; at r = 1 every cycle sends exactly the next planned row.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+RATE_RAMP_SHARE = 0.25  # share of each axis' a_max a change of the playback rate may add
 
 
 def ramp_slope(counts: np.ndarray, accel_counts_s2: np.ndarray, period_s: float) -> float:
@@ -24,6 +30,24 @@ def ramp_slope(counts: np.ndarray, accel_counts_s2: np.ndarray, period_s: float)
         return 1.0
     slopes = np.asarray(accel_counts_s2, dtype=float)[moving] * period_s**2 / max_step[moving]
     return float(min(1.0, slopes.min()))
+
+
+def stop_slope(max_step_counts: list[float], planned_accel_counts_s2: list[float], accel_limit_counts_s2: list[float],
+               period_s: float, rate: float, fallback: float) -> float:
+    """Rate decrease per cycle for a controlled stop started at playback rate ``rate``.
+
+    The stop ramp adds |Δc_j|·dr/T² to axis j on top of the plan's own acceleration, which
+    at rate r is r²·a_planned_j; keeping the sum within a_max_j gives
+    dr = min_j (a_max_j - r²·a_planned_j)·T² / max|Δc_j| (ramp_slope uses a_max_j alone, so
+    a stop during the plan's deceleration would exceed the limit). Never below 10 % of
+    ``fallback`` (ramp_slope), so a stop always ends, and never above it.
+    """
+    dr = fallback
+    for step, planned, limit in zip(max_step_counts, planned_accel_counts_s2, accel_limit_counts_s2):
+        if step > 0:
+            room = limit - rate * rate * planned
+            dr = min(dr, room * period_s * period_s / step)
+    return max(dr, 0.1 * fallback)
 
 
 def setpoints_at(rows: memoryview, s: float, out: list[int], n_axes: int) -> None:

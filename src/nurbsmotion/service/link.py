@@ -1,14 +1,6 @@
-"""The real MotionLink: fieldbus.Master (+ a playback rate for the feed override) and, when
-``simulate: true``, the simulated drives started first on the same bus channel.
-
-RateMaster is a small wrapper owned by the service: fieldbus.Master streams one planned row
-per cycle; here the streaming phase plays the rows at a rate r (fractional rows per cycle,
-linear interpolation between rows, like the master's own controlled-stop ramp) and r moves
-towards the requested rate by RAMP_SHARE of the master's stop-ramp slope per cycle, so a
-rate change adds at most RAMP_SHARE·a_max (see fieldbus.stop_ramp and service.rate). A controlled stop
-starts from the current position and rate, with a slope that leaves room for the plan's
-own acceleration (service.rate.stop_slope). A controlled stop starts from the current
-position and rate. Replace it by the master's own rate control once it has one.
+"""The real MotionLink: fieldbus.Master (whose playback rate carries the feed override, see
+fieldbus.stop_ramp) and, when ``simulate: true``, the simulated drives started first on the
+same bus channel.
 """
 
 from __future__ import annotations
@@ -16,75 +8,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Callable
-
-import numpy as np
 
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.fieldbus import Job, Master
-from nurbsmotion.fieldbus.stop_ramp import setpoints_at
+from nurbsmotion.fieldbus import Master
 from nurbsmotion.log import kv
-from nurbsmotion.service.rate import RAMP_SHARE, stop_slope
 
 log = logging.getLogger(__name__)
-
-
-class RateMaster(Master):
-    """fieldbus.Master with :meth:`set_rate` (feed override as playback rate)."""
-
-    def __init__(self, config: MachineConfig, *args: Any, **kwargs: Any) -> None:
-        super().__init__(config, *args, **kwargs)
-        self._rate_target = 1.0
-        self._accel_limits = [float(a) for a in self.axis_map.max_accel_counts_s2(config.interpolation.max_accel_mm_s2)]
-
-    def set_rate(self, rate: float) -> None:
-        """Playback rate for the running and the next jobs (1.0 = as planned, 0 = pause)."""
-        self._rate_target = max(0.0, float(rate))
-
-    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
-        job = super().stream(counts, on_progress)
-        arr = np.asarray(counts, dtype=np.int64)
-        job.playback_s = 0.0  # type: ignore[attr-defined]
-        job.playback_r = self._rate_target  # type: ignore[attr-defined]
-        # per-axis figures for the stop slope, as plain floats for the cycle loop
-        job.max_step = (np.abs(np.diff(arr, axis=0)).max(axis=0) if len(arr) > 1  # type: ignore[attr-defined]
-                        else np.zeros(arr.shape[1])).astype(float).tolist()
-        job.planned_accel = ((np.abs(np.diff(arr, n=2, axis=0)).max(axis=0) if len(arr) > 2  # type: ignore[attr-defined]
-                              else np.zeros(arr.shape[1])) / self._period_s**2).astype(float).tolist()
-        return job
-
-    def _compute(self, k: int) -> None:
-        if self._phase != "streaming":
-            super()._compute(k)
-            return
-        job = self._job
-        assert job is not None
-        sp, n = self._sp, self._n
-        if job.index < 0:
-            s = 0.0
-        else:
-            r, target, dr = job.playback_r, self._rate_target, job.ramp.dr * RAMP_SHARE
-            r = min(r + dr, target) if r < target else max(r - dr, target)
-            job.playback_r = r
-            s = min(job.playback_s + r, float(job.last))
-        job.playback_s = s
-        setpoints_at(job.rows, s, sp, n)
-        self._cw[:] = self._run_cw
-        i = int(s)
-        job.index = i
-        if i == job.last:
-            self._hold[:] = sp
-            self._set_phase("holding", k)
-            job.outcome, job.finish_cycle = "done", k + 1
-
-    def _start_controlled_stop(self, k: int, outcome: str) -> None:
-        super()._start_controlled_stop(k, outcome)
-        job = self._job
-        if job is not None and hasattr(job, "playback_s"):
-            job.ramp.s = job.playback_s
-            job.ramp.r = job.playback_r
-            job.ramp.dr = stop_slope(job.max_step, job.planned_accel, self._accel_limits, self._period_s,
-                                     job.playback_r, job.ramp.dr)
 
 
 class SimulatedDrives:
@@ -153,11 +82,11 @@ class SimulatedDrives:
         self.network.stop()
 
 
-def open_link(config: MachineConfig) -> tuple[RateMaster, SimulatedDrives | None]:
+def open_link(config: MachineConfig) -> tuple[Master, SimulatedDrives | None]:
     """Start the simulated drives (if configured), bring every axis up; FieldbusError names
     the node and the step if that fails (and everything started is stopped again)."""
     simulation = SimulatedDrives(config).start() if config.simulate else None
-    master = RateMaster(config)
+    master = Master(config)
     try:
         master.bring_up()
     except BaseException:

@@ -6,7 +6,7 @@ interpolation between planned rows) gives each axis
 - acceleration <= r²·a_planned + a_planned/4 + a_ramp:
   r² from the time scaling; a_planned/4 the most the piecewise-linear interpolation of the
   rows adds (its error is within [0, a T²/8] and a second difference combines three such
-  errors); a_ramp while the rate changes (RAMP_SHARE of the axis limit, see service.link).
+  errors); a_ramp while the rate changes (RAMP_SHARE of the axis limit, see fieldbus.stop_ramp).
 So the highest rate that keeps the axis limits is
     r_max = min(1.5, min_j v_max_j / v_planned_j,
                 min_j sqrt(((1 - RAMP_SHARE)·a_max_j - a_planned_j/4) / a_planned_j)),
@@ -21,8 +21,9 @@ import math
 
 import numpy as np
 
+from nurbsmotion.fieldbus.stop_ramp import RATE_RAMP_SHARE as RAMP_SHARE  # a rate change's share of a_max
+
 MAX_OVERRIDE = 1.5
-RAMP_SHARE = 0.25  # share of each axis' a_max a rate change may add (slope of the rate ramp)
 INTERPOLATION_SHARE = 0.25  # a_planned share the linear interpolation between rows may add
 
 
@@ -44,21 +45,3 @@ def effective_rate(requested: float, rate_limit: float) -> float:
     if requested <= 1.0:
         return requested
     return min(requested, max(1.0, rate_limit))
-
-
-def stop_slope(max_step_counts: list[float], planned_accel_counts_s2: list[float], accel_limit_counts_s2: list[float],
-               period_s: float, rate: float, fallback: float) -> float:
-    """Rate decrease per cycle for a controlled stop started at playback rate ``rate``.
-
-    The stop ramp adds |Δc_j|·dr/T² to axis j on top of the plan's own acceleration, which
-    at rate r is r²·a_planned_j; keeping the sum within a_max_j gives
-    dr = min_j (a_max_j - r²·a_planned_j)·T² / max|Δc_j| (fieldbus.stop_ramp uses a_max_j
-    alone, so a stop during the plan's deceleration exceeded the limit). Never below 10 %
-    of ``fallback`` (the master's slope), so a stop always ends, and never above it.
-    """
-    dr = fallback
-    for step, planned, limit in zip(max_step_counts, planned_accel_counts_s2, accel_limit_counts_s2):
-        if step > 0:
-            room = limit - rate * rate * planned
-            dr = min(dr, room * period_s * period_s / step)
-    return max(dr, 0.1 * fallback)
