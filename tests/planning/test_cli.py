@@ -40,6 +40,25 @@ def test_plan_json_reports_measured_figures_and_cli_overrides(capsys):
     assert data["measured"]["end_error_mm"] < 1e-9
 
 
+def test_lookahead_summary_states_every_guarantee_with_its_figure_and_tolerance(capsys):
+    assert main(["plan", WANG_NC, "--config", WANG_CONFIG, "--algorithm", "lookahead", "--max-jerk-mm-s3", "50000", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["algorithm"] == "lookahead" and data["tolerance"] == 1e-9
+    rows = {r["limit"]: r for r in data["guarantees"]}
+    assert {"chord error", "resultant acceleration", "jerk", "feed fluctuation"} <= set(rows)
+    for r in rows.values():
+        assert 0.0 <= r["verified_max"] <= r["at_most"] * (1 + 1e-9)
+    assert rows["jerk"]["at_most"] == 50000.0
+    assert main(["plan", WANG_NC, "--config", WANG_CONFIG, "--algorithm", "lookahead"]) == 0
+    text = capsys.readouterr().out
+    assert "guaranteed on every cycle" in text and "tolerance 1e-09 relative" in text and "verified max" in text
+
+
+def test_the_papers_methods_claim_no_guarantee(capsys):
+    assert main(["plan", WANG_NC, "--config", WANG_CONFIG, "--algorithm", "zhang", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["guarantees"] == []
+
+
 def test_compare_table_has_a_row_per_algorithm(capsys):
     assert main(["compare", WANG_NC, "--config", WANG_CONFIG, "--algorithms", "taylor2,zhang,lookahead", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)

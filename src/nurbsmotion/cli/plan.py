@@ -29,6 +29,51 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", metavar="OUT.png", help="write a PNG of path, curvature, feed, chord error, acceleration, jerk")
 
 
+def guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[dict[str, object]]:
+    """What a planner that verifies its set-points (lookahead) guarantees on every cycle: each
+    limit with the largest figure its own check measured (Trajectory.notes). Empty for the
+    papers' methods, which check nothing."""
+    notes = trajectory.notes
+    if "guarantees" not in notes:
+        return []
+
+    def row(name: str, limit: object, verified: object, unit: str, how: str) -> dict[str, object]:
+        return {"limit": name, "at_most": limit, "verified_max": verified, "unit": unit, "how": how}
+
+    rows = [row("chord error", limits.chord_error_mm, notes.get("verified_max_chord_error_mm"), "mm",
+                "bound kappa_max L^2/8 per step; sampled across block junctions"),
+            row("resultant acceleration", limits.max_accel_mm_s2, notes.get("verified_max_accel_mm_s2"), "mm/s^2",
+                "second difference / T^2")]
+    if limits.max_jerk_mm_s3 is not None:
+        rows.append(row("jerk", limits.max_jerk_mm_s3, notes.get("verified_max_jerk_mm_s3"), "mm/s^3",
+                        "third difference / T^3"))
+    for i, axis in enumerate("xyz"):
+        if limits.axis_max_velocity_mm_s is not None and i < len(limits.axis_max_velocity_mm_s):
+            rows.append(row(f"{axis.upper()} velocity", limits.axis_max_velocity_mm_s[i],
+                            notes.get(f"verified_max_{axis}_velocity_mm_s"), "mm/s", "step / T"))
+        if limits.axis_max_accel_mm_s2 is not None and i < len(limits.axis_max_accel_mm_s2):
+            rows.append(row(f"{axis.upper()} acceleration", limits.axis_max_accel_mm_s2[i],
+                            notes.get(f"verified_max_{axis}_accel_mm_s2"), "mm/s^2", "second difference / T^2"))
+    rows.append(row("feed fluctuation", notes.get("fluctuation_limit"), notes.get("verified_max_arc_fluctuation"), "",
+                    "|arc length of the step - planned step| / planned step"))
+    return rows
+
+
+def format_guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[str]:
+    rows = guarantees(trajectory, limits)
+    if not rows:
+        return []
+    notes = trajectory.notes
+    lines = [f"guaranteed on every cycle (checked by the planner, tolerance {notes.get('tolerance', 0):g} relative, "
+             f"planned at {notes.get('planning_margin', 1) * 100:g} % of each limit):"]
+    for r in rows:
+        verified = r["verified_max"]
+        shown = f"{verified:.6g}" if isinstance(verified, float) else "-"
+        lines.append(f"  {r['limit']:<24} <= {r['at_most']:<10g} verified max {shown} {r['unit']}".rstrip())
+    lines.append("  end point                exact, at rest on a cycle boundary")
+    return lines
+
+
 def format_summary(program: Program, trajectory: Trajectory, m: Measurements, limits: PlanLimits) -> str:
     rate = m.cycles / trajectory.planning_time_s if trajectory.planning_time_s > 0 else float("inf")
     return "\n".join([
@@ -46,6 +91,7 @@ def format_summary(program: Program, trajectory: Trajectory, m: Measurements, li
         f"  end point error          {m.end_error_mm:.3e} mm",
         "  axis max velocity        " + " ".join(f"{a} {v:.1f}" for a, v in zip("XYZ", m.axis_max_velocity_mm_s)) + " mm/s",
         "  axis max acceleration    " + " ".join(f"{a} {v:.0f}" for a, v in zip("XYZ", m.axis_max_accel_mm_s2)) + " mm/s^2",
+        *format_guarantees(trajectory, limits),
         f"planning     {trajectory.planning_time_s * 1000:.1f} ms ({rate:,.0f} set-points/s)",
     ])
 
@@ -69,6 +115,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"program": program.name, "algorithm": trajectory.algorithm, "limits": limits_summary(limits),
                           "planning_time_s": trajectory.planning_time_s, "measured": m.summary(),
+                          "guarantees": guarantees(trajectory, limits), "tolerance": trajectory.notes.get("tolerance"),
                           "trace": args.trace, "plot": args.plot}, indent=2))
     else:
         print(format_summary(program, trajectory, m, limits))
