@@ -983,8 +983,7 @@ class Master:
             self._set_phase("holding", k)
             self._finish_job(outcome)
             return
-        job.ramp.start(job.index)
-        job.ramp.s, job.ramp.r = job.playback_s, job.playback_r  # from where and how fast it plays now
+        job.ramp.start(job.playback_s, job.playback_r)  # from where and how fast it plays now
         job.ramp.dr = stop_slope(job.max_step, job.planned_accel, self._accel_limits, self._period_s,
                                  job.playback_r, job.ramp.dr)
         self._set_phase("stopping", k)

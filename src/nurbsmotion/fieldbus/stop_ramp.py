@@ -78,10 +78,11 @@ class StopRamp:
         self.s = 0.0
         self.r = 0.0
 
-    def start(self, index: int) -> None:
-        """Begin at row ``index`` (the last set-point sent) moving at the planned rate."""
-        self.s = float(min(index, self.last))
-        self.r = 1.0
+    def start(self, position: float, rate: float = 1.0) -> None:
+        """Begin at (fractional) row ``position``, the last set-point sent, moving at ``rate``
+        rows per cycle."""
+        self.s = float(min(position, self.last))
+        self.r = rate
 
     def step(self, out: list[int]) -> bool:
         """Write the next set-points into ``out``; False once stopped (out holds the final ones)."""
