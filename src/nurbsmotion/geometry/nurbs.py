@@ -244,11 +244,6 @@ class NurbsCurve:
         return np.unique(self.knots)
 
     # ---- vectorised evaluation ------------------------------------------------------------
-    def spans(self, u: NDArray[np.float64]) -> NDArray[np.intp]:
-        """Knot span index k of each u, with knots[k] <= u < knots[k+1]; u_max maps to the last span."""
-        n = len(self.control_points) - 1
-        return np.clip(np.searchsorted(self.knots, u, side="right") - 1, self.degree, n)
-
     @cached_property
     def _taylor_coefficients(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lefts, c): the left knot of every non-empty span and c[k, :, i] = A^(k)(lefts[i]) / k!,
@@ -382,8 +377,7 @@ class NurbsCurve:
         nodes, weights = _GAUSS_16
         half = (ends - starts) / 2.0
         u = (starts + ends)[:, None] / 2.0 + half[:, None] * nodes[None, :]
-        speed = np.linalg.norm(self.derivatives(u.ravel(), 1)[1], axis=1).reshape(u.shape)
-        return (speed * weights[None, :]).sum(axis=1) * half
+        return (self.speeds(u.ravel()).reshape(u.shape) @ weights) * half
 
     @cached_property
     def _quadrature(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -456,7 +450,7 @@ class NurbsCurve:
                 break
             lo = np.where(err < 0, u, lo)
             hi = np.where(err > 0, u, hi)
-            speed = np.linalg.norm(self.derivatives(u, 1)[1], axis=-1)
+            speed = self.speeds(u)
             step = np.divide(err, speed, out=np.full_like(err, np.inf), where=speed > 0)
             newton = u - step
             u = np.where((newton > lo) & (newton < hi), newton, 0.5 * (lo + hi))

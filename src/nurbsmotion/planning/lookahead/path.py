@@ -102,13 +102,18 @@ def row_max(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
+def coarse_u(curve: NurbsCurve, u_start: float, u_end: float, per_span: int = COARSE_PER_SPAN) -> NDArray[np.float64]:
+    """``per_span`` equal steps in u on every knot span between u_start and u_end (knots included)."""
+    knots = curve.breakpoints
+    edges = np.concatenate([[u_start], knots[(knots > u_start) & (knots < u_end)], [u_end]])
+    frac = np.linspace(0.0, 1.0, per_span + 1)[:-1]
+    return np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), u_end)
+
+
 def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(u, approximate arc length from u_start) on a coarse polyline (COARSE_PER_SPAN points per
     knot span): enough to size look-ahead windows, without the curve's exact quadrature."""
-    knots = curve.breakpoints
-    edges = np.concatenate([[u_start], knots[(knots > u_start) & (knots < u_end)], [u_end]])
-    frac = np.linspace(0.0, 1.0, COARSE_PER_SPAN + 1)[:-1]
-    u = np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), u_end)
+    u = coarse_u(curve, u_start, u_end)
     x = curve.points(u)
     return u, np.concatenate([[0.0], np.cumsum(row_norms(np.diff(x, axis=0)))])
 
@@ -153,12 +158,7 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
     """u values of the grid of one piece: each coarse interval split so that it is at most
     ``spacing_mm`` long and turns at most MAX_TURN_RAD."""
     curve = piece.curve
-    knots = curve.breakpoints
-    inner = knots[(knots > piece.u_start) & (knots < piece.u_end)]
-    edges = np.concatenate([[piece.u_start], inner, [piece.u_end]])
-    per_span = 2 if curve.degree == 1 else COARSE_PER_SPAN
-    frac = np.linspace(0.0, 1.0, per_span + 1)[:-1]
-    coarse = np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), edges[-1])
+    coarse = coarse_u(curve, piece.u_start, piece.u_end, 2 if curve.degree == 1 else COARSE_PER_SPAN)
     d = curve.derivatives(coarse, 1)[1]
     speed = row_norms(d)
     t = d / np.maximum(speed, TINY_SPEED)[:, None]
