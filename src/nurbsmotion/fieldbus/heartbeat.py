@@ -61,6 +61,8 @@ class MasterHeartbeat:
             return
         self._stop.clear()
         self._task = self._bus.send_periodic(heartbeat_message(self.node_id), self.period_s, duration=self._lease_s)
+        if isinstance(self._task, can.broadcastmanager.ThreadBasedCyclicSendTask):
+            self._task.on_error = self._send_failed  # keep the thread: a bus error is reported by the cycle loop
         self._thread = threading.Thread(target=self._watch, name="nurbsmotion-heartbeat", daemon=True)
         self._thread.start()
         log.info(kv("master_heartbeat", node=self.node_id, period_ms=round(self.period_s * 1000),
@@ -90,6 +92,10 @@ class MasterHeartbeat:
         else:
             task.start()  # SocketCAN: TX_SETUP again, count = lease / period
         self.renewals += 1
+
+    def _send_failed(self, err: Exception) -> bool:
+        log.warning(kv("master_heartbeat_send_failed", error=str(err)))
+        return True
 
     def _watch(self) -> None:
         while not self._stop.wait(self._renew_s):
