@@ -407,7 +407,8 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
              f"({mon.heartbeat_consumer_ms} <= {mon.heartbeat_producer_ms})")
     consumer_ms = mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple
     if consumer_ms > 0xFFFF:
-        fail("monitoring.master_heartbeat_consumer_multiple", f"the drives' consumer time {consumer_ms} ms "
+        multiple = "monitoring.master_heartbeat_consumer_multiple"
+        fail(multiple if multiple in cfg.lines else "monitoring.master_heartbeat_ms", f"the drives' consumer time {consumer_ms} ms "
              f"(master_heartbeat_ms x multiple) does not fit 0x1016 (at most 65535 ms)")
     for i, axis in enumerate(cfg.axes):
         if axis.node_id == cfg.master.node_id:
