@@ -87,9 +87,12 @@ def test_one_entry_pdos_run_split_controlword_and_set_point(tmp_path, mode):
         counts = np.column_stack([np.round(3000 * np.sin(2 * np.pi * k / 200))] * 2).astype(np.int32)
         result = master.stream(counts).wait(WAIT_S)
         assert result is not None and result.outcome == "done", result
-        applied = [r.setpoint_counts for r in sim[1].recorder.records()]
-        start = applied.index(int(counts[1, 0])) - 1  # every row applied once, in order
-        assert applied[start:start + 200] == counts[:, 0].tolist()
+        def applied() -> list[int]:
+            records = [r.setpoint_counts for r in sim[1].recorder.records()]
+            start = records.index(int(counts[1, 0])) - 1
+            return records[start:start + 200]
+        wait_for(lambda: len(applied()) == 200, 5.0)  # the last row is applied at the next SYNC
+        assert applied() == counts[:, 0].tolist()  # every row applied once, in order
 
 
 def test_sdo_abort_names_the_object_in_hex_and_words():
