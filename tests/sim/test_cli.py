@@ -122,7 +122,7 @@ def test_an_eds_that_does_not_load_names_the_axis_field(tmp_path: Path, capsys: 
     config.write_text("bus: {interface: virtual, channel: x}\naxes:\n  - {name: X, node_id: 1}\n  - {name: Y, node_id: 2, eds: none.eds}\n")
     assert main(["sim", "--config", str(config)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"{config}:4: axes[1].eds: cannot simulate axis Y" in err[0]
+    assert len(err) == 1 and f"{config}:4: axes[1].eds (Y, node 2): cannot read none.eds" in err[0]
 
 
 def test_a_bus_that_does_not_open_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
