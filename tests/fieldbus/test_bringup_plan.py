@@ -7,8 +7,8 @@ import pytest
 from nurbsmotion import cia402 as c
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.fieldbus.bringup_plan import (Field, PdoSetup, ReadBack, Write, describe_value, plan_drive,
-                                               rpdo_packer)
+from nurbsmotion.fieldbus.bringup_plan import (Field, PdoSetup, ReadBack, Write, cyclic_load, describe_value,
+                                               plan_drive, plan_within_load, rpdo_packer)
 from tests.fieldbus.eds_variants import eds_variant, one_entry_pdos
 
 
@@ -158,3 +158,17 @@ def test_abort_descriptions_name_the_object_in_hex_and_words():
     od = config("ip").axes[0].od
     assert describe_value(od, 0x1600, 2, 0x60C10120) == "0x1600:02 = 0x60C10120 (0x60C1:01, 32 bit)"
     assert describe_value(od, 0x6060, 0, 7) == "0x6060:00 = 7 (Modes of operation)"
+
+
+def test_split_pdos_count_in_the_bus_load(tmp_path):
+    eds = eds_variant(tmp_path, "one_entry.eds", **one_entry_pdos())
+    axes = "".join(f"  - {{name: {n}, node_id: {i + 1}, eds: {eds}}}\n" for i, n in enumerate("XYZ"))
+    standard = parse_config(f"cycle_period_ms: 1\naxes:\n" + "".join(
+        f"  - {{name: {n}, node_id: {i + 1}}}\n" for i, n in enumerate("XYZ")), "m.yaml")
+    assert cyclic_load(standard, plan_within_load(standard, [1000] * 3)) < 0.8  # one PDO each way: fits
+    split = parse_config(f"cycle_period_ms: 1\naxes:\n{axes}", "m.yaml")
+    with pytest.raises(InputError, match=r"^m.yaml:1: cycle_period_ms: bus load 1\d\d% of the planned PDOs"):
+        plan_within_load(split, [1000] * 3)
+    relaxed = parse_config(f"cycle_period_ms: 4\naxes:\n{axes}", "m.yaml")
+    plans = plan_within_load(relaxed, [1000] * 3)
+    assert all(p.layout.has_following_error for p in plans) and cyclic_load(relaxed, plans) < 0.8

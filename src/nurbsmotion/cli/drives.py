@@ -13,7 +13,7 @@ from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.bringup_plan import MODE_WORDS, DrivePlan, PdoFrame, PdoSetup, ReadBack, Write, \
-    describe_value, plan_drive
+    cyclic_load, describe_value, plan_drive, plan_within_load
 from nurbsmotion.fieldbus.busload import fits_following_error_tpdo
 
 HELP = "check the drives' descriptions (EDS) against the configuration: what bring-up writes"
@@ -55,13 +55,19 @@ def run(args: argparse.Namespace) -> int:
     windows = AxisMap.from_config(config).following_error_window_counts()
     fe_tpdo = fits_following_error_tpdo(config)
     errors: list[InputError] = []
+    plans = []
     for i, axis in enumerate(config.axes):
         try:
-            plan = plan_drive(config, i, int(windows[i]), fe_tpdo)
+            plans.append(plan_drive(config, i, int(windows[i]), fe_tpdo))
         except InputError as err:
             errors.append(err)
-            continue
-        print("\n".join(format_plan(plan, axis.od)))
     if errors:
+        for plan in plans:
+            print("\n".join(format_plan(plan, config.axes[plan.axis_index].od)))
         raise InputErrors(errors)
+    plans = plan_within_load(config, [int(w) for w in windows])  # as bring-up does; InputError if over the limit
+    for plan in plans:
+        print("\n".join(format_plan(plan, config.axes[plan.axis_index].od)))
+    print(f"cyclic bus load {cyclic_load(config, plans):.0%} at {config.cycle_period_s * 1000:g} ms and "
+          f"{config.bus.bitrate / 1000:g} kbit/s (limit {config.monitoring.max_bus_load:.0%})")
     return 0

@@ -29,6 +29,7 @@ from nurbsmotion import cia402 as c
 from nurbsmotion import drive_od
 from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
 from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.fieldbus.busload import HEARTBEAT_DLC, SYNC_DLC, fits_following_error_tpdo, frame_bits
 from nurbsmotion.fieldbus.pdo import interpolation_period, mapping_entry
 
 SYNC_WINDOW_SHARE = 0.9  # 0x1007 = 90 % of the cycle: every cyclic frame fits in 80 % (max_bus_load)
@@ -473,6 +474,34 @@ def plan_machine(config: MachineConfig, window_counts: list[int], following_erro
     return plans
 
 
+def cyclic_load(config: MachineConfig, plans: list[DrivePlan]) -> float:
+    """Bus load of the planned cyclic frames: (SYNC + every axis' RPDOs and TPDOs + the
+    drives' and the master's heartbeats per cycle) bits / (bitrate · T); see busload."""
+    period_s, mon = config.cycle_period_s, config.monitoring
+    bits = frame_bits(SYNC_DLC) + sum(frame_bits(f.dlc) for p in plans for f in p.layout.rpdos + p.layout.tpdos)
+    bits += len(plans) * frame_bits(HEARTBEAT_DLC) * period_s * 1000.0 / mon.heartbeat_producer_ms
+    if mon.master_heartbeat_ms:
+        bits += frame_bits(HEARTBEAT_DLC) * period_s * 1000.0 / mon.master_heartbeat_ms
+    return bits / (config.bus.bitrate * period_s)
+
+
+def plan_within_load(config: MachineConfig, window_counts: list[int], check_load: bool = True) -> list[DrivePlan]:
+    """Every axis' plan, with the following-error TPDO only where the planned frames (split
+    PDOs included) still fit ``monitoring.max_bus_load``; refused when even without it they
+    do not (InputError at cycle_period_ms)."""
+    limit = config.monitoring.max_bus_load
+    following_error = fits_following_error_tpdo(config)
+    plans = plan_machine(config, window_counts, following_error)
+    if following_error and cyclic_load(config, plans) > limit:
+        plans = plan_machine(config, window_counts, False)
+    load = cyclic_load(config, plans)
+    if check_load and load > limit:
+        raise InputError(config.where("cycle_period_ms"), f"bus load {load:.0%} of the planned PDOs (some drives need "
+                         f"two PDOs per direction) at {config.cycle_period_s * 1000:g} ms exceeds {limit:.0%} "
+                         f"(monitoring.max_bus_load): use a longer cycle, fewer axes on this bus or a higher bitrate")
+    return plans
+
+
 def describe_value(od: ObjectDictionary | None, index: int, subindex: int, value: int) -> str:
     """``0x1600:02 = 0x60C10120 (0x60C1:01, 32 bit)``; ``0x6060:00 = 8 (Modes of operation)``."""
     where = drive_od.name_of(index, subindex)
@@ -489,4 +518,4 @@ def describe_value(od: ObjectDictionary | None, index: int, subindex: int, value
 
 
 __all__ = ["AxisPdoLayout", "DrivePlan", "Field", "PdoFrame", "PdoSetup", "ReadBack", "Skipped", "Write",
-           "describe_value", "mapping_entry", "mode_of", "offered_modes", "plan_drive", "plan_machine", "rpdo_packer"]
+           "describe_value", "mapping_entry", "mode_of", "offered_modes", "plan_drive", "plan_machine", "plan_within_load", "rpdo_packer"]

@@ -37,7 +37,7 @@ from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import bringup
-from nurbsmotion.fieldbus.bringup_plan import DrivePlan, Field, PdoFrame, plan_machine, rpdo_packer
+from nurbsmotion.fieldbus.bringup_plan import DrivePlan, Field, PdoFrame, plan_within_load, rpdo_packer
 from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load, fits_following_error_tpdo
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
 from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, enable_step, is_ready,
@@ -211,7 +211,7 @@ class Master:
         self._sync_time = [0.0] * _HISTORY  # time.time() of the SYNC each cycle's RPDOs follow
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         # each axis' bring-up plan from its EDS: refused here (one line per axis) before the bus is touched
-        self.plans: list[DrivePlan] = plan_machine(config, self._fe_window, self.following_error_tpdo)
+        self.plans: list[DrivePlan] = plan_within_load(config, self._fe_window, check_load)
         self._rpdo_slots = [(can.Message(arbitration_id=frame.cob_id, is_extended_id=False,
                                          data=bytearray(frame.dlc)), i, rpdo_packer(frame))
                             for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos]
