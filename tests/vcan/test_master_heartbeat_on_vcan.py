@@ -4,6 +4,7 @@ reports the loss and goes to FAULT by itself within its consumer time."""
 
 from __future__ import annotations
 
+import datetime
 import time
 
 import pytest
@@ -19,9 +20,16 @@ pytestmark = pytest.mark.vcan
 # consume the master's 100 ms heartbeat with 1500 ms.
 MASTER_HEARTBEAT_MS = 100
 CONSUMER_MULTIPLE = 15
-# Slack for the drives' log lines to cross the pipe to this test; the drives' own detection
-# is bounded by the consumer time.
-LOG_DELIVERY_S = 1.0
+# A drive notices the loss at most the consumer time after the last heartbeat it received
+# (sent before the kill); the drives' process inside UML may start late by its scheduling
+# (hundreds of ms on a busy host, test_daemon_on_vcan): that much is allowed on top.
+SCHEDULING_S = 0.5
+
+
+def logged_at(line: str) -> float:
+    """Wall-clock time of a log line 'YYYY-mm-dd HH:MM:SS,mmm LEVEL ...' (local time)."""
+    stamp = datetime.datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f")
+    return stamp.timestamp()
 
 
 @pytest.fixture
@@ -56,13 +64,15 @@ def test_sigkill_of_the_daemon_faults_every_drive_within_the_consumer_time(daemo
 
     assert daemon.proc is not None
     daemon.proc.kill()  # SIGKILL: no shutdown, no NMT stop; the kernel drops its BCM heartbeat task
-    killed = time.monotonic()
+    killed = time.time()  # the drives' log lines carry wall-clock times
 
-    def lost() -> set[int]:
+    def lost() -> dict[int, float]:
         wanted = {f"sim.heartbeat_lost node={n} producer={master}": n for n in nodes}
-        return {n for text, n in wanted.items() for line in sim.log if text in line}
-    wait_until(lambda: lost() == set(nodes), consumer_s + LOG_DELIVERY_S + 5.0, "every drive to report the loss")
-    assert time.monotonic() - killed <= consumer_s + LOG_DELIVERY_S, diagnosis()
+        return {n: logged_at(line) for text, n in wanted.items() for line in sim.log if text in line}
+    wait_until(lambda: set(lost()) == set(nodes), consumer_s + SCHEDULING_S + 10.0, "every drive to report the loss")
+    delays = {n: round(at - killed, 3) for n, at in lost().items()}
+    print(f"drives noticed the loss after {delays} s (consumer time {consumer_s} s)")
+    assert max(delays.values()) <= consumer_s + SCHEDULING_S, f"{delays}\n{diagnosis()}"
     sim.stop()
     for n in nodes:  # each drive's closing summary: it went to FAULT by itself
         assert any(f"sim.summary node={n} state=FAULT" in line for line in sim.log), sim.summary()
