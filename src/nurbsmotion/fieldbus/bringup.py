@@ -97,8 +97,13 @@ def open_node(network: canopen.Network, node_id: int, od: ObjectDictionary, sdo_
 
 
 def _variable(node: canopen.RemoteNode, index: int, subindex: int) -> Any:
-    obj = node.sdo[index]
-    return obj if isinstance(obj, canopen.sdo.SdoVariable) else obj[subindex]
+    """The typed SDO variable of (index, subindex) from the node's EDS; a step naming an
+    object the EDS lacks is refused before any frame (the plan never does: a safety net)."""
+    try:
+        obj = node.sdo[index]
+        return obj if isinstance(obj, canopen.sdo.SdoVariable) else obj[subindex]
+    except KeyError:
+        raise FieldbusError(f"node {node.id}: the drive's EDS has no 0x{index:04X}:{subindex:02X}") from None
 
 
 def _sdo(trail: SdoTrail, step: str, action: Any) -> Any:

@@ -38,7 +38,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import bringup
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, Field, PdoFrame, plan_within_load, rpdo_packer
-from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load, fits_following_error_tpdo
+from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
 from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, enable_step, is_ready,
                                               running_controlword, state_name)
@@ -136,7 +136,6 @@ class Master:
         self.config = config
         self.axis_map = AxisMap.from_config(config)
         self.bus_load: BusLoad = check_bus_load(config) if check_load else config_bus_load(config)
-        self.following_error_tpdo = fits_following_error_tpdo(config)
         self._bus = bus
         self._own_bus = bus is None
         self._traffic_path = traffic_log
@@ -212,6 +211,8 @@ class Master:
         self._sync_msg = can.Message(arbitration_id=c.COB_SYNC, is_extended_id=False, data=b"")
         # each axis' bring-up plan from its EDS: refused here (one line per axis) before the bus is touched
         self.plans: list[DrivePlan] = plan_within_load(config, self._fe_window, check_load)
+        self.following_error_tpdo = any(p.layout.has_following_error for p in self.plans)
+        self._trails: list[bringup.SdoTrail] = []  # per axis after connect(): its SDO access, named in errors
         self._rpdo_slots = [(can.Message(arbitration_id=frame.cob_id, is_extended_id=False,
                                          data=bytearray(frame.dlc)), i, rpdo_packer(frame))
                             for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos]
