@@ -72,7 +72,12 @@ def test_silent_master_heartbeat_faults_every_drive_within_the_consumer_time():
         assert master._heartbeat is not None
         stopped = time.monotonic()
         master._heartbeat.stop()  # as if the daemon died: nothing else changes
-        wait_for(lambda: all(sim[n].state == c.State.FAULT for n in (1, 2)), 5.0)
+        try:
+            wait_for(lambda: all(sim[n].state == c.State.FAULT for n in (1, 2)), 5.0)
+        except AssertionError:
+            raise AssertionError(f"drive states {[sim[n].state for n in (1, 2)]}, errors "
+                                 f"{[hex(sim[n].axis.error_code) for n in (1, 2)]}, master {master.status().phase}, "
+                                 f"faults {[f.message for f in master.faults()]}") from None
         # consumer time 200 ms; the generous bound only absorbs a loaded machine's thread scheduling
         assert time.monotonic() - stopped < 2.0
         assert all(sim[n].axis.error_code == c.EmcyCode.HEARTBEAT for n in (1, 2))

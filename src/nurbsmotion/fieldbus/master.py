@@ -402,6 +402,8 @@ class Master:
         twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
         if twin is not None:
             raise twin
+        if self._heartbeat is not None:  # CiA 301: a drive monitors from the first heartbeat it receives after
+            time.sleep(1.5 * self._heartbeat.period_s)  # 0x1016 is written: let every drive hear one first
 
     def _twin_error(self) -> FieldbusError | None:
         """Two boot-ups of one node after one NMT reset: two devices with that node id."""
