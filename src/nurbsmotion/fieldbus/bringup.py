@@ -11,6 +11,7 @@ writing 0x1600:02 = 0x60C10120 (0x60C1:01, 32 bit)``.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Any, Iterable
@@ -24,6 +25,9 @@ from nurbsmotion import drive_od
 from nurbsmotion.config import AxisConfig
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, PdoSetup, ReadBack, Write, describe_value
+from nurbsmotion.log import kv
+
+log = logging.getLogger(__name__)
 
 READ_BACK_TIMEOUT_S = 0.2  # a drive may show the new mode in 0x6061 a little later
 
@@ -134,9 +138,15 @@ def check_identity(trail: SdoTrail, axis: AxisConfig) -> None:
 
 
 def check_supported_mode(trail: SdoTrail, plan: DrivePlan) -> None:
+    """0x6502 must have the mode's bit. A drive answering 0 reports no modes at all (EDS
+    entries without a default, e.g. Elmo, EPOS2, Schunk): then the 0x6061 read-back after
+    0x6060 is what proves the mode."""
     if not plan.check_supported_modes:
         return
     modes = read(trail, "check supported modes", c.SUPPORTED_DRIVE_MODES)
+    if modes == 0:
+        log.info(kv("supported_modes_not_reported", node=plan.node_id, axis=plan.axis))
+        return
     if not modes >> c.SUPPORTED_MODE_BIT[plan.mode] & 1:
         raise step_error(plan.node_id, "check supported modes", f"0x6502 = 0x{modes:08X}: the drive does not support "
                          f"mode {plan.mode.name} ({int(plan.mode)}) configured for axis {plan.axis}")
@@ -174,8 +184,25 @@ def _map_pdo(trail: SdoTrail, step: PdoSetup) -> None:
     pdo.enabled = True
     for fld in step.frame.fields:
         pdo.add_variable(fld.index, fld.subindex)
-    _sdo(trail, step.step, pdo.save)
+    if isinstance(pdo.map_array, canopen.sdo.SdoArray):
+        _sdo(trail, step.step, lambda: _save_array_mapped(pdo))
+    else:
+        _sdo(trail, step.step, pdo.save)
     node.network.unsubscribe(step.cob_id, pdo.on_message)
+
+
+def _save_array_mapped(pdo: Any) -> None:
+    """PdoMap.save for a mapping object of type ARRAY (ZeroErr's 0x1600/0x1A00), in the same
+    CiA 301 order. canopen 2.4.1's save() iterates an SdoArray over 1..sub0 read back from the
+    drive right after it wrote sub0 = 0, so it writes no entry, then a count over entries that
+    were never written (a strict drive refuses it, a lax one maps stale entries)."""
+    pdo.com_record[1].raw = pdo.cob_id | c.PDO_COB_ID_INVALID
+    pdo.com_record[2].raw = pdo.trans_type
+    pdo.map_array[0].raw = 0
+    for subindex, var in enumerate(pdo.map, 1):
+        pdo.map_array[subindex].raw = var.index << 16 | var.subindex << 8 | var.length
+    pdo.map_array[0].raw = len(pdo.map)
+    pdo.com_record[1].raw = pdo.cob_id
 
 
 def configure(trail: SdoTrail, plan: DrivePlan) -> None:
