@@ -188,7 +188,7 @@ def _map_pdo(trail: SdoTrail, step: PdoSetup) -> None:
         _sdo(trail, step.step, lambda: _save_array_mapped(pdo))
     else:
         _sdo(trail, step.step, pdo.save)
-    node.network.unsubscribe(step.cob_id, pdo.on_message)
+        node.network.unsubscribe(step.cob_id, pdo.on_message)  # save() subscribed it
 
 
 def _save_array_mapped(pdo: Any) -> None:
