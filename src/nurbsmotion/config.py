@@ -31,12 +31,15 @@ class BusConfig:
     """``sync_source``: 'loop' sends SYNC from the cycle loop right before that cycle's RPDOs
     (a late cycle delays SYNC, it never loses a set-point); 'kernel' lets the SocketCAN
     broadcast manager send SYNC on its own clock (less SYNC jitter, but a cycle later than
-    half a period loses its set-point: measured on vcan0, docs/vcan.md)."""
+    half a period loses its set-point: measured on vcan0, docs/vcan.md). ``sync_window_us``:
+    0x1007 on the drives (RPDOs later than this after SYNC are discarded); 0 = no window, the
+    default, since a cycle thread preempted between its SYNC and its RPDOs would lose them."""
 
     interface: str = "virtual"
     channel: str = "nurbsmotion"
     bitrate: int = 1_000_000
     sync_source: str = "loop"
+    sync_window_us: int = 0  # 0x1007 written on every drive that has it; 0 = no window
 
 
 @dataclass(frozen=True)
@@ -373,6 +376,8 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "cycle_period_ms": (_number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
     "bus": (_section(BusConfig, {"interface": (_string, {}), "channel": (_string, {}),
                                  "sync_source": (_string, {"choices": SYNC_SOURCES}),
+                                 "sync_window_us": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
+                                                              "maximum": 2**32 - 1}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),

@@ -38,13 +38,17 @@ def test_packaged_drive_in_csp_gets_every_standard_object():
     assert ReadBack("read mode back", c.MODES_OF_OPERATION_DISPLAY, 0, 8) in p.steps
     assert (w[(c.IP_TIME_PERIOD, 1)], w[(c.IP_TIME_PERIOD, 2)]) == (4, -3)  # 0x60C2 in CSP too
     assert w[(c.COMM_CYCLE_PERIOD, 0)] == 4000
-    assert w[(0x1007, 0)] == 3600  # SYNC window: 90 % of the cycle
+    assert w[(0x1007, 0)] == 0  # SYNC window set explicitly: none unless bus.sync_window_us
     assert 1 <= w[(c.QUICK_STOP_OPTION, 0)] <= 4
     assert w[(c.CONSUMER_HEARTBEAT_TIME, 1)] == 127 << 16 | 500  # master node 127, 100 ms x 5
     assert (c.QUICK_STOP_DECELERATION, 0) not in w and "0x6085:00" in skipped(p)
     assert (c.IP_SUB_MODE, 0) not in w
     order = [(s.index, s.subindex) for s in p.steps if isinstance(s, Write)]
     assert order.index((c.MODES_OF_OPERATION, 0)) == 0
+
+
+def test_sync_window_as_configured():
+    assert writes(plan(config("csp", top="bus: {sync_window_us: 3000}\n")))[(0x1007, 0)] == 3000
 
 
 def test_ip_writes_linear_sub_mode_and_period():

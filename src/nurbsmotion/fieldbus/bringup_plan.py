@@ -3,7 +3,8 @@ checked against it before the bus is touched. Pure: no bus, no SDO.
 
 Per axis, in PRE-OPERATIONAL (CiA 301 §7.3.2, CiA 402 §8): 0x6060 mode (read back from
 0x6061); IP: 0x60C0 sub-mode 0 (if present), 0x60C2 period; CSP: 0x60C2 where present (the
-drive interpolates over it); 0x1006 cycle period and 0x1007 SYNC window where present;
+drive interpolates over it); 0x1006 cycle period and 0x1007 SYNC window (``bus.sync_window_us``,
+default 0 = none) where present;
 0x605A quick-stop option within 1-4 (QUICK STOP ACTIVE ends in SWITCH ON DISABLED, so a
 queued 'enable operation' cannot re-enable the drive, CiA 402 transition 16); the PDOs; 0x6065
 /0x6066 following error window/time-out where present and in range; 0x1017 heartbeat
@@ -32,7 +33,6 @@ from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.busload import HEARTBEAT_DLC, SYNC_DLC, fits_following_error_tpdo, frame_bits
 from nurbsmotion.fieldbus.pdo import interpolation_period, mapping_entry
 
-SYNC_WINDOW_SHARE = 0.9  # 0x1007 = 90 % of the cycle: every cyclic frame fits in 80 % (max_bus_load)
 QUICK_STOP_OPTIONS = (2, 1, 3, 4)  # preferred first: 2 = quick-stop ramp 0x6085, then SWITCH ON DISABLED
 MAX_PDO_BITS = 64
 MODE_WORDS = {c.Mode.INTERPOLATED_POSITION: "interpolated position (mode 7)",
@@ -321,7 +321,7 @@ class _Builder:
         return True
 
 
-def _period_writes(b: _Builder, mode: c.Mode, period_s: float) -> None:
+def _period_writes(b: _Builder, mode: c.Mode, period_s: float, window_us: int) -> None:
     ip = mode == c.Mode.INTERPOLATED_POSITION
     if ip:
         b.write("set interpolation sub-mode", c.IP_SUB_MODE, 0, 0, "linear interpolation", optional=True)
@@ -342,9 +342,8 @@ def _period_writes(b: _Builder, mode: c.Mode, period_s: float) -> None:
         b.skipped.append(Skipped("0x60C2", f"{b.eds} has no 0x60C2: the drive takes the cycle from SYNC"))
     period_us = round(period_s * 1e6)
     b.write("set cycle period", c.COMM_CYCLE_PERIOD, 0, period_us, f"{period_us} µs", optional=True)
-    window_us = round(period_s * 1e6 * SYNC_WINDOW_SHARE)
-    b.write("set SYNC window", 0x1007, 0, window_us, f"{window_us} µs = {SYNC_WINDOW_SHARE:.0%} of the cycle",
-            optional=True)
+    b.write("set SYNC window", 0x1007, 0, window_us, "0 = no window (bus.sync_window_us)" if window_us == 0
+            else f"{window_us} µs: later RPDOs are discarded", optional=True)
 
 
 def _quick_stop_option(b: _Builder) -> None:
@@ -427,7 +426,7 @@ def _plan(config: MachineConfig, i: int, od: ObjectDictionary, eds: str, window_
         b.steps.append(ReadBack("read mode back", c.MODES_OF_OPERATION_DISPLAY, 0, int(mode)))
     else:
         b.skipped.append(Skipped("0x6061:00", f"{eds} has no 0x6061: the mode is not read back"))
-    _period_writes(b, mode, config.cycle_period_s)
+    _period_writes(b, mode, config.cycle_period_s, config.bus.sync_window_us)
     _quick_stop_option(b)
     layout = _pdo_steps(b, mode, axis.node_id, following_error_tpdo)
     b.write("set following error window", c.FOLLOWING_ERROR_WINDOW, 0, window_counts, "counts", optional=True)
