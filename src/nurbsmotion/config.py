@@ -11,11 +11,15 @@ import reprlib
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import yaml
 
 from nurbsmotion.errors import InputError, InputErrors
+
+if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
+    from nurbsmotion.homing_config import HomingConfig
+    from nurbsmotion.io_config import IoConfig
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
@@ -72,6 +76,7 @@ class AxisConfig:
     following_error_timeout_ms: int = 20
     eds: str | None = None
     identity: IdentityConfig | None = None
+    homing: HomingConfig | None = None
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -105,6 +110,7 @@ class MachineConfig:
     control: ControlConfig
     data_dir: str
     simulate: bool = False
+    io: IoConfig | None = None
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -267,6 +273,7 @@ _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "following_error_timeout_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
     "eds": (_optional(_string), {}),
     "identity": (_optional(_identity), {}),
+    "homing": (_optional(lambda doc: _section_reader("homing")(doc)), {}),
 }
 
 
@@ -337,7 +344,17 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "simulate": (_boolean, {}),
+    "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
 }
+
+
+def _section_reader(name: str) -> Callable[[_Doc], Any]:
+    """The reader of the ``homing`` / ``io`` sections (their modules import this one)."""
+    if name == "homing":
+        from nurbsmotion.homing_config import read_homing
+        return read_homing
+    from nurbsmotion.io_config import read_io
+    return read_io
 
 
 def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
@@ -351,6 +368,9 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
              f"({mon.heartbeat_consumer_ms} <= {mon.heartbeat_producer_ms})")
+    if cfg.io is not None:
+        from nurbsmotion.io_config import check_io_node
+        check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
 
 
 def parse_config(text: str, source: str = "<config>", base_dir: Path | None = None) -> MachineConfig:
@@ -383,6 +403,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         control=values.get("control", ControlConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
+        io=values.get("io"),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)
