@@ -64,3 +64,8 @@ def test_bad_values_and_unknown_keys_are_located():
 def test_manufacturer_specific_method_is_accepted():
     cfg = parse_config(_axis("{method: -3, speed_search_mm_s: 1, speed_zero_mm_s: 1, accel_mm_s2: 1}"))
     assert cfg.axes[0].homing.method == -3
+
+
+def test_drive_methods_35_and_37_need_no_speeds():
+    homing = parse_config(_axis("{method: 37, offset_mm: 1}")).axes[0].homing
+    assert homing.on_drive and not homing.moves

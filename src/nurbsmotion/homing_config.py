@@ -7,7 +7,7 @@ homing: {method: here, offset_mm: 0}
 
 ``method`` is the drive's CiA-402 homing method (0x6098: 1..35 and 37 standard, -128..-1
 manufacturer specific) or ``here`` (no drive homing: the current position becomes
-``offset_mm``). Drive methods need the two speeds and the acceleration. The optional
+``offset_mm``). Drive methods other than 35/37 need the two speeds and the acceleration. The optional
 ``speed_unit_counts_s``, ``accel_unit_counts_s2`` and ``home_offset_sign`` say what the
 drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
 ``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
@@ -26,6 +26,7 @@ from nurbsmotion.config import _MISSING, _SHOWN, _Doc, _fields, _number
 HERE = "here"
 STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)
 DRIVE_KEYS = ("speed_search_mm_s", "speed_zero_mm_s", "accel_mm_s2")
+NO_MOTION_METHODS = (35, 37)  # the drive takes its current position as home: no speeds needed
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,11 @@ class HomingConfig:
     def on_drive(self) -> bool:
         """True when the drive homes (mode 6); False for ``method: here``."""
         return self.method != HERE
+
+    @property
+    def moves(self) -> bool:
+        """True when the drive's method searches (needs 0x6099 speeds and 0x609A)."""
+        return self.on_drive and self.method not in NO_MOTION_METHODS
 
 
 def _method(doc: _Doc) -> Any:
@@ -89,7 +95,7 @@ def read_homing(doc: _Doc) -> Any:
     values = _fields(doc, _READERS, required=("method",))
     method = values.get("method")
     missing = [key for key in DRIVE_KEYS if key not in values]
-    if method is not None and method != HERE and missing and len(doc.errors) == before:
+    if method not in (None, HERE, *NO_MOTION_METHODS) and missing and len(doc.errors) == before:
         doc.fail(f"homing method {method} runs on the drive and needs {', '.join(missing)}")
     if len(doc.errors) > before or method is None:
         return _MISSING
