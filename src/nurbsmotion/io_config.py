@@ -19,8 +19,9 @@ config.py calls :func:`read_io` for ``io`` and :func:`check_io_node` across sect
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import yaml
 

@@ -4,8 +4,17 @@ import pytest
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import InputError
-from nurbsmotion.fieldbus.homing import (ACK_CYCLES, HomingDriveValues, HomingProcedure, Phase, classify, Event,
-                                         here_offset_counts, homing_drive_values, homing_plan)
+from nurbsmotion.fieldbus.homing import (
+    ACK_CYCLES,
+    Event,
+    HomingDriveValues,
+    HomingProcedure,
+    Phase,
+    classify,
+    here_offset_counts,
+    homing_drive_values,
+    homing_plan,
+)
 from nurbsmotion.homing_config import HERE, HomingConfig
 
 OE = 0x0237  # OPERATION ENABLED + voltage + remote
@@ -18,7 +27,7 @@ FAULT = 0x0208
 
 
 def _homing(**kw):
-    base = dict(method=17, speed_search_mm_s=20.0, speed_zero_mm_s=2.0, accel_mm_s2=200.0, offset_mm=-5.0)
+    base = {"method": 17, "speed_search_mm_s": 20.0, "speed_zero_mm_s": 2.0, "accel_mm_s2": 200.0, "offset_mm": -5.0}
     return HomingConfig(**{**base, **kw})
 
 
@@ -93,8 +102,8 @@ def test_successful_homing_from_switched_on():
 
 @pytest.mark.parametrize("last, text", [
     (ERROR, "node 3: homing method 1: the drive reports a homing error (statusword 0x2237, bit 13)"),
-    (INTERRUPTED, "node 3: homing method 1: the drive interrupted or did not start homing "
-                  "(statusword 0x0637, bit 10 without bit 12)"),
+    (INTERRUPTED, ("node 3: homing method 1: the drive interrupted or did not start homing "
+                  "(statusword 0x0637, bit 10 without bit 12)")),
     (FAULT, "node 3: homing method 1: the drive went to FAULT (statusword 0x0208)"),
     (0x0233, "node 3: homing method 1: the drive left OPERATION ENABLED (now SWITCHED ON)"),
 ])

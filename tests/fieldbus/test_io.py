@@ -6,13 +6,18 @@ from __future__ import annotations
 import contextlib
 import time
 import uuid
-from typing import Iterator
+from collections.abc import Iterator
 
 import canopen
 import pytest
 
 from nurbsmotion.errors import FieldbusError
-from nurbsmotion.fieldbus.io import IoNode, input_states, io_configuration, output_groups
+from nurbsmotion.fieldbus.io import (
+    IoNode,
+    input_states,
+    io_configuration,
+    output_groups,
+)
 from nurbsmotion.io_config import IoConfig, IoSignal
 from nurbsmotion.sim.io_node import SimIoNode
 

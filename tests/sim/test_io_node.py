@@ -5,13 +5,13 @@ from __future__ import annotations
 import contextlib
 import time
 import uuid
-from typing import Iterator
+from collections.abc import Iterator
 
 import canopen
 import pytest
 from canopen.sdo import SdoAbortedError
-
 from conftest import FrameLog, wait_until
+
 from nurbsmotion.sim.io_node import SimIoNode
 
 NODE = 10

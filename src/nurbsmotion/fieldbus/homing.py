@@ -72,7 +72,7 @@ class HomingDriveValues:
 def home_counts(offset_mm: float, counts_per_mm: float, invert: bool, offset_counts: int) -> int:
     """Counts at which the axis map reads ``offset_mm``: round(±offset_mm·counts_per_mm) + offset_counts."""
     sign = -1.0 if invert else 1.0
-    return int(round(sign * offset_mm * counts_per_mm)) + offset_counts
+    return round(sign * offset_mm * counts_per_mm) + offset_counts
 
 
 def _drive_unit(where: str, value_mm: float, counts_per_mm: float, counts_per_unit: float, low: int = 1) -> int:

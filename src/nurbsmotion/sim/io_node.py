@@ -21,7 +21,6 @@ Test API: :meth:`set_input`, :meth:`set_inputs`, :meth:`input`, :attr:`outputs`,
 from __future__ import annotations
 
 import logging
-import struct
 import threading
 import time
 from collections.abc import Callable
@@ -37,6 +36,13 @@ from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState
 from nurbsmotion.log import kv
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
+from nurbsmotion.sim.slave import (
+    EMCY_STRUCT,
+    GatedLocalNode,
+    Subscriptions,
+    addressed_command,
+    od_value,
+)
 
 log = logging.getLogger(__name__)
 
@@ -46,7 +52,6 @@ DEVICE_TYPE_DIGITAL_IO = 0x0003_0191  # CiA 401 (0x191), bit 16 digital inputs, 
 MAX_GROUPS = 8  # one 8-byte PDO
 EVENT_DRIVEN = (254, 255)
 CONSUMER_ENTRIES = 4
-EMCY_STRUCT = struct.Struct("<HB5x")
 
 
 def _var(name: str, index: int, subindex: int, data_type: int, access: str, default: int,
@@ -98,33 +103,6 @@ def io_object_dictionary(node_id: int, input_groups: int, output_groups: int) ->
     return od
 
 
-class _IoLocalNode(canopen.LocalNode):
-    """LocalNode whose SDO writes are checked by the node and whose NMT/SDO it gates."""
-
-    def __init__(self, node_id: int, od: ObjectDictionary, io: "SimIoNode") -> None:
-        super().__init__(node_id, od)
-        self._io = io
-        self._write_callbacks.clear()  # canopen's NmtSlave heartbeat is replaced by the node's
-        self.add_write_callback(io._before_sdo_write)
-        self.add_read_callback(io._on_sdo_read)
-
-    def set_data(self, index: int, subindex: int, data: bytes, check_writable: bool = False) -> None:
-        super().set_data(index, subindex, data, check_writable)
-        if check_writable:
-            self._io._after_sdo_write(index)
-
-    def associate_network(self, network: canopen.Network) -> None:
-        super().associate_network(network)
-        network.unsubscribe(self.sdo.rx_cobid, self.sdo.on_request)
-        network.unsubscribe(0, self.nmt.on_command)
-
-    def remove_network(self) -> None:
-        if self.has_network():
-            self.network.subscribe(self.sdo.rx_cobid, self.sdo.on_request)
-            self.network.subscribe(0, self.nmt.on_command)
-        super().remove_network()
-
-
 class SimIoNode:
     """A CiA-401 node with ``input_groups`` x 8 digital inputs and ``output_groups`` x 8
     outputs (each 0..8). :meth:`attach` it to a connected ``canopen.Network``."""
@@ -139,14 +117,14 @@ class SimIoNode:
         self.name = name or f"io{node_id}"
         self.input_groups, self.output_groups = input_groups, output_groups
         self.od = io_object_dictionary(node_id, input_groups, output_groups)
-        self.node = _IoLocalNode(node_id, self.od, self)
+        self.node = GatedLocalNode(node_id, self.od, self)
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
         self._inputs = bytearray(input_groups)
         self._outputs = bytearray(output_groups)
         self._clock = clock
         self._lock = threading.RLock()
-        self._subscriptions: list[tuple[int, Callable[..., None]]] = []
+        self._subscriptions = Subscriptions()
         self._heartbeat_task: Any = None
         self._heartbeat_consumer = HeartbeatConsumer()
         self._consumed: list[int] = []
@@ -195,11 +173,11 @@ class SimIoNode:
         with self._lock:
             if self.network is not None:
                 raise RuntimeError(f"{self.name} is already attached")
-            self.network = network
+            self.network = self._subscriptions.network = network
             self.node.associate_network(network)
-            self._subscribe(c.COB_NMT, self._on_nmt)
-            self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
-            self._subscribe(c.COB_SYNC, self._on_sync)
+            self._subscriptions.add(c.COB_NMT, self._on_nmt)
+            self._subscriptions.add(self.node.sdo.rx_cobid, self._on_sdo_request)
+            self._subscriptions.add(c.COB_SYNC, self._on_sync)
             self._boot(reset_application=True)
 
     def detach(self) -> None:
@@ -207,10 +185,9 @@ class SimIoNode:
             if self.network is None:
                 return
             self._stop_heartbeat()
-            for can_id, callback in list(self._subscriptions):
-                self._unsubscribe(can_id, callback)
+            self._subscriptions.clear()
             self.node.remove_network()
-            self.network = None
+            self.network = self._subscriptions.network = None
 
     def tick(self, now: float) -> float:
         """Watch consumed heartbeats; returns when to be called again."""
@@ -237,10 +214,10 @@ class SimIoNode:
         self._start_heartbeat()
 
     def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if len(data) < 2 or data[1] not in (0, self.node_id):
+        command = addressed_command(data, self.node_id)
+        if command is None:
             return
         with self._lock:
-            command = data[0]
             if command == NmtCommand.START:
                 self._enter(NmtState.OPERATIONAL)
             elif command == NmtCommand.STOP:
@@ -280,11 +257,11 @@ class SimIoNode:
         entries = [self._value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, CONSUMER_ENTRIES + 1)]
         self._heartbeat_consumer.configure(entries)
         for cob in self._consumed:
-            self._unsubscribe(cob, self._on_peer_heartbeat)
+            self._subscriptions.remove(cob, self._on_peer_heartbeat)
         self._consumed = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
         if self.network is not None:
             for cob in self._consumed:
-                self._subscribe(cob, self._on_peer_heartbeat)
+                self._subscriptions.add(cob, self._on_peer_heartbeat)
 
     def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:
@@ -312,7 +289,7 @@ class SimIoNode:
         if index == WRITE_OUTPUT_8:
             self._outputs[subindex - 1] = value
 
-    def _after_sdo_write(self, index: int) -> None:
+    def _after_sdo_write(self, index: int, subindex: int) -> None:
         if pdo_layout.is_pdo_parameter(index):
             self._rebuild_pdos()
         elif index == c.PRODUCER_HEARTBEAT_TIME:
@@ -321,9 +298,7 @@ class SimIoNode:
             self._configure_consumer()
 
     def _value(self, index: int, subindex: int = 0) -> Any:
-        var = pdo_layout.find_variable(self.od, index, subindex)
-        assert var is not None, (hex(index), subindex)
-        return var.decode_raw(self.node.get_data(index, subindex))
+        return od_value(self.node, self.od, index, subindex)
 
     # ------------------------------------------------------------------ PDOs
     def _layout(self, comm: int, mapping: int) -> pdo_layout.PdoLayout | None:
@@ -333,11 +308,11 @@ class SimIoNode:
 
     def _rebuild_pdos(self) -> None:
         if self._rpdo is not None:
-            self._unsubscribe(self._rpdo.cob_id, self._on_rpdo)
+            self._subscriptions.remove(self._rpdo.cob_id, self._on_rpdo)
         self._rpdo = self._layout(c.RPDO_COMM, c.RPDO_MAPPING)
         self._tpdo = self._layout(c.TPDO_COMM, c.TPDO_MAPPING)
         if self._rpdo is not None and self.network is not None:
-            self._subscribe(self._rpdo.cob_id, self._on_rpdo)
+            self._subscriptions.add(self._rpdo.cob_id, self._on_rpdo)
 
     def _set_group(self, group: int, value: int) -> None:
         if self._inputs[group] != value:
@@ -412,15 +387,3 @@ class SimIoNode:
         cob = self._value(c.EMCY_COB_ID)
         if not cob & pdo_layout.COB_ID_INVALID_BIT and self.nmt_state != NmtState.STOPPED:
             self._send(cob & 0x7FF, EMCY_STRUCT.pack(code, register))
-
-    def _subscribe(self, can_id: int, callback: Callable[..., None]) -> None:
-        assert self.network is not None
-        self.network.subscribe(can_id, callback)
-        self._subscriptions.append((can_id, callback))
-
-    def _unsubscribe(self, can_id: int, callback: Callable[..., None]) -> None:
-        if (can_id, callback) in self._subscriptions:
-            self._subscriptions.remove((can_id, callback))
-            assert self.network is not None
-            self.network.unsubscribe(can_id, callback)
-

@@ -1,9 +1,20 @@
 """Simulated drive homing (CiA 402-2 homing mode): each method's motion, home and status bits."""
 
+import itertools
+
 import pytest
 
-from nurbsmotion.sim.homing import (SW_HOMING_ATTAINED, SW_HOMING_ERROR, SW_TARGET_REACHED, HomeSensors, HomingSetup,
-                                    Phase, homing_tick, idle, supported)
+from nurbsmotion.sim.homing import (
+    SW_HOMING_ATTAINED,
+    SW_HOMING_ERROR,
+    SW_TARGET_REACHED,
+    HomeSensors,
+    HomingSetup,
+    Phase,
+    homing_tick,
+    idle,
+    supported,
+)
 
 T = 0.001
 SENSORS = HomeSensors(negative_limit_counts=-10_000, positive_limit_counts=50_000, index_pitch_counts=4000,
@@ -12,8 +23,8 @@ OFFSET = 250  # 0x607C: the home reads -250
 
 
 def _setup(method, **kw):
-    values = dict(method=method, speed_search_counts_s=20_000, speed_zero_counts_s=2000, accel_counts_s2=200_000,
-                  home_offset_counts=OFFSET)
+    values = {"method": method, "speed_search_counts_s": 20_000, "speed_zero_counts_s": 2000, "accel_counts_s2": 200_000,
+                  "home_offset_counts": OFFSET}
     return HomingSetup(**{**values, **kw})
 
 
@@ -65,7 +76,7 @@ def test_limit_switch_methods(method, home_raw, tolerance, switch_side):
     # never faster than the search speed, speed changes within 0x609A
     speeds = [s.speed_counts_s for s in states]
     assert max(abs(v) for v in speeds) <= 20_000
-    assert max(abs(b - a) for a, b in zip(speeds, speeds[1:])) <= 200_000 * T + 1e-9
+    assert max(abs(b - a) for a, b in itertools.pairwise(speeds)) <= 200_000 * T + 1e-9
     # it stops after the home with 0x609A: overshoot speed_zero²/(2a) = 10 counts
     assert abs(last.raw - _home_raw(last)) == pytest.approx(10, abs=2 + tolerance)
 
