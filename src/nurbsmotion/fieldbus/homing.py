@@ -34,6 +34,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from canopen.objectdictionary import ObjectDictionary, ODVariable
+
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import State
 from nurbsmotion.errors import InputError
@@ -138,6 +140,34 @@ def homing_plan(values: HomingDriveValues, streaming_mode: c.Mode) -> HomingPlan
                SdoWrite("set homing mode", c.MODES_OF_OPERATION, 0, "<b", MODE_HOMING)]
     restore = (SdoWrite("restore streaming mode", c.MODES_OF_OPERATION, 0, "<b", int(streaming_mode)),)
     return HomingPlan(tuple(writes), MODE_HOMING, restore)
+
+
+def homing_plan_problems(plan: HomingPlan, od: ObjectDictionary, node_id: int) -> list[str]:
+    """Why a drive described by ``od`` (its EDS/DCF) would refuse the plan's writes, one line
+    each: object missing, not writable, or the value outside LowLimit..HighLimit. Real files
+    differ: Maxon's EPOS4 DCF has no 0x607C, Pilz's PRBT declares 0x6098 const, Elmo and
+    ZeroErr allow methods up to 35 only, ZeroErr limits 0x6099:01 to 20000."""
+    problems = []
+    for write in plan.writes + plan.restore:
+        var = _listed_variable(od, write.index, write.subindex)
+        where = f"node {node_id}: {write.step}: 0x{write.index:04X}:{write.subindex:02X}"
+        if var is None:
+            problems.append(f"{where}: the drive's EDS has no such object")
+        elif not var.writable:
+            problems.append(f"{where}: read-only in the drive's EDS (AccessType={var.access_type})")
+        elif (var.min is not None and write.value < var.min) or (var.max is not None and write.value > var.max):
+            problems.append(f"{where}: the drive's EDS allows {var.min}..{var.max}, not {write.value}")
+    return problems
+
+
+def _listed_variable(od: ObjectDictionary, index: int, subindex: int) -> ODVariable | None:
+    """The variable the file lists (canopen invents ARRAY sub-entries on access: not those)."""
+    if index not in od.indices:
+        return None
+    obj = od[index]
+    if isinstance(obj, ODVariable):
+        return obj if subindex == 0 else None
+    return obj.subindices.get(subindex)
 
 
 def here_offset_counts(position_counts: int, offset_mm: float, counts_per_mm: float, invert: bool) -> int:
