@@ -14,8 +14,8 @@ import pytest
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import (
     IoNode,
+    cia401_dictionary,
     input_states,
-    io_configuration,
     output_groups,
 )
 from nurbsmotion.io_config import IoConfig, IoSignal
@@ -44,13 +44,10 @@ def test_output_groups_by_name_and_polarity():
     assert output_groups({"coolant_mist": True, "lamp_ok": True}, IO.outputs, 2) == b"\x02\x00"
 
 
-def test_configuration_maps_the_used_groups_event_driven():
-    writes = io_configuration(IO, heartbeat_producer_ms=100)
-    table = [(w.index, w.subindex, w.value) for w in writes if not w.optional]
-    assert (0x1800, 2, 255) in table and (0x1400, 2, 255) in table
-    assert [v for i, s, v in table if i == 0x1A00] == [0, 0x6000_0108, 0x6000_0208, 2]
-    assert [v for i, s, v in table if i == 0x1600] == [0, 0x6200_0108, 0x6200_0208, 2]
-    assert table[-1] == (0x1017, 0, 100)
+def test_dictionary_holds_the_used_groups_only():
+    od = cia401_dictionary(IO)
+    assert sorted(od[0x6000].subindices) == [0, 1, 2] and sorted(od[0x6200].subindices) == [0, 1, 2]
+    assert od[0x6000][1].pdo_mappable and not od[0x6000][1].writable and od[0x6200][2].writable
 
 
 @contextlib.contextmanager
@@ -86,6 +83,8 @@ def test_bring_up_inputs_and_outputs_with_the_simulated_node():
         io.set_outputs({"coolant_flood": True, "lamp_ok": True})
         wait_until(lambda: sim.outputs == b"\x01\x00", what="outputs via RPDO1")
         assert sim.output(0) and not sim.output(9)
+        # what bring-up configured in the node: event-driven PDO 1 mapping the two groups
+        assert sim.node.sdo[0x1800][2].raw == 255 and sim.node.sdo[0x1A00][0].raw == 2
         with pytest.raises(KeyError, match="node 12: no output named spindle"):
             io.set_outputs({"spindle": True})
         io.close()

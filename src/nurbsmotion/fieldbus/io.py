@@ -18,11 +18,12 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import canopen
-from canopen.objectdictionary import ObjectDictionary
+from canopen import objectdictionary as odt
+from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable
+from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from nurbsmotion import cia402 as c
-from nurbsmotion.fieldbus import bringup
-from nurbsmotion.fieldbus.pdo import SdoWrite, mapping_entry, pdo_writes
+from nurbsmotion.errors import FieldbusError
 from nurbsmotion.io_config import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
@@ -32,6 +33,7 @@ READ_INPUT_8 = 0x6000
 WRITE_OUTPUT_8 = 0x6200
 CIA_401 = 0x0191  # device type 0x1000, low 16 bits: the device profile number
 EVENT_DRIVEN = 255  # transmission type: on change (CiA 301 'event-driven, device profile specific')
+SDO_TIMEOUT_S = 0.5
 
 
 def signal_state(groups: bytes, signal: IoSignal) -> bool:
@@ -54,17 +56,33 @@ def output_groups(states: Mapping[str, bool], signals: tuple[IoSignal, ...], n_g
     return bytes(data)
 
 
-def io_configuration(io: IoConfig, heartbeat_producer_ms: int) -> list[SdoWrite]:
-    """SDO writes of the I/O node's bring-up (PRE-OPERATIONAL): TPDO1 = the used input
-    groups, RPDO1 = the used output groups, both event driven; the rest disabled."""
-    node = io.node_id
-    inputs = [mapping_entry(READ_INPUT_8, n, 8) for n in range(1, io.input_groups + 1)] or None
-    outputs = [mapping_entry(WRITE_OUTPUT_8, n, 8) for n in range(1, io.output_groups + 1)] or None
-    writes = pdo_writes("TPDO", 1, node, inputs, EVENT_DRIVEN) + pdo_writes("RPDO", 1, node, outputs, EVENT_DRIVEN)
-    for n in (2, 3, 4):
-        writes += pdo_writes("TPDO", n, node, None, EVENT_DRIVEN) + pdo_writes("RPDO", n, node, None, EVENT_DRIVEN)
-    writes.append(SdoWrite("set heartbeat producer", c.PRODUCER_HEARTBEAT_TIME, 0, "<H", heartbeat_producer_ms))
-    return writes
+def cia401_dictionary(io: IoConfig) -> ObjectDictionary:
+    """The objects the master uses on a CiA-401 device (CiA 301 PDO 1 parameters, 0x6000 and
+    0x6200 sub-indices for the used groups), so canopen's RemoteNode can type SDO values and
+    remap PDO 1 with its PdoMap. The device itself is asked for its sizes at bring-up."""
+    od = ObjectDictionary()
+    u8, u16, u32 = odt.UNSIGNED8, odt.UNSIGNED16, odt.UNSIGNED32
+    od.add_object(_variable(c.DEVICE_TYPE, 0, u32, "ro"))
+    od.add_object(_variable(c.PRODUCER_HEARTBEAT_TIME, 0, u16, "rw"))
+    for comm, mapping in ((c.RPDO_COMM, c.RPDO_MAPPING), (c.TPDO_COMM, c.TPDO_MAPPING)):
+        od.add_object(_record(comm, [(0, u8, "ro"), (1, u32, "rw"), (2, u8, "rw")]))
+        od.add_object(_record(mapping, [(n, u8 if n == 0 else u32, "rw") for n in range(9)]))
+    for index, groups, access in ((READ_INPUT_8, io.input_groups, "ro"), (WRITE_OUTPUT_8, io.output_groups, "rw")):
+        od.add_object(_record(index, [(0, u8, "ro")] + [(n, u8, access) for n in range(1, groups + 1)]))
+    return od
+
+
+def _variable(index: int, subindex: int, data_type: int, access: str) -> ODVariable:
+    var = ODVariable(f"0x{index:04X}:{subindex:02X}", index, subindex)
+    var.data_type, var.access_type, var.pdo_mappable = data_type, access, index in (READ_INPUT_8, WRITE_OUTPUT_8)
+    return var
+
+
+def _record(index: int, subs: list[tuple[int, int, str]]) -> ODRecord:
+    record = ODRecord(f"0x{index:04X}", index)
+    for subindex, data_type, access in subs:
+        record.add_member(_variable(index, subindex, data_type, access))
+    return record
 
 
 class IoNode:
@@ -79,47 +97,70 @@ class IoNode:
         self.network = network
         self.io = io
         self.on_change = on_change
-        self.node = canopen.RemoteNode(io.node_id, ObjectDictionary())
+        self.node = canopen.RemoteNode(io.node_id, cia401_dictionary(io))
+        self.node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
         network.add_node(self.node)
         self._lock = threading.Lock()
         self._inputs: dict[str, bool] | None = None
         self._outputs: dict[str, bool] = {s.name: False for s in io.outputs}
         self._output_names = {s.name for s in io.outputs}
-        self._subscribed = False
 
     # ------------------------------------------------------------------ bring-up
     def bring_up(self, heartbeat_producer_ms: int) -> None:
-        """Check, configure, read the inputs, start (NMT); FieldbusError names node and step."""
-        sdo, node_id = self.node.sdo, self.io.node_id
-        device = bringup.sdo_upload(sdo, node_id, "I/O device type", c.DEVICE_TYPE, 0, "<I")
+        """Check, configure, read the inputs, start (NMT); FieldbusError names node and step.
+
+        In NMT PRE-OPERATIONAL: 0x1000 is a CiA-401 device; 0x6000:00 / 0x6200:00 hold the
+        configured groups; TPDO1 = 0x6000:01..n and RPDO1 = 0x6200:01..m, transmission type
+        255 (canopen's PdoMap: disable, count 0, entries, count, enable); 0x1017 heartbeat.
+        """
+        device = self._sdo("I/O device type", lambda: self.node.sdo[c.DEVICE_TYPE].raw)
         if device & 0xFFFF != CIA_401:
-            raise bringup.step_error(node_id, "I/O device type", f"0x1000 = 0x{device:08X}: not a CiA-401 I/O device")
+            raise self._error("I/O device type", f"0x1000 = 0x{device:08X}: not a CiA-401 I/O device")
         self._check_size(READ_INPUT_8, self.io.input_groups, "inputs")
         self._check_size(WRITE_OUTPUT_8, self.io.output_groups, "outputs")
-        bringup.configure_drive(sdo, node_id, io_configuration(self.io, heartbeat_producer_ms))
-        self.network.subscribe(c.COB_TPDO[0] + node_id, self._on_tpdo)
-        self._subscribed = True
-        groups = bytes(bringup.sdo_upload(sdo, node_id, "read inputs", READ_INPUT_8, n, "<B")
+        self._map(self.node.tpdo[1], c.COB_TPDO[0], READ_INPUT_8, self.io.input_groups, "configure TPDO1")
+        self._map(self.node.rpdo[1], c.COB_RPDO[0], WRITE_OUTPUT_8, self.io.output_groups, "configure RPDO1")
+        self._sdo("set heartbeat producer", lambda: setattr(self.node.sdo[c.PRODUCER_HEARTBEAT_TIME], "raw",
+                                                             heartbeat_producer_ms))
+        self.node.tpdo[1].add_callback(self._on_tpdo)
+        groups = bytes(self._sdo("read inputs", lambda n=n: self.node.sdo[READ_INPUT_8][n].raw)
                        for n in range(1, self.io.input_groups + 1))
         with self._lock:
             self._inputs = input_states(groups, self.io.inputs)
         self.node.nmt.send_command(c.NmtCommand.START)
         self._send_outputs()
-        log.info(kv("io.ready", node=node_id, inputs=self.inputs))
+        log.info(kv("io.ready", node=self.io.node_id, inputs=self.inputs))
+
+    def _error(self, step: str, message: str) -> FieldbusError:
+        return FieldbusError(f"node {self.io.node_id}: bring-up step '{step}': {message}")
+
+    def _sdo(self, step: str, action: Callable[[], Any]) -> Any:
+        try:
+            return action()
+        except SdoAbortedError as err:
+            raise self._error(step, f"SDO abort 0x{err.code:08X} ({SdoAbortedError.CODES.get(err.code, 'unknown')})"
+                              ) from None
+        except SdoCommunicationError as err:
+            raise self._error(step, f"no SDO answer ({err})") from None
 
     def _check_size(self, index: int, needed: int, what: str) -> None:
-        if needed == 0:
-            return
         step = f"I/O {what}"
-        have = bringup.sdo_upload(self.node.sdo, self.io.node_id, step, index, 0, "<B")
+        have = self._sdo(step, lambda: self.node.sdo[index][0].raw) if needed else 0
         if have < needed:
-            raise bringup.step_error(self.io.node_id, step, f"0x{index:04X} has {have} groups of 8 {what}, "
-                                     f"the io section needs {needed}")
+            raise self._error(step, f"0x{index:04X} has {have} groups of 8 {what}, the io section needs {needed}")
+
+    def _map(self, pdo: Any, cob_base: int, index: int, groups: int, step: str) -> None:
+        pdo.clear()
+        pdo.cob_id = cob_base + self.io.node_id
+        pdo.trans_type = EVENT_DRIVEN
+        pdo.enabled = groups > 0
+        for n in range(1, groups + 1):
+            pdo.add_variable(index, n)
+        self._sdo(step, pdo.save)
 
     def close(self) -> None:
-        if self._subscribed:
-            self.network.unsubscribe(c.COB_TPDO[0] + self.io.node_id, self._on_tpdo)
-            self._subscribed = False
+        self.node.tpdo[1].callbacks.clear()
+        self.network.unsubscribe(self.node.tpdo[1].cob_id, self.node.tpdo[1].on_message)
 
     # ------------------------------------------------------------------ inputs
     @property
@@ -132,11 +173,12 @@ class IoNode:
         with self._lock:
             return None if self._inputs is None else self._inputs[name]
 
-    def _on_tpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
+    def _on_tpdo(self, pdo: Any) -> None:
+        data = bytes(pdo.data)
         if len(data) < self.io.input_groups:
             log.warning(kv("io.tpdo_length", node=self.io.node_id, length=len(data), expected=self.io.input_groups))
             return
-        states = input_states(bytes(data), self.io.inputs)
+        states = input_states(data, self.io.inputs)
         with self._lock:
             previous, self._inputs = self._inputs, states
         changed = [(name, active) for name, active in states.items() if previous is None or previous[name] != active]
@@ -160,8 +202,13 @@ class IoNode:
             self._outputs.update(states)
         self._send_outputs()
 
-    def _send_outputs(self) -> Any:
-        if self.io.output_groups:
-            with self._lock:
-                data = output_groups(self._outputs, self.io.outputs, self.io.output_groups)
-            self.network.send_message(c.COB_RPDO[0] + self.io.node_id, data)
+    def _send_outputs(self) -> None:
+        """RPDO1 through canopen's PdoMap (event driven: sent on every change)."""
+        if not self.io.output_groups:
+            return
+        with self._lock:
+            data = output_groups(self._outputs, self.io.outputs, self.io.output_groups)
+        rpdo = self.node.rpdo[1]
+        for variable, value in zip(rpdo.map, data):
+            variable.raw = value
+        rpdo.transmit()

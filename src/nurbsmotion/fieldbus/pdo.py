@@ -51,8 +51,7 @@ def interpolation_period(period_s: float) -> tuple[int, int]:
     raise ValueError(f"cycle period {period_s} s has no 0x60C2 representation")
 
 
-def _pdo_writes(kind: str, number: int, node_id: int, entries: list[int] | None,
-                transmission_type: int = c.TRANSMISSION_SYNC_EVERY) -> list[SdoWrite]:
+def _pdo_writes(kind: str, number: int, node_id: int, entries: list[int] | None) -> list[SdoWrite]:
     """Disable, remap and (if ``entries``) re-enable one PDO, in the order CiA 301 requires."""
     comm = (c.RPDO_COMM if kind == "RPDO" else c.TPDO_COMM) + number - 1
     mapping = (c.RPDO_MAPPING if kind == "RPDO" else c.TPDO_MAPPING) + number - 1
@@ -61,17 +60,11 @@ def _pdo_writes(kind: str, number: int, node_id: int, entries: list[int] | None,
     if entries is None:  # not used: disable; a drive without this PDO is fine
         return [SdoWrite(step, comm, 1, "<I", c.PDO_COB_ID_INVALID | cob_id, optional=True)]
     writes = [SdoWrite(step, comm, 1, "<I", c.PDO_COB_ID_INVALID | cob_id),
-              SdoWrite(step, comm, 2, "<B", transmission_type),
+              SdoWrite(step, comm, 2, "<B", c.TRANSMISSION_SYNC_EVERY),
               SdoWrite(step, mapping, 0, "<B", 0)]
     writes += [SdoWrite(step, mapping, i + 1, "<I", e) for i, e in enumerate(entries)]
     writes += [SdoWrite(step, mapping, 0, "<B", len(entries)), SdoWrite(step, comm, 1, "<I", cob_id)]
     return writes
-
-
-def pdo_writes(kind: str, number: int, node_id: int, entries: list[int] | None,
-               transmission_type: int) -> list[SdoWrite]:
-    """The CiA 301 remap sequence of one PDO of any node (e.g. the CiA-401 I/O node)."""
-    return _pdo_writes(kind, number, node_id, entries, transmission_type)
 
 
 def drive_configuration(node_id: int, mode: c.Mode, cycle_period_s: float, heartbeat_producer_ms: int,
