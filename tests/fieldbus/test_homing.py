@@ -72,6 +72,8 @@ def test_plan_writes_every_homing_object_before_the_mode():
         (0x6098, 0, "<b", 17), (0x6099, 1, "<I", 20000), (0x6099, 2, "<I", 2000), (0x609A, 0, "<I", 200000),
         (0x607C, 0, "<i", 5000), (0x6060, 0, "<b", 6)]
     assert plan.restore[0].value == 7
+    assert [w.data() for w in plan.writes[:2]] == [b"\x11", (20000).to_bytes(4, "little")]
+    assert plan.writes[4].data() == (5000).to_bytes(4, "little", signed=True)
     with pytest.raises(ValueError):
         homing_drive_values(HomingConfig(method=HERE), 1000, False, 0, "X")
 

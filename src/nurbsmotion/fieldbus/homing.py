@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import enum
 import math
+import struct
 from dataclasses import dataclass
 
 from canopen.objectdictionary import ObjectDictionary, ODVariable
@@ -40,7 +41,6 @@ from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import State
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.drive_state import enable_step
-from nurbsmotion.fieldbus.pdo import SdoWrite
 from nurbsmotion.homing_config import HomingConfig
 
 HOMING_METHOD = 0x6098
@@ -119,26 +119,41 @@ def homing_drive_values(homing: HomingConfig, counts_per_mm: float, invert: bool
 
 
 @dataclass(frozen=True)
+class ObjectWrite:
+    """One SDO download of the plan. ``fmt`` is the object's CiA-402 data type as a struct
+    code, for a master that writes without the drive's EDS (with it, the EDS types the value)."""
+
+    step: str
+    index: int
+    subindex: int
+    fmt: str
+    value: int
+
+    def data(self) -> bytes:
+        return struct.pack(self.fmt, self.value)
+
+
+@dataclass(frozen=True)
 class HomingPlan:
     """SDO work around one drive homing: ``writes`` before, read 0x6061 == ``mode_check``,
     then the per-cycle procedure, then ``restore``."""
 
-    writes: tuple[SdoWrite, ...]
+    writes: tuple[ObjectWrite, ...]
     mode_check: int
-    restore: tuple[SdoWrite, ...]
+    restore: tuple[ObjectWrite, ...]
 
 
 def homing_plan(values: HomingDriveValues, streaming_mode: c.Mode) -> HomingPlan:
     """The SDO writes of a homing, in order (objects of CiA 402-2 homing mode)."""
     step = "homing configuration"
-    writes = [SdoWrite(step, HOMING_METHOD, 0, "<b", values.method)]
+    writes = [ObjectWrite(step, HOMING_METHOD, 0, "<b", values.method)]
     if values.speed_search:  # methods 35/37 do not move: speeds and acceleration are not written
-        writes += [SdoWrite(step, HOMING_SPEEDS, 1, "<I", values.speed_search),
-                   SdoWrite(step, HOMING_SPEEDS, 2, "<I", values.speed_zero),
-                   SdoWrite(step, HOMING_ACCELERATION, 0, "<I", values.acceleration)]
-    writes += [SdoWrite(step, HOME_OFFSET, 0, "<i", values.home_offset),
-               SdoWrite("set homing mode", c.MODES_OF_OPERATION, 0, "<b", MODE_HOMING)]
-    restore = (SdoWrite("restore streaming mode", c.MODES_OF_OPERATION, 0, "<b", int(streaming_mode)),)
+        writes += [ObjectWrite(step, HOMING_SPEEDS, 1, "<I", values.speed_search),
+                   ObjectWrite(step, HOMING_SPEEDS, 2, "<I", values.speed_zero),
+                   ObjectWrite(step, HOMING_ACCELERATION, 0, "<I", values.acceleration)]
+    writes += [ObjectWrite(step, HOME_OFFSET, 0, "<i", values.home_offset),
+               ObjectWrite("set homing mode", c.MODES_OF_OPERATION, 0, "<b", MODE_HOMING)]
+    restore = (ObjectWrite("restore streaming mode", c.MODES_OF_OPERATION, 0, "<b", int(streaming_mode)),)
     return HomingPlan(tuple(writes), MODE_HOMING, restore)
 
 
