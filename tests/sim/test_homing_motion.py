@@ -137,3 +137,11 @@ def test_rising_edge_restarts_and_not_started_reports_target_reached():
 def test_supported_methods():
     assert [m for m in range(-5, 40) if supported(m)] == [1, 2, 17, 18, 33, 34, 35, 37]
     assert homing_tick(idle(0.0), _setup(3), SENSORS, True, T).phase is Phase.ERROR
+
+
+def test_setup_from_the_drive_objects():
+    from nurbsmotion.sim.homing import HOMING_OBJECTS, setup_from_objects
+
+    values = {(0x6098, 0): 17, (0x6099, 1): 20_000, (0x6099, 2): 2000, (0x609A, 0): 200_000, (0x607C, 0): -5}
+    assert setup_from_objects(lambda index, sub: values[(index, sub)]) == HomingSetup(17, 20_000.0, 2000.0, 200_000.0, -5)
+    assert {(i, s) for i, s, _ in HOMING_OBJECTS} == set(values)

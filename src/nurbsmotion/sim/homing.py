@@ -26,12 +26,18 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 SW_TARGET_REACHED = 1 << 10
 SW_HOMING_ATTAINED = 1 << 12
 SW_HOMING_ERROR = 1 << 13
 SUPPORTED_METHODS = (1, 2, 17, 18, 33, 34, 35, 37)
+MODE_HOMING = 6  # 0x6060 value
+SUPPORTED_MODE_BIT = 5  # 0x6502 bit for homing mode
+# The homing objects a drive's EDS must list (index, subindex, CiA 301 data type).
+HOMING_OBJECTS = ((0x6098, 0, "INTEGER8"), (0x6099, 1, "UNSIGNED32"), (0x6099, 2, "UNSIGNED32"),
+                  (0x609A, 0, "UNSIGNED32"), (0x607C, 0, "INTEGER32"))
 
 
 class Limit(enum.Enum):
@@ -100,6 +106,14 @@ class HomingSetup:
     speed_zero_counts_s: float  # 0x6099:02
     accel_counts_s2: float  # 0x609A
     home_offset_counts: int  # 0x607C
+
+
+def setup_from_objects(read: Callable[[int, int], int]) -> HomingSetup:
+    """The drive's homing objects as a HomingSetup; ``read(index, subindex)`` is the drive's
+    object value (what an SDO upload would return)."""
+    return HomingSetup(method=read(0x6098, 0), speed_search_counts_s=float(read(0x6099, 1)),
+                       speed_zero_counts_s=float(read(0x6099, 2)), accel_counts_s2=float(read(0x609A, 0)),
+                       home_offset_counts=read(0x607C, 0))
 
 
 class Phase(enum.Enum):
