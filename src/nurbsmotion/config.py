@@ -71,12 +71,12 @@ class AxisConfig:
     offset_counts: int = 0
     soft_limits_mm: tuple[float, float] | None = None
     max_velocity_mm_s: float | None = None
+    homing: HomingConfig | None = None
     max_accel_mm_s2: float | None = None
     following_error_window_mm: float = 1.0
     following_error_timeout_ms: int = 20
     eds: str | None = None
     identity: IdentityConfig | None = None
-    homing: HomingConfig | None = None
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -109,8 +109,8 @@ class MachineConfig:
     monitoring: MonitoringConfig
     control: ControlConfig
     data_dir: str
-    simulate: bool = False
     io: IoConfig | None = None
+    simulate: bool = False
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -222,6 +222,15 @@ def _optional(reader: Callable[..., Any]) -> Callable[..., Any]:
     return read
 
 
+def _section_reader(name: str) -> Callable[[_Doc], Any]:
+    """The reader of the ``homing`` / ``io`` sections (their modules import this one)."""
+    if name == "homing":
+        from nurbsmotion.homing_config import read_homing
+        return read_homing
+    from nurbsmotion.io_config import read_io
+    return read_io
+
+
 def _fields(doc: _Doc, readers: dict[str, tuple[Callable[..., Any], dict[str, Any]]],
             required: tuple[str, ...] = ()) -> dict[str, Any]:
     """Read the keys of a mapping with their readers; collect errors; drop failed values."""
@@ -268,12 +277,12 @@ _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "offset_counts": (_number, {"integer": True, "minimum": -(2**31), "exclusive_min": False, "maximum": 2**31 - 1}),
     "soft_limits_mm": (_optional(_limits_pair), {}),
     "max_velocity_mm_s": (_optional(_number), {"minimum": 0}),
+    "homing": (_optional(lambda doc: _section_reader("homing")(doc)), {}),
     "max_accel_mm_s2": (_optional(_number), {"minimum": 0}),
     "following_error_window_mm": (_number, {"minimum": 0}),
     "following_error_timeout_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
     "eds": (_optional(_string), {}),
     "identity": (_optional(_identity), {}),
-    "homing": (_optional(lambda doc: _section_reader("homing")(doc)), {}),
 }
 
 
@@ -335,6 +344,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),
     "axes": (_axes, {}),
+    "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
     "monitoring": (_section(MonitoringConfig, {
         "heartbeat_producer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "heartbeat_consumer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
@@ -344,17 +354,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "simulate": (_boolean, {}),
-    "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
 }
-
-
-def _section_reader(name: str) -> Callable[[_Doc], Any]:
-    """The reader of the ``homing`` / ``io`` sections (their modules import this one)."""
-    if name == "homing":
-        from nurbsmotion.homing_config import read_homing
-        return read_homing
-    from nurbsmotion.io_config import read_io
-    return read_io
 
 
 def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
@@ -364,13 +364,13 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
 
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
+    if cfg.io is not None:
+        from nurbsmotion.io_config import check_io_node
+        check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
     mon = cfg.monitoring
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
              f"({mon.heartbeat_consumer_ms} <= {mon.heartbeat_producer_ms})")
-    if cfg.io is not None:
-        from nurbsmotion.io_config import check_io_node
-        check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
 
 
 def parse_config(text: str, source: str = "<config>", base_dir: Path | None = None) -> MachineConfig:
@@ -399,11 +399,11 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         bus=values.get("bus", BusConfig()),
         interpolation=values.get("interpolation", InterpolationConfig()),
         axes=values["axes"],
+        io=values.get("io"),
         monitoring=values.get("monitoring", MonitoringConfig()),
         control=values.get("control", ControlConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
-        io=values.get("io"),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)
