@@ -5,7 +5,6 @@ import pytest
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.homing import (
-    ACK_CYCLES,
     Event,
     HomingDriveValues,
     HomingProcedure,
@@ -91,13 +90,14 @@ def _run(procedure, statuswords):
 
 def test_successful_homing_from_switched_on():
     proc = HomingProcedure(3, 17, cycle_period_s=0.004, timeout_s=1.0)
-    steps = _run(proc, [0x0233, OE, OE] + [COMPLETED] * ACK_CYCLES + [IN_PROGRESS, ATTAINED, COMPLETED])
+    assert proc.ack_cycles == 25  # 100 ms at 4 ms
+    steps = _run(proc, [0x0233, OE, OE] + [COMPLETED] * proc.ack_cycles + [IN_PROGRESS, ATTAINED, COMPLETED])
     words = [s.controlword for s in steps]
     assert words[0] == 0x0F  # SWITCHED ON -> enable operation, bit 4 low
     assert words[1] == 0x0F  # ARMED: bit 4 low one more cycle in OPERATION ENABLED
     assert words[2:-1] == [0x1F] * (len(words) - 3)  # bit 4 high from the rising edge on
     # a stale 'completed' from an earlier homing right after the edge is ignored
-    assert [s.phase for s in steps[2:2 + ACK_CYCLES + 1]] == [Phase.STARTED] * (ACK_CYCLES + 1)
+    assert [s.phase for s in steps[2:2 + proc.ack_cycles + 1]] == [Phase.STARTED] * (proc.ack_cycles + 1)
     assert steps[-2].phase is Phase.RUNNING and steps[-2].outcome is None
     assert steps[-1].phase is Phase.HOMED and steps[-1].outcome.homed and steps[-1].controlword == 0x0F
     assert proc.step(COMPLETED).outcome is None  # the outcome is reported once
@@ -112,7 +112,7 @@ def test_successful_homing_from_switched_on():
 ])
 def test_failures_name_the_node_and_stop_homing(last, text):
     proc = HomingProcedure(3, 1, cycle_period_s=0.004, timeout_s=1.0)
-    steps = _run(proc, [OE, OE] + [IN_PROGRESS] * (ACK_CYCLES + 2) + [last])
+    steps = _run(proc, [OE, OE] + [IN_PROGRESS] * (proc.ack_cycles + 2) + [last])
     assert steps[-1].phase is Phase.FAILED
     assert steps[-1].outcome.reason == text and not steps[-1].outcome.homed
     assert not steps[-1].controlword & 0x10  # bit 4 low interrupts the drive's homing
@@ -123,6 +123,11 @@ def test_timeout_counts_cycles():
     steps = _run(proc, [OE] * 11)
     assert [s.outcome for s in steps[:10]] == [None] * 10
     assert steps[10].outcome.reason == "node 5: homing method 33: not completed within 0.1 s (statusword 0x0237)"
+
+
+def test_acknowledge_window_is_at_least_three_cycles():
+    assert HomingProcedure(1, 1, cycle_period_s=0.1, timeout_s=10).ack_cycles == 3
+    assert HomingProcedure(1, 1, cycle_period_s=0.001, timeout_s=10).ack_cycles == 100
 
 
 def test_fault_before_start_is_not_reset_silently():

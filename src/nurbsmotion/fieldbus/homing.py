@@ -54,9 +54,12 @@ SW_HOMING_ERROR = 1 << 13
 UINT32_MAX = 2**32 - 1
 INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 # Statuswords right after the rising edge may predate it: an RPDO sent after SYNC n takes
-# effect at SYNC n+1 (CiA 301), whose TPDO the master reads in cycle n+2. One more cycle
-# of margin for a TPDO that arrives after the master looked.
+# effect at SYNC n+1 (CiA 301), whose TPDO the master reads in cycle n+2; one more cycle of
+# margin for a TPDO that arrives after the master looked. A drive may also need some time to
+# start its homing and clear bit 10 ("not started"): an assumed 100 ms. Waiting only delays
+# the verdict on a fast homing (35/37) by that much.
 ACK_CYCLES = 3
+ACK_S = 0.1
 
 
 # --------------------------------------------------------------------------- drive values
@@ -269,12 +272,12 @@ class HomingProcedure:
     read back before the first step). No I/O, no clock: time is counted in cycles."""
 
     def __init__(self, node_id: int, method: int, cycle_period_s: float, timeout_s: float,
-                 ack_cycles: int = ACK_CYCLES) -> None:
+                 ack_s: float = ACK_S) -> None:
         self.node_id = node_id
         self.method = method
         self.timeout_s = timeout_s
         self.timeout_cycles = max(1, math.ceil(timeout_s / cycle_period_s - 1e-9))
-        self.ack_cycles = ack_cycles
+        self.ack_cycles = max(ACK_CYCLES, math.ceil(ack_s / cycle_period_s - 1e-9))
         self.phase = Phase.ENABLING
         self.cycles = 0
         self._started_at = -1
