@@ -8,7 +8,8 @@ STOPPED, reset restores the defaults), heartbeat producer 0x1017 (python-can per
 send), heartbeat consumer 0x1016, PDO remapping by the CiA 301 procedure (``sim.pdo``).
 
 TPDO1 goes out per its transmission type (0x1800:02): 254/255 at once when an input
-changes; 1..240 on every n-th SYNC; 0 on the SYNC after a change. RPDO1 data is applied at
+changes (and not on entering OPERATIONAL: CiA 301 does not require it, so a master must
+read 0x6000 by SDO to know the inputs before the first change); 1..240 on every n-th SYNC; 0 on the SYNC after a change. RPDO1 data is applied at
 once for types 254/255, at the next SYNC for 0..240. Outputs take the error value 0
 (0x6206 'error mode' all set, 0x6207 'error value' 0 in CiA 401 terms) when the node is
 stopped or reset, or when a watched heartbeat is lost (then also EMCY 0x8130).
@@ -238,8 +239,6 @@ class SimIoNode:
         self._sync_count = 0
         if self._heartbeat_task is not None:
             self._heartbeat_task.update([int(state)])
-        if state == NmtState.OPERATIONAL:
-            self._send_tpdo()  # event-driven PDOs report the current inputs on entering OPERATIONAL
 
     def _start_heartbeat(self) -> None:
         self._stop_heartbeat()
