@@ -35,9 +35,10 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     """Route one checked request to the controller."""
     f = request.fields
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
-        "submit": lambda: controller.submit(f["name"], f["program"]),
+        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False))),
         "status": controller.status,
         "job": lambda: controller.job_info(f["id"]),
+        "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
         "stop": controller.stop,
         "abort": controller.abort,
         "reset": controller.reset,
