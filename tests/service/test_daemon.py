@@ -9,6 +9,7 @@ import pytest
 from nurbsmotion.config import load_config
 from nurbsmotion.service.client import Client, DaemonUnavailable
 from nurbsmotion.service.daemon import Daemon
+from nurbsmotion.service.records import JobRecords
 from tests.service.fakes import FakeLink, with_data_dir
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,9 +58,7 @@ def test_clients_polling_while_the_daemon_ends_mid_job_never_see_an_internal_err
     errors = [r["error"] for r in responses if not r.get("ok")]
     assert responses and not [e for e in errors if "internal error" in e], errors
     assert all("shutting down" in e for e in errors), errors
-    last_job = [r for r in responses if r.get("ok") and "job" in r and isinstance(r["job"], dict)
-                and r["job"].get("outcome")]
-    assert last_job and last_job[-1]["job"]["outcome"]["outcome"] == "stopped"
+    assert JobRecords(config.data_dir).find(job_id).outcome()["outcome"] == "stopped"
 
 
 def test_the_socket_answers_only_once_the_controller_exists_and_not_after_close(config):

@@ -30,6 +30,7 @@ from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now
 log = logging.getLogger(__name__)
 
 Planner = Callable[[str, str, np.ndarray], PlannedJob]  # (name, text, start position mm) -> plan
+SETTLE_S = 0.5  # the longest a job's end waits for the axes to reach their last set-point (final_position)
 OUTCOME_OF_RESULT = {"done": "completed", "stopped": "stopped", "aborted": "aborted", "faulted": "fault"}
 
 
@@ -359,8 +360,9 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
-        self._stop_feedback(job)
-        outcome = self._outcome(job, result)
+        status, settled = self._settled_status()
+        self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
+        outcome = self._outcome(job, result, status, settled)
         self._stop_traffic()
         if self.simulation is not None:
             try:
@@ -382,11 +384,23 @@ class Controller:
                     "line_reached": reached["where"] if reached else None}
                 self._job = None
 
-    def _outcome(self, job: ActiveJob, result: JobResult) -> dict[str, Any]:
+    def _settled_status(self) -> tuple[MasterStatus, bool]:
+        """The status once every axis' position actual is within one count of its set-point
+        (the servo caught up; after a quick stop the master's set-point follows the actual),
+        or after SETTLE_S: (status, settled)."""
+        deadline = time.monotonic() + SETTLE_S
+        while True:
+            status = self.link.status()
+            settled = all(a.position_counts is not None and abs(a.position_counts - a.setpoint_counts) <= 1
+                          for a in status.axes)
+            if settled or time.monotonic() >= deadline:
+                return status, settled
+            time.sleep(self.config.cycle_period_s)
+
+    def _outcome(self, job: ActiveJob, result: JobResult, status: MasterStatus, settled: bool) -> dict[str, Any]:
         outcome = OUTCOME_OF_RESULT.get(result.outcome, "fault")
         if result.faults:
             outcome = "fault"
-        status = self.link.status()
         faults = [self._fault_record(f, status, job.start_cycle) for f in result.faults]
         reason = faults[0]["message"] if faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
@@ -395,7 +409,7 @@ class Controller:
                 "fault": faults[0] if faults else None, "faults": faults,
                 "sent": result.sent, "planned": result.length,
                 "line_reached": self._line_reached(job, result.sent - 1),
-                "final_position": self._positions_mm(status),
+                "final_position": self._positions_mm(status), "settled": settled,
                 "overrides": job.overrides,
                 "feedback_rows": job.feedback.rows if job.feedback is not None else None,
                 "motion_time_s": round(time.monotonic() - job.started_s, 3),

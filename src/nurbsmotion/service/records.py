@@ -1,4 +1,5 @@
-"""Job records: one folder per job under ``<data_dir>/jobs/<timestamp>-<id>/``.
+"""Job records: one folder per job under ``<data_dir>/jobs/<YYYYmmdd-HHMMSS.mmm>-<id>/`` (the
+time of the submission to the millisecond, so the folders sort in submission order).
 
 Written in the order that loses nothing when a job ends badly: the program as submitted, the
 configuration in force and the plan (summary + trace) before any motion, the drives'
@@ -14,7 +15,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import time
 import uuid
 from dataclasses import dataclass
 from datetime import datetime
@@ -107,12 +107,14 @@ class JobRecord:
 
     @property
     def created_at(self) -> str:
-        """The folder's time stamp (the submission), as ``YYYY-mm-ddTHH:MM:SS``."""
+        """The folder's time stamp (the submission), as ``YYYY-mm-ddTHH:MM:SS.mmm``."""
         stamp = self.folder.name.rsplit("-", 1)[0]
-        try:
-            return datetime.strptime(stamp, "%Y%m%d-%H%M%S").isoformat()
-        except ValueError:
-            return ""
+        for form in ("%Y%m%d-%H%M%S.%f", "%Y%m%d-%H%M%S"):  # older records: whole seconds
+            try:
+                return datetime.strptime(stamp, form).isoformat(timespec="milliseconds")
+            except ValueError:
+                continue
+        return ""
 
     def summary(self) -> dict[str, Any]:
         """One line of ``jobs``: id, name, submitted, outcome (None while it runs), line reached."""
@@ -138,7 +140,8 @@ class JobRecords:
         """A new job folder holding the program as submitted."""
         self.root.mkdir(parents=True, exist_ok=True)
         job_id = new_job_id()
-        folder = self.root / f"{time.strftime('%Y%m%d-%H%M%S')}-{job_id}"
+        now = datetime.now()
+        folder = self.root / f"{now:%Y%m%d-%H%M%S}.{now.microsecond // 1000:03d}-{job_id}"
         folder.mkdir()
         record = JobRecord(job_id, folder)
         record.write_program(name, text)
