@@ -90,9 +90,11 @@ class Daemon:
         if self.server is not None:
             self.server.close()
             self.server = None
+        served = self.controller is not None
         self.controller = None
         self._stop_simulation()
-        log.info(kv("daemon_stopped"))
+        if served:  # a start-up that failed has said so in its error already
+            log.info(kv("daemon_stopped"))
 
     def _stop_motion(self) -> None:
         if self.controller is not None:
