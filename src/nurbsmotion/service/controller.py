@@ -113,6 +113,7 @@ class Controller:
                 self._stop_traffic()
                 self._stop_feedback(job)
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
+                log.info(kv("submit_refused", name=name, error=err))
                 raise InputError("submit", str(err)) from None
             job.watcher = threading.Thread(target=self._watch, args=(job,), name=f"job-{record.job_id}", daemon=True)
             with self._lock:
@@ -122,7 +123,7 @@ class Controller:
             with self._lock:
                 self._planning = False
         log.info(kv("job_started", job=record.job_id, name=name, cycles=len(plan.counts),
-                    duration_s=plan.trajectory.duration_s, override_percent=round(self._override * 100.0, 3),
+                    duration_s=plan.trajectory.duration_s, override_percent=round(rate * 100.0, 3),
                     folder=record.folder))
         return {"ok": True, "job": {"id": record.job_id, "folder": str(record.folder), "summary": plan.summary}}
 
