@@ -57,3 +57,19 @@ def test_a_bad_config_variable_is_one_line_naming_the_file(configs, monkeypatch,
 def test_the_daemon_takes_its_config_from_the_variable_or_says_it_needs_one(configs, monkeypatch, capsys):
     assert main(["daemon"]) == 2
     assert "NURBSMOTION_CONFIG" in capsys.readouterr().err
+
+
+def test_jobs_reads_the_records_itself_when_no_daemon_answers(configs, monkeypatch, capsys):
+    from nurbsmotion.service.records import JobRecords
+
+    tmp, paths = configs
+    paths["a"].write_text(paths["a"].read_text() + f"data_dir: {tmp / 'data'}\n")
+    record = JobRecords(tmp / "data").create_rejected("bad.nc", "G01 Q7\n", ["bad.nc:1: Q7: unsupported word Q"])
+    monkeypatch.setenv("NURBSMOTION_CONFIG", str(paths["a"]))
+    assert main(["jobs"]) == 0
+    out = capsys.readouterr()
+    assert f"read from {tmp / 'data' / 'jobs'}" in out.err and record.job_id in out.out and "rejected" in out.out
+    assert main(["jobs", record.job_id]) == 0
+    assert "error       bad.nc:1: Q7: unsupported word Q" in capsys.readouterr().out
+    assert main(["jobs", "--socket", str(tmp / "none.sock")]) == 3  # an explicit socket: no guessing
+    assert "no daemon at" in capsys.readouterr().err

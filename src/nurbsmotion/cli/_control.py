@@ -56,13 +56,15 @@ def error_line(args: argparse.Namespace, message: str) -> None:
     sys.stderr.write(f"nurbsmotion {args.command}: error: {message}\n")
 
 
-def with_client(args: argparse.Namespace, body: Callable[[Client], int]) -> int:
-    """Run ``body`` with a connected client; the client errors become exit codes 2 and 3."""
+def with_client(args: argparse.Namespace, body: Callable[[Client], int], quiet_no_daemon: bool = False) -> int:
+    """Run ``body`` with a connected client; the client errors become exit codes 2 and 3
+    (``quiet_no_daemon``: exit 3 without the error line, the caller has another way)."""
     try:
         with Client(socket_path(args)) as client:
             return body(client)
     except DaemonUnavailable as err:
-        error_line(args, str(err))
+        if not quiet_no_daemon:
+            error_line(args, str(err))
         return EXIT_NO_DAEMON
     except RequestFailed as err:
         for line in err.errors:

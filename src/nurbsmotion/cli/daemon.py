@@ -1,12 +1,14 @@
 """``nurbsmotion daemon --config FILE``: bring the drives up and serve the control socket.
 
 The daemon logs at INFO by default (one structured line per event: ready, job started and
-ended, submission rejected, override changed, faults); ``-v`` adds nothing, ``-vv`` debug.
+ended, submission rejected, override changed, faults); the simulated drives of
+``simulate: true`` log their own state changes only with ``-v``; ``-vv`` is debug.
 """
 
 from __future__ import annotations
 
 import argparse
+import logging
 import os
 
 from nurbsmotion.cli._control import CONFIG_VARIABLE
@@ -26,5 +28,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     if not args.config:
         raise InputError("--config", f"a machine configuration is required (--config FILE or ${CONFIG_VARIABLE})")
-    setup_logging(max(1, getattr(args, "verbose", 0)))  # an operator reads what the service did
+    verbosity = getattr(args, "verbose", 0)
+    setup_logging(max(1, verbosity))  # an operator reads what the service did
+    if verbosity < 1:  # simulated drives are not the service: their state changes are noise here
+        logging.getLogger("nurbsmotion.sim").setLevel(logging.WARNING)
     return run_daemon(load_config(args.config))

@@ -1,7 +1,9 @@
 """``nurbsmotion jobs [ID]``: the job records (newest first), or one record in full.
 
-Asks the daemon (control API ``jobs`` / ``job``). Exit codes: 0 shown, 2 unknown id or bad
-option, 3 no daemon.
+Asks the daemon (control API ``jobs`` / ``job``). When no daemon answers and a configuration
+is known (``--config`` or ``$NURBSMOTION_CONFIG``), the records are read from its
+``data_dir`` directly, so they can be read after the daemon has ended. Exit codes: 0 shown,
+2 unknown id or bad option, 3 no daemon (and no configuration to find the records).
 """
 
 from __future__ import annotations
@@ -10,9 +12,13 @@ import argparse
 import json
 from typing import Any
 
-from nurbsmotion.cli._control import add_socket_arguments, with_client
+import sys
+
+from nurbsmotion.cli._control import EXIT_NO_DAEMON, add_socket_arguments, config_path, with_client
 from nurbsmotion.cli.status import fault_text
+from nurbsmotion.config import load_config
 from nurbsmotion.service.client import Client
+from nurbsmotion.service.records import JobRecords
 
 HELP = "list the job records (newest first) or show one: outcome, line reached, times, faults, overrides"
 
@@ -72,12 +78,25 @@ def show_lines(job: dict[str, Any]) -> list[str]:
     return lines
 
 
+def show(args: argparse.Namespace, response: dict[str, Any]) -> int:
+    if args.json:
+        print(json.dumps(response, indent=2))
+    else:
+        print("\n".join(show_lines(response["job"]) if args.id else list_lines(response)))
+    return 0
+
+
+def read_here(args: argparse.Namespace) -> int:
+    """The records read from the configuration's data_dir (no daemon answered)."""
+    records = JobRecords(load_config(config_path(args)).data_dir)  # type: ignore[arg-type]
+    response = {"ok": True, "job": records.info(args.id)} if args.id else {"ok": True, **records.listing(args.limit)}
+    sys.stderr.write(f"nurbsmotion jobs: no daemon answers; read from {records.root}\n")
+    return show(args, response)
+
+
 def run(args: argparse.Namespace) -> int:
     def body(client: Client) -> int:
-        response = client.call("job", id=args.id) if args.id else client.call("jobs", limit=args.limit)
-        if args.json:
-            print(json.dumps(response, indent=2))
-        else:
-            print("\n".join(show_lines(response["job"]) if args.id else list_lines(response)))
-        return 0
-    return with_client(args, body)
+        return show(args, client.call("job", id=args.id) if args.id else client.call("jobs", limit=args.limit))
+
+    code = with_client(args, body, quiet_no_daemon=config_path(args) is not None and not args.socket)
+    return read_here(args) if code == EXIT_NO_DAEMON and config_path(args) and not args.socket else code

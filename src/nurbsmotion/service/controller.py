@@ -174,29 +174,15 @@ class Controller:
         return {"ok": True}
 
     def job_info(self, job_id: str) -> dict[str, Any]:
-        record = self.records.find(job_id)
-        if record is None:
-            raise InputError("field 'id'", f"no job {job_id!r} in {self.records.root}")
-        active = self._job
-        running = active is not None and active.record.job_id == job_id
-        return {"ok": True, "job": {"id": job_id, "folder": str(record.folder), "running": running,
-                                    "submitted_at": record.created_at, "plan": record.plan(),
-                                    "outcome": None if running else record.outcome(),
-                                    "files": sorted(p.name for p in record.folder.iterdir()
-                                                    if not p.name.startswith("."))}}
+        return {"ok": True, "job": self.records.info(job_id, self._running_id())}
 
     def jobs(self, limit: int = 20) -> dict[str, Any]:
         """The newest ``limit`` records (newest first), one summary each."""
-        if limit < 1:
-            raise InputError("field 'limit'", f"must be at least 1, got {limit:g}")
-        records = self.records.all()
-        active = self._job
-        rows = []
-        for record in reversed(records[-int(limit):]):
-            row = record.summary()
-            row["running"] = active is not None and active.record.job_id == record.job_id
-            rows.append(row)
-        return {"ok": True, "jobs": rows, "total": len(records), "root": str(self.records.root)}
+        return {"ok": True, **self.records.listing(limit, self._running_id())}
+
+    def _running_id(self) -> str | None:
+        job = self._job
+        return job.record.job_id if job is not None else None
 
     # ------------------------------------------------------------------ status
     def state(self, status: MasterStatus | None = None) -> str:

@@ -21,6 +21,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
 
+from nurbsmotion.errors import InputError
+
 PROGRAM_FILE = "program"  # suffix added from the submitted name (.nc, .yaml ...)
 PLAN_FILE = "plan.json"
 TRACE_FILE = "trace.csv"
@@ -167,6 +169,24 @@ class JobRecords:
         for folder in self.root.glob(f"*-{job_id}"):
             return JobRecord(job_id, folder)
         return None
+
+    def info(self, job_id: str, running_id: str | None = None) -> dict[str, Any]:
+        """One record in full (the ``job`` response); InputError for an unknown id."""
+        record = self.find(job_id)
+        if record is None:
+            raise InputError("field 'id'", f"no job {job_id!r} in {self.root}")
+        running = job_id == running_id
+        return {"id": job_id, "folder": str(record.folder), "running": running, "submitted_at": record.created_at,
+                "plan": record.plan(), "outcome": None if running else record.outcome(),
+                "files": sorted(p.name for p in record.folder.iterdir() if not p.name.startswith("."))}
+
+    def listing(self, limit: int = 20, running_id: str | None = None) -> dict[str, Any]:
+        """The newest ``limit`` records, newest first (the ``jobs`` response)."""
+        if limit < 1:
+            raise InputError("field 'limit'", f"must be at least 1, got {limit:g}")
+        records = self.all()
+        rows = [{**r.summary(), "running": r.job_id == running_id} for r in reversed(records[-int(limit):])]
+        return {"jobs": rows, "total": len(records), "root": str(self.root)}
 
     def mark_interrupted(self) -> list[JobRecord]:
         """Give every job folder without an outcome the outcome 'interrupted'."""
