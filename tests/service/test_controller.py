@@ -189,6 +189,7 @@ def test_a_following_error_fault_has_no_code_its_error_in_counts_and_mm_and_a_jo
     assert fault["code"] is None and fault["kind"] == "following_error"
     assert fault["measured"] == {"following_error_counts": -2345, "following_error_mm": -2.345}
     assert fault["cycle"] == 30 and fault["master_cycle"] == 1031 and "at job cycle 30" in fault["message"]
+    assert controller.status()["faults"] == [fault]  # the status tells it the same way as the record
     controller.reset()
 
 

@@ -71,6 +71,7 @@ class Controller:
         self._job: ActiveJob | None = None
         self._planning = False
         self._last: dict[str, Any] | None = None
+        self._last_job_faults: dict[tuple[int | None, str, int], int] = {}  # its faults -> its start cycle
         self._faults_acknowledged = 0
         self._override = 1.0  # requested, as a fraction
 
@@ -216,7 +217,8 @@ class Controller:
                 "cycles": {"count": t.cycles, "late": t.late_cycles, "missed": t.missed_cycles,
                            "send_errors": t.send_errors, "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3),
                            "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)},
-                "faults": [self._fault_record(f, status, job.start_cycle if job is not None else None)
+                "faults": [self._fault_record(f, status, job.start_cycle if job is not None else
+                                              self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None}
 
@@ -366,6 +368,8 @@ class Controller:
                         planned=outcome["planned"], line=reached["where"] if reached else "-",
                         motion_time_s=outcome["motion_time_s"], reason=outcome["reason"] or "-"))
             with self._lock:
+                self._last_job_faults = {(f["node"], f["kind"], f["master_cycle"]): job.start_cycle
+                                         for f in outcome["faults"]}
                 self._last = {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), **{
                     k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")},
                     "line_reached": reached["where"] if reached else None}
