@@ -1,6 +1,7 @@
 """One job at a time: submit, watch, stop, fault and reset, override, records (fake link)."""
 
 import csv
+import dataclasses
 import json
 import logging
 import time
@@ -230,5 +231,20 @@ def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
         outcome = controller.job_info(job["id"])["job"]["outcome"]
         assert outcome["line_reached"]["where"] == "part.nc:4" and outcome["line_reached"]["text"] == "G01 X2 Y3"
         assert controller.status()["last_job"]["line_reached"] == "part.nc:4"
+    finally:
+        controller.shutdown(2.0)
+
+
+def test_feedback_log_false_records_no_feedback(tmp_path):
+    config = load_config(ROOT / "config" / "demo.yaml")
+    config = dataclasses.replace(config, monitoring=dataclasses.replace(config.monitoring, feedback_log=False))
+    link = FakeLink(config)
+    controller = Controller(config, link, fake_planner(config), JobRecords(tmp_path))
+    try:
+        job = controller.submit("a.nc", "X1")["job"]
+        _wait(_ended(controller))
+        info = controller.job_info(job["id"])["job"]
+        assert "feedback.csv" not in info["files"] and info["outcome"]["feedback_rows"] is None
+        assert link.feedback is None
     finally:
         controller.shutdown(2.0)

@@ -279,7 +279,10 @@ class Controller:
         log.info(kv("submit_rejected", name=name, record=job_id, errors=len(errors), first=errors[0]))
 
     def _record_feedback(self, record: JobRecord) -> FeedbackLog | None:
-        """feedback.csv: every TPDO1 of the job (service.feedback), from before the first set-point."""
+        """feedback.csv: every TPDO1 of the job (service.feedback), from before the first set-point
+        (monitoring.feedback_log: false records none)."""
+        if not self.config.monitoring.feedback_log:
+            return None
         try:
             feedback = FeedbackLog(record.feedback_path, self.link.axis_map)
         except OSError as err:

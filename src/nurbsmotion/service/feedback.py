@@ -30,8 +30,7 @@ class FeedbackLog:
     def __init__(self, path: Path, axis_map: AxisMap) -> None:
         self.path = path
         self.rows = 0
-        self._names = list(axis_map.names)
-        self._nodes = list(axis_map.node_ids)
+        self._prefix = [f"{name},{node}," for name, node in zip(axis_map.names, axis_map.node_ids)]
         self._offset = [int(o) for o in axis_map.offset_counts]
         self._mm_per_count = [float(s) / float(c) for s, c in zip(axis_map.sign, axis_map.counts_per_mm)]
         self._samples: collections.deque[tuple[int, int, int, int, float]] = collections.deque()
@@ -46,17 +45,17 @@ class FeedbackLog:
     def flush(self, start_cycle: int) -> None:
         """Write the samples received so far; ``start_cycle``: the master cycle of job cycle 0."""
         out = self._out
-        if out is None:
+        if out is None or not self._samples:
             return
         samples = self._samples
+        if self._t0 is None:
+            self._t0 = samples[0][4]
+        t0, prefix, offset, scale = self._t0, self._prefix, self._offset, self._mm_per_count
         lines = []
-        while samples:
+        while samples:  # %-formatting with a per-axis prefix: half the time of an f-string per row
             cycle, i, sw, pos, stamp = samples.popleft()
-            if self._t0 is None:
-                self._t0 = stamp
-            mm = (pos - self._offset[i]) * self._mm_per_count[i]
-            lines.append(f"{cycle - start_cycle},{self._names[i]},{self._nodes[i]},{sw},{pos},{mm:.6f},"
-                         f"{stamp - self._t0:.6f}\n")
+            lines.append("%d,%s%d,%d,%.6f,%.6f\n" % (cycle - start_cycle, prefix[i], sw, pos,
+                                                       (pos - offset[i]) * scale[i], stamp - t0))
         out.writelines(lines)
         out.flush()
         self.rows += len(lines)
