@@ -13,24 +13,19 @@ import argparse
 import os
 import sys
 import tempfile
-import threading
 import time
-import uuid
 from pathlib import Path
 
-import can
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks._report import write_section  # noqa: E402
-from benchmarks.bench_soak import COUNTS_PER_MM, MOVE_MM, MOVE_S, move, run_as_hardware  # noqa: E402
+from benchmarks.bench_soak import COUNTS_PER_MM, MOVE_MM, MOVE_S, move, run_as_hardware, three_axes  # noqa: E402
 
-from nurbsmotion.config import parse_config  # noqa: E402
 from nurbsmotion.fieldbus import Master  # noqa: E402
 from nurbsmotion.service.feedback import FeedbackLog  # noqa: E402
-from nurbsmotion.sim import SimNetwork  # noqa: E402
 
 MODES = ("without", "with")
 
@@ -57,45 +52,28 @@ def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path 
 
 
 def measure(jobs: int, period_ms: float) -> dict[str, dict[str, float]]:
-    channel = "feedback-" + uuid.uuid4().hex
-    axes = "".join(f"  - {{name: {name}, node_id: {i + 1}, mode: {mode}, counts_per_mm: {COUNTS_PER_MM}}}\n"
-                   for i, (name, mode) in enumerate((("X", "csp"), ("Y", "csp"), ("Z", "ip"))))
-    config = parse_config(f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
-                          f"axes:\n{axes}", "feedback.yaml")
     figures = {m: {"jobs": 0, "cycles": 0, "late": 0, "missed": 0, "rows": 0, "flush_s": 0.0, "motion_s": 0.0}
                for m in MODES}
-    sim = SimNetwork(channel=channel)
-    for node in (1, 2, 3):
-        sim.add_drive(node, record=False)
-    sim.start()
-    bus = can.Bus(interface="virtual", channel=channel)
-    master = Master(config, bus)
     distance = np.array(MOVE_MM) * COUNTS_PER_MM
-    try:
-        master.bring_up()
-        with tempfile.TemporaryDirectory() as tmp:
-            for k in range(2 * jobs):
-                mode = MODES[k % 2]
-                before = master.status().timing
-                t0 = time.monotonic()
-                rows, flush_s = run_job(master, distance, config.cycle_period_s,
-                                        Path(tmp) if mode == "with" else None)
-                after = master.status().timing
-                distance = -distance
-                f = figures[mode]
-                f["jobs"] += 1
-                f["cycles"] += after.cycles - before.cycles
-                f["late"] += after.late_cycles - before.late_cycles
-                f["missed"] += after.missed_cycles - before.missed_cycles
-                f["rows"] += rows
-                f["flush_s"] += flush_s
-                f["motion_s"] += time.monotonic() - t0
-                if master.status().faults:
-                    master.reset_faults()
-    finally:
-        master.shutdown()
-        bus.shutdown()
-        sim.stop()
+    with three_axes(period_ms, "feedback") as master, tempfile.TemporaryDirectory() as tmp:
+        for k in range(2 * jobs):
+            mode = MODES[k % 2]
+            before = master.status().timing
+            t0 = time.monotonic()
+            rows, flush_s = run_job(master, distance, master.config.cycle_period_s,
+                                    Path(tmp) if mode == "with" else None)
+            after = master.status().timing
+            distance = -distance
+            f = figures[mode]
+            f["jobs"] += 1
+            f["cycles"] += after.cycles - before.cycles
+            f["late"] += after.late_cycles - before.late_cycles
+            f["missed"] += after.missed_cycles - before.missed_cycles
+            f["rows"] += rows
+            f["flush_s"] += flush_s
+            f["motion_s"] += time.monotonic() - t0
+            if master.status().faults:
+                master.reset_faults()
     return figures
 
 
