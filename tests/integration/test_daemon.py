@@ -122,6 +122,8 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     job = daemon.wait_job_end(job_id)
     outcome = job["outcome"]
     assert outcome["outcome"] == "fault" and outcome["fault"]["node"] == 2
+    assert outcome["fault"]["code"] == 0x2310 and outcome["fault"]["code_hex"] == "0x2310"  # the EMCY code
+    assert 0 < outcome["fault"]["cycle"] < outcome["fault"]["master_cycle"]  # job-relative
     assert 0 < outcome["sent"] < outcome["planned"]
     status = daemon.request("status")
     assert status["state"] == "fault" and status["faults"]
