@@ -65,7 +65,7 @@ class MasterHeartbeat:
             self._task.on_error = self._send_failed  # keep the thread: a bus error is reported by the cycle loop
         self._thread = threading.Thread(target=self._watch, name="nurbsmotion-heartbeat", daemon=True)
         self._thread.start()
-        log.info(kv("master_heartbeat", node=self.node_id, period_ms=round(self.period_s * 1000),
+        log.debug(kv("master_heartbeat", node=self.node_id, period_ms=round(self.period_s * 1000),
                     lease_s=self._lease_s, sender=type(self._task).__name__))
 
     def stop(self) -> None:
