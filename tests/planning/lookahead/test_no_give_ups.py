@@ -55,8 +55,11 @@ def test_repairs_that_always_fail_fall_back_to_slower_verified_plans(monkeypatch
     """No repair round at all: every window that violates falls back (stops, exact stops
     after a block, lower feeds) and the plan still holds every limit on every cycle."""
     monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)
-    program = read_program(EXAMPLES / "mixed.nc")
-    for limits in (WANG_LIMITS, replace(WANG_LIMITS, max_jerk_mm_s3=None, period_s=0.001)):
+    cases = [("mixed.nc", replace(WANG_LIMITS, period_s=0.001)),
+             ("mixed.nc", replace(WANG_LIMITS, max_jerk_mm_s3=None, period_s=0.001)),
+             ("wang_table1.nc", replace(WANG_LIMITS, period_s=0.001))]
+    for name, limits in cases:
+        program = read_program(EXAMPLES / name)
         trajectory = plan_lookahead(program, limits)
         notes = trajectory.notes
         assert notes["fallback_stops"] + notes["fallback_slower_blocks"] >= 1
@@ -66,12 +69,13 @@ def test_repairs_that_always_fail_fall_back_to_slower_verified_plans(monkeypatch
 def test_the_resume_after_a_fallback_stop_continues_the_plan(monkeypatch):
     monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)
     program = read_program(EXAMPLES / "mixed.nc")
-    whole = list(plan_lookahead_resumable(program, WANG_LIMITS, chunk_cycles=100))
+    limits = replace(WANG_LIMITS, period_s=0.001)
+    whole = list(plan_lookahead_resumable(program, limits, chunk_cycles=200))
     for k in (len(whole) // 3, len(whole) // 2):
         head = [chunk for chunk, _ in whole[: k + 1]]
-        tail = [chunk for chunk, _ in plan_lookahead_resumable(program, WANG_LIMITS, 100, whole[k][1])]
+        tail = [chunk for chunk, _ in plan_lookahead_resumable(program, limits, 200, whole[k][1])]
         joined = Trajectory.concatenate(head + tail)
-        assert_within_limits(measure(joined, program), WANG_LIMITS)
+        assert_within_limits(measure(joined, program), limits)
 
 
 def test_a_plan_that_cannot_exist_names_the_program_line(monkeypatch):

@@ -30,7 +30,7 @@ from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
 from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
-                                                         static_speed_limit, widen_dips)
+                                                         static_speed_limit, tangential_jerk_share, widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
@@ -269,13 +269,14 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     grid = build_grid(pieces, settings.spacing_mm)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
+    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm)
     idx = scan_grid(grid, cursor.raw_offset_mm)
     if len(idx) < 2:  # a running start whose filter memory already reaches past the run's end
         raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
                             "from this state; keep the current plan", pieces[-1].block)
     period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
-        bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
+        bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
         s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
