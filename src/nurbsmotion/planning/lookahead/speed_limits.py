@@ -265,6 +265,21 @@ DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
 DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
 
 
+def spread_min(s: NDArray[np.float64], members: NDArray[np.intp], values: NDArray[np.float64],
+               half_width_mm: float) -> NDArray[np.float64]:
+    """At every grid point, the smallest of ``values`` (at grid points ``members``, in order)
+    within +-half_width_mm in s (inf where none): sliding_min of a signal that is inf
+    elsewhere, with the search over the members only."""
+    at = s[members]
+    lo = np.searchsorted(at, s - half_width_mm, side="left")
+    hi = np.searchsorted(at, s + half_width_mm, side="right") - 1
+    out = np.full(len(s), np.inf)
+    near = hi >= lo
+    if near.any():
+        out[near] = window_min(values, lo[near], hi[near])
+    return out
+
+
 def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
     """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
     moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
@@ -282,9 +297,9 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     out = v.copy()
     floor = -np.inf
     while True:
-        band = np.where((inner <= level) & (inner > floor), inner, np.inf)
-        width = np.full(len(s), DIP_WIDTH_FACTOR * level * averaging_s)
-        out = np.minimum(out, sliding_min(s, band, width))
+        members = np.flatnonzero((inner <= level) & (inner > floor))
+        if len(members):
+            out = np.minimum(out, spread_min(s, members, inner[members], DIP_WIDTH_FACTOR * level * averaging_s))
         if level >= top:
             out[0], out[-1] = v[0], v[-1]
             return out
