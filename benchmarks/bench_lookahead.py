@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -208,7 +209,10 @@ def throughput(repeat: int) -> str:
             rate = result["count"] / result["best_s"]
             rows.append(f"| {label} | {process} | {result['count']} | {result['best_s']:.4f} | {result['faults']} | "
                         f"{rate:,.0f} | >= 1,000,000 ({'met' if rate >= 1e6 else 'NOT met'}) |")
-    return ("Best of the repetitions, each process fresh; page faults = minor faults during the best run.\n\n"
+    load = os.getloadavg()
+    return ("Best of the repetitions, each process fresh; page faults = minor faults during the best run. "
+            f"The machine was shared with other agents' work (load average {load[0]:.1f} / {load[1]:.1f} on "
+            f"{os.cpu_count()} cores at the end): the rates are lower bounds of a quiet machine's.\n\n"
             + "\n".join(rows))
 
 
