@@ -141,14 +141,8 @@ def rows(programs: dict[str, Program], previous: list[float | None]) -> str:
 
 def butterfly_text() -> str | None:
     """LinuxCNC's nc_files/nurbs/G5/butterfly-xy.ngc (G5.2 NURBS) from the G-code corpus
-    (tests/data/gcode/SOURCES.md), or from its branch until that is merged."""
-    if BUTTERFLY.exists():
-        return BUTTERFLY.read_text()
-    try:
-        return subprocess.run(["git", "-C", str(ROOT), "show", f"corpus:{BUTTERFLY.relative_to(ROOT)}"],
-                              capture_output=True, text=True, check=True).stdout
-    except (OSError, subprocess.CalledProcessError):
-        return None
+    (tests/data/gcode/SOURCES.md)."""
+    return BUTTERFLY.read_text() if BUTTERFLY.exists() else None
 
 
 def main() -> None:
