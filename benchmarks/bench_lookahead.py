@@ -6,7 +6,9 @@ Targets (issue 4):
   toppra's time-optimal duration on the same path, our limits holding on every cycle (and how
   far toppra's own samples exceed them between its grid points);
 - jerk-limited straight line: <= 1.01x ruckig's time-optimal 1-D profile;
-- >= 1,000,000 set-points per second planned on Wang's Table 1 curve at T = 1 ms;
+- >= 1,000,000 set-points per second planned on Wang's Table 1 curve at T = 1 ms, with and
+  (issue 17) without a jerk limit, in the nurbsmotion process (keep_freed_memory) and, for
+  the gap, a bare library call (glibc's default allocator);
 - a one-hour program at T = 1 ms planned and streamed in chunks with < 500 MB.
 
 Run: python benchmarks/bench_lookahead.py [--repeat R] [--hour-minutes M] (M = 0 skips the

@@ -164,6 +164,15 @@ delta < A T^2 / 8 (see the benchmark's docstring). Lower bound: continuous time-
 along the same runs at 100 % of the limits, {GRID_MM * 1000:g} um grid.
 
 {rows(programs, previous)}
+
+"previous" is the planner before issue 17 (three fixed scan rounds), "ratio" the motion time
+over the lower bound. Where chord error limits the speed, the verified chord error is
+0.99-1.00 delta on Wang's curve and the butterfly (the bound kappa_max L^2 / 8 is within a
+few per cent of the true sag there); where it cannot (delta >= A T^2 / 8), every plan's
+chord error stays below A T^2 / 8 whatever the bound. The sharp-corner program (a near-cusp
+zigzag) turns within less than a step at T = 4 ms: the planner has to shorten the steps
+across the whole turn, which the bound (curvature at points, no steps) does not see, so the
+bound is weak there rather than the plan slow.
 """
     write_section("motion_time", "Motion time against a continuous lower bound; chord error used",
                   body, "python benchmarks/bench_motion_time.py")
