@@ -171,8 +171,8 @@ over the lower bound. Where chord error limits the speed, the verified chord err
 few per cent of the true sag there); where it cannot (delta >= A T^2 / 8), every plan's
 chord error stays below A T^2 / 8 whatever the bound. The sharp-corner program (a near-cusp
 zigzag) turns within less than a step at T = 4 ms: the planner has to shorten the steps
-across the whole turn, which the bound (curvature at points, no steps) does not see, so the
-bound is weak there rather than the plan slow.
+across the whole turn, which the bound (curvature at points, no steps) does not see; how
+much of its 1.9-4x is the bound's weakness and how much the plan's was not examined.
 """
     write_section("motion_time", "Motion time against a continuous lower bound; chord error used",
                   body, "python benchmarks/bench_motion_time.py")
