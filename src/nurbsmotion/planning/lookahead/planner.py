@@ -34,6 +34,7 @@ from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGI
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
+SHARE_ROUNDS = 3  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
@@ -279,6 +280,12 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
         s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
+        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):  # the share at the planned speeds
+            speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds)
+            bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
+            x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
+            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)
         if not reaches_end:

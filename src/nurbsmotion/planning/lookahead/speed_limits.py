@@ -21,7 +21,8 @@ tangent, c = x_ss the curvature vector and c' = x_sss:
   tangent j_t up to J wherever a_t changes by A; the normal jerk N = |3 c v a_t + c'_n v^3|
   (c'_n: c' less its tangent part) adds to it at right angles, so on curves the raw tangential
   acceleration starts at sqrt(1 - (N/J)^2) of A (tangential_jerk_share, never below
-  MIN_TANGENTIAL_SHARE), N estimated at the point's speed cap and full A.
+  MIN_TANGENTIAL_SHARE), N estimated at full A and the point's speed cap, then (planner,
+  first round) at the speeds the scan planned.
 The acceleration constraints are convex in (x, a_t), so the speeds at which some a_t is
 admissible form an interval [0, x_max]: found by vectorised bisection.
 """
@@ -136,17 +137,21 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
         return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
 
 
-def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: float) -> NDArray[np.float64]:
+def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: float,
+                          speed_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Share of A for the raw tangential acceleration, per grid point, so that the filter's
     tangential jerk (share x J) and the path's normal jerk N = 3 |c| v A + |c'_n| v^3 (v the
-    point's speed cap: feed, chord, jerk terms and A / |c|) add up to at most J:
-    sqrt(1 - (N/J)^2), at least MIN_TANGENTIAL_SHARE; the smallest within the filter's reach
-    (v tau_f + ``reach_mm``) either side. All ones without a jerk limit."""
+    point's speed cap: feed, chord, jerk terms and A / |c|, or ``speed_mm_s`` where lower: the
+    speeds a scan planned) add up to at most J: sqrt(1 - (N/J)^2), at least
+    MIN_TANGENTIAL_SHARE; the smallest within the filter's reach (v tau_f + ``reach_mm``)
+    either side. All ones without a jerk limit."""
     if caps.jerk_mm_s3 is None or tau_f <= 0:
         return np.ones(len(grid))
     kappa = row_norms(grid.curv)
     v = np.minimum(static_speed_limit(grid, caps, np.ones(len(grid))),
                    np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
+    if speed_mm_s is not None:
+        v = np.minimum(v, speed_mm_s)
     along = np.einsum("ij,ij->i", grid.dcurv, grid.tangent)
     normal = 3.0 * kappa * v * caps.accel_mm_s2 + row_norms(grid.dcurv - along[:, None] * grid.tangent) * v**3
     share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
