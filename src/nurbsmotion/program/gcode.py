@@ -52,7 +52,7 @@ G_GROUPS: dict[int, str] = {
     540: "coordinate system", 550: "coordinate system", 560: "coordinate system", 570: "coordinate system",
     580: "coordinate system", 590: "coordinate system", 591: "coordinate system", 592: "coordinate system",
     593: "coordinate system", 610: "path control", 611: "path control", 640: "path control",
-    980: "retract mode", 990: "retract mode", 800: "canned cycle",
+    980: "retract mode", 990: "retract mode", 800: "canned cycle", 960: "spindle mode", 970: "spindle mode",
     40: "non-modal", 100: "non-modal", 280: "non-modal", 281: "non-modal", 300: "non-modal", 301: "non-modal",
     530: "non-modal", 920: "non-modal", 921: "non-modal", 922: "non-modal", 923: "non-modal",
 }
@@ -62,7 +62,7 @@ UNSUPPORTED_G = {
     385: "probing", 410: "cutter radius compensation", 411: "cutter radius compensation",
     420: "cutter radius compensation", 421: "cutter radius compensation", 432: "additional tool length offset",
     520: "local coordinate offset", 730: "canned cycle", 760: "threading cycle", 930: "inverse time feed",
-    950: "feed per revolution", 960: "constant surface speed", 970: "spindle RPM mode", 150: "polar coordinates",
+    950: "feed per revolution", 150: "polar coordinates",
     160: "polar coordinates", 680: "coordinate rotation", 690: "coordinate rotation", 500: "scaling", 510: "scaling",
     **{c: "canned cycle" for c in range(810, 900, 10)},
 }
@@ -169,6 +169,7 @@ class GcodeParser(NurbsReading):
         self.tool_loaded: int | None = self.options.tool_in_spindle
         self.spindle = SpindleDirection.OFF
         self.spindle_rpm = 0.0
+        self.constant_surface_speed = False  # G96: S is a surface speed (G97: rpm)
         self.blocks: list[Block] = []
         self.events: list[ProgramEvent] = []
         self.params = ParameterStore(self.system_parameter)
@@ -497,6 +498,8 @@ class GcodeParser(NurbsReading):
                 self.arc_absolute = code == 901
             elif group == "coordinate system":
                 self.offsets.active = SYSTEM_CODES[code]
+            elif group == "spindle mode":
+                self.constant_surface_speed = code == 960
 
     def apply_feed(self, line: _Line) -> None:
         f = line.claim("F").get("F")
@@ -517,7 +520,8 @@ class GcodeParser(NurbsReading):
         changed = s.value != self.spindle_rpm
         self.spindle_rpm = s.value
         if changed and self.spindle is not SpindleDirection.OFF and not spindle_code_on_line:
-            self.add_event(line, EventKind.SPINDLE, s.text, spindle=self.spindle, spindle_rpm=self.spindle_rpm)
+            self.add_event(line, EventKind.SPINDLE, s.text, spindle=self.spindle, spindle_rpm=self.spindle_rpm,
+                           constant_surface_speed=self.constant_surface_speed)
 
     def tool_number(self, line: _Line, w: Word) -> int:
         if w.value != int(w.value) or w.value < 0:
@@ -551,7 +555,8 @@ class GcodeParser(NurbsReading):
         if m is not None:
             self.spindle = {3: SpindleDirection.CW, 4: SpindleDirection.CCW, 5: SpindleDirection.OFF}[int(m.value)]
             self.add_event(line, EventKind.SPINDLE, m.text, spindle=self.spindle,
-                           spindle_rpm=None if self.spindle is SpindleDirection.OFF else self.spindle_rpm)
+                           spindle_rpm=None if self.spindle is SpindleDirection.OFF else self.spindle_rpm,
+                           constant_surface_speed=self.constant_surface_speed)
         for key in ("coolant", "coolant 2"):
             m = m_codes.get(key)
             if m is not None:

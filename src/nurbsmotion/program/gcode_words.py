@@ -173,6 +173,8 @@ def read_item(line: LexedLine, text: _Text, pos: int, where: str) -> int:
     ch = text.code[pos]
     if ch == "#":
         return read_assignment(line, text, pos, where)
+    if ch in "@^":
+        raise InputError(f"{where}: {text.token_at(pos)}", "unsupported: polar coordinates (LinuxCNC's @ radius and ^ angle)")
     if not ch.isalpha():
         bad = text.token_at(pos)
         raise InputError(f"{where}: {bad}", f"unexpected character {text.body[text.origin[pos]]!r}; expected a word like X10.5")

@@ -105,7 +105,8 @@ class ProgramEvent:
     dwell_s: float | None = None
     tool: int | None = None
     spindle: SpindleDirection | None = None
-    spindle_rpm: float | None = None
+    spindle_rpm: float | None = None  # the S value: rpm, or surface speed (units/min) under G96
+    constant_surface_speed: bool = False  # G96 in effect
     coolant: CoolantMode | None = None
 
     @property

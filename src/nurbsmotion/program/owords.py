@@ -90,9 +90,9 @@ def index_owords(lines: list[LexedLine | None], source: str) -> tuple[Flow, list
                 fail(i, o, f"{o.keyword} outside an {_name(o.label)} loop (while, do or repeat)")
             else:
                 flow.loop_of[i] = loop
-        elif o.keyword == "return":
-            if not any(c.kind == "sub" and c.label == o.label for c in stack):
-                fail(i, o, f"return outside {_name(o.label)} sub")
+        elif o.keyword == "return":  # LinuxCNC returns from the innermost sub whatever the label
+            if not any(c.kind == "sub" for c in stack):
+                fail(i, o, "return outside a sub")
             else:
                 flow.in_sub.add(i)
     for c in stack:
