@@ -60,7 +60,6 @@ GCODE_ERRORS = [
     ("G1 X[1 F100", "t.nc:1: X[1", "expected ']'"),
     ("o100 if [1]\nG0 X1", "t.nc:1: o100if[1]", "o100 if is never closed with o100 endif"),
     ("o100 endif", "t.nc:1: o100endif", "endif does not close an open o100 if"),
-    ("o101 while [1]\no101 endwhile", "t.nc:1", "O-word loop that never ends"),
     ("o<missing> call", "t.nc:1: o<missing>call", "unsupported: O-word call of o<missing>: no o<missing> sub in this file"),
     ("o100 loop", "t.nc:1: o100loop", "unsupported: O-word 'loop'"),
     ("o100 break", "t.nc:1: o100break", "break outside an o100 loop"),

@@ -38,7 +38,6 @@ from nurbsmotion.program.tools import ToolTable
 
 MM_PER_INCH = 25.4
 ZERO_MOVE_MM = 1e-9  # shorter G00/G01 moves are skipped
-MAX_EXECUTED_LINES = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
 MAX_CALL_DEPTH = 100
 
 # G codes as round(10 * value)
@@ -100,6 +99,7 @@ class ReadOptions:
     block_delete: bool = True  # '/' lines are skipped (the switch on)
     optional_stop: bool = True  # M1 pauses like M0 (the switch on)
     max_errors: int = 50
+    max_loop_lines: int = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
 
 
 @dataclass
@@ -222,13 +222,13 @@ class GcodeParser(NurbsReading):
         first = next((ln for ln in lines if not (isinstance(ln, LexedLine) and ln.empty)), None)
         percent_ends = isinstance(first, LexedLine) and first.percent
         seen_percent = False
-        pc, executed = 0, 0
+        pc, executed, looped_to = 0, 0, 0
         while pc < len(lines):
             line = lines[pc]
             executed += 1
-            if executed > len(lines) + MAX_EXECUTED_LINES:
-                number = line.number if isinstance(line, LexedLine) else pc + 1
-                self.record(number, InputError(f"{self.source}:{number}", f"more than {MAX_EXECUTED_LINES:,} lines run in loops and calls: "
+            if executed > len(lines) + self.options.max_loop_lines:
+                number = looped_to + 1  # the line the last backward jump went to: the loop's head
+                self.record(number, InputError(f"{self.source}:{number}", f"more than {self.options.max_loop_lines:,} lines run in loops and calls: "
                                                                         f"an O-word loop that never ends?"))
                 raise _Stop
             if isinstance(line, InputError):
@@ -246,7 +246,10 @@ class GcodeParser(NurbsReading):
                 continue
             try:
                 if line.oword is not None:
-                    pc = self.run_oword(pc, line, flow, frames)
+                    after = self.run_oword(pc, line, flow, frames)
+                    if after <= pc:
+                        looped_to = after - 1 if lines_is_loop_body(after, flow) else after
+                    pc = after
                     continue
                 if self.run_line(line):
                     break
@@ -819,6 +822,12 @@ class GcodeParser(NurbsReading):
             word = word or " ".join(w.text for w in offsets) or (radius.text if radius else "")
             raise InputError(line.at(word), str(err)) from None
         self.add_block(BlockKind.ARC, curve, feed, line)
+
+
+def lines_is_loop_body(index: int, flow: Flow) -> bool:
+    """A backward jump to the first line of a do/repeat body: its head is the line before."""
+    c = flow.constructs.get(index - 1)
+    return c is not None and c.start == index - 1 and c.kind in ("do", "repeat")
 
 
 def err_line(err: InputError) -> int:
