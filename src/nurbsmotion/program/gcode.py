@@ -256,6 +256,7 @@ class GcodeParser(NurbsReading):
             except InputError as err:
                 self.params.discard()
                 self.record(line.number, err)
+                self.recover_position(line)
                 pc = self.after_failed(pc, line, flow)
                 continue
             pc += 1
@@ -264,6 +265,19 @@ class GcodeParser(NurbsReading):
                 self.fail_unfinished_nurbs(None)
             except InputError as err:
                 self.record(err_line(err), err)
+
+    def recover_position(self, lexed: LexedLine) -> None:
+        """After a bad move line, go on from where it was meant to end (fewer follow-on errors)."""
+        if self.nurbs is not None or self.motion not in (RAPID, LINE, ARC_CW, ARC_CCW) or lexed.oword is not None:
+            return
+        line = _Line(self.source, lexed.number, lexed.text)
+        for raw in lexed.words:
+            if raw.letter in "XYZ":
+                try:
+                    line.words[raw.letter] = Word(raw.letter, self.evaluate(raw.expr, ""), raw.text)
+                except InputError:
+                    return
+        self.position = self.target(line, self.position)
 
     @staticmethod
     def after_failed(pc: int, line: LexedLine, flow: Flow) -> int:
