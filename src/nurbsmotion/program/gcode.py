@@ -619,7 +619,7 @@ class GcodeParser(NurbsReading):
         for w in (p, q):
             if w is not None and w.value < 0:
                 raise InputError(line.at(w), f"G64 {w.letter} is a tolerance: >= 0, got {w.value:g}")
-        self.blend_tolerance_mm = p.value * self.mm_per_unit if p is not None else None
+        self.blend_tolerance_mm = p.value * self.mm_per_unit if p is not None and p.value > 0 else None  # P0: no limit
 
     def axis_user(self, line: _Line, groups: dict[str, Word]) -> Word | None:
         """G10/G28/G30/G92/G43.1 take the axis words; a motion G code with them is an error."""
