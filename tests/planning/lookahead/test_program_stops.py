@@ -70,3 +70,13 @@ def test_chunked_plan_holds_the_same_dwell():
     program = parse_gcode("G1 X5 F600\nG4 P0.1\nG1 X10\n", "t.nc")
     rows = np.concatenate([c.position_mm for c in plan_lookahead_chunks(program, LIMITS, chunk_cycles=50)])
     assert [steps for _, steps in rest_stretches(rows)] == [25]
+
+
+def test_a_helical_ramp_is_planned_within_the_chord_error_and_acceleration():
+    """Helical arcs are NURBS like any other curve: the look-ahead's verified figures hold."""
+    limits = PlanLimits(period_s=0.004, chord_error_mm=0.001, max_accel_mm_s2=1000.0)
+    program = parse_gcode("G0 X5 Y0 Z1\nG17 G3 X5 Y0 I-5 J0 Z-2 P3 F1200\nG1 X0 Y0\n", "t.nc")
+    trajectory = plan(program, limits)
+    assert trajectory.notes["verified_max_chord_error_mm"] <= limits.chord_error_mm * (1 + 1e-6)
+    assert trajectory.notes["verified_max_accel_mm_s2"] <= limits.max_accel_mm_s2 * (1 + 1e-6)
+    np.testing.assert_allclose(trajectory.position_mm[-1], [0, 0, -2], atol=1e-9)
