@@ -27,7 +27,7 @@ from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
-from nurbsmotion.program.expressions import ExpressionError
+from nurbsmotion.program.expressions import ExpressionError, Number
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_words import LexedLine, OWord, Word, check_number, lex_line
 from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SourceRef,
@@ -451,6 +451,9 @@ class GcodeParser(NurbsReading):
     def evaluate_words(self, lexed: LexedLine, line: _Line) -> list[Word]:
         words = []
         for raw in lexed.words:
+            if isinstance(raw.expr, Number):  # checked by the lexer
+                words.append(Word(raw.letter, raw.expr.value, raw.text))
+                continue
             value = self.evaluate(raw.expr, line.at(raw.text))
             check_number(value, raw.letter, raw.text[1:], line.where)
             words.append(Word(raw.letter, value, raw.text))

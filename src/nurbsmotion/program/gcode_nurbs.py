@@ -202,7 +202,12 @@ class NurbsReading:
             raise InputError(line.at(line.words["L"]), "L only allowed on the G5.2 line")
         nurbs = self.nurbs
         if point_given:
-            nurbs.add_point(line, self.target(line, nurbs.points[-1], letters), weight, None)
+            point = self.target(line, nurbs.points[-1], letters)
+            if len(nurbs.points) == 1 and np.linalg.norm(point - nurbs.points[0]) <= SAME_POSITION_MM:
+                word = " ".join(line.words[k].text for k in letters if k in line.words)
+                raise InputError(line.at(word), "this point repeats the current position, which G5.2 already takes as its first "
+                                                "control point: the curve would stop dead at its start (zero speed); leave it out")
+            nurbs.add_point(line, point, weight, None)
         elif weight is not None:
             raise InputError(line.at(weight), f"a weight P needs its control point {' '.join(letters)}")
 

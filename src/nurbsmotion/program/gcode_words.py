@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.program.expressions import Expr, ExpressionError, Number, ParamRef, read_parameter, read_value
@@ -84,6 +85,8 @@ class LexedLine:
 
 def strip_comments(text: str, where: str) -> str:
     """Remove ``( ... )`` and ``; ...`` comments; an unclosed ``(`` is an error."""
+    if "(" not in text and ")" not in text:
+        return text.split(";", 1)[0]
     out = []
     i = 0
     while i < len(text):
@@ -111,15 +114,16 @@ class _Text:
 
     def __init__(self, body: str) -> None:
         self.body = body
-        self.origin = [i for i, ch in enumerate(body) if not ch.isspace()]
-        self.code = "".join(body[i] for i in self.origin).lower()
+        self.raw = "".join(body.split())  # as written, spaces removed: same positions as code
+        self.code = self.raw.lower()
+
+    @cached_property
+    def origin(self) -> list[int]:
+        return [i for i, ch in enumerate(self.body) if not ch.isspace()]
 
     def written(self, start: int, end: int) -> str:
         """The text as written between two code positions, spaces removed."""
-        if start >= len(self.origin):
-            return ""
-        stop = self.origin[end - 1] + 1 if end > start else self.origin[start]
-        return "".join(self.body[self.origin[start]:stop].split())
+        return self.raw[start:end] if end > start else ""
 
     def token_at(self, pos: int) -> str:
         """The written text from ``pos`` to the next space (for 'got ...' messages)."""
@@ -184,10 +188,14 @@ def read_item(line: LexedLine, text: _Text, pos: int, where: str) -> int:
         following = text.token_at(start)
         hint = f", got {following[:20]!r}" if following else ""
         raise InputError(f"{where}: {letter}", f"{letter} needs a number{hint}")
-    try:
-        expr, end = read_value(text.code, start)
-    except ExpressionError as err:
-        raise InputError(f"{where}: {letter}{text.token_at(start)}", _value_message(text, start, err)) from None
+    plain = _PLAIN_NUMBER.match(text.code, start)  # the common case, without the expression reader
+    if plain is not None and (plain.end() == len(text.code) or text.code[plain.end()].isalpha()):
+        expr, end = Number(float(plain.group())), plain.end()
+    else:
+        try:
+            expr, end = read_value(text.code, start)
+        except ExpressionError as err:
+            raise InputError(f"{where}: {letter}{text.token_at(start)}", _value_message(text, start, err)) from None
     if end < len(text.code) and (text.code[end].isdigit() or text.code[end] in ".,"):
         bad = re.match(r"[^a-z#\[\]]*", text.code[start:]).group()  # type: ignore[union-attr]
         raw_bad = text.written(start, start + len(bad))
