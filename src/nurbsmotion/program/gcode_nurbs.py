@@ -138,14 +138,14 @@ class NurbsReading:
         q = line.words.get("Q")
         if q is not None and (q.value != int(q.value) or not LINUXCNC_Q[0] <= q.value <= LINUXCNC_Q[1]):
             raise InputError(line.at(q), f"G6.2 Q (LinuxCNC's interpolation method) must be 1, 2 or 3, got {q.value:g}")
-        feed = self.need_feed(line)
-        nurbs = _Nurbs(NURBS_FANUC, order, feed, line)
+        nurbs = _Nurbs(NURBS_FANUC, order, self.feed_mm_s, line)
         first = self.target(line, self.position)
         if np.linalg.norm(first - self.position) > SAME_POSITION_MM:
             word = next(line.words[k] for k in "XYZ" if k in line.words)
             raise InputError(line.at(word), f"the first NURBS control point {_fmt(first)} must be the current position {_fmt(self.position)}")
         nurbs.add_point(line, self.position.copy(), line.words.get("R"), knot)
         self.nurbs = nurbs
+        self.need_feed(line)  # after opening it: without F the rest of the NURBS is still read (one error)
 
     def nurbs_order(self, line: "_Line", word: Word | None, default: int) -> int:
         if word is None:
@@ -193,10 +193,11 @@ class NurbsReading:
         weight = line.words.get("P")
         if self.nurbs is None:
             order = self.nurbs_order(line, line.words.get("L"), default=3)
-            self.nurbs = _Nurbs(NURBS_LINUXCNC, order, self.need_feed(line), line)
+            self.nurbs = _Nurbs(NURBS_LINUXCNC, order, self.feed_mm_s, line)
             first_weight = weight if not point_given else None  # 'G5.2 P1 L3': P weighs the current position
             self.nurbs.add_point(line, self.position.copy(), first_weight, None)
             if not point_given:
+                self.need_feed(line)  # after opening it: without F the rest of the NURBS is still read (one error)
                 return
         elif "L" in line.words:
             raise InputError(line.at(line.words["L"]), "L only allowed on the G5.2 line")
@@ -210,6 +211,8 @@ class NurbsReading:
             nurbs.add_point(line, point, weight, None)
         elif weight is not None:
             raise InputError(line.at(weight), f"a weight P needs its control point {' '.join(letters)}")
+        if explicit and nurbs.first is line:
+            self.need_feed(line)
 
     def linuxcnc_end(self, line: "_Line", explicit: bool) -> None:
         nurbs = self.nurbs
