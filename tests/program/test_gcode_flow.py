@@ -3,7 +3,6 @@ M0/M1 with the optional-stop switch, M2/M30, spindle and coolant commands as pro
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from nurbsmotion.errors import InputError

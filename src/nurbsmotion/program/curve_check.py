@@ -50,7 +50,7 @@ def weight_problems(weights: Sequence[float], n_points: int) -> list[CurveProble
     return problems
 
 
-def decreasing_knot_problems(knots: Sequence[float]) -> list[CurveProblem]:
+def decreasing_knot_problems(knots: Sequence[float] | np.ndarray) -> list[CurveProblem]:
     k = np.asarray(knots, dtype=float)
     return [CurveProblem("knots", f"knot {i + 1} ({k[i]:g}) is less than knot {i} ({k[i - 1]:g}); knots must not decrease", int(i))
             for i in np.flatnonzero(np.diff(k) < 0) + 1]

@@ -10,12 +10,16 @@ G10/G28/G30/G92, motion (G53 applies to it), M0/M1/M2/M30.
 Every problem is reported (up to ``ReadOptions.max_errors``), one line each, in line
 order: a bad line is skipped and reading goes on. Positions in the Program are machine
 coordinates: work offsets, G92 and tool length offsets are applied here.
+
+The reader is one class from parts: this module (driver, words, modal codes, events,
+moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_nurbs
+(G6.2, G5.2/G5.3); gcode_line is the evaluated line they share.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -28,17 +32,18 @@ from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
 from nurbsmotion.program.expressions import ExpressionError, Number
+from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
+from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
-from nurbsmotion.program.gcode_words import LexedLine, OWord, Word, check_number, lex_line
-from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SourceRef,
-                                       SpindleDirection)
+from nurbsmotion.program.gcode_offsets import OffsetCommands
+from nurbsmotion.program.gcode_words import LexedLine, Word, check_number, lex_line
+from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
 from nurbsmotion.program.tools import ToolTable
 
 MM_PER_INCH = 25.4
 ZERO_MOVE_MM = 1e-9  # shorter G00/G01 moves are skipped
-MAX_CALL_DEPTH = 100
 
 # G codes as round(10 * value)
 RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
@@ -102,50 +107,11 @@ class ReadOptions:
     max_loop_lines: int = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
 
 
-@dataclass
-class _Line:
-    """One line being run: where it is, its evaluated words sorted by kind."""
-
-    file: str
-    number: int
-    text: str
-    g_words: list[Word] = field(default_factory=list)
-    m_words: list[Word] = field(default_factory=list)
-    words: dict[str, Word] = field(default_factory=dict)  # the words left for the motion
-    claimed: dict[str, Word] = field(default_factory=dict)  # used by G4, G10, G28, G43, G64, M61, ...
-
-    @property
-    def where(self) -> str:
-        return f"{self.file}:{self.number}"
-
-    def at(self, word: Word | str | None) -> str:
-        return f"{self.where}: {word}" if word else self.where
-
-    @property
-    def source(self) -> SourceRef:
-        return SourceRef(self.file, self.number, self.text.strip())
-
-    def g(self, code: int) -> Word | None:
-        return next((w for w in self.g_words if round(w.value * 10) == code), None)
-
-    def claim(self, letters: str) -> dict[str, Word]:
-        got = {k: self.words.pop(k) for k in letters if k in self.words}
-        self.claimed.update(got)
-        return got
-
-
 class _Stop(Exception):
     """Too many problems: stop reading."""
 
 
-@dataclass
-class _Frame:
-    return_pc: int
-    label: int | str
-    repeats: dict[int, int] = field(default_factory=dict)
-
-
-class GcodeParser(NurbsReading):
+class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
     """Reads one program; ``parse`` returns the Program or raises InputError(s)."""
 
     def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> None:
@@ -270,7 +236,7 @@ class GcodeParser(NurbsReading):
         """After a bad move line, go on from where it was meant to end (fewer follow-on errors)."""
         if self.nurbs is not None or self.motion not in (RAPID, LINE, ARC_CW, ARC_CCW) or lexed.oword is not None:
             return
-        line = _Line(self.source, lexed.number, lexed.text)
+        line = GcodeLine(self.source, lexed.number, lexed.text)
         for raw in lexed.words:
             if raw.letter in "XYZ":
                 try:
@@ -278,110 +244,6 @@ class GcodeParser(NurbsReading):
                 except InputError:
                     return
         self.position = self.target(line, self.position)
-
-    @staticmethod
-    def after_failed(pc: int, line: LexedLine, flow: Flow) -> int:
-        """Where to go on after a bad line: past the construct a bad if/while/repeat opens."""
-        c = flow.constructs.get(pc)
-        if line.oword is not None and c is not None and c.start == pc and c.kind in ("if", "while", "repeat"):
-            return c.end + 1
-        return pc + 1
-
-    # ---- O-words -----------------------------------------------------------------------
-    def condition(self, line: LexedLine, o: OWord) -> float:
-        if len(o.args) != 1:
-            raise InputError(f"{self.source}:{line.number}: {o.text}", f"{o.keyword} needs one [condition]")
-        return self.evaluate(o.args[0], f"{self.source}:{line.number}: {o.text}")
-
-    def run_oword(self, pc: int, line: LexedLine, flow: Flow, frames: list[_Frame]) -> int:
-        """Next line to run after O-word line ``pc``."""
-        o = line.oword
-        assert o is not None
-        c = flow.constructs.get(pc)
-        k = o.keyword
-        if k == "sub":
-            assert c is not None
-            return c.end + 1  # a definition met in the flow is skipped
-        if k in ("endsub", "return"):
-            return self.leave_sub(line, o, frames, pc)
-        if k == "call":
-            return self.call(pc, line, o, flow, frames)
-        if k == "if":
-            assert c is not None
-            if self.condition(line, o):
-                return pc + 1
-            for branch in c.branches:
-                b = self.oword_at(branch)
-                if b.keyword == "else":
-                    return branch + 1
-                if self.condition(self.lexed_at(branch), b):
-                    return branch + 1
-            return c.end + 1
-        if k in ("elseif", "else"):
-            assert c is not None
-            return c.end + 1  # the branch before was taken
-        if k == "endif" or k == "do":
-            return pc + 1
-        if k == "while":
-            assert c is not None
-            if c.kind == "do":  # closes a do: loop back while true
-                return c.start + 1 if self.condition(line, o) else pc + 1
-            return pc + 1 if self.condition(line, o) else c.end + 1
-        if k == "endwhile":
-            assert c is not None
-            return c.start
-        if k == "repeat":
-            assert c is not None
-            if len(o.args) != 1:
-                raise InputError(f"{self.source}:{line.number}: {o.text}", "repeat needs one [count]")
-            count = round(self.evaluate(o.args[0], f"{self.source}:{line.number}: {o.text}"))
-            repeats = frames[-1].repeats if frames else self.top_repeats
-            repeats[pc] = count
-            return pc + 1 if count > 0 else c.end + 1
-        if k == "endrepeat":
-            assert c is not None
-            repeats = frames[-1].repeats if frames else self.top_repeats
-            repeats[c.start] = repeats.get(c.start, 1) - 1
-            return c.start + 1 if repeats[c.start] > 0 else pc + 1
-        loop = flow.loop_of[pc]
-        closing = loop.end
-        if k == "break":
-            return closing + 1
-        return loop.start if loop.kind == "while" else closing  # continue
-
-    def lexed_at(self, index: int) -> LexedLine:
-        line = self.lines[index]
-        assert isinstance(line, LexedLine)
-        return line
-
-    def oword_at(self, index: int) -> OWord:
-        o = self.lexed_at(index).oword
-        assert o is not None
-        return o
-
-    def call(self, pc: int, line: LexedLine, o: OWord, flow: Flow, frames: list[_Frame]) -> int:
-        where = f"{self.source}:{line.number}: {o.text}"
-        sub = flow.subs.get(o.label)
-        if sub is None:
-            raise InputError(where, f"unsupported: O-word call of {o.name}: no {o.name} sub in this file "
-                                    f"(subroutine files are not read)")
-        if len(frames) >= MAX_CALL_DEPTH:
-            raise InputError(where, f"calls nested deeper than {MAX_CALL_DEPTH}: endless recursion?")
-        args = [self.evaluate(a, where) for a in o.args]
-        self.params.enter_call(args)
-        frames.append(_Frame(pc + 1, o.label))
-        return sub.start + 1
-
-    def leave_sub(self, line: LexedLine, o: OWord, frames: list[_Frame], pc: int) -> int:
-        where = f"{self.source}:{line.number}: {o.text}"
-        value = self.evaluate(o.args[0], where) if o.args else None
-        if not frames:
-            raise InputError(where, f"{o.keyword} of {o.name} reached without a call")
-        frame = frames.pop()
-        self.params.leave_call()
-        if value is not None:
-            self.params.set_now("_value", value)
-        return frame.return_pc
 
     def evaluate(self, expr: object, where: str) -> float:
         try:
@@ -416,7 +278,7 @@ class GcodeParser(NurbsReading):
     # ---- one line ----------------------------------------------------------------------
     def run_line(self, lexed: LexedLine) -> bool:
         """Interpret one line in RS274NGC order; True when it ends the program (M02/M30)."""
-        line = _Line(self.source, lexed.number, lexed.text)
+        line = GcodeLine(self.source, lexed.number, lexed.text)
         self.sort_words(line, self.evaluate_words(lexed, line))
         for a in lexed.assignments:
             where = line.at(a.text)
@@ -448,7 +310,7 @@ class GcodeParser(NurbsReading):
         self.params.commit()
         return self.apply_stop(line, m_codes)
 
-    def evaluate_words(self, lexed: LexedLine, line: _Line) -> list[Word]:
+    def evaluate_words(self, lexed: LexedLine, line: GcodeLine) -> list[Word]:
         words = []
         for raw in lexed.words:
             if isinstance(raw.expr, Number):  # checked by the lexer
@@ -459,7 +321,7 @@ class GcodeParser(NurbsReading):
             words.append(Word(raw.letter, value, raw.text))
         return words
 
-    def sort_words(self, line: _Line, words: list[Word]) -> None:
+    def sort_words(self, line: GcodeLine, words: list[Word]) -> None:
         for w in words:
             if w.letter == "G":
                 line.g_words.append(w)
@@ -476,7 +338,7 @@ class GcodeParser(NurbsReading):
             else:
                 line.words[w.letter] = w
 
-    def group_g_codes(self, line: _Line) -> dict[str, Word]:
+    def group_g_codes(self, line: GcodeLine) -> dict[str, Word]:
         seen: dict[str, Word] = {}
         for w in line.g_words:
             code = round(w.value * 10)
@@ -489,7 +351,7 @@ class GcodeParser(NurbsReading):
             seen[group] = w
         return seen
 
-    def group_m_codes(self, line: _Line) -> dict[str, Word]:
+    def group_m_codes(self, line: GcodeLine) -> dict[str, Word]:
         seen: dict[str, Word] = {}
         for w in line.m_words:
             code = int(w.value) if w.value == int(w.value) else -1
@@ -502,7 +364,7 @@ class GcodeParser(NurbsReading):
         return seen
 
     # ---- modal codes ------------------------------------------------------------------
-    def apply_modes(self, line: _Line, groups: dict[str, Word]) -> None:
+    def apply_modes(self, line: GcodeLine, groups: dict[str, Word]) -> None:
         """Plane, units, distance modes, coordinate system (they apply before F and the move)."""
         for group, w in groups.items():
             code = round(w.value * 10)
@@ -521,7 +383,7 @@ class GcodeParser(NurbsReading):
             elif group == "spindle mode":
                 self.constant_surface_speed = code == 960
 
-    def apply_feed(self, line: _Line) -> None:
+    def apply_feed(self, line: GcodeLine) -> None:
         f = line.claim("F").get("F")
         if f is None:
             return
@@ -531,7 +393,7 @@ class GcodeParser(NurbsReading):
             raise InputError(line.at(f), "F inside a NURBS definition: give the feed on its first block")
         self.feed_mm_s = f.value * self.mm_per_unit / 60.0
 
-    def apply_spindle_speed(self, line: _Line, spindle_code_on_line: bool) -> None:
+    def apply_spindle_speed(self, line: GcodeLine, spindle_code_on_line: bool) -> None:
         s = line.claim("S").get("S")
         if s is None:
             return
@@ -543,7 +405,7 @@ class GcodeParser(NurbsReading):
             self.add_event(line, EventKind.SPINDLE, s.text, spindle=self.spindle, spindle_rpm=self.spindle_rpm,
                            constant_surface_speed=self.constant_surface_speed)
 
-    def tool_number(self, line: _Line, w: Word) -> int:
+    def tool_number(self, line: GcodeLine, w: Word) -> int:
         if w.value != int(w.value) or w.value < 0:
             raise InputError(line.at(w), f"a tool number is a whole number >= 0, got {w.value:g}")
         number = int(w.value)
@@ -552,7 +414,7 @@ class GcodeParser(NurbsReading):
             raise InputError(line.at(w), f"tool {number} is not in the tool table {table.source}")
         return number
 
-    def apply_tool(self, line: _Line, m_codes: dict[str, Word]) -> None:
+    def apply_tool(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
         t = line.claim("T").get("T")
         if t is not None:
             self.tool_selected = self.tool_number(line, t)
@@ -570,7 +432,7 @@ class GcodeParser(NurbsReading):
             self.add_event(line, EventKind.TOOL_CHANGE, m.text, tool=tool)
         self.tool_loaded = tool
 
-    def apply_spindle_and_coolant(self, line: _Line, m_codes: dict[str, Word]) -> None:
+    def apply_spindle_and_coolant(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
         m = m_codes.get("spindle")
         if m is not None:
             self.spindle = {3: SpindleDirection.CW, 4: SpindleDirection.CCW, 5: SpindleDirection.OFF}[int(m.value)]
@@ -583,7 +445,7 @@ class GcodeParser(NurbsReading):
                 mode = {7: CoolantMode.MIST, 8: CoolantMode.FLOOD, 9: CoolantMode.OFF}[int(m.value)]
                 self.add_event(line, EventKind.COOLANT, m.text, coolant=mode)
 
-    def apply_dwell(self, line: _Line, groups: dict[str, Word]) -> None:
+    def apply_dwell(self, line: GcodeLine, groups: dict[str, Word]) -> None:
         g = groups.get("non-modal")
         if g is None or round(g.value * 10) != 40:
             return
@@ -594,7 +456,7 @@ class GcodeParser(NurbsReading):
             raise InputError(line.at(p), f"dwell time must be >= 0 s, got {p.value:g}")
         self.add_event(line, EventKind.DWELL, g.text, dwell_s=p.value)
 
-    def apply_tool_length(self, line: _Line, g: Word | None) -> None:
+    def apply_tool_length(self, line: GcodeLine, g: Word | None) -> None:
         if "H" in line.words and (g is None or round(g.value * 10) != 430):
             raise InputError(line.at(line.words["H"]), "H without G43 (tool length offset from the tool table)")
         if g is None:
@@ -610,7 +472,7 @@ class GcodeParser(NurbsReading):
                 raise InputError(line.at(h or g), f"G43 needs a tool table for tool {number} (none given)")
             self.offsets.tool_length_mm = table.length_mm(number) if table is not None else 0.0
 
-    def apply_path_control(self, line: _Line, g: Word | None) -> None:
+    def apply_path_control(self, line: GcodeLine, g: Word | None) -> None:
         if g is None:
             return
         code = round(g.value * 10)
@@ -624,7 +486,7 @@ class GcodeParser(NurbsReading):
                 raise InputError(line.at(w), f"G64 {w.letter} is a tolerance: >= 0, got {w.value:g}")
         self.blend_tolerance_mm = p.value * self.mm_per_unit if p is not None and p.value > 0 else None  # P0: no limit
 
-    def axis_user(self, line: _Line, groups: dict[str, Word]) -> Word | None:
+    def axis_user(self, line: GcodeLine, groups: dict[str, Word]) -> Word | None:
         """G10/G28/G30/G92/G43.1 take the axis words; a motion G code with them is an error."""
         users = [w for w in (groups.get("non-modal"), groups.get("tool length")) if w is not None and round(w.value * 10) in AXIS_USERS]
         if not users:
@@ -635,7 +497,7 @@ class GcodeParser(NurbsReading):
             raise InputError(line.at(motion), f"{motion.text} and {user.text} in one block: both use the axis words")
         return user
 
-    def check_leftover_words(self, line: _Line, axis_user: bool) -> None:
+    def check_leftover_words(self, line: GcodeLine, axis_user: bool) -> None:
         """Words no code of this block uses (the motion's are checked by move)."""
         if axis_user:
             return
@@ -647,7 +509,7 @@ class GcodeParser(NurbsReading):
                     raise InputError(line.at(w), "no motion mode: give G00, G01, G02, G03, G06.2 or G5.2 first")
                 raise InputError(line.at(w), f"{w.letter} is not used by any code of this block")
 
-    def apply_stop(self, line: _Line, m_codes: dict[str, Word]) -> bool:
+    def apply_stop(self, line: GcodeLine, m_codes: dict[str, Word]) -> bool:
         m = m_codes.get("stopping")
         if m is None:
             return False
@@ -658,7 +520,7 @@ class GcodeParser(NurbsReading):
             self.add_event(line, EventKind.PAUSE, m.text)
         return False
 
-    def add_event(self, line: _Line, kind: EventKind, code: str, **values: object) -> None:
+    def add_event(self, line: GcodeLine, kind: EventKind, code: str, **values: object) -> None:
         if self.nurbs is not None:
             raise InputError(line.at(code), f"{code} inside the NURBS of line {self.nurbs.first.number}: "
                                             f"finish the NURBS first")
@@ -667,82 +529,10 @@ class GcodeParser(NurbsReading):
         if event.stops_motion and self.blocks and not self.blocks[-1].exact_stop:
             self.blocks[-1] = dataclasses.replace(self.blocks[-1], exact_stop=True)
 
-    # ---- G10 G28 G30 G92 G43.1 (axis words that are not a move) ----------------------
-    def axis_values_mm(self, line: _Line) -> dict[int, float]:
-        words = line.claim("XYZ")
-        return {"XYZ".index(k): w.value * self.mm_per_unit for k, w in words.items()}
-
-    def run_axis_user(self, line: _Line, g: Word) -> None:
-        code = round(g.value * 10)
-        if code == 100:
-            self.set_work_offset(line, g)
-        elif code in (280, 300):
-            self.go_home(line, g, self.offsets.g28 if code == 280 else self.offsets.g30)
-        elif code == 920:
-            values = self.axis_values_mm(line)
-            if not values:
-                raise InputError(line.at(g), "G92 needs at least one axis word: the current position's new coordinates")
-            base = self.offsets.work[self.offsets.active - 1] + np.array([0.0, 0.0, self.offsets.tool_length_mm])
-            if not self.offsets.g92_applied:
-                self.offsets.g92 = np.zeros(3)
-            for axis, value in values.items():
-                self.offsets.g92[axis] = self.position[axis] - base[axis] - value
-            self.offsets.g92_applied = True
-        elif code == 431:
-            values = self.axis_values_mm(line)
-            if set(values) != {2}:
-                raise InputError(line.at(g), "G43.1 takes one Z word: the tool length offset (X and Y offsets: unsupported)")
-            self.offsets.tool_length_mm = values[2]
-        self.check_unused(line, g)
-
-    def check_unused(self, line: _Line, g: Word) -> None:
-        leftover = [w for k, w in line.words.items() if k != "F"]
-        if leftover:
-            raise InputError(line.at(leftover[0]), f"{leftover[0].letter} not allowed with {g.text}")
-
-    def set_work_offset(self, line: _Line, g: Word) -> None:
-        words = line.claim("LPR")
-        l, p, r = words.get("L"), words.get("P"), words.get("R")
-        if l is None or l.value not in (2, 20):
-            raise InputError(line.at(l or g), "unsupported: G10 " + (f"L{l.value:g}" if l else "without L")
-                             + " (only L2 and L20 set work offsets; the tool table is edited outside the program)")
-        if p is None or p.value != int(p.value) or not 0 <= p.value <= 9:
-            raise InputError(line.at(p or g), "G10 L2/L20 needs P0 (the active system) or P1..P9 (G54..G59.3)")
-        if r is not None and r.value != 0:
-            raise InputError(line.at(r), "unsupported: coordinate system rotation (G10 R)")
-        system = int(p.value) or self.offsets.active
-        offset = self.offsets.work[system - 1].copy()
-        others = (self.offsets.g92 if self.offsets.g92_applied else 0.0) + np.array([0.0, 0.0, self.offsets.tool_length_mm])
-        for axis, value in self.axis_values_mm(line).items():
-            offset[axis] = value if l.value == 2 else self.position[axis] - others[axis] - value
-        self.offsets.work[system - 1] = offset
-
-    def go_home(self, line: _Line, g: Word, stored: NDArray[np.float64]) -> None:
-        """G28/G30: rapid through the programmed point (if any) to the stored position of those axes."""
-        if self.nurbs is not None:
-            raise InputError(line.at(g), f"{g.text} inside the NURBS of line {self.nurbs.first.number}")
-        words = {k: line.words[k] for k in "XYZ" if k in line.words}
-        home = stored.copy()
-        if words:
-            via = self.target(line, self.position)
-            line.claim("XYZ")
-            self.add_straight(line, via, rapid=True)
-            home = self.position.copy()
-            for k in words:
-                home["XYZ".index(k)] = stored["XYZ".index(k)]
-        self.add_straight(line, home, rapid=True)
-
     # ---- moves ------------------------------------------------------------------------
-    def move_with_g53(self, line: _Line, motion_on_line: bool, non_modal: Word | None) -> None:
+    def move_with_g53(self, line: GcodeLine, motion_on_line: bool, non_modal: Word | None) -> None:
         code = round(non_modal.value * 10) if non_modal is not None else None
-        if code in (281, 301):
-            (self.offsets.g28 if code == 281 else self.offsets.g30)[:] = self.position
-        elif code == 921:
-            self.offsets.g92, self.offsets.g92_applied = np.zeros(3), False
-        elif code == 922:
-            self.offsets.g92_applied = False
-        elif code == 923:
-            self.offsets.g92_applied = True
+        self.apply_stored_offsets(code)
         if code != 530:
             self.move(line, motion_on_line)
             return
@@ -757,7 +547,7 @@ class GcodeParser(NurbsReading):
         finally:
             self.offsets.machine_mode = False
 
-    def move(self, line: _Line, motion_on_line: bool) -> None:
+    def move(self, line: GcodeLine, motion_on_line: bool) -> None:
         axis_words = {k: w for k, w in line.words.items() if k != "F"}
         if self.motion is None:
             return
@@ -772,12 +562,12 @@ class GcodeParser(NurbsReading):
                    NURBS_LINUXCNC_END: self.linuxcnc_end}[self.motion]
         handler(line, motion_on_line)
 
-    def need_feed(self, line: _Line) -> float:
+    def need_feed(self, line: GcodeLine) -> float:
         if self.feed_mm_s is None:
             raise InputError(line.where, f"no feed rate: F missing for {g_name(self.motion or 0)}")
         return self.feed_mm_s
 
-    def target(self, line: _Line, base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]:
+    def target(self, line: GcodeLine, base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]:
         """Programmed point in machine mm: G90 absolute (+ offsets) or G91 relative to ``base``."""
         point = base.copy()
         offset = self.offsets.total()
@@ -788,20 +578,20 @@ class GcodeParser(NurbsReading):
                 point[axis] = value + offset[axis] if self.absolute else base[axis] + value
         return point
 
-    def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: _Line) -> None:
+    def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: GcodeLine) -> None:
         self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm))
         self.position = curve.end_point
 
-    def add_straight(self, line: _Line, end: NDArray[np.float64], rapid: bool) -> None:
+    def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
         if np.linalg.norm(end - self.position) <= ZERO_MOVE_MM:
             return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 
-    def straight(self, line: _Line, _explicit: bool) -> None:
+    def straight(self, line: GcodeLine, _explicit: bool) -> None:
         self.add_straight(line, self.target(line, self.position), rapid=self.motion == RAPID)
 
-    def arc(self, line: _Line, _explicit: bool) -> None:
+    def arc(self, line: GcodeLine, _explicit: bool) -> None:
         feed = self.need_feed(line)
         plane = PLANES[self.plane]
         clockwise = self.motion == ARC_CW
@@ -839,12 +629,6 @@ class GcodeParser(NurbsReading):
             word = word or " ".join(w.text for w in offsets) or (radius.text if radius else "")
             raise InputError(line.at(word), str(err)) from None
         self.add_block(BlockKind.ARC, curve, feed, line)
-
-
-def lines_is_loop_body(index: int, flow: Flow) -> bool:
-    """A backward jump to the first line of a do/repeat body: its head is the line before."""
-    c = flow.constructs.get(index - 1)
-    return c is not None and c.start == index - 1 and c.kind in ("do", "repeat")
 
 
 def err_line(err: InputError) -> int:

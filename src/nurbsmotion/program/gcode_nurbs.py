@@ -18,7 +18,7 @@ Orders 2 to 10 (degree 1 to 9) as LinuxCNC allows.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,7 +31,7 @@ from nurbsmotion.program.gcode_words import Word
 from nurbsmotion.program.model import BlockKind
 
 if TYPE_CHECKING:
-    from nurbsmotion.program.gcode import _Line
+    from nurbsmotion.program.gcode_line import GcodeLine as _Line
 
 NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END = 62, 52, 53
 NURBS_ORDERS = (2, 10)  # G06.2 P and G5.2 L: order = degree + 1
@@ -85,14 +85,14 @@ class NurbsReading:
     motion: int | None
     plane: int
     absolute: bool
+    feed_mm_s: float | None
+    # provided by GcodeParser
+    target: Callable[..., NDArray[np.float64]]
+    need_feed: Callable[["_Line"], float]
+    add_block: Callable[..., None]
 
     def init_nurbs(self) -> None:
         self.nurbs: _Nurbs | None = None
-
-    # provided by GcodeParser
-    def target(self, line: "_Line", base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]: ...
-    def need_feed(self, line: "_Line") -> float: ...
-    def add_block(self, kind: BlockKind, curve: Any, feed_mm_s: float | None, line: "_Line") -> None: ...
 
     def change_motion(self, line: "_Line", motion: int) -> None:
         """A motion G code on this line: ends G06.2 mode (unless it is G6.2 again, LinuxCNC's

@@ -190,7 +190,8 @@ def read_item(line: LexedLine, text: _Text, pos: int, where: str) -> int:
         raise InputError(f"{where}: {letter}", f"{letter} needs a number{hint}")
     plain = _PLAIN_NUMBER.match(text.code, start)  # the common case, without the expression reader
     if plain is not None and (plain.end() == len(text.code) or text.code[plain.end()].isalpha()):
-        expr, end = Number(float(plain.group())), plain.end()
+        expr: Expr = Number(float(plain.group()))
+        end = plain.end()
     else:
         try:
             expr, end = read_value(text.code, start)
