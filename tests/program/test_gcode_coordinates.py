@@ -94,3 +94,22 @@ def test_g10_rotation_and_tool_table_edits_are_refused_precisely():
         parse_gcode("G10 L2 P1 R45", "t.nc")
     with pytest.raises(InputError, match=r"unsupported: G10 L10"):
         parse_gcode("G10 L10 P1 Z0", "t.nc")
+
+
+def test_a_state_survives_a_round_trip_through_json():
+    import json
+    state = CoordinateState(active_system=8, g92_mm=(1.0, 2.0, 3.0), g92_applied=True,
+                            g28_mm=(0.0, 0.0, -5.0)).with_work_offset(3, (10.0, -2.5, 0.0))
+    assert CoordinateState.from_dict(json.loads(json.dumps(state.as_dict()))) == state
+    assert CoordinateState.from_dict({}) == CoordinateState()
+
+
+@pytest.mark.parametrize("data,where", [
+    ({"active": "G60"}, "offsets.active"), ({"g92_mm": [1, 2]}, "offsets.g92_mm"),
+    ({"work_offsets_mm": {"G54": [0, "x", 0]}}, "offsets.work_offsets_mm.G54"),
+    ({"colour": 1}, "offsets.colour"), ({"g92_applied": 1}, "offsets.g92_applied"), ([], "offsets"),
+])
+def test_a_bad_persisted_state_names_its_field(data, where):
+    with pytest.raises(InputError) as info:
+        CoordinateState.from_dict(data)
+    assert info.value.where == where

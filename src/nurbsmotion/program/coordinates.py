@@ -5,7 +5,8 @@ LinuxCNC "Coordinate Systems" and "G-codes" G10 L2/L20, G28, G30, G53, G54-G59.3
     machine = program + work_offset[active] + (g92 if g92_applied) + tool length (Z)
 
 All values are machine millimetres. ``CoordinateState`` is what a reader starts from and
-what a Program ends with: the service persists it between jobs and restarts (LinuxCNC
+what a Program ends with: the service persists it between jobs and restarts (``as_dict`` /
+``from_dict``, JSON-ready; LinuxCNC
 keeps the same values in its parameter file, #5161-#5390). ``parameter`` maps the LinuxCNC
 parameter numbers onto it so programs can read them (``#5221`` = G54 X offset, ...).
 """
@@ -16,6 +17,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import NDArray
+
+from nurbsmotion.errors import InputError
 
 SYSTEM_NAMES = ("G54", "G55", "G56", "G57", "G58", "G59", "G59.1", "G59.2", "G59.3")
 Triple = tuple[float, float, float]
@@ -56,6 +59,35 @@ class CoordinateState:
                 "work_offsets_mm": {name: list(v) for name, v in zip(SYSTEM_NAMES, self.work_offsets_mm)},
                 "g92_mm": list(self.g92_mm), "g92_applied": self.g92_applied,
                 "g28_mm": list(self.g28_mm), "g30_mm": list(self.g30_mm)}
+
+    @classmethod
+    def from_dict(cls, data: object, where: str = "offsets") -> "CoordinateState":
+        """The inverse of ``as_dict`` (a persisted state); InputError naming the bad field."""
+        if not isinstance(data, dict):
+            raise InputError(where, "must be a mapping as written by CoordinateState.as_dict")
+
+        def triple(value: object, field_name: str) -> Triple:
+            ok = isinstance(value, (list, tuple)) and len(value) == 3 and all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in value)
+            if not ok:
+                raise InputError(f"{where}.{field_name}", f"must be 3 finite numbers [x, y, z] in mm, got {value!r}")
+            return _triple(value)  # type: ignore[arg-type]
+
+        unknown = set(data) - {"active", "work_offsets_mm", "g92_mm", "g92_applied", "g28_mm", "g30_mm"}
+        if unknown:
+            raise InputError(f"{where}.{sorted(unknown)[0]}", "unknown key")
+        active = data.get("active", "G54")
+        if active not in SYSTEM_NAMES:
+            raise InputError(f"{where}.active", f"must be one of {' '.join(SYSTEM_NAMES)}, got {active!r}")
+        work = data.get("work_offsets_mm", {})
+        if not isinstance(work, dict) or set(work) - set(SYSTEM_NAMES):
+            raise InputError(f"{where}.work_offsets_mm", f"must map {' '.join(SYSTEM_NAMES)} to [x, y, z]")
+        applied = data.get("g92_applied", False)
+        if not isinstance(applied, bool):
+            raise InputError(f"{where}.g92_applied", f"must be true or false, got {applied!r}")
+        return cls(tuple(triple(work.get(n, ZERO), f"work_offsets_mm.{n}") for n in SYSTEM_NAMES),
+                   SYSTEM_NAMES.index(active) + 1, triple(data.get("g92_mm", ZERO), "g92_mm"), applied,
+                   triple(data.get("g28_mm", ZERO), "g28_mm"), triple(data.get("g30_mm", ZERO), "g30_mm"))
 
     def with_work_offset(self, system: int, offset_mm: Triple) -> "CoordinateState":
         offsets = list(self.work_offsets_mm)
