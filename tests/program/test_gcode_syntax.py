@@ -159,3 +159,11 @@ def test_an_endless_loop_is_one_error_on_its_line():
         parse_gcode("#1=0\no1 while [#1 GE 0]\n#1=[#1+1]\no1 endwhile\n", "t.nc", options=ReadOptions(max_loop_lines=10_000))
     with pytest.raises(InputError, match=r"^t.nc:2: more than 10,000 lines"):
         parse_gcode("G1 F100\no1 repeat [100000]\nG91 X1\no1 endrepeat\n", "t.nc", options=ReadOptions(max_loop_lines=10_000))
+
+
+def test_a_broken_o_word_line_is_named_with_the_structure_it_breaks():
+    with pytest.raises(InputError) as info:
+        parse_gcode("#1=1\no100 if [#1 GT\nG1 X1 F100\no100 endif\n", "t.nc")
+    lines = str(info.value).splitlines()
+    assert lines[0] == "t.nc:2: o100if[#1GT: a number is missing"
+    assert lines[1] == "t.nc:4: o100endif: endif does not close an open o100 if"

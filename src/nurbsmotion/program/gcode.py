@@ -148,9 +148,12 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
     def parse(self, text: str) -> Program:
         self.lines = lines = self.lex(text.split("\n"))
         flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
-        for err in structure:
-            self.record(err_line(err), err)
         try:
+            for err in structure:  # the program cannot run: say so, with every unreadable line
+                self.record(err_line(err), err)
+            for number, line in enumerate(lines, start=1):
+                if structure and isinstance(line, InputError):
+                    self.record(number, line)
             if not structure:
                 self.run(lines, flow)
         except _Stop:
