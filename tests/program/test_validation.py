@@ -35,6 +35,7 @@ GCODE_ERRORS = [
     ("G43 H1", "t.nc:1: H1", "G43 needs a tool table for tool 1"),
     ("H1", "t.nc:1: H1", "H without G43"),
     ("G4", "t.nc:1: G4", "G4 needs P"),
+    ("G1 X0 F100\nG04 X1.5", "t.nc:2: X1.5", "G4 takes P, the dwell in seconds"),
     ("G4 P-1", "t.nc:1: P-1", "dwell time must be >= 0"),
     ("G10 L1 P1 Z5", "t.nc:1: L1", "unsupported: G10 L1"),
     ("G10 L2 P12 X1", "t.nc:1: P12", "P1..P9"),

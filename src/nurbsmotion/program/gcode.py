@@ -452,6 +452,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
         g = groups.get("non-modal")
         if g is None or round(g.value * 10) != 40:
             return
+        if "X" in line.words:  # Fanuc's 'G04 X1.5': would be a move of the modal motion here
+            raise InputError(line.at(line.words["X"]), "G4 takes P, the dwell in seconds (Fanuc's G04 X is not read)")
         p = line.claim("P").get("P")
         if p is None:
             raise InputError(line.at(g), "G4 needs P: the dwell time in seconds")
