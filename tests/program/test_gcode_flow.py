@@ -84,6 +84,13 @@ def test_g4_dwell_is_an_exact_event_after_an_exact_stop():
     assert [b.exact_stop for b in program.blocks] == [True, True, False]
 
 
+def test_g4_with_a_motion_on_its_line_dwells_then_moves():
+    """LinuxCNC's nc_files/skeleton.ngc: 'G04 P.001 G0 X1.0 Y1.0' (dwell, then the rapid)."""
+    program = read("G1 X0.5 F100\nG04 P.001 G0 X1.0 Y1.0")
+    assert [(e.kind, e.before_block) for e in program.events] == [(EventKind.DWELL, 1)]
+    assert program.blocks[1].end.tolist() == [1.0, 1.0, 0.0] and program.blocks[0].exact_stop
+
+
 def test_m0_pauses_m1_pauses_only_with_the_optional_stop_switch():
     text = "G1 X1 F100\nM0\nG1 X2\nM1\nG1 X3\n"
     assert [(e.code, e.before_block) for e in read(text).events] == [("M0", 1), ("M1", 2)]

@@ -452,7 +452,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
         g = groups.get("non-modal")
         if g is None or round(g.value * 10) != 40:
             return
-        if "X" in line.words:  # Fanuc's 'G04 X1.5': would be a move of the modal motion here
+        if "X" in line.words and "motion" not in groups:  # Fanuc's 'G04 X1.5': would move the modal motion here
             raise InputError(line.at(line.words["X"]), "G4 takes P, the dwell in seconds (Fanuc's G04 X is not read)")
         p = line.claim("P").get("P")
         if p is None:
