@@ -3,6 +3,7 @@ M0/M1 with the optional-stop switch, M2/M30, spindle and coolant commands as pro
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from nurbsmotion.errors import InputError
@@ -130,3 +131,24 @@ def test_summary_counts_events():
     s = summarize(read("T1 M6\nS100 M3\nG1 X1 F100\nG4 P2\nM0\nM30", tool_table=TOOLS))
     assert s.events_by_kind == {"tool_change": 1, "spindle": 1, "dwell": 1, "pause": 1}
     assert s.dwell_s == 2 and s.tools == (1,) and s.requires_spindle and s.exact_stops == 1
+
+
+def test_m70_m72_save_and_restore_the_modal_state():
+    text = "G21 G90 F100\nM70\nG20 G91 F10\nG1 X1\nM72\nG1 X1\n"
+    program = read(text)
+    np.testing.assert_allclose([b.end[0] for b in program.blocks], [25.4, 1.0])
+    assert [b.feed_mm_s for b in program.blocks] == pytest.approx([25.4 * 10 / 60, 100 / 60])
+    with pytest.raises(InputError, match="M72 without a state saved by M70"):
+        read("M70\nM71\nM72")
+
+
+def test_m73_restores_the_callers_state_when_the_sub_returns():
+    """As LinuxCNC's nc_files/m73-demo.ngc: the sub switches to G20 G91 and the spindle."""
+    text = ("o<sub> sub\nM73\nG20 G91 F5 S300 M3\nG1 X1\no<sub> endsub\n"
+            "G21 G90 F100 S1000 M3\no<sub> call\nG1 X10\n")
+    program = read(text)
+    np.testing.assert_allclose([b.end[0] for b in program.blocks], [25.4, 10.0])
+    assert program.blocks[1].feed_mm_s == pytest.approx(100 / 60)
+    assert [(e.spindle_rpm, e.source.line) for e in program.events] == [(1000, 6), (300, 3), (1000, 5)]
+    with pytest.raises(InputError, match="M73 outside a subroutine"):
+        read("M73")

@@ -34,6 +34,7 @@ from nurbsmotion.program.coordinates import CoordinateState, Offsets
 from nurbsmotion.program.expressions import ExpressionError, Number
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
+from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_offsets import OffsetCommands
 from nurbsmotion.program.gcode_words import LexedLine, Word, check_number, lex_line
@@ -73,6 +74,7 @@ UNSUPPORTED_G = {
 SYSTEM_CODES = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
 AXIS_USERS = {100: "G10", 280: "G28", 300: "G30", 920: "G92", 431: "G43.1"}  # use the block's axis words
 M_GROUPS = {0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping", 6: "tool change", 61: "tool change",
+            70: "modal state", 71: "modal state", 72: "modal state", 73: "modal state",
             3: "spindle", 4: "spindle", 5: "spindle", 7: "coolant", 8: "coolant", 9: "coolant"}
 END_CODES = {2, 30}
 ROTARY_LETTERS = "ABCUVW"
@@ -111,7 +113,7 @@ class _Stop(Exception):
     """Too many problems: stop reading."""
 
 
-class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
+class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands):
     """Reads one program; ``parse`` returns the Program or raises InputError(s)."""
 
     def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> None:
@@ -136,6 +138,9 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
         self.spindle = SpindleDirection.OFF
         self.spindle_rpm = 0.0
         self.constant_surface_speed = False  # G96: S is a surface speed (G97: rpm)
+        self.coolant: set[CoolantMode] = set()
+        self.saved_states: list[ModalSnapshot | None] = [None]  # M70 per call level
+        self.frames: list[_Frame] = []
         self.blocks: list[Block] = []
         self.events: list[ProgramEvent] = []
         self.params = ParameterStore(self.system_parameter)
@@ -187,7 +192,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
 
     def run(self, lines: list[LexedLine | InputError], flow: Flow) -> None:
         """Run the lines in program order (O-word jumps and calls); stop at M2/M30 or a closing '%'."""
-        frames: list[_Frame] = []
+        frames = self.frames
         first = next((ln for ln in lines if not (isinstance(ln, LexedLine) and ln.empty)), None)
         percent_ends = isinstance(first, LexedLine) and first.percent
         seen_percent = False
@@ -297,6 +302,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
         self.apply_feed(line)
         self.apply_spindle_speed(line, "spindle" in m_codes)
         self.apply_tool(line, m_codes)
+        self.apply_modal_state(line, m_codes.get("modal state"), self.frames[-1].autorestore if self.frames else [None])
         self.apply_spindle_and_coolant(line, m_codes)
         self.apply_dwell(line, groups)
         self.apply_tool_length(line, groups.get("tool length"))
@@ -446,6 +452,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands):
             m = m_codes.get(key)
             if m is not None:
                 mode = {7: CoolantMode.MIST, 8: CoolantMode.FLOOD, 9: CoolantMode.OFF}[int(m.value)]
+                self.coolant = set() if mode is CoolantMode.OFF else self.coolant | {mode}
                 self.add_event(line, EventKind.COOLANT, m.text, coolant=mode)
 
     def apply_dwell(self, line: GcodeLine, groups: dict[str, Word]) -> None:

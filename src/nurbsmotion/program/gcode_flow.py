@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from nurbsmotion.errors import InputError
+from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_words import LexedLine, OWord
 from nurbsmotion.program.owords import Flow
 from nurbsmotion.program.parameters import ParameterStore
@@ -22,6 +23,7 @@ class _Frame:
     return_pc: int
     label: int | str
     repeats: dict[int, int] = field(default_factory=dict)
+    autorestore: list = field(default_factory=lambda: [None])  # M73's saved state, restored on return
 
 
 
@@ -40,7 +42,10 @@ class OwordRunning:
     params: ParameterStore
     top_repeats: dict[int, int]
 
-    evaluate: Callable[[object, str], float]  # provided by GcodeParser
+    saved_states: list  # M70 states per call level (gcode_modal)
+    # provided by GcodeParser
+    evaluate: Callable[[object, str], float]
+    restore: Callable[..., None]
 
     @staticmethod
     def after_failed(pc: int, line: LexedLine, flow: Flow) -> int:
@@ -131,6 +136,7 @@ class OwordRunning:
             raise InputError(where, f"calls nested deeper than {MAX_CALL_DEPTH}: endless recursion?")
         args = [self.evaluate(a, where) for a in o.args]
         self.params.enter_call(args)
+        self.saved_states.append(None)
         frames.append(_Frame(pc + 1, o.label))
         return sub.start + 1
 
@@ -141,6 +147,9 @@ class OwordRunning:
             raise InputError(where, f"{o.keyword} of {o.name} reached without a call")
         frame = frames.pop()
         self.params.leave_call()
+        self.saved_states.pop()
+        if frame.autorestore[0] is not None:
+            self.restore(GcodeLine(self.source, line.number, line.text), "M73", frame.autorestore[0])
         if value is not None:
             self.params.set_now("_value", value)
         return frame.return_pc
