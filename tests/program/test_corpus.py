@@ -4,9 +4,9 @@ is either accepted and planned, or refused with `file:line:` lines that name a r
 The programs are read as a machine with a tool table would read them (tools 1-99; without a
 table every G43 H is refused). Planning: the default look-ahead at T = 4 ms plans the first
 PREFIX_BLOCKS blocks of every accepted program (a prefix is a valid program: blocks meet);
-whole programs take about 450 s in all (camotics_bear.nc alone 99 s, measured 2026-11-24 on
+whole programs take 450-575 s in all (camotics_bear.nc alone 99 s, measured 2026-11-24 on
 the 2-core shared machine), so they run only with NURBSMOTION_CORPUS_FULL=1 (every accepted
-program planned whole without failure on that date: 46 of 46).
+program planned whole without failure on that date, twice: 46 of 46).
 """
 
 from __future__ import annotations
