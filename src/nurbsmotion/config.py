@@ -85,12 +85,14 @@ TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
 @dataclass(frozen=True)
 class MonitoringConfig:
     """``traffic_log``: each job's folder gets every bus frame of the job as ``traffic.log``
-    (candump) or ``traffic.asc`` (Vector ASCII); 'none' records nothing."""
+    (candump) or ``traffic.asc`` (Vector ASCII); 'none' records nothing. ``feedback_log``:
+    each job's folder gets ``feedback.csv``, every TPDO1 (statusword, position actual)."""
 
     heartbeat_producer_ms: int = 100
     heartbeat_consumer_ms: int = 300
     max_bus_load: float = 0.8
     traffic_log: str = "none"
+    feedback_log: bool = True
 
 
 @dataclass(frozen=True)
@@ -350,6 +352,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
         "heartbeat_consumer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "max_bus_load": (_number, {"minimum": 0, "maximum": 1}),
         "traffic_log": (_string, {"choices": TRAFFIC_LOG_FORMATS}),
+        "feedback_log": (_boolean, {}),
     }), {}),
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),

@@ -222,8 +222,8 @@ class SimIoNode:
             if command == NmtCommand.START:
                 self._enter(NmtState.OPERATIONAL)
             elif command == NmtCommand.STOP:
+                self._error_outputs()  # outputs off before STOPPED is visible (no window with both)
                 self._enter(NmtState.STOPPED)
-                self._error_outputs()
             elif command == NmtCommand.PRE_OPERATIONAL:
                 self._enter(NmtState.PRE_OPERATIONAL)
             elif command == NmtCommand.RESET_NODE:
