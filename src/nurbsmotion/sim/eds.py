@@ -1,10 +1,32 @@
-"""Where the drive description (EDS) of the simulated servo lives."""
+"""What a drive description (EDS/DCF) says about its objects, as the simulated drive enforces it.
+
+A simulated drive can be built from any vendor EDS (canopen's ``import_od``). The EDS is the
+whole truth about the drive: an object it lacks does not exist, an entry without a value
+starts at 0 (CiA 306 leaves it to the device; a master must write what it needs), access
+types and LowLimit/HighLimit are checked on every SDO write, and 0x6502 lists the modes
+0x6060 accepts.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from canopen import objectdictionary as od_types
+from canopen.objectdictionary import ObjectDictionary, ODVariable
+from canopen.sdo import SdoAbortedError
+
+from nurbsmotion import cia402 as c
+
 EDS_NAME = "nurbsmotion-servo.eds"
+
+ABORT_VALUE_INVALID = 0x06090030  # value range of parameter exceeded (only for write access)
+ABORT_VALUE_TOO_HIGH = 0x06090031
+ABORT_VALUE_TOO_LOW = 0x06090032
+
+# 0x6502 bit -> mode of operation (CiA 402-2, 'supported drive modes')
+MODE_OF_SUPPORTED_BIT = {0: 1, 1: 2, 2: 3, 3: 4, 5: 6, 6: 7, 7: 8, 8: 9, 9: 10}
+# Modes a drive whose EDS gives no 0x6502 value may have: the standard ones.
+STANDARD_MODES = frozenset(MODE_OF_SUPPORTED_BIT.values())
 
 
 def default_eds_path() -> Path:
@@ -16,3 +38,54 @@ def default_eds_path() -> Path:
         if path.is_file():
             return path
     raise FileNotFoundError(f"{EDS_NAME} not found in {', '.join(str(p.parent) for p in candidates)}")
+
+
+def find_variable(od: ObjectDictionary, index: int, subindex: int) -> ODVariable | None:
+    """The EDS entry of (index, subindex), None if the drive has no such object."""
+    if index not in od:
+        return None
+    obj = od[index]
+    if isinstance(obj, ODVariable):
+        return obj if subindex == 0 else None
+    return obj[subindex] if subindex in obj.subindices else None
+
+
+def has_object(od: ObjectDictionary, index: int, subindex: int = 0) -> bool:
+    return find_variable(od, index, subindex) is not None
+
+
+def zero_data(var: ODVariable) -> bytes:
+    """The value of an entry the EDS gives no DefaultValue/ParameterValue: 0 (empty for
+    strings and domains)."""
+    if var.data_type in var.STRUCT_TYPES:
+        return var.encode_raw(0.0 if var.data_type in (od_types.REAL32, od_types.REAL64) else 0)
+    return b""
+
+
+def check_range(var: ODVariable, value: object) -> None:
+    """LowLimit/HighLimit of the EDS (CiA 301 aborts 0x06090032 too low, 0x06090031 too high)."""
+    if not isinstance(value, (int, float)):
+        return
+    if var.min is not None and value < var.min:
+        raise SdoAbortedError(ABORT_VALUE_TOO_LOW)
+    if var.max is not None and value > var.max:
+        raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
+
+
+def supported_modes(supported_bits: int) -> frozenset[int]:
+    """Modes 0x6060 accepts from the 0x6502 value; all standard modes when the EDS gives
+    none (0: the description does not say, so the write decides)."""
+    if supported_bits == 0:
+        return STANDARD_MODES
+    return frozenset(mode for bit, mode in MODE_OF_SUPPORTED_BIT.items() if supported_bits >> bit & 1)
+
+
+def cycle_period_source(od: ObjectDictionary) -> int | None:
+    """The object a drive takes its IP/CSP cycle from: 0x60C2 when the EDS has it (EPOS4,
+    AKD, Elmo, Nanotec interpolate over 0x60C2 in CSP too), else 0x1006; None if neither
+    exists (the drive then locks onto the measured SYNC interval)."""
+    if has_object(od, c.IP_TIME_PERIOD, 1):
+        return c.IP_TIME_PERIOD
+    if has_object(od, c.COMM_CYCLE_PERIOD):
+        return c.COMM_CYCLE_PERIOD
+    return None

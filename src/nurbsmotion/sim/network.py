@@ -173,12 +173,11 @@ class SimNetwork:
 
     def _tick_loop(self) -> None:
         while not self._stop.is_set():
-            now = time.monotonic()
-            deadline = now + 0.05
+            wait_s = 0.05
             for drive in list(self.drives.values()):
                 try:
-                    deadline = min(deadline, drive.tick(now))
+                    wait_s = min(wait_s, drive.tick() - drive.now())  # each drive on its own clock
                 except Exception:  # noqa: BLE001 - one drive's error must not stop the others' heartbeat
                     log.exception("sim ticker: node %d", drive.node_id)
-            self._wake.wait(max(deadline - time.monotonic(), 0.0))
+            self._wake.wait(max(wait_s, 0.0))
             self._wake.clear()
