@@ -9,11 +9,13 @@ drive a ``ManualClock`` instead."""
 
 from __future__ import annotations
 
+import configparser
 import contextlib
 import struct
 import threading
 import time
 import uuid
+from pathlib import Path
 from typing import Callable, Iterator
 
 import can
@@ -88,7 +90,7 @@ class Bench:
     def add(self, node_id: int, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
         """Start drive ``node_id``; wait for its boot-up; return it and its master-side node."""
         drive = self.sim.add_drive(node_id, **drive_kwargs)
-        node = canopen.RemoteNode(node_id, str(default_eds_path()))
+        node = canopen.RemoteNode(node_id, str(drive.eds_path))  # the master reads the drive's own EDS
         node.sdo.RESPONSE_TIMEOUT = 1.0
         self.master.add_node(node)
         self.nodes[node_id] = node
@@ -183,3 +185,32 @@ def open_bench(interface: str, channel: str) -> Iterator[Bench]:
 def bench(channel: str) -> Iterator[Bench]:
     with open_bench("virtual", channel) as opened:
         yield opened
+
+
+def derived_eds(directory: Path, drop: tuple[str, ...] = (), change: dict[str, dict[str, str | None]] | None = None) -> Path:
+    """The packaged EDS with sections dropped (``"6066"``, ``"1600sub2"``) and keys changed
+    (``{"607A": {"PDOMapping": "0"}}``; None removes the key; a new section is created), so a
+    test can describe exactly the drive whose rule it checks."""
+    eds = configparser.RawConfigParser()
+    eds.optionxform = str  # keep the keys' case
+    eds.read(default_eds_path(), encoding="ascii")
+    for section in drop:
+        eds.remove_section(section)
+    for section, keys in (change or {}).items():
+        if not eds.has_section(section):
+            eds.add_section(section)
+        for key, value in keys.items():
+            if value is None:
+                eds.remove_option(section, key)
+            else:
+                eds.set(section, key, value)
+    path = directory / f"derived-{uuid.uuid4().hex[:8]}.eds"
+    with path.open("w", encoding="ascii") as out:
+        eds.write(out)
+    return path
+
+
+def variable_section(name: str, data_type: int, access: str, default: str | None = "0") -> dict[str, str | None]:
+    """Keys of a VAR section for ``derived_eds`` (e.g. 0x1007, 0x1019 the packaged EDS lacks)."""
+    return {"ParameterName": name, "ObjectType": "0x7", "DataType": f"0x{data_type:04X}", "AccessType": access,
+            "DefaultValue": default, "PDOMapping": "0"}
