@@ -136,3 +136,13 @@ def test_tpdo_mapping_may_hold_any_readable_mappable_object(bench: Bench) -> Non
     bench.operational(9)
     bench.sync()
     assert bench.frames.of(0x289) == [struct.pack("<bH", 7, 0)]
+
+
+@pytest.mark.parametrize("can_id", [0x000, 0x07F, 0x581, 0x605, 0x704, 0x7E5])
+def test_a_restricted_can_id_cannot_be_a_pdo(bench: Bench, can_id: int) -> None:
+    _, node = bench.add(3)
+    node.sdo[0x1400][1].raw = 0x8000_0203
+    with pytest.raises(SdoAbortedError) as err:
+        node.sdo[0x1400][1].raw = can_id  # CiA 301 7.3.5: NMT, SDO, heartbeat, LSS ... ids
+    assert err.value.code == 0x06090030
+    node.sdo[0x1400][1].raw = 0x8000_0000 | can_id  # stored while disabled: harmless

@@ -195,15 +195,18 @@ class Cia402Axis:
         return self.mode_display == Mode.INTERPOLATED_POSITION and bool(self.controlword & c.CW_ENABLE_IP)
 
     # ------------------------------------------------------------------ per SYNC
+    def run_missed_cycles(self, timing: SyncTiming) -> None:
+        """The cycles that ran without a SYNC before this one (``timing.missed_ticks``), each
+        holding or extrapolating; called before the SYNC's RPDO data takes effect."""
+        for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
+            self._run_cycle(False, self.params.cycle_period_s)
+
     def step(self, sync_index: int, sync_counter: int, timing: SyncTiming | None = None) -> None:
-        """One SYNC: the cycles that ran without a SYNC before it (``timing.missed_ticks``,
-        each with the hold/extrapolate set-point), then this SYNC's cycle: take the new
-        set-point (recorded), move for the time that passed, check the following error."""
+        """This SYNC's cycle (after ``run_missed_cycles``): take the new set-point (recorded),
+        move for the time that passed, check the following error."""
         period_s = self.params.cycle_period_s
         if timing is None:
             timing = SyncTiming(0.0, period_s, 0, period_s)
-        for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
-            self._run_cycle(False, period_s)
         step_s = timing.step_s if timing.step_s > 0 else period_s
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip

@@ -48,7 +48,7 @@ log = logging.getLogger(__name__)
 
 EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
-ABORT_NO_DATA = 0x060A0023  # LocalNode: entry without a value
+ABORT_WRITE_ONLY = 0x06010001
 ABORT_PARAMETER_INCOMPATIBLE = 0x06040043
 IP_LINEAR = 0  # 0x60C0 sub-mode
 SYNC_WINDOW_LENGTH = 0x1007  # µs after SYNC in which synchronous RPDOs count (0 = no window)
@@ -89,13 +89,17 @@ class _DriveNode(canopen.LocalNode):
         self.add_read_callback(drive._on_sdo_read)
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
-        """As LocalNode; an entry the EDS gives no value starts at 0 (not an abort)."""
-        try:
-            return super().get_data(index, subindex, check_readable)
-        except SdoAbortedError as err:
-            if err.code != ABORT_NO_DATA:
-                raise
-        return eds_rules.zero_data(self._find_object(index, subindex))
+        """As LocalNode, but an entry never written holds its EDS value, or 0 if the EDS gives
+        none (``eds.initial_data``), instead of an abort."""
+        obj = self._find_object(index, subindex)
+        if check_readable and not obj.readable:
+            raise SdoAbortedError(ABORT_WRITE_ONLY)
+        for callback in self._read_callbacks:
+            result = callback(index=index, subindex=subindex, od=obj)
+            if result is not None:
+                return obj.encode_raw(result)
+        stored = self.data_store.get(index, {}).get(subindex)
+        return stored if stored is not None else eds_rules.initial_data(obj)
 
     def set_data(self, index: int, subindex: int, data: bytes, check_writable: bool = False) -> None:
         super().set_data(index, subindex, data, check_writable)
@@ -783,6 +787,7 @@ class SimDrive:
             self.stats.syncs_late += 1
             self.stats.ticks_missed += timing.missed_ticks
         self.axis.sync_locked = self._sync_monitor.locked
+        self.axis.run_missed_cycles(timing)  # they ran before this SYNC: with the old RPDO data
         if self._pending:
             for setters, values in self._pending.values():
                 self._apply_values(setters, values)

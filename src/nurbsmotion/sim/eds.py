@@ -54,12 +54,27 @@ def has_object(od: ObjectDictionary, index: int, subindex: int = 0) -> bool:
     return find_variable(od, index, subindex) is not None
 
 
-def zero_data(var: ODVariable) -> bytes:
-    """The value of an entry the EDS gives no DefaultValue/ParameterValue: 0 (empty for
-    strings and domains)."""
-    if var.data_type in var.STRUCT_TYPES:
-        return var.encode_raw(0.0 if var.data_type in (od_types.REAL32, od_types.REAL64) else 0)
-    return b""
+def initial_data(var: ODVariable) -> bytes:
+    """An entry's value before anything was written: ParameterValue (DCF), else DefaultValue,
+    else 0. Strings and domains without a value read as one NUL byte (an SDO upload cannot
+    carry 0 bytes; a real drive never answers 'no data' for its name)."""
+    value = var.value if var.value is not None else var.default
+    if var.data_type not in var.STRUCT_TYPES:
+        data = var.encode_raw(value) if value is not None else b""
+        return data or b"\x00"
+    if value is None:
+        value = 0.0 if var.data_type in (od_types.REAL32, od_types.REAL64) else 0
+    return var.encode_raw(_as_signed(var, value))
+
+
+def _as_signed(var: ODVariable, value: int | float) -> int | float:
+    """A signed default written in hex as its two's complement (EPOS2: 0x60C0 = 0xFFFF, i.e.
+    -1; canopen reads it unsigned)."""
+    if var.data_type in od_types.SIGNED_TYPES and isinstance(value, int):
+        bits = len(var)
+        if 2 ** (bits - 1) <= value < 2**bits:
+            return value - 2**bits
+    return value
 
 
 def check_range(var: ODVariable, value: object) -> None:

@@ -94,6 +94,14 @@ class PdoLayout:
         return self.transmission_type <= 240
 
 
+# CiA 301 7.3.5: CAN ids no PDO may use (NMT, SYNC/EMCY group, TIME, SDO, heartbeat, LSS, ...)
+RESTRICTED_CAN_IDS = ((0x000, 0x07F), (0x101, 0x180), (0x581, 0x5FF), (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x7FF))
+
+
+def restricted_can_id(can_id: int) -> bool:
+    return any(low <= can_id <= high for low, high in RESTRICTED_CAN_IDS)
+
+
 def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmission_type: int, entries: list[int]) -> PdoLayout:
     """Layout of PDO ``number`` from its communication and mapping parameter values."""
     fmt = "<"
@@ -111,7 +119,7 @@ def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmiss
     return PdoLayout(
         number=number,
         cob_id=cob_id_value & 0x7FF,
-        enabled=not cob_id_value & COB_ID_INVALID_BIT,
+        enabled=not cob_id_value & COB_ID_INVALID_BIT and not restricted_can_id(cob_id_value & 0x7FF),
         transmission_type=transmission_type,
         keys=keys,
         codec=struct.Struct(fmt),
@@ -148,10 +156,10 @@ def check_parameter_write(od: ObjectDictionary, read: Reader, index: int, subind
 
 def check_communication_write(read: Reader, index: int, subindex: int, value: int) -> None:
     """The CAN id of a valid PDO cannot change (disable it with bit 31 first); 11-bit ids
-    only; transmission types 241..251 are reserved."""
+    outside the restricted ones only; transmission types 241..251 are reserved."""
     if subindex == 1:
         current = read(index, 1)
-        if value & COB_ID_EXTENDED_BIT:
+        if value & COB_ID_EXTENDED_BIT or (not value & COB_ID_INVALID_BIT and restricted_can_id(value & 0x7FF)):
             raise SdoAbortedError(ABORT_VALUE_INVALID)
         both_valid = not current & COB_ID_INVALID_BIT and not value & COB_ID_INVALID_BIT
         if both_valid and (current & 0x7FF) != (value & 0x7FF):
