@@ -564,7 +564,8 @@ class SimDrive:
         params.quick_stop_decel_counts_s2 = float(value(c.QUICK_STOP_DECELERATION, 0, DEFAULT_QUICK_STOP_DECEL))
         params.limit_min_counts = value(c.SOFTWARE_POSITION_LIMIT, 1, 0)
         params.limit_max_counts = value(c.SOFTWARE_POSITION_LIMIT, 2, 0)
-        params.modes = eds_rules.supported_modes(value(c.SUPPORTED_DRIVE_MODES, 0, 0))
+        params.modes = eds_rules.supported_modes(value(c.SUPPORTED_DRIVE_MODES, 0, 0),
+                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0))
         self._sync_window_s = value(SYNC_WINDOW_LENGTH, 0, 0) * 1e-6
         self._sync_counter_overflow = value(SYNC_COUNTER_OVERFLOW, 0, None)
         self._emcy_cob = value(c.EMCY_COB_ID, 0, pdo_layout.COB_ID_INVALID_BIT)

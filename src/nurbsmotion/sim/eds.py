@@ -56,14 +56,22 @@ def has_object(od: ObjectDictionary, index: int, subindex: int = 0) -> bool:
 
 def initial_data(var: ODVariable) -> bytes:
     """An entry's value before anything was written: ParameterValue (DCF), else DefaultValue,
-    else 0. Strings and domains without a value read as one NUL byte (an SDO upload cannot
+    else 0 (the nearest limit if the EDS's own LowLimit/HighLimit exclude 0: EPOS2 0x2212:01
+    >= 16). Strings and domains without a value read as one NUL byte (an SDO upload cannot
     carry 0 bytes; a real drive never answers 'no data' for its name)."""
     value = var.value if var.value is not None else var.default
     if var.data_type not in var.STRUCT_TYPES:
         data = var.encode_raw(value) if value is not None else b""
         return data or b"\x00"
     if value is None:
-        value = 0.0 if var.data_type in (od_types.REAL32, od_types.REAL64) else 0
+        low, high = limits(var)
+        value = 0
+        if low is not None and low > 0:
+            value = low
+        elif high is not None and high < 0:
+            value = high
+        if var.data_type in (od_types.REAL32, od_types.REAL64):
+            value = float(value)
     return var.encode_raw(_as_signed(var, value))
 
 
@@ -77,22 +85,33 @@ def _as_signed(var: ODVariable, value: int | float) -> int | float:
     return value
 
 
+def limits(var: ODVariable) -> tuple[int | float | None, int | float | None]:
+    """(LowLimit, HighLimit) of an entry; (None, None) for an inverted range, which some
+    EDS files write (Faulhaber 0x6061: 0..0xFF on an INTEGER8 reads as 0..-1)."""
+    low, high = var.min, var.max
+    if low is not None and high is not None and low > high:
+        return None, None
+    return low, high
+
+
 def check_range(var: ODVariable, value: object) -> None:
     """LowLimit/HighLimit of the EDS (CiA 301 aborts 0x06090032 too low, 0x06090031 too high)."""
     if not isinstance(value, (int, float)):
         return
-    if var.min is not None and value < var.min:
+    low, high = limits(var)
+    if low is not None and value < low:
         raise SdoAbortedError(ABORT_VALUE_TOO_LOW)
-    if var.max is not None and value > var.max:
+    if high is not None and value > high:
         raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
 
 
-def supported_modes(supported_bits: int) -> frozenset[int]:
-    """Modes 0x6060 accepts from the 0x6502 value; all standard modes when the EDS gives
-    none (0: the description does not say, so the write decides)."""
-    if supported_bits == 0:
-        return STANDARD_MODES
-    return frozenset(mode for bit, mode in MODE_OF_SUPPORTED_BIT.items() if supported_bits >> bit & 1)
+def supported_modes(supported_bits: int, mode_var: ODVariable | None = None) -> frozenset[int]:
+    """Modes 0x6060 accepts: those of the 0x6502 value; when the EDS gives none (0: the
+    description does not say), the standard modes within 0x6060's LowLimit/HighLimit."""
+    if supported_bits:
+        return frozenset(mode for bit, mode in MODE_OF_SUPPORTED_BIT.items() if supported_bits >> bit & 1)
+    low, high = limits(mode_var) if mode_var is not None else (None, None)
+    return frozenset(m for m in STANDARD_MODES if (low is None or m >= low) and (high is None or m <= high))
 
 
 def cycle_period_source(od: ObjectDictionary) -> int | None:
