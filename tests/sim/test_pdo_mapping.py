@@ -146,3 +146,16 @@ def test_a_restricted_can_id_cannot_be_a_pdo(bench: Bench, can_id: int) -> None:
         node.sdo[0x1400][1].raw = can_id  # CiA 301 7.3.5: NMT, SDO, heartbeat, LSS ... ids
     assert err.value.code == 0x06090030
     node.sdo[0x1400][1].raw = 0x8000_0000 | can_id  # stored while disabled: harmless
+
+
+def test_a_count_over_entries_never_written_is_refused(bench: Bench) -> None:
+    # e.g. canopen's PdoMap.save on an ARRAY mapping object: sub 0 set to 0 makes it write no entry
+    _, node = bench.add(3)
+    node.sdo[0x1400][1].raw = 0x8000_0203
+    node.sdo[0x1600][0].raw = 0
+    node.sdo[0x1600][1].raw = 0x60400010
+    node.sdo[0x1600][2].raw = 0
+    with pytest.raises(SdoAbortedError) as err:
+        node.sdo[0x1600][0].raw = 2
+    assert err.value.code == 0x06040041
+    node.sdo[0x1600][0].raw = 1

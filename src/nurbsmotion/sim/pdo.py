@@ -68,6 +68,8 @@ def check_entries(od: ObjectDictionary, entries: list[int], receive: bool) -> No
     if len(entries) > MAX_PDO_ENTRIES:
         raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
     for entry in entries:
+        if entry == 0:  # counted but never written: object 0x0000:00 cannot be mapped
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
         check_entry(od, entry, receive)
     if sum(split_entry(e)[2] for e in entries) > MAX_PDO_BITS:
         raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
