@@ -211,12 +211,12 @@ class Cia402Axis:
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip
         self._fresh_target = self._fresh_ip = False
-        source = self._run_cycle(fresh, step_s)
-        if source is SetpointSource.FRESH:
-            self.recorder.append(sync_index, self.mode_display, int(round(self._demand)), self.position_actual,
-                                 sync_counter, _ns(timing.time_s))
+        source, demand = self._run_cycle(fresh, step_s)
+        if source is SetpointSource.FRESH:  # recorded even if this cycle's following error faults the drive
+            self.recorder.append(sync_index, self.mode_display, demand, self.position_actual, sync_counter,
+                                 _ns(timing.time_s))
         self.timeline.append(sync_index, _ns(timing.time_s), _ns(timing.interval_s), timing.missed_ticks, int(source),
-                             int(round(self._demand)), self.position_actual, self.following_error, sync_counter)
+                             demand, self.position_actual, self.following_error, sync_counter)
         self._update_statusword()
 
     def _ticks_to_simulate(self, missed: int) -> int:
@@ -226,22 +226,24 @@ class Cia402Axis:
             return min(missed, self.servo.lag_cycles + 2)
         return min(missed, MAX_EXTRAPOLATED_TICKS)
 
-    def _run_cycle(self, fresh: bool, step_s: float) -> SetpointSource:
-        """One cycle of the drive's position loop; returns where its set-point came from."""
+    def _run_cycle(self, fresh: bool, step_s: float) -> tuple[SetpointSource, int]:
+        """One cycle of the drive's position loop; returns where its set-point came from and
+        the demand it followed (counts)."""
+        inactive = SetpointSource.INACTIVE
         if self.state is State.OPERATION_ENABLED:
             if self.cycle_period_missing():
                 self.raise_fault(EMCY_PARAMETER_ERROR)
-                return SetpointSource.INACTIVE
+                return inactive, int(round(self._demand))
             if not self.setpoint_active():
                 self.stats.setpoints_ignored += fresh
                 self._move(self._demand, step_s)
                 self._check_following_error()
-                return SetpointSource.INACTIVE
+                return inactive, int(round(self._demand))
             source, demand = self._cycle_demand(fresh)
             if not self._within_limits(int(round(demand))):
                 self.stats.setpoints_refused += 1
                 self.raise_fault(EmcyCode.SOFTWARE_LIMIT)
-                return SetpointSource.INACTIVE
+                return inactive, int(round(self._demand))
             self._demand_step = demand - self._demand if source is SetpointSource.FRESH else self._demand_step
             self._demand = demand
             self._move(demand, step_s)
@@ -250,7 +252,7 @@ class Cia402Axis:
             else:
                 self.stats.setpoints_missing += 1
             self._check_following_error()
-            return source
+            return source, int(round(demand))
         if self.state is State.QUICK_STOP_ACTIVE:
             stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, step_s)
             self._demand = self.servo.actual
@@ -259,7 +261,7 @@ class Cia402Axis:
                 self._change_state(State.SWITCH_ON_DISABLED, [12])
         else:
             self.stats.setpoints_ignored += fresh
-        return SetpointSource.INACTIVE
+        return inactive, int(round(self._demand))
 
     def _cycle_demand(self, fresh: bool) -> tuple[SetpointSource, float]:
         """The new set-point, else the last one held or its step continued (drive setting)."""
