@@ -198,6 +198,8 @@ class Cia402Axis:
     def run_missed_cycles(self, timing: SyncTiming) -> None:
         """The cycles that ran without a SYNC before this one (``timing.missed_ticks``), each
         holding or extrapolating; called before the SYNC's RPDO data takes effect."""
+        if self.state is not State.OPERATION_ENABLED:  # the quick-stop ramp advances per SYNC only
+            return
         for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
             self._run_cycle(False, self.params.cycle_period_s)
 
@@ -253,8 +255,8 @@ class Cia402Axis:
                 self.stats.setpoints_missing += 1
             self._check_following_error()
             return source, int(round(demand))
-        if self.state is State.QUICK_STOP_ACTIVE:
-            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, step_s)
+        if self.state is State.QUICK_STOP_ACTIVE:  # one nominal cycle per SYNC (a model choice, docs/sim.md)
+            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self.params.cycle_period_s)
             self._demand = self.servo.actual
             self.position_actual = int(round(self.servo.actual))
             if stopped and not quick_stop_stays_active(self.params.quick_stop_option):
