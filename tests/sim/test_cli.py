@@ -102,7 +102,7 @@ def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Pat
     env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
     proc = subprocess.Popen(
         [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config), "--record-dir", str(tmp_path / "rec"),
-         "--missing-setpoint", "extrapolate", "--sync-loss-periods", "4"],
+         "--missing-setpoint", "extrapolate", "--own-cycle", "--sync-loss-periods", "4"],
         stderr=subprocess.PIPE, env=env,
     )
     try:

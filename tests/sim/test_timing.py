@@ -42,7 +42,7 @@ def test_cycles_that_ran_without_sync(interval_t: float, missed: int) -> None:
 
 
 def test_sync_monitor_locks_after_two_on_time_intervals_and_loses_sync_after_n_periods() -> None:
-    monitor = SyncMonitor(SyncSettings(loss_periods=3))
+    monitor = SyncMonitor(SyncSettings(own_cycle=True, loss_periods=3))
     times = [0.0, 0.001, 0.00203, 0.003]
     assert [monitor.on_sync(t, T).missed_ticks for t in times] == [0, 0, 0, 0]
     assert monitor.locked
@@ -50,6 +50,13 @@ def test_sync_monitor_locks_after_two_on_time_intervals_and_loses_sync_after_n_p
     assert (timing.missed_ticks, timing.step_s) == (1, pytest.approx(1.2 * T)) and not monitor.locked
     assert monitor.loss_deadline(T) == pytest.approx(0.0082)
     assert not monitor.lost(0.0081, T) and monitor.lost(0.0083, T) and not monitor.lost(0.0099, T)  # reported once
+
+
+def test_a_sync_triggered_drive_runs_one_cycle_per_sync_whenever_it_comes() -> None:
+    monitor = SyncMonitor(SyncSettings())
+    monitor.on_sync(0.0, T)
+    timing = monitor.on_sync(0.0052, T)
+    assert (timing.missed_ticks, timing.step_s) == (0, pytest.approx(5.2 * T))
 
 
 def test_sync_loss_can_be_off() -> None:
@@ -79,7 +86,7 @@ def test_every_sync_and_setpoint_is_stamped_and_a_regular_stream_is_clean(bench:
 
 
 def test_a_late_sync_shows_as_a_cycle_without_sync_and_costs_the_lock(bench: Bench) -> None:
-    drive, _ = bench.add_enabled(2, lag_cycles=0)
+    drive, _ = bench.add_enabled(2, lag_cycles=0, sync=SyncSettings(own_cycle=True))
     bench.sync()
     stream(bench, 2, [10 * k for k in range(1, 11)], gap_after=4, gap_s=T)  # SYNC 6 comes 2 T after SYNC 5
     rows = drive.timeline.records()
@@ -109,9 +116,10 @@ def test_the_lock_bit_returns_after_two_regular_intervals(bench: Bench) -> None:
     assert drive.sync_locked
 
 
-def test_the_servo_moves_for_the_time_that_passed(bench: Bench) -> None:
+@pytest.mark.parametrize("own_cycle", [False, True])
+def test_the_servo_moves_for_the_time_that_passed(bench: Bench, own_cycle: bool) -> None:
     # 100 counts per ms at most: a SYNC after 3 ms has let the motor move 300 counts
-    drive, _ = bench.add_enabled(2, lag_cycles=0, max_velocity_counts_s=100_000)
+    drive, _ = bench.add_enabled(2, lag_cycles=0, max_velocity_counts_s=100_000, sync=SyncSettings(own_cycle=own_cycle))
     bench.sync()
     bench.send(0x202, rpdo(0x0F, 1000))
     bench.sync()
@@ -126,6 +134,15 @@ def test_an_early_sync_is_reported(bench: Bench) -> None:
     stream(bench, 2, [1, 2, 3, 4], gap_after=2, gap_s=-0.9 * T)
     report = stream_report(drive.timeline.as_array(), drive.period_s)
     assert report.early_syncs == 1 and report.missed_cycles == 0
+
+
+def test_a_sync_triggered_drive_sees_a_late_sync_in_its_timeline_but_runs_no_cycle_without_it(bench: Bench) -> None:
+    drive, _ = bench.add_enabled(2)
+    bench.sync()
+    stream(bench, 2, [10 * k for k in range(1, 11)], gap_after=4, gap_s=T)
+    report = stream_report(drive.timeline.as_array(), drive.period_s)
+    assert (report.late_syncs, report.missed_cycles, report.missing_setpoints) == (1, 0, 0)
+    assert [r.setpoint_counts for r in drive.recorder.records()] == [10 * k for k in range(1, 11)]
 
 
 @pytest.mark.parametrize("policy,expected_demand", [(MissingSetpoint.HOLD, [10, 20, 30, 30, 50]),

@@ -35,6 +35,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-velocity-counts-s", type=float, default=None, metavar="V", help="servo velocity limit (default: none)")
     parser.add_argument("--missing-setpoint", default=MissingSetpoint.HOLD.value, metavar="hold|extrapolate",
                         help="what a drive does in a cycle without a fresh set-point (default hold)")
+    parser.add_argument("--own-cycle", action="store_true",
+                        help="drives run their own cycle locked onto SYNC: a late SYNC leaves cycles without one")
     parser.add_argument("--sync-loss-periods", type=float, default=None, metavar="N",
                         help="fault (EMCY 0x8700) when no SYNC came for N cycle periods while enabled (default: off)")
 
@@ -53,13 +55,14 @@ def parse_faults(specs: list[str], machine: MachineConfig) -> list[FaultInjectio
     return faults
 
 
-def sync_settings(missing_setpoint: str, sync_loss_periods: float | None) -> SyncSettings:
+def sync_settings(missing_setpoint: str, sync_loss_periods: float | None, own_cycle: bool = False) -> SyncSettings:
     if sync_loss_periods is not None and not sync_loss_periods >= 1:
         raise InputError("--sync-loss-periods", f"must be >= 1, got {sync_loss_periods}")
     choices = [m.value for m in MissingSetpoint]
     if missing_setpoint not in choices:
         raise InputError("--missing-setpoint", f"must be one of {', '.join(choices)}, got {missing_setpoint!r}")
-    return SyncSettings(missing_setpoint=MissingSetpoint(missing_setpoint), loss_periods=sync_loss_periods)
+    return SyncSettings(missing_setpoint=MissingSetpoint(missing_setpoint), own_cycle=own_cycle,
+                        loss_periods=sync_loss_periods)
 
 
 def check_options(lag_cycles: int, max_velocity_counts_s: float | None, record_dir: str | None) -> None:
@@ -120,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
     machine = load_config(args.config)
     faults = parse_faults(args.fault, machine)
     check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
-    sync = sync_settings(args.missing_setpoint, args.sync_loss_periods)
+    sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)
     logging.getLogger("nurbsmotion.sim").setLevel(min(logging.getLogger().level, logging.INFO))
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}

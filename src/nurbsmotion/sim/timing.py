@@ -1,11 +1,17 @@
-"""The time a simulated drive feels: its cycle locked onto SYNC, late and missing SYNCs.
+"""The time a simulated drive feels: SYNC timestamps, its cycle, late and missing SYNCs.
 
-A CSP/IP drive runs its own position cycle of period T (0x60C2, else 0x1006) phase-locked
-onto SYNC (Kollmorgen AKD, Infranor, Nanotec: statusword bit 8 = synchronised). When a SYNC
-comes later than T + ``late_tolerance``·T after the previous one, the drive's cycle has run
-without it ("missed tick"): it holds or extrapolates its set-point for that cycle, and the
-late SYNC then re-phases the cycle. The servo is stepped once per tick with the time that
-really passed, so the servo time always equals the elapsed time.
+Two kinds of drive (``SyncSettings.own_cycle``):
+
+- SYNC-triggered (default): the drive runs one position cycle per SYNC, whenever it comes,
+  stepped by the time that passed since the previous SYNC;
+- own cycle: the drive runs its own position cycle of period T (0x60C2, else 0x1006)
+  phase-locked onto SYNC (Kollmorgen AKD, Infranor, Nanotec). When a SYNC comes later than
+  T + ``late_tolerance``·T after the previous one, the drive's cycle has run without it
+  ("missed tick"): it holds or extrapolates its set-point for that cycle, and the late SYNC
+  then re-phases the cycle. The servo is stepped once per tick with the time that really
+  passed, so the servo time always equals the elapsed time.
+
+Both judge the SYNC interval (statusword bit 8 = synchronised) and may fault on sync loss.
 
 Pure arithmetic on timestamps (seconds, any monotonic base): the drive passes them in, so
 tests inject a clock instead of widening tolerances.
@@ -29,7 +35,9 @@ class MissingSetpoint(enum.Enum):
 class SyncSettings:
     """How a drive judges the SYNC it is locked onto (a per-drive setting, like real drives').
 
-    ``lock_tolerance``: an interval within (1 ± lock_tolerance)·T counts as on time
+    ``missing_setpoint``: hold or extrapolate in a cycle without a fresh set-point.
+    ``own_cycle``: the drive runs its own cycle locked onto SYNC (see the module doc; default:
+    one cycle per SYNC). ``lock_tolerance``: an interval within (1 ± lock_tolerance)·T counts as on time
     (statusword bit 8 is set after ``lock_intervals`` such intervals in a row, cleared by
     one outside). ``late_tolerance``: a SYNC later than (1 + late_tolerance)·T means the
     drive's cycle ran without it. ``loss_periods``: sync-loss fault (EMCY 0x8700) when no
@@ -37,6 +45,7 @@ class SyncSettings:
     """
 
     missing_setpoint: MissingSetpoint = MissingSetpoint.HOLD
+    own_cycle: bool = False
     lock_tolerance: float = 0.05
     lock_intervals: int = 2
     late_tolerance: float = 0.25
@@ -96,7 +105,7 @@ class SyncMonitor:
         on_time = period_s > 0 and abs(interval - period_s) <= settings.lock_tolerance * period_s
         self._good_intervals = self._good_intervals + 1 if on_time else 0
         self.locked = self._good_intervals >= settings.lock_intervals
-        missed = missed_ticks(interval, period_s, settings.late_tolerance)
+        missed = missed_ticks(interval, period_s, settings.late_tolerance) if settings.own_cycle else 0
         return SyncTiming(now_s, interval, missed, interval - missed * period_s)
 
     def loss_deadline(self, period_s: float) -> float:
