@@ -46,8 +46,8 @@ def test_sync_monitor_locks_after_two_on_time_intervals_and_loses_sync_after_n_p
     times = [0.0, 0.001, 0.00203, 0.003]
     assert [monitor.on_sync(t, T).missed_ticks for t in times] == [0, 0, 0, 0]
     assert monitor.locked
-    timing = monitor.on_sync(0.0052, T)  # 2.2 T: one cycle ran without SYNC, this one lasted 1.2 T
-    assert (timing.missed_ticks, timing.step_s) == (1, pytest.approx(1.2 * T)) and not monitor.locked
+    timing = monitor.on_sync(0.0052, T)  # 2.2 T: one cycle ran without SYNC
+    assert (timing.missed_ticks, timing.interval_s) == (1, pytest.approx(2.2 * T)) and not monitor.locked
     assert monitor.loss_deadline(T) == pytest.approx(0.0082)
     assert not monitor.lost(0.0081, T) and monitor.lost(0.0083, T) and not monitor.lost(0.0099, T)  # reported once
 
@@ -56,7 +56,7 @@ def test_a_sync_triggered_drive_runs_one_cycle_per_sync_whenever_it_comes() -> N
     monitor = SyncMonitor(SyncSettings())
     monitor.on_sync(0.0, T)
     timing = monitor.on_sync(0.0052, T)
-    assert (timing.missed_ticks, timing.step_s) == (0, pytest.approx(5.2 * T))
+    assert (timing.missed_ticks, timing.interval_s) == (0, pytest.approx(5.2 * T))
 
 
 def test_sync_loss_can_be_off() -> None:
@@ -116,16 +116,17 @@ def test_the_lock_bit_returns_after_two_regular_intervals(bench: Bench) -> None:
     assert drive.sync_locked
 
 
-@pytest.mark.parametrize("own_cycle", [False, True])
-def test_the_servo_moves_for_the_time_that_passed(bench: Bench, own_cycle: bool) -> None:
-    # 100 counts per ms at most: a SYNC after 3 ms has let the motor move 300 counts
+@pytest.mark.parametrize("own_cycle,moved", [(False, 100), (True, 300)])
+def test_an_own_cycle_drive_moves_for_the_cycles_that_passed(bench: Bench, own_cycle: bool, moved: int) -> None:
+    # 100 counts per 1 ms cycle at most: after a SYNC 3 ms late an own-cycle drive has run 3 cycles,
+    # a SYNC-triggered drive one (it waited for the SYNC)
     drive, _ = bench.add_enabled(2, lag_cycles=0, max_velocity_counts_s=100_000, sync=SyncSettings(own_cycle=own_cycle))
     bench.sync()
     bench.send(0x202, rpdo(0x0F, 1000))
     bench.sync()
     assert drive.position_actual == 100
     bench.sync(at_s=bench.sync_time_s + 3 * T)
-    assert drive.position_actual == 400
+    assert drive.position_actual == 100 + moved
 
 
 def test_an_early_sync_is_reported(bench: Bench) -> None:

@@ -29,6 +29,7 @@ EMCY_PARAMETER_ERROR = 0x6320  # CiA 301 'parameter error': IP/CSP enabled witho
 EMCY_SYNC_LOSS = 0x8700  # CiA 402 'sync controller'
 FE_WINDOW_DISABLED = 0xFFFF_FFFF
 ERROR_HISTORY_LENGTH = 8
+DEFAULT_CYCLE_S = 1e-3  # servo cycle outside IP/CSP when no cycle period is configured
 MAX_EXTRAPOLATED_TICKS = 10_000  # a drive extrapolating longer has long tripped its following error
 STATES_WITH_VOLTAGE = (State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
@@ -201,19 +202,17 @@ class Cia402Axis:
         if self.state is not State.OPERATION_ENABLED:  # the quick-stop ramp advances per SYNC only
             return
         for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
-            self._run_cycle(False, self.params.cycle_period_s)
+            self._run_cycle(False)
 
     def step(self, sync_index: int, sync_counter: int, timing: SyncTiming | None = None) -> None:
         """This SYNC's cycle (after ``run_missed_cycles``): take the new set-point (recorded),
-        move for the time that passed, check the following error."""
-        period_s = self.params.cycle_period_s
+        move one cycle, check the following error."""
         if timing is None:
-            timing = SyncTiming(0.0, period_s, 0, period_s)
-        step_s = timing.step_s if timing.step_s > 0 else period_s
+            timing = SyncTiming(0.0, self.params.cycle_period_s, 0)
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip
         self._fresh_target = self._fresh_ip = False
-        source, demand = self._run_cycle(fresh, step_s)
+        source, demand = self._run_cycle(fresh)
         if source is SetpointSource.FRESH:  # recorded even if this cycle's following error faults the drive
             self.recorder.append(sync_index, self.mode_display, demand, self.position_actual, sync_counter,
                                  _ns(timing.time_s))
@@ -228,9 +227,10 @@ class Cia402Axis:
             return min(missed, self.servo.lag_cycles + 2)
         return min(missed, MAX_EXTRAPOLATED_TICKS)
 
-    def _run_cycle(self, fresh: bool, step_s: float) -> tuple[SetpointSource, int]:
-        """One cycle of the drive's position loop; returns where its set-point came from and
-        the demand it followed (counts)."""
+    def _run_cycle(self, fresh: bool) -> tuple[SetpointSource, int]:
+        """One cycle of the drive's position loop (one cycle period: the drive interpolates
+        each set-point step over its cycle, however late the next SYNC comes); returns where
+        its set-point came from and the demand it followed (counts)."""
         inactive = SetpointSource.INACTIVE
         if self.state is State.OPERATION_ENABLED:
             if self.cycle_period_missing():
@@ -238,7 +238,7 @@ class Cia402Axis:
                 return inactive, int(round(self._demand))
             if not self.setpoint_active():
                 self.stats.setpoints_ignored += fresh
-                self._move(self._demand, step_s)
+                self._move(self._demand)
                 self._check_following_error()
                 return inactive, int(round(self._demand))
             source, demand = self._cycle_demand(fresh)
@@ -248,15 +248,15 @@ class Cia402Axis:
                 return inactive, int(round(self._demand))
             self._demand_step = demand - self._demand if source is SetpointSource.FRESH else self._demand_step
             self._demand = demand
-            self._move(demand, step_s)
+            self._move(demand)
             if source is SetpointSource.FRESH:
                 self.stats.setpoints_applied += 1
             else:
                 self.stats.setpoints_missing += 1
             self._check_following_error()
             return source, int(round(demand))
-        if self.state is State.QUICK_STOP_ACTIVE:  # one nominal cycle per SYNC (a model choice, docs/sim.md)
-            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self.params.cycle_period_s)
+        if self.state is State.QUICK_STOP_ACTIVE:  # the ramp advances per SYNC only (docs/sim.md)
+            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self._cycle_s())
             self._demand = self.servo.actual
             self.position_actual = int(round(self.servo.actual))
             if stopped and not quick_stop_stays_active(self.params.quick_stop_option):
@@ -274,8 +274,13 @@ class Cia402Axis:
             return SetpointSource.EXTRAPOLATED, self._demand + self._demand_step
         return SetpointSource.HELD, self._demand
 
-    def _move(self, demand: float, step_s: float) -> None:
-        self.position_actual = int(round(self.servo.step(demand, step_s)))
+    def _move(self, demand: float) -> None:
+        self.position_actual = int(round(self.servo.step(demand, self._cycle_s())))
+
+    def _cycle_s(self) -> float:
+        """The cycle the servo steps by: the IP/CSP cycle period (never 0 while IP/CSP runs),
+        1 ms in other modes when none is configured."""
+        return self.params.cycle_period_s if self.params.cycle_period_s > 0 else DEFAULT_CYCLE_S
 
     def _within_limits(self, setpoint: int) -> bool:
         """0x607D: min <= set-point <= max (limits disabled while min >= max)."""

@@ -2,14 +2,14 @@
 
 Two kinds of drive (``SyncSettings.own_cycle``):
 
-- SYNC-triggered (default): the drive runs one position cycle per SYNC, whenever it comes,
-  stepped by the time that passed since the previous SYNC;
+- SYNC-triggered (default): the drive runs one position cycle per SYNC, whenever it comes
+  (it interpolates each set-point step over its cycle period and then waits for the next);
 - own cycle: the drive runs its own position cycle of period T (0x60C2, else 0x1006)
   phase-locked onto SYNC (Kollmorgen AKD, Infranor, Nanotec). When a SYNC comes later than
   T + ``late_tolerance``·T after the previous one, the drive's cycle has run without it
   ("missed tick"): it holds or extrapolates its set-point for that cycle, and the late SYNC
-  then re-phases the cycle. The servo is stepped once per tick with the time that really
-  passed, so the servo time always equals the elapsed time.
+  then re-phases the cycle. The servo is stepped once per cycle, so the time that really
+  passed shows as the number of cycles (a SYNC 2 T late: three cycles).
 
 Both judge the SYNC interval (statusword bit 8 = synchronised) and may fault on sync loss.
 
@@ -66,8 +66,7 @@ class SyncTiming:
 
     time_s: float
     interval_s: float  # since the previous SYNC (nan for the first)
-    missed_ticks: int  # drive cycles that ran without a SYNC before this one
-    step_s: float  # servo time of this SYNC's own cycle (interval minus the missed ticks)
+    missed_ticks: int  # drive cycles that ran without a SYNC before this one (own-cycle drives)
 
 
 def missed_ticks(interval_s: float, period_s: float, late_tolerance: float) -> int:
@@ -98,7 +97,7 @@ class SyncMonitor:
         last, self.last_sync_s = self.last_sync_s, now_s
         self.loss_reported = False
         if last is None:
-            return SyncTiming(now_s, math.nan, 0, period_s)
+            return SyncTiming(now_s, math.nan, 0)
         interval = now_s - last
         self.measured_period_s = interval
         settings = self.settings
@@ -106,7 +105,7 @@ class SyncMonitor:
         self._good_intervals = self._good_intervals + 1 if on_time else 0
         self.locked = self._good_intervals >= settings.lock_intervals
         missed = missed_ticks(interval, period_s, settings.late_tolerance) if settings.own_cycle else 0
-        return SyncTiming(now_s, interval, missed, interval - missed * period_s)
+        return SyncTiming(now_s, interval, missed)
 
     def loss_deadline(self, period_s: float) -> float:
         """When the sync-loss fault is due (inf if disabled, not armed or already reported)."""
