@@ -54,6 +54,7 @@ RUNNING_PHASES = ("holding", "streaming", "stopping")
 _OE_MASK, _OE_VALUE = 0x6F, 0x27  # statusword coding of OPERATION ENABLED
 _QS_VALUE = 0x07  # QUICK STOP ACTIVE under the same mask
 _HISTORY = 8  # cycles of sent set-points kept for the computed following error
+FeedbackSink = Callable[[int, int, int, int, float], None]  # see Master.record_feedback
 
 
 class Job:
@@ -76,6 +77,7 @@ class Job:
         self.on_progress = on_progress
         self.progress_every = progress_every
         self.faults: list[FaultReport] = []
+        self.start_cycle = -1  # master cycle that sends the job's first set-point (its cycle 0)
         self.finish_cycle = -1
         self.outcome = ""
         self._done = threading.Event()
@@ -166,6 +168,7 @@ class Master:
         self._accel_counts_s2 = self.axis_map.max_accel_counts_s2(config.interpolation.max_accel_mm_s2)
         self._accel_limits = [float(a) for a in self._accel_counts_s2]
         self._rate_target = 1.0  # playback rate requested by set_rate (feed override)
+        self._feedback_sink: FeedbackSink | None = None  # record_feedback()
         # feedback, written by the notifier thread (plain lists: item stores are atomic)
         self._fb_status: list[int | None] = [None] * n
         self._fb_pos: list[int] = [0] * n
@@ -266,6 +269,9 @@ class Master:
             self._fb_status[i], self._fb_pos[i] = unpack(data)
             self._fb_cycle[i] = self._cycle
             self._fb_time[i] = timestamp
+            sink = self._feedback_sink
+            if sink is not None:
+                sink(self._cycle, i, self._fb_status[i], self._fb_pos[i], timestamp)
         return on_tpdo1
 
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
@@ -397,6 +403,14 @@ class Master:
         running job's rate moves there by RATE_RAMP_SHARE of its stop slope per cycle; the
         caller keeps the rate within what the plan allows (service.rate)."""
         self._rate_target = max(0.0, float(rate))
+
+    def record_feedback(self, sink: FeedbackSink | None) -> None:
+        """Hand every valid TPDO1 to ``sink(cycle, axis_index, statusword, position_counts,
+        timestamp)`` (None: stop). Read-only: called on canopen's receive thread right after
+        the master stored the values, so it must only append somewhere and return; ``cycle``
+        is the master's cycle counter when the TPDO arrived (a job's cycle 0 is its
+        ``start_cycle``), ``timestamp`` the frame's receive time."""
+        self._feedback_sink = sink
 
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
         """Start streaming an (N, n_axes) int32 array of set-points, one row per cycle.
@@ -801,6 +815,7 @@ class Master:
             assert isinstance(arg, Job)
             if phase == "holding" and self._job is None:
                 self._job = arg
+                arg.start_cycle = k + 1
                 self._set_phase("streaming", k)
             else:
                 self._release_gc()
