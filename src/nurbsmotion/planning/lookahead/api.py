@@ -15,7 +15,7 @@ from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
 from nurbsmotion.planning.lookahead.planner import (FALLBACK_SLOWER, FALLBACK_SPLIT, FALLBACK_STOP, Cursor,
                                                     PlanSettings, PlanningError, WindowPlan, plan_run, settings_for)
-from nurbsmotion.planning.lookahead.runs import Run, program_pieces, split_runs
+from nurbsmotion.planning.lookahead.runs import ProgramStops, Run, program_pieces, split_runs, trailing_dwell_cycles
 from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
@@ -130,25 +130,42 @@ def resume_after(plan: WindowPlan, before: NDArray[np.float64], tau_f: float, pe
     return Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, tau_f)
 
 
+def rest_chunk(piece: BlockPiece, u: float, point: NDArray[np.float64], cycles: int, period_s: float) -> Trajectory:
+    """``cycles`` set-points at rest at ``point`` (a G4 dwell)."""
+    return Trajectory(ALGORITHM, period_s, np.full(cycles, piece.block, np.int32), np.full(cycles, u),
+                      np.repeat(point.reshape(1, 3), cycles, axis=0), np.zeros(cycles))
+
+
 def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures,
-            before: NDArray[np.float64] | None = None) -> Iterator[tuple[Trajectory, Resume]]:
+            before: NDArray[np.float64] | None = None, trailing_rest: int = 0) -> Iterator[tuple[Trajectory, Resume]]:
     before = np.zeros((0, 3)) if before is None else before
     period = settings.limits.period_s
     for index, run in enumerate(runs):
         started = time.perf_counter()
         cursor = first if index == 0 and first is not None else None
+        if run.rest_cycles_before and cursor is None:
+            piece = run.pieces[0]
+            point = to_3d(piece.curve.points(np.array([piece.u_start])))[0]
+            yield (rest_chunk(piece, piece.u_start, point, run.rest_cycles_before, period),
+                   Resume(piece.block, piece.u_start, before, None, settings.tau_f))
         for plan in plan_run(run, settings, before, cursor):
             figures.add(plan)
             if len(plan.samples.u):
                 before = np.concatenate([before, plan.samples.position_mm])[-3:]
                 yield window_trajectory(plan, period, started), resume_after(plan, before, settings.tau_f, period)
             started = time.perf_counter()
+    if trailing_rest and runs:
+        piece = runs[-1].pieces[-1]
+        yield (rest_chunk(piece, piece.u_end, before[-1], trailing_rest, period),
+               Resume(piece.block, piece.u_end, before, None, settings.tau_f))
 
 
-def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings]:
+def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings, int]:
+    """Runs, settings, and the set-points of a dwell after the last move."""
     pieces = program_pieces(program, limits)
     settings = settings_for(limits, max_feed(pieces), chunk_cycles)
-    return split_runs(pieces, limits, settings.min_pass_mm_s), settings
+    stops = ProgramStops.of(program, limits)
+    return split_runs(pieces, limits, settings.min_pass_mm_s, stops), settings, trailing_dwell_cycles(pieces, stops, limits.period_s)
 
 
 def _rest_chunk(program: Program, limits: PlanLimits) -> Trajectory:
@@ -179,7 +196,7 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
 
     Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
     from the highest feed), not by the program's length."""
-    runs, settings = _setup(program, limits, chunk_cycles)
+    runs, settings, trailing = _setup(program, limits, chunk_cycles)
     figures = _figures if _figures is not None else _Figures()
     if not runs:
         yield _rest_chunk(program, limits)
@@ -188,7 +205,7 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
     if state is not None:
         runs, first = start_from_state(program, runs, state, settings)
     figures.runs = len(runs)
-    for chunk, _ in _named_lines(program, _chunks(runs, settings, first, figures)):
+    for chunk, _ in _named_lines(program, _chunks(runs, settings, first, figures, trailing_rest=trailing)):
         yield chunk
 
 
@@ -200,11 +217,11 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     real last set-points and the real filter memory. The acceleration and jerk limits must
     be those of the resumed plan (the filter memory depends on A/J); the feed, chord error and
     axis limits may change."""
-    runs, settings = _setup(program, limits, chunk_cycles)
+    runs, settings, trailing = _setup(program, limits, chunk_cycles)
     if not runs:
         return
     if resume is None:
-        yield from _named_lines(program, _chunks(runs, settings, None, _Figures()))
+        yield from _named_lines(program, _chunks(runs, settings, None, _Figures(), trailing_rest=trailing))
         return
     if abs(resume.tau_f - settings.tau_f) > 1e-12:
         raise InputError("limits", "resuming needs the acceleration and jerk limits of the resumed plan "
@@ -212,7 +229,7 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     runs, first = resume_runs(runs, resume)
     if not runs:
         return
-    yield from _named_lines(program, _chunks(runs, settings, first, _Figures(), resume.before))
+    yield from _named_lines(program, _chunks(runs, settings, first, _Figures(), resume.before, trailing))
 
 
 def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | None]:
@@ -252,13 +269,14 @@ class PlanStream:
         self.planning_time_s = 0.0
 
     def chunks(self) -> Iterator[tuple[Trajectory, Resume | None]]:
-        runs, settings = _setup(self.program, self.limits, self.chunk_cycles)
+        runs, settings, trailing = _setup(self.program, self.limits, self.chunk_cycles)
         self.figures.runs = len(runs)
         if not runs:
             yield _rest_chunk(self.program, self.limits), None
             return
         started = time.perf_counter()
-        for chunk, resume in _named_lines(self.program, _chunks(runs, settings, None, self.figures)):
+        for chunk, resume in _named_lines(self.program, _chunks(runs, settings, None, self.figures,
+                                                                trailing_rest=trailing)):
             self.planning_time_s += time.perf_counter() - started
             yield chunk, resume
             started = time.perf_counter()
