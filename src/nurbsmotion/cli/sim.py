@@ -17,6 +17,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim import FaultInjection, SimNetwork, parse_fault_spec
 from nurbsmotion.sim.homing import HomeSensors
+from nurbsmotion.sim.network import SpindleSim
 from nurbsmotion.sim.network import DriveSetupError
 from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
 
@@ -37,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="limit switches / index pulses a drive's homing finds, in raw counts, e.g. "
              "node=1,negative_limit=-2500,positive_limit=2500,index_pitch=1000,index_phase=300 (repeatable)",
     )
+    parser.add_argument("--spindle", metavar="SPEC", default=None,
+                        help="add a spindle drive (profile velocity 3 / cyclic synchronous velocity 9), "
+                             "e.g. node=5,counts_per_rev=4096")
     parser.add_argument("--lag-cycles", type=int, default=1, metavar="N", help="servo lag in SYNC cycles (default 1)")
     parser.add_argument("--max-velocity-counts-s", type=float, default=None, metavar="V", help="servo velocity limit (default: none)")
     parser.add_argument("--missing-setpoint", default=MissingSetpoint.HOLD.value, metavar="hold|extrapolate",
@@ -100,6 +104,31 @@ def parse_home_sensors(specs: list[str], machine: MachineConfig) -> dict[int, Ho
     return sensors
 
 
+def parse_spindle(spec: str | None, machine: MachineConfig) -> SpindleSim | None:
+    """``node=5,counts_per_rev=4096``: a spindle drive at a node no axis (or io) uses."""
+    if spec is None:
+        return None
+    where = f"--spindle {spec!r}"
+    fields: dict[str, str] = {}
+    for part in spec.split(","):
+        key, sep, value = (t.strip() for t in part.partition("="))
+        if not sep or key not in ("node", "counts_per_rev") or not value:
+            raise InputError(where, f"expected node=N,counts_per_rev=C, got {part.strip()!r}")
+        fields[key] = value
+    if set(fields) != {"node", "counts_per_rev"}:
+        raise InputError(where, "node and counts_per_rev are both required")
+    try:
+        node_id, counts_per_rev = int(fields["node"], 0), float(fields["counts_per_rev"])
+    except ValueError:
+        raise InputError(where, "node and counts_per_rev must be numbers") from None
+    used = {axis.node_id for axis in machine.axes} | ({machine.io.node_id} if machine.io is not None else set())
+    if not 1 <= node_id <= 127 or node_id in used:
+        raise InputError(where, f"node must be 1..127 and not an axis or io node of {machine.source} (used {sorted(used)})")
+    if not counts_per_rev > 0:
+        raise InputError(where, f"counts_per_rev must be > 0, got {counts_per_rev:g}")
+    return SpindleSim(node_id, counts_per_rev)
+
+
 def sync_settings(missing_setpoint: str, sync_loss_periods: float | None, own_cycle: bool = False) -> SyncSettings:
     if sync_loss_periods is not None and not sync_loss_periods >= 1:
         raise InputError("--sync-loss-periods", f"must be >= 1, got {sync_loss_periods}")
@@ -133,12 +162,13 @@ def serve(
     on_ready: Callable[[SimNetwork], Any] | None = None,
     sync: SyncSettings | None = None,
     home_sensors: dict[int, HomeSensors] | None = None,
+    spindle: SpindleSim | None = None,
 ) -> SimNetwork:
     """Run the drives until ``stop`` is set; then stop them and write the recordings
     (set-points and SYNC timelines are recorded only when ``record_dir`` is given)."""
     try:
         net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s,
-                                     record=record_dir is not None, sync=sync, home_sensors=home_sensors)
+                                     record=record_dir is not None, sync=sync, home_sensors=home_sensors, spindle=spindle)
     except DriveSetupError as err:
         raise InputError(machine.where(f"axes[{err.axis_index}].eds"), err.message) from None
     try:
@@ -170,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
     machine = load_config(args.config)
     faults = parse_faults(args.fault, machine)
     home_sensors = parse_home_sensors(args.home_sensors, machine)
+    spindle = parse_spindle(args.spindle, machine)
     check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
     sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)
     logging.getLogger("nurbsmotion.sim").setLevel(min(logging.getLogger().level, logging.INFO))
@@ -177,7 +208,7 @@ def run(args: argparse.Namespace) -> int:
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         serve(machine, faults, stop, lag_cycles=args.lag_cycles, max_velocity_counts_s=args.max_velocity_counts_s,
-              record_dir=args.record_dir, sync=sync, home_sensors=home_sensors)
+              record_dir=args.record_dir, sync=sync, home_sensors=home_sensors, spindle=spindle)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

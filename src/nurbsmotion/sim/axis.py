@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, Mode, State
 from nurbsmotion.log import kv
-from nurbsmotion.sim import homing
+from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim.eds import STANDARD_MODES
 from nurbsmotion.sim.recording import SetpointRecorder, SetpointSource, SyncRecorder
 from nurbsmotion.sim.servo import ServoModel
@@ -24,7 +24,7 @@ from nurbsmotion.sim.timing import MissingSetpoint, SyncTiming
 
 log = logging.getLogger("nurbsmotion.sim.drive")
 
-CYCLIC_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION))
+CYCLIC_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION), velocity.MODE_CYCLIC_SYNC_VELOCITY)
 SW_SYNCHRONIZED = 1 << 8  # manufacturer specific in CiA 402; sync status as Nanotec's
 EMCY_PARAMETER_ERROR = 0x6320  # CiA 301 'parameter error': IP/CSP enabled without a cycle period
 EMCY_SYNC_LOSS = 0x8700  # CiA 402 'sync controller'
@@ -52,6 +52,7 @@ class AxisParameters:
     limit_max_counts: int = 0  # 0x607D sub 2
     modes: frozenset[int] = STANDARD_MODES  # 0x6502: what 0x6060 accepts
     missing_setpoint: MissingSetpoint = MissingSetpoint.HOLD
+    velocity_profile: velocity.VelocityProfile = velocity.VelocityProfile(0.0, 0.0, 0.0, 0.0)  # 0x6083/4, 0x606D/E
     homing_period_s: float = 1e-3  # 0x1006 (else the SYNC interval): the drive's own cycle in homing mode
 
 
@@ -113,6 +114,8 @@ class Cia402Axis:
         self.mode = self.mode_display = mode
         self.target_position = 0
         self.ip_setpoint = 0
+        self.target_velocity = 0
+        self._in_window_s = 0.0
         self.error_code = 0
         self.error_register = 0
         self.error_history: list[int] = []
@@ -159,6 +162,15 @@ class Cia402Axis:
         """0x607A, the CSP set-point."""
         self.target_position = value
         self._fresh_target = True
+
+    def set_target_velocity(self, value: int) -> None:
+        """0x60FF, the PV target / CSV set-point (counts/s)."""
+        self.target_velocity = value
+
+    @property
+    def velocity_actual(self) -> int:
+        """0x606C, counts/s."""
+        return int(round(self.servo.velocity_counts_s))
 
     def set_ip_setpoint(self, value: int) -> None:
         """0x60C1 sub 1, the IP set-point."""
@@ -210,8 +222,8 @@ class Cia402Axis:
         """Statusword bit 12: CSP 'target used' / IP 'interpolation active'."""
         if self.state is not State.OPERATION_ENABLED:
             return False
-        if self.mode_display == Mode.CYCLIC_SYNC_POSITION:
-            return True
+        if self.mode_display in (Mode.CYCLIC_SYNC_POSITION, velocity.MODE_CYCLIC_SYNC_VELOCITY):
+            return True  # CSV: 'target velocity used'
         return self.mode_display == Mode.INTERPOLATED_POSITION and bool(self.controlword & c.CW_ENABLE_IP)
 
     # ------------------------------------------------------------------ per SYNC
@@ -255,6 +267,13 @@ class Cia402Axis:
             self.stats.setpoints_ignored += fresh
             self._homing_cycle()
             return inactive, int(round(self._demand))
+        if self.state is State.OPERATION_ENABLED and self.mode_display in velocity.VELOCITY_MODES:
+            self.stats.setpoints_ignored += fresh
+            if self.cycle_period_missing():
+                self.raise_fault(EMCY_PARAMETER_ERROR)
+            else:
+                self._velocity_cycle()
+            return inactive, int(round(self._demand))
         if self.state is State.OPERATION_ENABLED:
             if self.cycle_period_missing():
                 self.raise_fault(EMCY_PARAMETER_ERROR)
@@ -287,6 +306,21 @@ class Cia402Axis:
         else:
             self.stats.setpoints_ignored += fresh
         return inactive, int(round(self._demand))
+
+    def _velocity_cycle(self) -> None:
+        """One cycle of profile velocity (3) or cyclic synchronous velocity (9), ``sim.velocity``."""
+        state = velocity.VelocityState(self.servo.actual, self.servo.velocity_counts_s, self._in_window_s)
+        if self.mode_display == velocity.MODE_PROFILE_VELOCITY:
+            state = velocity.profile_velocity_tick(state, self.target_velocity, bool(self.controlword & c.CW_HALT),
+                                                   self.params.velocity_profile, self._cycle_s())
+        else:
+            state = velocity.cyclic_velocity_tick(state, self.target_velocity, self._cycle_s())
+        self._in_window_s = state.in_window_s
+        self.servo.hold(state.position)
+        self.servo.velocity_counts_s = state.velocity_counts_s
+        self._demand = self.servo.actual
+        self.following_error = 0
+        self.position_actual = int(round(self.servo.actual))
 
     def _homing_cycle(self) -> None:
         """One drive cycle of homing mode (``sim.homing.homing_tick``): the motor stands where
@@ -348,6 +382,9 @@ class Cia402Axis:
             word |= c.SW_IP_ACTIVE
         if self.state is State.OPERATION_ENABLED and self.mode_display == homing.MODE_HOMING:
             word |= self._homing.statusword_bits  # bits 10, 12, 13: CiA 402-2 homing table
+        if self.state is State.OPERATION_ENABLED and self.mode_display == velocity.MODE_PROFILE_VELOCITY:
+            state = velocity.VelocityState(self.servo.actual, self.servo.velocity_counts_s, self._in_window_s)
+            word |= c.SW_TARGET_REACHED if state.target_reached(self.params.velocity_profile) else 0
         if self._fe_flag:
             word |= c.SW_FOLLOWING_ERROR
         if self.sync_locked:

@@ -33,7 +33,7 @@ from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
 from nurbsmotion.sim import eds as eds_rules
-from nurbsmotion.sim import homing
+from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim import axis as axis_module
 from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
@@ -182,6 +182,10 @@ class SimDrive:
                                self.timeline)
         self.axis.params.missing_setpoint = (sync or SyncSettings()).missing_setpoint
         self.axis.home_sensors = home_sensors or homing.HomeSensors()
+        # a velocity mode runs only with its objects in the EDS (0x6502 alone is not enough)
+        self._velocity_modes_missing = frozenset(
+            mode for mode, objects in velocity.REQUIRED_OBJECTS.items()
+            if any(find_variable(self.od, index, 0) is None for index in objects))
         self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self._od_value_or(index, sub, 0))
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
@@ -220,6 +224,8 @@ class SimDrive:
             (c.FOLLOWING_ERROR_ACTUAL, 0): lambda: axis.following_error,
             (c.TARGET_POSITION, 0): lambda: axis.target_position,
             (c.IP_DATA_RECORD, 1): lambda: axis.ip_setpoint,
+            (velocity.TARGET_VELOCITY, 0): lambda: axis.target_velocity,
+            (velocity.VELOCITY_ACTUAL, 0): lambda: axis.velocity_actual,
             (c.ERROR_CODE, 0): lambda: axis.error_code,
             (c.ERROR_REGISTER, 0): lambda: axis.error_register,
             (c.PREDEFINED_ERROR_FIELD, 0): lambda: len(axis.error_history),
@@ -229,6 +235,7 @@ class SimDrive:
             (c.MODES_OF_OPERATION, 0): self._set_mode,
             (c.TARGET_POSITION, 0): axis.set_target_position,
             (c.IP_DATA_RECORD, 1): axis.set_ip_setpoint,
+            (velocity.TARGET_VELOCITY, 0): axis.set_target_velocity,
         }
 
     # ------------------------------------------------------------------ public API
@@ -574,7 +581,11 @@ class SimDrive:
         params.limit_min_counts = value(c.SOFTWARE_POSITION_LIMIT, 1, 0)
         params.limit_max_counts = value(c.SOFTWARE_POSITION_LIMIT, 2, 0)
         params.modes = eds_rules.supported_modes(value(c.SUPPORTED_DRIVE_MODES, 0, 0),
-                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0))
+                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0)) - self._velocity_modes_missing
+        params.velocity_profile = velocity.VelocityProfile(
+            float(value(velocity.PROFILE_ACCELERATION, 0, 0)),
+            float(value(velocity.PROFILE_DECELERATION, 0, value(velocity.PROFILE_ACCELERATION, 0, 0))),
+            float(value(velocity.VELOCITY_WINDOW, 0, 0)), float(value(velocity.VELOCITY_WINDOW_TIME, 0, 0)))
         self._sync_window_s = value(SYNC_WINDOW_LENGTH, 0, 0) * 1e-6
         self._sync_counter_overflow = value(SYNC_COUNTER_OVERFLOW, 0, None)
         self._emcy_cob = value(c.EMCY_COB_ID, 0, pdo_layout.COB_ID_INVALID_BIT)

@@ -48,6 +48,20 @@ class IoInput:
     active_low: bool = False
 
 
+@dataclass(frozen=True)
+class SpindleSim:
+    """A spindle drive to simulate: the packaged CiA-402 drive (or ``eds``) at ``node_id``,
+    used in profile velocity (3) or cyclic synchronous velocity (9) mode."""
+
+    node_id: int
+    counts_per_rev: float
+    eds: str | Path | None = None
+
+    def rpm(self, velocity_counts_s: float) -> float:
+        """rev/min = counts/s · 60 / counts_per_rev."""
+        return velocity_counts_s * 60.0 / self.counts_per_rev
+
+
 class SimNetwork:
     """Any number of :class:`SimDrive` and :class:`SimIoNode` on one bus
     (``interface``/``channel`` as python-can).
@@ -64,6 +78,7 @@ class SimNetwork:
         self.drives: dict[int, SimDrive] = {}
         self.io_nodes: dict[int, SimIoNode] = {}
         self.io_inputs: dict[str, IoInput] = {}  # named inputs (from a machine's io section)
+        self.spindle: SpindleSim | None = None
         self.network: canopen.Network | None = None
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -106,6 +121,7 @@ class SimNetwork:
     def for_machine(
         cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True,
         sync: SyncSettings | None = None, home_sensors: dict[int, HomeSensors] | None = None,
+        spindle: SpindleSim | None = None,
     ) -> "SimNetwork":
         """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
         bus.interface/channel/bitrate, axes[].name/node_id/eds/identity), and the CiA-401 node
@@ -115,7 +131,8 @@ class SimNetwork:
         Each drive is its EDS straight out of the box (plus the axis identity in 0x1018):
         mode, cycle period and everything else are what the master writes, so a missing
         write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive;
-        ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds.
+        ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds;
+        ``spindle`` adds a spindle drive (its node id must be free).
         """
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
@@ -142,7 +159,19 @@ class SimNetwork:
         io = getattr(machine, "io", None)
         if io is not None:
             net._add_machine_io(io)
+        if spindle is not None:
+            net.add_spindle(spindle, record=record, sync=sync)
         return net
+
+    def add_spindle(self, spindle: SpindleSim, **drive_kwargs: Any) -> SimDrive:
+        """Create the spindle drive (keyword arguments as :class:`SimDrive`)."""
+        if not spindle.counts_per_rev > 0:
+            raise InputError("spindle", f"counts_per_rev must be > 0, got {spindle.counts_per_rev}")
+        if spindle.node_id in self.drives or spindle.node_id in self.io_nodes:
+            raise InputError("spindle", f"node {spindle.node_id} is already simulated (an axis or the io node)")
+        drive = self.add_drive(spindle.node_id, spindle.eds, name=f"spindle/node{spindle.node_id}", **drive_kwargs)
+        self.spindle = spindle
+        return drive
 
     def _add_machine_io(self, io: Any) -> None:
         """The io section's node, with its named inputs all inactive (active-low wires at 1)."""
