@@ -34,7 +34,8 @@ def event_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
         return f"{event.code} needs a spindle, and this machine has none ({said} in {config.source})"
     if event.kind is EventKind.COOLANT and event.coolant is not None and event.coolant is not CoolantMode.OFF \
             and coolant_output(config, event.coolant) is None:
-        wanted = " or ".join(COOLANT_OUTPUTS[event.coolant])
+        names = COOLANT_OUTPUTS[event.coolant]
+        wanted = f"{', '.join(names[:-1])} or {names[-1]}"
         return (f"{event.code} needs {event.coolant.value} coolant, and this machine has no output named "
                 f"{wanted} (io.outputs in {config.source})")
     if event.kind is EventKind.TOOL_CHANGE:
