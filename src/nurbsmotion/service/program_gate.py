@@ -3,7 +3,9 @@
 - M3/M4 (spindle on) without a spindle drive (``spindle: none`` or no ``spindle:`` key): a
   mill program must not "run" with its spindle stopped (issue 15, item 5).
 - M7 (mist) / M8 (flood) without a coolant output in ``io.outputs`` (an output named
-  ``coolant``, or ``mist``/``coolant_mist`` for M7, ``flood``/``coolant_flood`` for M8).
+  ``coolant``, or ``mist``/``coolant_mist`` for M7, ``flood``/``coolant_flood`` for M8), and
+  for now with one too: the daemon does not switch io outputs yet, and a program must not run
+  with its coolant silently off.
 - M0, M1 (with the optional-stop switch on) and M6 hold the job until ``resume``; the daemon
   cannot hold a job yet, so such a program is refused rather than run through its pauses.
 
@@ -19,6 +21,7 @@ from nurbsmotion.program import CoolantMode, EventKind, Program, ProgramEvent, S
 COOLANT_OUTPUTS = {CoolantMode.MIST: ("coolant", "mist", "coolant_mist"),
                    CoolantMode.FLOOD: ("coolant", "flood", "coolant_flood")}
 NO_HOLD = "the daemon cannot pause a job yet (hold/resume is not built)"
+NO_OUTPUTS = "the daemon does not switch io outputs yet (io: is read but not driven)"
 
 
 def coolant_output(config: MachineConfig, mode: CoolantMode) -> str | None:
@@ -32,8 +35,10 @@ def event_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
     if event.kind is EventKind.SPINDLE and event.spindle is not SpindleDirection.OFF and config.spindle in (None, "none"):
         said = "spindle: none" if config.spindle == "none" else "no spindle: key"
         return f"{event.code} needs a spindle, and this machine has none ({said} in {config.source})"
-    if event.kind is EventKind.COOLANT and event.coolant is not None and event.coolant is not CoolantMode.OFF \
-            and coolant_output(config, event.coolant) is None:
+    if event.kind is EventKind.COOLANT and event.coolant is not None and event.coolant is not CoolantMode.OFF:
+        output = coolant_output(config, event.coolant)
+        if output is not None:
+            return f"{event.code} {event.coolant.value} coolant (output {output}): {NO_OUTPUTS}"
         names = COOLANT_OUTPUTS[event.coolant]
         wanted = f"{', '.join(names[:-1])} or {names[-1]}"
         return (f"{event.code} needs {event.coolant.value} coolant, and this machine has no output named "
