@@ -15,6 +15,7 @@ from typing import Any, Callable
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
+from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.motion import MotionLink, Simulation
@@ -57,6 +58,7 @@ class Daemon:
         self._closing = False
 
     def start(self) -> None:
+        cap_switch_interval(self.config.cycle_period_s)  # process-wide: the cycle thread gets the GIL in time
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         link, self.simulation = self._open_motion(self.config)
