@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from nurbsmotion import cia402 as c
 from nurbsmotion.fieldbus.controller import TRANSITIONS, CycleController, Event, Phase, next_phase
 from nurbsmotion.fieldbus.drive_state import CW_ENABLED, CW_QUICK_STOP, CW_SHUTDOWN
 from nurbsmotion.fieldbus.playback import Playback

@@ -183,6 +183,7 @@ class Master:
         self._cycle = 0
         self._horizon = 0  # last cycle whose commands are computed
         self._no_rewind_before = 0
+        self._first_new = 1 << 62  # lowest cycle computed since the last commit
         self._job: Job | None = None
         self._requests: collections.deque[tuple[str, object]] = collections.deque()
         self._ready = threading.Event()
@@ -543,7 +544,7 @@ class Master:
             self._cycle = self._horizon = self._fb.wire_cycle = self._no_rewind_before = 0
             self._plan(0, [])
             writer.start()
-            writer.commit(0, self._horizon, self._ctl.tail)
+            writer.commit(0, self._horizon, self._take_first_new(), self._ctl.tail)
             while not self._quit:
                 k = writer.next_cycle()
                 self._cycle = self._fb.wire_cycle = k
@@ -556,7 +557,7 @@ class Master:
                     phase = Phase.ENABLING
                 requests += self._supervisor.check(k, phase, self._job)
                 self._plan(k, requests)
-                writer.commit(k, self._horizon, self._ctl.tail)
+                writer.commit(k, self._horizon, self._take_first_new(), self._ctl.tail)
                 self._after_cycle(k)
             if self._job is not None:  # shutdown before its end reached the wire
                 self._finish_job(self._job, self._job.outcome or "aborted")
@@ -577,30 +578,57 @@ class Master:
     def _plan(self, k: int, requests: list[tuple[str, Any]]) -> None:
         """Commands of every cycle up to the writer's horizon; requests act from k + guard + 1
         on (queued cycles beyond that are computed again from the state kept for each)."""
-        writer, ctl, fb, history, snaps = self._writer, self._ctl, self._fb, self._history, self._snaps
+        writer, ctl, fb, snaps = self._writer, self._ctl, self._fb, self._snaps
         assert writer is not None
         if any(what in ("abort", "quick_stop") for what, _ in requests):
             writer.quick_stop_now(k, [CW_QUICK_STOP] * self._n, list(fb.pos))
         first = k + writer.guard + 1
+        if self._horizon < first - 1:
+            self._adopt_tail(k, first - 1)
         if requests and self._horizon >= first:
             back = max(first - 1, self._no_rewind_before)
             snap = snaps[back % HISTORY_CYCLES]
             if back < self._horizon and snap is not None:
                 ctl.restore(snap)
                 self._horizon = back
-        size = HISTORY_CYCLES
         while True:
-            h = self._horizon
-            if h >= writer.horizon(k, ctl.stop_cycles(), ctl.phase in MOVING_PHASES) and not requests:
+            if self._horizon >= writer.horizon(k, ctl.stop_cycles(), ctl.phase in MOVING_PHASES) and not requests:
                 break
-            h += 1
-            cw, sp = ctl.step(h, fb, requests)
+            self._step_next(requests)
             requests = []
-            history.store(h, cw, sp)
-            snaps[h % size] = ctl.snapshot()
-            self._horizon = h
-            if ctl.notices:
-                self._notices(h)
+
+    def _step_next(self, requests: list[tuple[str, Any]]) -> None:
+        """Commands of the cycle after the horizon, kept with the controller state after them."""
+        ctl = self._ctl
+        h = self._horizon + 1
+        self._first_new = min(self._first_new, h)
+        cw, sp = ctl.step(h, self._fb, requests)
+        self._history.store(h, cw, sp)
+        self._snaps[h % HISTORY_CYCLES] = ctl.snapshot()
+        self._horizon = h
+        if ctl.notices:
+            self._notices(h)
+
+    def _adopt_tail(self, k: int, until: int) -> None:
+        """The cycle thread came back after the kernel went past its horizon: the cycles up to
+        ``until`` are (or may be) on the wire from the queue's tail. Compute them as the tail
+        was (a controlled stop while moving, the last commands otherwise), so the controller
+        continues from what the drives got; a stop that was not asked for is a 'stall' fault."""
+        ctl = self._ctl
+        requests: list[tuple[str, Any]] = []
+        if ctl.phase is Phase.STREAMING:
+            self._supervisor.report(None, None, "stall", self._horizon, k, f"stall: the cycle thread was away "
+                                    f"past the queued set-points (cycle {self._horizon}, now {k}); the queue went on "
+                                    f"with its controlled stop", ctl.phase, self._job, [])
+            requests.append(("fault_stop", None))
+        while self._horizon < until:
+            self._step_next(requests)
+            requests = []
+
+    def _take_first_new(self) -> int:
+        """Lowest cycle computed (or recomputed) since the last commit, then reset."""
+        first, self._first_new = self._first_new, 1 << 62
+        return first
 
     def _notices(self, h: int) -> None:
         notices = self._ctl.notices
@@ -610,9 +638,9 @@ class Master:
             if what == "phase":
                 phase, cycle = notice[1], notice[2]
                 log.info(kv("phase", phase=phase.value, cycle=cycle))
+                self._no_rewind_before = cycle  # a rewind never undoes a phase change (bring-up, job start...)
                 if phase is Phase.STREAMING:
                     self._job = self._ctl.job
-                    self._no_rewind_before = cycle
             elif what == "ready":
                 self._ready.set()
             elif what == "enable_failed":

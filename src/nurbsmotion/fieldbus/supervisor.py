@@ -211,7 +211,7 @@ class Supervisor:
         step = enable_step(state, 0, ip_mode)[0]
         waited_ms = (k - since_cycle) * self.period_s * 1000
         where = f"no TPDO1 received (last statusword by SDO: {state_name(sw)})" if fb.cycle[i] < 0 else \
-            f"stuck in {state_name(sw)}"
+            f"stuck in {state_name(sw)} (statusword 0x{sw or 0:04X}, controlword sent 0x{self.history.cw[k % self.history.size][i]:04X})"
         emcy = fb.last_emcy[i]
         message = (f"node {node}: bring-up step '{step}': {where} after {waited_ms:.0f} ms"
                    f"{f' (last EMCY 0x{emcy:04X})' if emcy else ''}")

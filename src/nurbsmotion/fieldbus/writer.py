@@ -56,7 +56,8 @@ class CycleWriter(Protocol):
 
     def horizon(self, c: int, stop_cycles: int, moving: bool) -> int: ...
 
-    def commit(self, c: int, horizon: int, tail: Callable[[list[list[int]], list[list[int]]], int]) -> None: ...
+    def commit(self, c: int, horizon: int, first_new: int,
+               tail: Callable[[list[list[int]], list[list[int]]], int]) -> None: ...
 
     def quick_stop_now(self, c: int, controlwords: list[int], setpoints: list[int]) -> None: ...
 
@@ -120,7 +121,8 @@ class LoopWriter:
     def horizon(self, c: int, stop_cycles: int, moving: bool) -> int:
         return c + 1
 
-    def commit(self, c: int, horizon: int, tail: Callable[[list[list[int]], list[list[int]]], int]) -> None:
+    def commit(self, c: int, horizon: int, first_new: int,
+               tail: Callable[[list[list[int]], list[list[int]]], int]) -> None:
         """Nothing to do: cycle c + 1 is sent at its deadline from the history."""
 
     def quick_stop_now(self, c: int, controlwords: list[int], setpoints: list[int]) -> None:
