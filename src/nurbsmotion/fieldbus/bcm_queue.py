@@ -55,6 +55,7 @@ SFF_EXACT_MASK = 0xC00007FF  # CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_SFF_MASK
 TIMESPEC = struct.Struct("@ll")
 GUARD_CYCLES = 3
 BATCH_CYCLES = 8  # the planning horizon moves in steps of this many cycles (fewer tail rewrites)
+WAKE_PERIOD_S = 0.008  # the cycle thread wakes about this often (whole cycles): the queue, not it, keeps time
 TRIM_KP, TRIM_KI = 0.1, 0.01  # PI on the SYNC phase error (per renewal)
 TRIM_LIMIT = 0.2  # share of T the period correction may reach
 RE_ANCHOR_SHARE = 2.0  # phase error (share of T) beyond which the phase reference moves
@@ -133,7 +134,8 @@ class BcmQueueWriter:
         self.t_ref = 0.0
         self.k_ref = -1
         self.last_stamp = 0.0
-        self.grid = DeadlineGrid(period_s, time.perf_counter() + period_s)
+        self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
+        self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
         self.expired = 0  # lease expiries seen
 
     def _init_frames(self) -> None:
@@ -148,10 +150,11 @@ class BcmQueueWriter:
     def start(self) -> None:
         self.bcm_sock = create_bcm_socket(self.channel)
         self.echo = SyncEcho(self.channel, self.frames.sync_id)
-        self.grid = DeadlineGrid(self.period_s, time.perf_counter() + self.period_s)
+        self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
 
     def next_cycle(self) -> int:
-        """Sleep one period, then count the SYNCs the kernel sent meanwhile: the wire cycle."""
+        """Sleep until the next wake-up (every WAKE_PERIOD_S, whole cycles), then count the
+        SYNCs the kernel sent meanwhile: the wire cycle."""
         woke = wait_until(self.grid.next_s, 60e-6)
         lateness, missed = self.grid.advance(woke)
         self.stats.add(lateness, missed)

@@ -27,6 +27,7 @@ class Feedback:
         self.pos: list[int] = [0] * n_axes
         self.fe: list[int | None] = [None] * n_axes
         self.cycle = [-1] * n_axes  # wire cycle when the last TPDO1 arrived
+        self.tpdo_count = [0] * n_axes  # TPDO1s received (one answers each SYNC)
         self.time = [0.0] * n_axes  # its receive timestamp (time.time() based)
         self.bad_tpdo = [0] * n_axes
         self.emcy_count = [0] * n_axes
@@ -51,6 +52,7 @@ class Feedback:
                 return
             self.status[i], self.pos[i] = unpack(data)
             self.cycle[i] = self.wire_cycle
+            self.tpdo_count[i] += 1
             self.time[i] = timestamp
         return on_tpdo1
 

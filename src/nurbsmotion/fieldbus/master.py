@@ -463,6 +463,20 @@ class Master:
         else:
             self._traffic_log.switch(path)
             self._traffic = self._traffic_log
+        self._filter_received()
+
+    def _filter_received(self) -> None:
+        """With the kernel queue our own SYNC and RPDOs come back to our raw socket (the BCM is
+        another socket): 4 frames a cycle of receive work for nothing. Accept only what the
+        drives send (EMCY, TPDO1/2, SDO answers, heartbeat) unless the traffic is recorded."""
+        if self._bus is None or not self._use_kernel_queue():
+            return
+        if self._traffic is not None:
+            self._bus.set_filters(None)
+            return
+        ids = [base + node for node in self._node_ids
+               for base in (c.COB_EMCY, c.COB_TPDO[0], c.COB_TPDO[1], c.COB_SDO_TX, c.COB_HEARTBEAT)]
+        self._bus.set_filters([{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in ids])
 
     def shutdown(self, timeout_s: float = 5.0) -> None:
         """Controlled stop of a running job, disable the drives, NMT stop, close (if ours)."""
@@ -530,6 +544,7 @@ class Master:
         self._enable_error = None
         if self._writer is None:
             self._writer = self._make_writer()
+        self._filter_received()
         self._supervisor.reset()
         self._ctl.handle("enable", None, 0, self._fb)
         self._thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
