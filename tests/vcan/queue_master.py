@@ -14,12 +14,15 @@ import sys
 
 from nurbsmotion.config import load_config
 from nurbsmotion.fieldbus import Master
+from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY
 from tests.vcan.two_processes import SLOW_KERNEL_MASTER_OPTIONS, strictly_increasing_job
 
 
 def main(config_path: str, cycles: int) -> int:
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr, format="%(message)s")
-    with Master(load_config(config_path), sync_source="kernel", **SLOW_KERNEL_MASTER_OPTIONS) as master:
+    # as the daemon runs it (service.link): SCHED_FIFO cycle thread where allowed (root in UML)
+    with Master(load_config(config_path), sync_source="kernel", rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze",
+                **SLOW_KERNEL_MASTER_OPTIONS) as master:
         master.bring_up()
         held = [axis.position_counts for axis in master.status().axes]
         print("held", *held, flush=True)
