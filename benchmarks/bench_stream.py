@@ -148,8 +148,8 @@ def analyse(frames: list[tuple[float, int, int]], rows: np.ndarray, period_s: fl
             last_rpdo[-1] = stamp
     first_value, last_value = int(rows[0, 0]), int(rows[-1, 0])
     start = next((n for n, c in enumerate(per_cycle) if first_value in c.get(1, [])), 0)
-    end = next((n for n in range(len(per_cycle) - 1, -1, -1) if last_value in per_cycle[n].get(1, [])),
-               len(per_cycle) - 1)
+    end = next((n for n in range(start, len(per_cycle)) if last_value in per_cycle[n].get(1, [])),
+               len(per_cycle) - 1)  # the first cycle with the last row (the hold repeats it)
     times = np.array(syncs[start:end + 2])
     intervals = np.diff(times)
     margins = [syncs[n + 1] - last_rpdo[n] for n in range(start, min(end + 1, len(syncs) - 1)) if last_rpdo[n]]
@@ -207,6 +207,10 @@ def run_vcan(folder: Path, period_ms: float, stall_ms: float, seconds: float, sy
         sim.send_signal(signal.SIGTERM)
         sim.wait(20)
     outcome = f"{result[1]} {result[3]}" if len(result) >= 4 and result[3] != "-" else (result[1] if result else "?")
+    if os.environ.get("BENCH_STREAM_DUMP"):  # a folder: the listener's frames of every run, for a closer look
+        import json
+        dump = Path(os.environ["BENCH_STREAM_DUMP"]) / f"{sync}-{period_ms:g}-{stall_ms:g}.json"
+        dump.write_text(json.dumps({"held": held, "frames": listener.frames}))
     figures = analyse(listener.frames, job_rows(held, cycles), period_ms / 1000)
     return Figures("vcan0", sync, period_ms, stall_ms, held_ms, outcome, *figures)
 
@@ -243,6 +247,24 @@ def run_virtual(folder: Path, period_ms: float, stall_ms: float, seconds: float)
     return Figures("virtual", "loop", period_ms, stall_ms, held_ms, outcome, *figures)
 
 
+def run_bare_bcm(period_ms: float, seconds: float) -> str:
+    """The guest's own timer: SYNC alone from python-can's send_periodic (one BCM op, one
+    frame), no master, no drives, the same listener. A row of SYNC figures only."""
+    period_s = period_ms / 1000
+    listener = Listener(can.Bus(interface="socketcan", channel="vcan0"))
+    sender = can.Bus(interface="socketcan", channel="vcan0")
+    task = sender.send_periodic(can.Message(arbitration_id=SYNC_ID, data=b"", is_extended_id=False), period_s)
+    time.sleep(seconds)
+    task.stop()
+    listener.stop()
+    listener.bus.shutdown()
+    sender.shutdown()
+    d = np.diff([t for t, i, _ in listener.frames if i == SYNC_ID]) * 1000
+    outside = np.mean(np.abs(d - period_ms) > 0.05 * period_ms) * 100
+    return (f"| vcan0 | bare BCM SYNC | {period_ms:g} | - | - | {d.min():.3f} | {np.median(d):.3f} | "
+            f"{np.percentile(d, 99):.3f} | {d.max():.2f} | {(d.mean() / period_ms - 1) * 1e6:+.0f} | {outside:.1f} | - | - | - |")
+
+
 HEADER = ("| bus | writer | T ms | stall ms (held) | outcome | min ms | p50 ms | p99 ms | max ms | drift ppm | "
           "outside ±5 % T % | min RPDO→SYNC ms | lost X/Y/Z | repeated X/Y/Z |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -267,6 +289,8 @@ def main() -> int:
     print(f"load average before: {os.getloadavg()[0]:.2f}", flush=True)
     print(HEADER, flush=True)
     for period_ms in [float(p) for p in args.periods.split(",")]:
+        if args.bus == "vcan":
+            print(run_bare_bcm(period_ms, args.seconds), flush=True)
         for sync in (args.sync.split(",") if args.bus == "vcan" else ["loop"]):
             for stall_ms in [float(s) for s in args.stalls.split(",")]:
                 figures = run_vcan(folder, period_ms, stall_ms, args.seconds, sync) if args.bus == "vcan" \

@@ -18,8 +18,9 @@ next SYNC. Python only keeps the ring ahead of the kernel:
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
 - **The period.** The BCM re-arms each frame at now + ival, so the wire runs slow by the
-  timer latency of every frame (about 6 % inside User-Mode Linux). A PI loop on the phase
-  of the echoed SYNC timestamps against t0 + k·T trims ival at every renewal.
+  timer latency of every frame (about 6 % inside User-Mode Linux). The median of the last
+  64 echoed SYNC intervals against T trims ival at every renewal (frequency, not phase:
+  after a held-up timer the wire does not run fast to catch up).
 
 Why the BCM and not ETF + SO_TXTIME: queued SO_TXTIME frames cannot be revised (a stop or
 an override would wait for the whole queue, or the queue must be short), and an ETF root
@@ -30,6 +31,7 @@ rewritten until shortly before they are sent.
 
 from __future__ import annotations
 
+import collections
 import logging
 import socket
 import struct
@@ -56,9 +58,9 @@ TIMESPEC = struct.Struct("@ll")
 GUARD_CYCLES = 3
 BATCH_CYCLES = 8  # the planning horizon moves in steps of this many cycles (fewer tail rewrites)
 WAKE_PERIOD_S = 0.008  # the cycle thread wakes about this often (whole cycles): the queue, not it, keeps time
-TRIM_KP, TRIM_KI = 0.1, 0.01  # PI on the SYNC phase error (per renewal)
-TRIM_LIMIT = 0.2  # share of T the period correction may reach
-RE_ANCHOR_SHARE = 2.0  # phase error (share of T) beyond which the phase reference moves
+TRIM_WINDOW = 64  # echoed SYNC intervals the period trim looks at
+TRIM_GAIN = 0.05  # share of the median's error corrected per renewal
+TRIM_LIMIT = 0.1  # share of T the period correction may reach
 
 
 def ring_cycles(frames_per_cycle: int) -> int:
@@ -129,10 +131,8 @@ class BcmQueueWriter:
         self.lease_end = 0
         self.tail_sp = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
         self.tail_cw = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
-        self.trim_sum = 0.0
         self.correction_s = 0.0
-        self.t_ref = 0.0
-        self.k_ref = -1
+        self.intervals: collections.deque[float] = collections.deque(maxlen=TRIM_WINDOW)
         self.last_stamp = 0.0
         self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
         self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
@@ -166,9 +166,9 @@ class BcmQueueWriter:
         self.synced += 1
         self.c = k = self.op_base + self.synced - 1
         self.history.sync_time[k % self.history.size] = stamp
+        if self.last_stamp:
+            self.intervals.append(stamp - self.last_stamp)
         self.last_stamp = stamp
-        if self.k_ref < 0:
-            self.t_ref, self.k_ref = stamp, k
 
     def horizon(self, c: int, stop_cycles: int, moving: bool) -> int:
         """Deepest cycle to plan: moving, as deep as the stop after it still ends before the
@@ -228,21 +228,15 @@ class BcmQueueWriter:
         self.running = True
 
     def _trim(self) -> float:
-        """Period correction (s per cycle) from the phase of the last SYNC against t0 + k·T.
-
-        A phase error beyond RE_ANCHOR_SHARE·T (the kernel's timer was held up, e.g. the
-        guest descheduled) moves the reference instead: catching it up would run the wire
-        fast for many cycles."""
-        if self.k_ref < 0 or self.c <= self.k_ref:
-            return self.correction_s
-        error = self.last_stamp - (self.t_ref + (self.c - self.k_ref) * self.period_s)  # > 0: the wire is late
-        if abs(error) > RE_ANCHOR_SHARE * self.period_s:
-            self.t_ref, self.k_ref = self.last_stamp, self.c
-            return self.correction_s
-        self.trim_sum += error
-        limit = TRIM_LIMIT * self.period_s
-        self.trim_sum = max(-limit / TRIM_KI, min(limit / TRIM_KI, self.trim_sum))
-        self.correction_s = max(-limit, min(limit, TRIM_KP * error + TRIM_KI * self.trim_sum))
+        """Period correction (s per cycle): the median of the last TRIM_WINDOW echoed SYNC
+        intervals against T, integrated with gain TRIM_GAIN. The median ignores the intervals
+        a held-up timer stretched (a descheduled guest), so the wire neither runs slow by the
+        timer latency of every frame nor fast to catch up a lost phase."""
+        intervals = self.intervals
+        if len(intervals) >= TRIM_WINDOW // 2:
+            median = sorted(intervals)[len(intervals) // 2]
+            limit = TRIM_LIMIT * self.period_s
+            self.correction_s = max(-limit, min(limit, self.correction_s + TRIM_GAIN * (median - self.period_s)))
         return self.correction_s
 
     def quick_stop_now(self, c: int, controlwords: list[int], setpoints: list[int]) -> None:
@@ -273,8 +267,8 @@ class BcmQueueWriter:
         self.op_base = c + 1
         self.synced = 0
         self.c = c
-        self.k_ref = -1
-        self.trim_sum = self.correction_s = 0.0
+        self.last_stamp = 0.0
+        self.intervals.clear()
 
     def _delete(self) -> None:
         if self.bcm_sock is not None and self.running:
