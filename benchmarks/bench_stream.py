@@ -174,7 +174,11 @@ def freeze(pid: int, after_s: float, stall_s: float) -> subprocess.Popen:
                             text=True)
 
 
-def run_vcan(folder: Path, period_ms: float, stall_ms: float, seconds: float, sync: str) -> Figures:
+class BringUpFailed(Exception):
+    """The master's child process did not bring the drives up."""
+
+
+def run_vcan(folder: Path, period_ms: float, stall_ms: float, seconds: float, sync: str) -> Figures | str:
     config_path = write_config(folder, "socketcan", "vcan0", period_ms)
     cycles = int(seconds / (period_ms / 1000))
     env = dict(os.environ, PYTHONPATH=f"{ROOT / 'src'}:{ROOT}")
@@ -189,16 +193,10 @@ def run_vcan(folder: Path, period_ms: float, stall_ms: float, seconds: float, sy
     master = subprocess.Popen([sys.executable, __file__, "--role", "master", "--config", str(config_path),
                                "--cycles", str(cycles), "--sync", sync], stdout=subprocess.PIPE,
                               stderr=subprocess.DEVNULL, text=True, env=env)
-    held_ms = 0.0
     try:
-        assert master.stdout is not None
-        held = [int(v) for v in master.stdout.readline().split()[1:]]
-        master.stdout.readline()
-        stopper = freeze(master.pid, STALL_AT * seconds, stall_ms / 1000) if stall_ms else None
-        result = master.stdout.readline().split()
-        if stopper is not None:
-            held_ms = float(stopper.communicate()[0] or 0.0)
-        master.wait(60)
+        return _run_vcan_job(master, listener, period_ms, stall_ms, seconds, sync, cycles)
+    except BringUpFailed:
+        return f"| vcan0 | {sync} | {period_ms:g} | {stall_ms:g} | bring-up failed | - | - | - | - | - | - | - | - | - |"
     finally:
         if master.poll() is None:
             master.kill()
@@ -206,6 +204,22 @@ def run_vcan(folder: Path, period_ms: float, stall_ms: float, seconds: float, sy
         listener.bus.shutdown()
         sim.send_signal(signal.SIGTERM)
         sim.wait(20)
+
+
+def _run_vcan_job(master: subprocess.Popen, listener: Listener, period_ms: float, stall_ms: float, seconds: float,
+                  sync: str, cycles: int) -> Figures:
+    held_ms = 0.0
+    assert master.stdout is not None
+    held = [int(v) for v in master.stdout.readline().split()[1:]]
+    if not held:
+        raise BringUpFailed
+    master.stdout.readline()
+    stopper = freeze(master.pid, STALL_AT * seconds, stall_ms / 1000) if stall_ms else None
+    result = master.stdout.readline().split()
+    if stopper is not None:
+        held_ms = float(stopper.communicate()[0] or 0.0)
+    master.wait(60)
+    listener.stop()
     outcome = f"{result[1]} {result[3]}" if len(result) >= 4 and result[3] != "-" else (result[1] if result else "?")
     if os.environ.get("BENCH_STREAM_DUMP"):  # a folder: the listener's frames of every run, for a closer look
         import json
@@ -295,7 +309,7 @@ def main() -> int:
             for stall_ms in [float(s) for s in args.stalls.split(",")]:
                 figures = run_vcan(folder, period_ms, stall_ms, args.seconds, sync) if args.bus == "vcan" \
                     else run_virtual(folder, period_ms, stall_ms, args.seconds)
-                print(figures.row(), flush=True)
+                print(figures if isinstance(figures, str) else figures.row(), flush=True)
     print(f"load average after: {os.getloadavg()[0]:.2f}", flush=True)
     return 0
 

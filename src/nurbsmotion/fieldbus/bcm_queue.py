@@ -18,9 +18,10 @@ next SYNC. Python only keeps the ring ahead of the kernel:
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
 - **The period.** The BCM re-arms each frame at now + ival, so the wire runs slow by the
-  timer latency of every frame (about 6 % inside User-Mode Linux). The median of the last
-  64 echoed SYNC intervals against T trims ival at every renewal (frequency, not phase:
-  after a held-up timer the wire does not run fast to catch up).
+  timer latency of every frame (about 6 % inside User-Mode Linux), and a held-up timer
+  shifts it for good. The median of the last 64 echoed SYNC intervals trims the frequency;
+  the phase against t0 + k·T is caught up at most 4 % of T per cycle (a frozen guest's
+  lag of more than 4 T is accepted, not caught up).
 
 Why the BCM and not ETF + SO_TXTIME: queued SO_TXTIME frames cannot be revised (a stop or
 an override would wait for the whole queue, or the queue must be short), and an ETF root
@@ -60,7 +61,10 @@ BATCH_CYCLES = 8  # the planning horizon moves in steps of this many cycles (few
 WAKE_PERIOD_S = 0.008  # the cycle thread wakes about this often (whole cycles): the queue, not it, keeps time
 TRIM_WINDOW = 64  # echoed SYNC intervals the period trim looks at
 TRIM_GAIN = 0.05  # share of the median's error corrected per renewal
-TRIM_LIMIT = 0.1  # share of T the period correction may reach
+TRIM_LIMIT = 0.1  # share of T the frequency correction may reach
+PHASE_GAIN = 0.1  # share of the SYNC phase error caught up per renewal
+PHASE_LIMIT = 0.04  # at most this share of T faster or slower per cycle to catch up the phase
+RE_ANCHOR_CYCLES = 4  # a phase error beyond this many periods moves the reference
 
 
 def ring_cycles(frames_per_cycle: int) -> int:
@@ -131,7 +135,8 @@ class BcmQueueWriter:
         self.lease_end = 0
         self.tail_sp = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
         self.tail_cw = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
-        self.correction_s = 0.0
+        self.correction_s = self.frequency_s = 0.0
+        self.t_ref, self.k_ref = 0.0, -1
         self.intervals: collections.deque[float] = collections.deque(maxlen=TRIM_WINDOW)
         self.last_stamp = 0.0
         self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
@@ -228,15 +233,27 @@ class BcmQueueWriter:
         self.running = True
 
     def _trim(self) -> float:
-        """Period correction (s per cycle): the median of the last TRIM_WINDOW echoed SYNC
-        intervals against T, integrated with gain TRIM_GAIN. The median ignores the intervals
-        a held-up timer stretched (a descheduled guest), so the wire neither runs slow by the
-        timer latency of every frame nor fast to catch up a lost phase."""
-        intervals = self.intervals
+        """Period correction (s per cycle), two terms. Frequency: the median of the last
+        TRIM_WINDOW echoed SYNC intervals against T, integrated with gain TRIM_GAIN (the
+        median ignores intervals a held-up timer stretched), within ±TRIM_LIMIT·T. Phase: the
+        last SYNC against t0 + k·T, caught up at most PHASE_LIMIT·T per cycle, so a late
+        timer does not shift the wire for good; a lag beyond RE_ANCHOR_CYCLES·T (the guest
+        was frozen) moves the reference instead of running fast for long."""
+        intervals, period = self.intervals, self.period_s
         if len(intervals) >= TRIM_WINDOW // 2:
             median = sorted(intervals)[len(intervals) // 2]
-            limit = TRIM_LIMIT * self.period_s
-            self.correction_s = max(-limit, min(limit, self.correction_s + TRIM_GAIN * (median - self.period_s)))
+            limit = TRIM_LIMIT * period
+            self.frequency_s = max(-limit, min(limit, self.frequency_s + TRIM_GAIN * (median - period)))
+        phase = 0.0
+        if self.k_ref >= 0:
+            error = self.last_stamp - (self.t_ref + (self.c - self.k_ref) * period)  # > 0: the wire is late
+            if abs(error) > RE_ANCHOR_CYCLES * period:
+                self.t_ref, self.k_ref = self.last_stamp, self.c
+            else:
+                phase = max(-PHASE_LIMIT * period, min(PHASE_LIMIT * period, PHASE_GAIN * error))
+        elif self.last_stamp:
+            self.t_ref, self.k_ref = self.last_stamp, self.c
+        self.correction_s = self.frequency_s + phase
         return self.correction_s
 
     def quick_stop_now(self, c: int, controlwords: list[int], setpoints: list[int]) -> None:
@@ -268,6 +285,7 @@ class BcmQueueWriter:
         self.synced = 0
         self.c = c
         self.last_stamp = 0.0
+        self.k_ref = -1
         self.intervals.clear()
 
     def _delete(self) -> None:
