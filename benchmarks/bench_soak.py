@@ -17,8 +17,10 @@ import os
 import sys
 import time
 import uuid
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Iterator
 
 import can
 import numpy as np
@@ -86,13 +88,15 @@ def run_as_hardware(priority: int) -> str:
         return "normal priority (no permission for SCHED_FIFO)"
 
 
-def soak(seconds: float, period_ms: float = 1.0, sample_s: float = 2.0) -> SoakResult:
-    channel = "soak-" + uuid.uuid4().hex
-    axes = "".join(f"  - {{name: {name}, node_id: {i + 1}, mode: {mode}, counts_per_mm: {COUNTS_PER_MM}}}\n"
-                   for i, (name, mode) in enumerate((("X", "csp"), ("Y", "csp"), ("Z", "ip"))))
+@contextmanager
+def three_axes(period_ms: float, name: str) -> Iterator[Master]:
+    """A brought-up Master and three simulated drives (X, Y CSP, Z IP; recording nothing) on
+    a private virtual bus; everything stopped afterwards."""
+    channel = f"{name}-{uuid.uuid4().hex}"
+    axes = "".join(f"  - {{name: {axis}, node_id: {i + 1}, mode: {mode}, counts_per_mm: {COUNTS_PER_MM}}}\n"
+                   for i, (axis, mode) in enumerate((("X", "csp"), ("Y", "csp"), ("Z", "ip"))))
     config = parse_config(f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
-                          f"axes:\n{axes}", "soak.yaml")
-    result = SoakResult(seconds, period_ms, load_before=os.getloadavg())
+                          f"axes:\n{axes}", f"{name}.yaml")
     sim = SimNetwork(channel=channel)
     for node in (1, 2, 3):
         sim.add_drive(node, record=False)
@@ -101,6 +105,17 @@ def soak(seconds: float, period_ms: float = 1.0, sample_s: float = 2.0) -> SoakR
     master = Master(config, bus, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")  # as the daemon runs it
     try:
         master.bring_up()
+        yield master
+    finally:
+        master.shutdown()
+        bus.shutdown()
+        sim.stop()
+
+
+def soak(seconds: float, period_ms: float = 1.0, sample_s: float = 2.0) -> SoakResult:
+    result = SoakResult(seconds, period_ms, load_before=os.getloadavg())
+    with three_axes(period_ms, "soak") as master:
+        config = master.config
         distance = np.array(MOVE_MM) * COUNTS_PER_MM
         t0 = time.monotonic()
         next_sample = t0
@@ -123,10 +138,6 @@ def soak(seconds: float, period_ms: float = 1.0, sample_s: float = 2.0) -> SoakR
         result.p50_ms, result.p99_ms, result.max_ms = t.lateness_p50_s * 1e3, t.lateness_p99_s * 1e3, \
             t.lateness_max_s * 1e3
         result.faults = [str(f) for f in status.faults]
-    finally:
-        master.shutdown()
-        bus.shutdown()
-        sim.stop()
     result.load_after = os.getloadavg()
     return result
 

@@ -11,11 +11,15 @@ import reprlib
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import yaml
 
 from nurbsmotion.errors import InputError, InputErrors
+
+if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
+    from nurbsmotion.homing_config import HomingConfig
+    from nurbsmotion.io_config import IoConfig
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
@@ -68,6 +72,7 @@ class AxisConfig:
     offset_counts: int = 0
     soft_limits_mm: tuple[float, float] | None = None
     max_velocity_mm_s: float | None = None
+    homing: HomingConfig | None = None
     max_accel_mm_s2: float | None = None
     following_error_window_mm: float = 1.0
     following_error_timeout_ms: int = 20
@@ -81,12 +86,14 @@ TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
 @dataclass(frozen=True)
 class MonitoringConfig:
     """``traffic_log``: each job's folder gets every bus frame of the job as ``traffic.log``
-    (candump) or ``traffic.asc`` (Vector ASCII); 'none' records nothing."""
+    (candump) or ``traffic.asc`` (Vector ASCII); 'none' records nothing. ``feedback_log``:
+    each job's folder gets ``feedback.csv``, every TPDO1 (statusword, position actual)."""
 
     heartbeat_producer_ms: int = 100
     heartbeat_consumer_ms: int = 300
     max_bus_load: float = 0.8
     traffic_log: str = "none"
+    feedback_log: bool = True
 
 
 @dataclass(frozen=True)
@@ -105,6 +112,7 @@ class MachineConfig:
     monitoring: MonitoringConfig
     control: ControlConfig
     data_dir: str
+    io: IoConfig | None = None
     simulate: bool = False
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
@@ -217,6 +225,15 @@ def _optional(reader: Callable[..., Any]) -> Callable[..., Any]:
     return read
 
 
+def _section_reader(name: str) -> Callable[[_Doc], Any]:
+    """The reader of the ``homing`` / ``io`` sections (their modules import this one)."""
+    if name == "homing":
+        from nurbsmotion.homing_config import read_homing
+        return read_homing
+    from nurbsmotion.io_config import read_io
+    return read_io
+
+
 def _fields(doc: _Doc, readers: dict[str, tuple[Callable[..., Any], dict[str, Any]]],
             required: tuple[str, ...] = ()) -> dict[str, Any]:
     """Read the keys of a mapping with their readers; collect errors; drop failed values."""
@@ -263,6 +280,7 @@ _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "offset_counts": (_number, {"integer": True, "minimum": -(2**31), "exclusive_min": False, "maximum": 2**31 - 1}),
     "soft_limits_mm": (_optional(_limits_pair), {}),
     "max_velocity_mm_s": (_optional(_number), {"minimum": 0}),
+    "homing": (_optional(lambda doc: _section_reader("homing")(doc)), {}),
     "max_accel_mm_s2": (_optional(_number), {"minimum": 0}),
     "following_error_window_mm": (_number, {"minimum": 0}),
     "following_error_timeout_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
@@ -329,11 +347,13 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),
     "axes": (_axes, {}),
+    "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
     "monitoring": (_section(MonitoringConfig, {
         "heartbeat_producer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "heartbeat_consumer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
         "max_bus_load": (_number, {"minimum": 0, "maximum": 1}),
         "traffic_log": (_string, {"choices": TRAFFIC_LOG_FORMATS}),
+        "feedback_log": (_boolean, {}),
     }), {}),
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
@@ -348,6 +368,9 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
 
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
+    if cfg.io is not None:
+        from nurbsmotion.io_config import check_io_node
+        check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
     mon = cfg.monitoring
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
@@ -380,6 +403,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         bus=values.get("bus", BusConfig()),
         interpolation=values.get("interpolation", InterpolationConfig()),
         axes=values["axes"],
+        io=values.get("io"),
         monitoring=values.get("monitoring", MonitoringConfig()),
         control=values.get("control", ControlConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),

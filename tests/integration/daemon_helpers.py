@@ -75,13 +75,14 @@ class DaemonProcess:
         self.log_path = self.folder / "daemon.log"
         self.proc: subprocess.Popen[bytes] | None = None
         self.notify_socket: Path | None = None  # set: the daemon gets it as $NOTIFY_SOCKET
+        self.verbose = ["-v"]  # [] runs it as a user would (INFO by default as well)
 
     def environment(self) -> dict[str, str]:
         return subprocess_environment(self.notify_socket)
 
     def start(self) -> "DaemonProcess":
         with open(self.log_path, "wb") as log:
-            self.proc = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "-v", "daemon", "--config",
+            self.proc = subprocess.Popen([sys.executable, "-m", "nurbsmotion", *self.verbose, "daemon", "--config",
                                           str(self.config_path)], stdout=log, stderr=subprocess.STDOUT,
                                          env=self.environment())
         wait_until(self._answers, START_TIMEOUT_S, "the daemon to answer on its socket", poll_s=0.05)

@@ -63,12 +63,16 @@ def test_a_bad_program_is_rejected_with_its_lines_and_nothing_moves(daemon):
     after = daemon.request("status")
     assert after["state"] == "idle" and after["job"] is None
     assert [a["commanded_mm"] for a in after["axes"]] == [a["commanded_mm"] for a in before["axes"]]
-    assert sorted(JobRecords(daemon.data_dir).root.glob("*")) == jobs_before
+    [rejected] = sorted(set(JobRecords(daemon.data_dir).root.glob("*")) - set(jobs_before))
+    outcome = json.loads((rejected / "outcome.json").read_text())  # the rejection leaves a record, nothing else
+    assert outcome["outcome"] == "rejected" and outcome["errors"] == response["errors"]
+    assert sorted(p.name for p in rejected.iterdir()) == ["outcome.json", "program.nc"]
 
 
-def test_soft_limits_are_checked_before_motion(daemon):
-    response = daemon.request("submit", name="far.nc", program="G01 X150 F3000\n")
-    assert response["ok"] is False and "soft limit" in response["error"] and "axis X" in response["error"]
+def test_soft_limits_are_checked_before_motion_and_name_the_program_line(daemon):
+    response = daemon.request("submit", name="far.nc", program="G21 G90\nG01 X150 F3000\n")
+    assert response["ok"] is False
+    assert response["error"] == "far.nc:2: X150: axis X would reach 150 mm, beyond the soft limit 100 mm"
     assert daemon.request("status")["job"] is None
 
 
@@ -118,6 +122,8 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     job = daemon.wait_job_end(job_id)
     outcome = job["outcome"]
     assert outcome["outcome"] == "fault" and outcome["fault"]["node"] == 2
+    assert outcome["fault"]["code"] == 0x2310 and outcome["fault"]["code_hex"] == "0x2310"  # the EMCY code
+    assert 0 < outcome["fault"]["cycle"] < outcome["fault"]["master_cycle"]  # job-relative
     assert 0 < outcome["sent"] < outcome["planned"]
     status = daemon.request("status")
     assert status["state"] == "fault" and status["faults"]

@@ -20,6 +20,7 @@ class FakeJob:
     def __init__(self, link: "FakeLink", counts: np.ndarray) -> None:
         self.link, self.counts = link, counts
         self.index = -1
+        self.start_cycle = link.cycle + 1  # the link's cycle counter when the job's first row plays
         self.stop_flag = ""
         self.done = threading.Event()
         self.result: JobResult | None = None
@@ -46,6 +47,9 @@ class FakeLink:
         self.cycle_s = cycle_s
         self.shut = False
         self.fault_at: int | None = None  # index at which the running job faults
+        self.feedback = None  # record_feedback's sink: called once per axis per played row
+        self.fault_kind, self.fault_code = "emcy", 0x2310  # what the fault at fault_at is
+        self.cycle = 1000  # a link cycle counter that does not start with the job
 
     def bring_up(self) -> None:
         self.phase = "holding"
@@ -66,9 +70,15 @@ class FakeLink:
         for i in range(len(job.counts)):
             stop.wait(self.cycle_s)
             job.index = i
+            self.cycle = job.start_cycle + i
             self.held = [int(c) for c in job.counts[i]]
+            sink = self.feedback
+            if sink is not None:
+                for axis, position in enumerate(self.held):
+                    sink(self.cycle, axis, 0x1237, position, 1000.0 + i * self.cycle_s)
             if self.fault_at is not None and i >= self.fault_at:
-                self.faults.append(FaultReport(2, "Y", "emcy", 0x2310, i, f"node 2 (axis Y): EMCY 0x2310 at cycle {i}"))
+                self.faults.append(FaultReport(2, "Y", self.fault_kind, self.fault_code, self.cycle,
+                                               f"node 2 (axis Y): {self.fault_kind} at cycle {self.cycle}"))
                 self.phase, outcome = "quick_stop", "faulted"
                 break
             if job.stop_flag:
@@ -99,6 +109,9 @@ class FakeLink:
 
     def record_traffic(self, path: str | None) -> None:
         self.traffic = path
+
+    def record_feedback(self, sink) -> None:
+        self.feedback = sink
 
     def shutdown(self, timeout_s: float = 5.0) -> None:
         if self.job is not None:

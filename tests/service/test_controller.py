@@ -1,5 +1,9 @@
 """One job at a time: submit, watch, stop, fault and reset, override, records (fake link)."""
 
+import csv
+import dataclasses
+import json
+import logging
 import time
 from pathlib import Path
 
@@ -8,6 +12,7 @@ import pytest
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.controller import Controller
+from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.records import JobRecords
 from tests.service.fakes import FakeLink, fake_planner
 
@@ -49,12 +54,19 @@ def test_a_job_runs_to_completion_and_leaves_its_record(parts):
     assert link.held[0] == 5000  # counts_per_mm 1000
 
 
-def test_a_bad_program_is_rejected_and_nothing_moves(parts, tmp_path):
+def test_a_bad_program_is_rejected_nothing_moves_and_the_rejection_leaves_a_record(parts, tmp_path, caplog):
     controller, link = parts
-    with pytest.raises(InputError, match="bad.nc:1"):
-        controller.submit("bad.nc", "G99")
-    assert link.job is None and link.held == [0, 0, 0]
-    assert not (tmp_path / "jobs").exists()
+    with caplog.at_level(logging.INFO, logger="nurbsmotion"):
+        with pytest.raises(InputError, match="bad.nc:1"):
+            controller.submit("bad.nc", "G99")
+    assert link.job is None and link.held == [0, 0, 0] and link.feedback is None
+    [record] = controller.jobs()["jobs"]
+    assert record["outcome"] == "rejected" and record["name"] == "bad.nc"
+    info = controller.job_info(record["id"])["job"]
+    assert info["outcome"]["errors"] == ["bad.nc:1: unknown word 'G99'"]
+    assert info["files"] == ["outcome.json", "program.nc"]
+    [line] = [r.getMessage() for r in caplog.records if "submit_rejected" in r.getMessage()]
+    assert f"record={record['id']}" in line and 'first="bad.nc:1: unknown word' in line
 
 
 def test_one_job_at_a_time(parts):
@@ -129,3 +141,110 @@ def test_a_job_whose_record_cannot_be_written_does_not_start(tmp_path):
     with pytest.raises(InputError, match="data_dir"):
         controller.submit("a.nc", "X5")
     assert link.job is None and controller.status()["state"] == "idle"
+
+
+def test_a_record_holds_the_config_times_final_position_feedback_and_override_history(parts):
+    controller, link = parts
+    link.cycle_s = 0.005
+    job = controller.submit("line.nc", "X5")["job"]
+    _wait(lambda: (controller.status()["job"] or {}).get("cycle", 0) > 20)
+    controller.override(50)
+    _wait(_ended(controller))
+    info = controller.job_info(job["id"])["job"]
+    folder, outcome = Path(info["folder"]), info["outcome"]
+    config = json.loads((folder / "config.json").read_text())
+    assert config["cycle_period_s"] == controller.config.cycle_period_s and config["axes"][0]["name"] == "X"
+    assert outcome["started_at"] < outcome["ended_at"] and outcome["start_cycle"] == 1001
+    assert outcome["final_position"]["X"] == {"commanded_mm": 5.0, "actual_mm": 5.0}
+    history = outcome["overrides"]
+    assert [(h["by"], h["requested_percent"]) for h in history] == [("job_start", 100.0), ("request", 50.0)]
+    assert 20 <= history[1]["setpoint"] < 200 and history[1]["at_s"] > 0
+    with open(folder / "feedback.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == outcome["feedback_rows"] == 3 * 200
+    assert [int(r["job_cycle"]) for r in rows[::3]] == list(range(200))  # job-relative, not the link's
+    assert rows[-3]["axis"] == "X" and int(rows[-3]["position_counts"]) == 5000
+    assert float(rows[-3]["position_mm"]) == 5.0 and int(rows[-3]["statusword"]) == 0x1237
+
+
+def test_the_override_resets_to_100_percent_for_each_job_unless_kept(parts):
+    controller, link = parts
+    controller.override(40)
+    controller.submit("a.nc", "X1")
+    assert controller.status()["override"]["requested_percent"] == 100.0 and link.rate == 1.0
+    _wait(_ended(controller))
+    controller.override(40)
+    controller.submit("b.nc", "X2", keep_override=True)
+    status = controller.status()
+    assert status["override"]["requested_percent"] == 40.0 and link.rate == pytest.approx(0.4)
+    assert status["job"] is None or status["job"]["override_percent"] == 40.0
+    _wait(_ended(controller))
+
+
+def test_a_following_error_fault_has_no_code_its_error_in_counts_and_mm_and_a_job_cycle(parts):
+    controller, link = parts
+    link.fault_at, link.fault_kind, link.fault_code = 30, "following_error", -2345
+    job = controller.submit("a.nc", "X5")["job"]
+    _wait(_ended(controller))
+    fault = controller.job_info(job["id"])["job"]["outcome"]["fault"]
+    assert fault["code"] is None and fault["kind"] == "following_error"
+    assert fault["measured"] == {"following_error_counts": -2345, "following_error_mm": -2.345}
+    assert fault["cycle"] == 30 and fault["master_cycle"] == 1031 and "at job cycle 30" in fault["message"]
+    assert controller.status()["faults"] == [fault]  # the status tells it the same way as the record
+    controller.reset()
+
+
+def test_an_emcy_fault_carries_its_code(parts):
+    controller, link = parts
+    link.fault_at = 10
+    job = controller.submit("a.nc", "X5")["job"]
+    _wait(_ended(controller))
+    fault = controller.job_info(job["id"])["job"]["outcome"]["fault"]
+    assert (fault["code"], fault["code_hex"], fault["measured"], fault["cycle"]) == (0x2310, "0x2310", None, 10)
+    controller.reset()
+
+
+def test_jobs_lists_the_newest_first_and_marks_the_running_one(parts):
+    controller, link = parts
+    first = controller.submit("a.nc", "X1")["job"]["id"]
+    _wait(_ended(controller))
+    link.cycle_s = 0.01
+    second = controller.submit("b.nc", "X2")["job"]["id"]
+    listing = controller.jobs()
+    assert [j["id"] for j in listing["jobs"]] == [second, first] and listing["total"] == 2
+    assert listing["jobs"][0]["running"] and listing["jobs"][0]["outcome"] is None
+    assert listing["jobs"][1]["outcome"] == "completed" and listing["jobs"][1]["name"] == "a.nc"
+    assert [j["id"] for j in controller.jobs(1)["jobs"]] == [second]
+    with pytest.raises(InputError, match="'limit'"):
+        controller.jobs(0)
+    controller.stop()
+    _wait(_ended(controller))
+
+
+def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
+    config = load_config(ROOT / "config" / "demo.yaml")
+    link = FakeLink(config, cycle_s=0.0005)
+    controller = Controller(config, link, lambda n, t, s: plan_job(n, t, config, s), JobRecords(tmp_path))
+    try:
+        job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\n")["job"]
+        _wait(_ended(controller))
+        outcome = controller.job_info(job["id"])["job"]["outcome"]
+        assert outcome["line_reached"]["where"] == "part.nc:4" and outcome["line_reached"]["text"] == "G01 X2 Y3"
+        assert controller.status()["last_job"]["line_reached"] == "part.nc:4"
+    finally:
+        controller.shutdown(2.0)
+
+
+def test_feedback_log_false_records_no_feedback(tmp_path):
+    config = load_config(ROOT / "config" / "demo.yaml")
+    config = dataclasses.replace(config, monitoring=dataclasses.replace(config.monitoring, feedback_log=False))
+    link = FakeLink(config)
+    controller = Controller(config, link, fake_planner(config), JobRecords(tmp_path))
+    try:
+        job = controller.submit("a.nc", "X1")["job"]
+        _wait(_ended(controller))
+        info = controller.job_info(job["id"])["job"]
+        assert "feedback.csv" not in info["files"] and info["outcome"]["feedback_rows"] is None
+        assert link.feedback is None
+    finally:
+        controller.shutdown(2.0)

@@ -42,3 +42,17 @@ def test_find_refuses_names_that_are_not_job_ids(tmp_path):
     records = JobRecords(tmp_path)
     records.create("a.nc", "x")
     assert records.find("../..") is None and records.find("*") is None
+
+
+def test_records_list_in_submission_order_within_one_second(tmp_path):
+    records = JobRecords(tmp_path)
+    made = [records.create(f"{i}.nc", "x") for i in range(5)]  # ids are random: the name must order them
+    assert records.all() == made
+    assert made[0].created_at[:4].isdigit() and "." in made[0].created_at
+
+
+def test_a_rejected_submission_keeps_its_program_and_errors(tmp_path):
+    records = JobRecords(tmp_path)
+    record = records.create_rejected("bad.nc", "G01 Q7\n", ["bad.nc:1: Q7: unsupported word Q"])
+    assert record.outcome()["outcome"] == "rejected" and record.outcome()["errors"] == ["bad.nc:1: Q7: unsupported word Q"]
+    assert record.summary()["name"] == "bad.nc" and records.mark_interrupted() == []

@@ -9,7 +9,7 @@ from pathlib import Path
 import nurbsmotion.sim
 
 ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log"}
-ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses",
+ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
                      "logging", "math", "numpy", "pathlib", "struct", "threading", "time", "typing"}
 
 

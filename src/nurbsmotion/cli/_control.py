@@ -1,5 +1,9 @@
-"""Shared by the control commands (run, status, stop, abort, reset, override): finding the
-socket, connecting, and the exit codes of a control client.
+"""Shared by the control commands (run, status, stop, abort, reset, override, jobs):
+finding the socket, connecting, and the exit codes of a control client.
+
+The socket, first found wins: ``--socket PATH``, ``--config FILE`` (its control.socket),
+``$NURBSMOTION_SOCKET``, ``$NURBSMOTION_CONFIG``, the default ``control.socket`` (the one
+the shipped configurations use).
 
 Exit codes: 0 done, 1 the job ended without completing (fault, stop, abort), 2 the request
 was refused (bad program, bad value, busy, nothing to stop), 3 no daemon answers.
@@ -8,6 +12,7 @@ was refused (bad program, bad value, busy, nothing to stop), 3 no daemon answers
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from typing import Any, Callable
 
@@ -16,19 +21,34 @@ from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 
 EXIT_NO_DAEMON = 3
 EXIT_REFUSED = 2
+SOCKET_VARIABLE = "NURBSMOTION_SOCKET"
+CONFIG_VARIABLE = "NURBSMOTION_CONFIG"
 
 
 def add_socket_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_mutually_exclusive_group()
-    group.add_argument("--config", metavar="FILE", help="machine configuration (its control.socket is used)")
-    group.add_argument("--socket", metavar="PATH", help=f"control socket (default {ControlConfig().socket})")
+    group.add_argument("--config", metavar="FILE", help=f"machine configuration (its control.socket is used; "
+                                                       f"default ${CONFIG_VARIABLE})")
+    group.add_argument("--socket", metavar="PATH", help=f"control socket (default ${SOCKET_VARIABLE}, "
+                                                       f"else {ControlConfig().socket})")
+
+
+def config_path(args: argparse.Namespace) -> str | None:
+    """``--config``, else ``$NURBSMOTION_CONFIG`` (None: neither)."""
+    return getattr(args, "config", None) or os.environ.get(CONFIG_VARIABLE) or None
 
 
 def socket_path(args: argparse.Namespace) -> str:
+    """The control socket (module docstring: the first of the five places that gives one)."""
     if getattr(args, "socket", None):
         return str(args.socket)
     if getattr(args, "config", None):
         return load_config(args.config).control.socket
+    if os.environ.get(SOCKET_VARIABLE):
+        return os.environ[SOCKET_VARIABLE]
+    config = config_path(args)
+    if config:
+        return load_config(config).control.socket
     return ControlConfig().socket
 
 
@@ -36,13 +56,15 @@ def error_line(args: argparse.Namespace, message: str) -> None:
     sys.stderr.write(f"nurbsmotion {args.command}: error: {message}\n")
 
 
-def with_client(args: argparse.Namespace, body: Callable[[Client], int]) -> int:
-    """Run ``body`` with a connected client; the client errors become exit codes 2 and 3."""
+def with_client(args: argparse.Namespace, body: Callable[[Client], int], quiet_no_daemon: bool = False) -> int:
+    """Run ``body`` with a connected client; the client errors become exit codes 2 and 3
+    (``quiet_no_daemon``: exit 3 without the error line, the caller has another way)."""
     try:
         with Client(socket_path(args)) as client:
             return body(client)
     except DaemonUnavailable as err:
-        error_line(args, str(err))
+        if not quiet_no_daemon:
+            error_line(args, str(err))
         return EXIT_NO_DAEMON
     except RequestFailed as err:
         for line in err.errors:

@@ -1,7 +1,10 @@
 """``nurbsmotion check PROGRAM``: read and validate a program, print what it does.
 
 Exit 0 with a summary (blocks by kind, length, bounding box of the sampled path, feed
-range), or exit 2 with one line per error (``file:line: word: message``).
+range), or exit 2 with one line per error (``file:line: word: message``). With ``--config``
+the program is also planned for that machine exactly as the daemon's ``submit`` does: its
+axes, limits and soft limits apply (``part.nc:42: X650: axis X would reach 650 mm, beyond
+the soft limit 600 mm``).
 """
 
 from __future__ import annotations
@@ -9,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from pathlib import Path
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.program import read_program
@@ -22,6 +26,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     parser.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"), default=(0.0, 0.0, 0.0),
                         help="machine position (mm) the G-code program starts from (default 0 0 0)")
+    parser.add_argument("--config", metavar="FILE", help="machine configuration: also plan the program for it and "
+                                                         "check its axes, limits and soft limits as submit does")
+
+
+def check_on_machine(args: argparse.Namespace) -> dict[str, object]:
+    """Plan the program for the ``--config`` machine (service.planner.plan_job, the daemon's
+    own checks); InputError names the program line."""
+    import numpy as np
+
+    from nurbsmotion.config import load_config
+    from nurbsmotion.service.planner import axis_columns, plan_job
+
+    config = load_config(args.config)
+    start_mm = np.array(args.start, dtype=float)[axis_columns(config)]
+    text = Path(args.program).read_text(encoding="utf-8")  # read_program read it already: it is readable
+    plan = plan_job(args.program, text, config, start_mm).summary
+    return {"config": str(args.config), "axes": [a.name for a in config.axes], "cycles": plan["cycles"],
+            "duration_s": plan["duration_s"], "algorithm": plan["algorithm"]}
 
 
 def format_summary(s: ProgramSummary) -> str:
@@ -62,9 +84,19 @@ def run(args: argparse.Namespace) -> int:
         print(errors_as_json(err))
         return 2
     summary = summarize(program)
+    try:
+        machine = check_on_machine(args) if args.config else None
+    except InputError as err:
+        if not args.json:
+            raise
+        print(errors_as_json(err))
+        return 2
     if args.json:
-        print(json.dumps({"ok": True, **summary.as_dict()}, indent=2))
+        print(json.dumps({"ok": True, **summary.as_dict(), **({"machine": machine} if machine else {})}, indent=2))
     else:
         print(format_summary(summary))
+        if machine:
+            print(f"machine   {machine['config']}: axes {' '.join(machine['axes'])}, within the axis and soft "
+                  f"limits ({machine['algorithm']}: {machine['cycles']} cycles, {machine['duration_s']:.2f} s)")
     sys.stdout.flush()
     return 0

@@ -2,11 +2,14 @@
 
 Exit codes: 0 completed, 1 stopped/aborted/fault, 2 rejected (errors one per line, file:line),
 3 no daemon. Ctrl-C asks the daemon for a controlled stop; a second Ctrl-C leaves the job running.
+The feed override starts at 100 % unless ``--keep-override``. If the daemon ends while the
+job runs, the outcome is read from the job's record (when this user may read it).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import time
 from pathlib import Path
@@ -14,7 +17,8 @@ from typing import Any, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
 from nurbsmotion.errors import InputError
-from nurbsmotion.service.client import Client
+from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
+from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
 
 HELP = "submit a program (G-code or YAML) to the daemon, follow it and print the outcome"
 POLL_S = 0.2
@@ -24,6 +28,8 @@ PLAIN_EVERY_S = 1.0
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="program file (.nc G-code or .yaml curves); read here, sent as text")
     parser.add_argument("--no-progress", action="store_true", help="only print the outcome")
+    parser.add_argument("--keep-override", action="store_true",
+                        help="keep the feed override in force now (default: the job starts at 100 %%)")
     add_socket_arguments(parser)
 
 
@@ -38,7 +44,7 @@ def progress_text(status: dict[str, Any]) -> str:
     job = status["job"]
     positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
     return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
-            f"{positions}  [{status['state']}]")
+            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{status['state']}]")
 
 
 class _Plain:
@@ -72,7 +78,8 @@ class _Rich:
         job = status["job"]
         positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
         self.progress.update(self.task, total=job["total"], completed=job["cycle"],
-                             info=f"{job['feed_mm_s']:6.1f} mm/s {positions} {status['state']}")
+                             info=f"{job['feed_mm_s']:6.1f} mm/s ovr {job['override_percent']:g} % "
+                                  f"{job.get('line') or '-'} {positions} {status['state']}")
 
     def close(self) -> None:
         self.progress.stop()
@@ -113,16 +120,46 @@ def describe_outcome(info: dict[str, Any]) -> str:
     outcome = info.get("outcome") or {}
     text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {outcome.get('sent', 0)}/"
             f"{outcome.get('planned', 0)} set-points in {outcome.get('motion_time_s', 0.0):.2f} s")
+    reached = outcome.get("line_reached")
+    if reached and outcome.get("outcome") != "completed":
+        text += f", reached {reached['where']}"
     if outcome.get("reason"):
         text += f"; {outcome['reason']}"
     return f"{text}\nrecord: {info['folder']}"
+
+
+def record_read_here(job: dict[str, Any]) -> dict[str, Any] | None:
+    """The job's record read from its folder (the daemon is gone); None if it has no outcome
+    yet or this user may not read it."""
+    folder = Path(job["folder"])
+    try:
+        outcome = json.loads((folder / OUTCOME_FILE).read_text(encoding="utf-8"))
+        plan = json.loads((folder / PLAN_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return {"id": job["id"], "folder": str(folder), "plan": plan, "outcome": outcome}
+
+
+def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict[str, Any] | None:
+    """follow(); when the daemon ends meanwhile, the outcome from the record (None: unknown)."""
+    try:
+        return follow(client, job["id"], display.update if display else None)
+    except (DaemonUnavailable, RequestFailed):
+        deadline = time.monotonic() + 2.0  # the daemon writes the outcome before it lets go of the socket
+        while time.monotonic() < deadline:
+            info = record_read_here(job)
+            if info is not None:
+                return info
+            time.sleep(POLL_S)
+        return None
 
 
 def run(args: argparse.Namespace) -> int:
     text = read_program(args.program)
 
     def body(client: Client) -> int:
-        response = client.request("submit", name=Path(args.program).name, program=text)
+        fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
+        response = client.request("submit", name=Path(args.program).name, program=text, **fields)
         if not response.get("ok"):
             for line in response.get("errors") or [response.get("error", "rejected")]:
                 error_line(args, line)
@@ -130,10 +167,13 @@ def run(args: argparse.Namespace) -> int:
         job = response["job"]
         display = _display(Path(args.program).name, args.no_progress)
         try:
-            info = follow(client, job["id"], display.update if display else None)
+            info = follow_to_the_end(client, job, display)
         finally:
             if display is not None:
                 display.close()
+        if info is None:
+            error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
+            return 1
         print(describe_outcome(info))
         return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
 

@@ -29,19 +29,28 @@ def format_status(s: dict[str, Any]) -> list[str]:
     job = s.get("job")
     if job:
         lines.append(f"job {job['id']} {job['name']}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
-                     f"feed {job['feed_mm_s']:.1f} mm/s")
+                     f"feed {job['feed_mm_s']:.1f} mm/s, override {job['override_percent']:g} %, "
+                     f"at {job.get('line') or '-'}")
     for a in s["axes"]:
         lines.append(f"axis {a['name']} node {a['node']}: {a['drive_state']}, commanded {_mm(a['commanded_mm'])} mm, "
                      f"actual {_mm(a['actual_mm'])} mm, following error {_mm(a['following_error_mm'])} mm")
     c = s["cycles"]
     lines.append(f"cycles {c['count']}: late {c['late']}, missed {c['missed']}, lateness p99 "
                  f"{c['lateness_p99_ms']:.3f} ms, max {c['lateness_max_ms']:.3f} ms")
-    lines.extend(f"fault: {f['message']}" for f in s["faults"])
+    lines.extend(f"fault: {fault_text(f)}" for f in s["faults"])
     last = s.get("last_job")
     if last:
-        lines.append(f"last job {last['id']} {last['name']}: {last['outcome']}"
+        reached = f" at {last['line_reached']}" if last.get("line_reached") else ""
+        lines.append(f"last job {last['id']} {last['name']}: {last['outcome']}{reached}"
                      f"{': ' + last['reason'] if last.get('reason') else ''}")
     return lines
+
+
+def fault_text(fault: dict[str, Any]) -> str:
+    """The fault's message with its code and measured value, if any."""
+    extra = [f"code {fault['code_hex']}"] if fault.get("code_hex") else []
+    extra += [f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in (fault.get("measured") or {}).items()]
+    return fault["message"] + (f" [{', '.join(extra)}]" if extra else "")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -36,6 +36,7 @@ class Feedback:
         self.hb_state: list[int | None] = [None] * n_axes
         self.events: collections.deque[tuple[int, int, int]] = collections.deque()
         self.wire_cycle = 0
+        self.sink: Callable[[int, int, int, int, float], None] | None = None  # Master.record_feedback
 
     def tpdo1_callback(self, i: int, first_call: Callable[[], None] | None = None) -> Callback:
         size = TPDO1_FORMAT.size
@@ -53,6 +54,9 @@ class Feedback:
             self.status[i], self.pos[i] = unpack(data)
             self.cycle[i] = self.wire_cycle
             self.tpdo_count[i] += 1
+            sink = self.sink
+            if sink is not None:
+                sink(self.wire_cycle, i, self.status[i], self.pos[i], timestamp)
             self.time[i] = timestamp
         return on_tpdo1
 

@@ -60,6 +60,7 @@ log = logging.getLogger(__name__)
 RUNNING_PHASES = ("holding", "streaming", "stopping")
 HISTORY_CYCLES = 512  # cycles of commands kept: the kernel queue (<= 256) plus the following-error search
 SYNC_SOURCES = ("auto", "loop", "kernel")
+FeedbackSink = Callable[[int, int, int, int, float], None]  # see Master.record_feedback
 
 
 class Job:
@@ -75,6 +76,7 @@ class Job:
         self.on_progress = on_progress
         self.progress_every = progress_every
         self.faults: list[FaultReport] = []
+        self.start_cycle = -1  # master cycle that sends the job's first set-point (its cycle 0)
         self.finish_cycle = -1  # wire cycle at which the job's end has been sent (-1: not yet planned)
         self.outcome = ""
         self.released = False
@@ -385,6 +387,14 @@ class Master:
         self._rate_target = max(0.0, float(rate))
         self._request("rate", self._rate_target)
 
+    def record_feedback(self, sink: FeedbackSink | None) -> None:
+        """Hand every valid TPDO1 to ``sink(cycle, axis_index, statusword, position_counts,
+        timestamp)`` (None: stop). Read-only: called on canopen's receive thread right after
+        the master stored the values, so it must only append somewhere and return; ``cycle``
+        is the master's cycle counter when the TPDO arrived (a job's cycle 0 is its
+        ``start_cycle``), ``timestamp`` the frame's receive time."""
+        self._fb.sink = sink
+
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
         """Start streaming an (N, n_axes) int32 array of set-points, one row per cycle.
 
@@ -656,6 +666,7 @@ class Master:
                 self._no_rewind_before = cycle  # a rewind never undoes a phase change (bring-up, job start...)
                 if phase is Phase.STREAMING:
                     self._job = self._ctl.job
+                    self._job.start_cycle = cycle  # the step that starts streaming computes row 0
             elif what == "ready":
                 self._ready.set()
             elif what == "enable_failed":

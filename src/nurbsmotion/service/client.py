@@ -12,10 +12,14 @@ from nurbsmotion.service.protocol import encode
 
 
 class DaemonUnavailable(NurbsmotionError):
-    """Nobody answers on the socket: ``no daemon at PATH (is it running?)``."""
+    """Nobody answers on the socket: ``no daemon at PATH (is it running?)``; or the daemon
+    went away during a request (``lost``): ``the daemon at PATH ended the connection ...``."""
 
-    def __init__(self, path: Path | str, detail: str = "") -> None:
-        super().__init__(f"no daemon at {path} (is it running?){f' [{detail}]' if detail else ''}")
+    def __init__(self, path: Path | str, detail: str = "", lost: bool = False) -> None:
+        if lost:
+            super().__init__(f"the daemon at {path} ended the connection ({detail}; is it shutting down?)")
+        else:
+            super().__init__(f"no daemon at {path} (is it running?){f' [{detail}]' if detail else ''}")
 
 
 class RequestFailed(NurbsmotionError):
@@ -60,10 +64,10 @@ class Client:
             line = self._file.readline()
         except OSError as err:
             self.close()
-            raise DaemonUnavailable(self.path, f"connection lost: {err.strerror or err}") from err
+            raise DaemonUnavailable(self.path, f"connection lost: {err.strerror or err}", lost=True) from err
         if not line:
             self.close()
-            raise DaemonUnavailable(self.path, "the daemon closed the connection")
+            raise DaemonUnavailable(self.path, "closed without an answer", lost=True)
         return json.loads(line)
 
     def call(self, cmd: str, **fields: Any) -> dict[str, Any]:

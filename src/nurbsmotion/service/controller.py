@@ -7,6 +7,7 @@ stop along the path in progress), ``fault`` (a fault not yet acknowledged by ``r
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import shutil
 import threading
@@ -20,14 +21,16 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
+from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import PlannedJob
 from nurbsmotion.service.rate import effective_rate
-from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords
+from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
 log = logging.getLogger(__name__)
 
 Planner = Callable[[str, str, np.ndarray], PlannedJob]  # (name, text, start position mm) -> plan
+SETTLE_S = 0.5  # the longest a job's end waits for the axes to reach their last set-point (final_position)
 OUTCOME_OF_RESULT = {"done": "completed", "stopped": "stopped", "aborted": "aborted", "faulted": "fault"}
 
 
@@ -45,7 +48,15 @@ class ActiveJob:
     late_before: int = 0  # the link's cycle counters when the job started (outcome: the job's own)
     missed_before: int = 0
     started_s: float = field(default_factory=time.monotonic)
+    started_at: str = field(default_factory=now_iso)
     watcher: threading.Thread | None = None
+    feedback: FeedbackLog | None = None
+    overrides: list[dict[str, Any]] = field(default_factory=list)  # the override history of the job
+
+    @property
+    def start_cycle(self) -> int:
+        """Master cycle of the job's cycle 0 (-1 until the master took the job)."""
+        return self.handle.start_cycle if self.handle is not None else -1
 
 
 class Controller:
@@ -60,32 +71,50 @@ class Controller:
         self._job: ActiveJob | None = None
         self._planning = False
         self._last: dict[str, Any] | None = None
+        self._last_job_faults: dict[tuple[int | None, str, int], int] = {}  # its faults -> its start cycle
         self._faults_acknowledged = 0
         self._override = 1.0  # requested, as a fraction
 
     # ------------------------------------------------------------------ requests
-    def submit(self, name: str, text: str) -> dict[str, Any]:
-        """Parse, plan and check the program, record it, start streaming; reject with errors."""
+    def submit(self, name: str, text: str, keep_override: bool = False) -> dict[str, Any]:
+        """Parse, plan and check the program, record it, start streaming; reject with errors.
+
+        The feed override goes back to 100 % for the new job unless ``keep_override``."""
         check_program_name(name)
         with self._lock:
-            self._check_can_start()
+            try:
+                self._check_can_start()
+            except Refused as err:
+                log.info(kv("submit_refused", name=name, error=err))
+                raise
             self._planning = True
         try:
             status = self.link.status()
             start_mm = self._held_position_mm(status)
-            plan = self.planner(name, text, start_mm)
+            try:
+                plan = self.planner(name, text, start_mm)
+            except InputError as err:
+                self._record_rejection(name, text, err)
+                raise
             record = self._record(name, text, plan)
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
+            if not keep_override and self._override != 1.0:
+                self._override = 1.0
+                log.info(kv("override_changed", requested_percent=100.0, reason="new_job"))
             if self.simulation is not None:
                 self.simulation.clear_recordings()
             try:
-                self._set_link_rate(plan)
+                rate = self._set_link_rate(plan)
                 self._record_traffic(record)
+                job.feedback = self._record_feedback(record)
+                job.overrides.append(self._override_entry(job, rate, "job_start", -1))
                 job.handle = self.link.stream(plan.counts)
             except (InputError, FieldbusError) as err:
                 self._stop_traffic()
+                self._stop_feedback(job)
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
+                log.info(kv("submit_refused", name=name, error=err))
                 raise InputError("submit", str(err)) from None
             job.watcher = threading.Thread(target=self._watch, args=(job,), name=f"job-{record.job_id}", daemon=True)
             with self._lock:
@@ -94,7 +123,9 @@ class Controller:
         finally:
             with self._lock:
                 self._planning = False
-        log.info(kv("job_started", job=record.job_id, name=name, cycles=len(plan.counts)))
+        log.info(kv("job_started", job=record.job_id, name=name, cycles=len(plan.counts),
+                    duration_s=plan.trajectory.duration_s, override_percent=round(rate * 100.0, 3),
+                    folder=record.folder))
         return {"ok": True, "job": {"id": record.job_id, "folder": str(record.folder), "summary": plan.summary}}
 
     def stop(self) -> dict[str, Any]:
@@ -129,6 +160,11 @@ class Controller:
         self._override = percent / 100.0
         job = self._job
         effective = self._set_link_rate(job.plan) if job is not None else self._override
+        if job is not None:
+            index = self.link.status().job_index
+            job.overrides.append(self._override_entry(job, effective, "request", -1 if index is None else index))
+        log.info(kv("override_changed", requested_percent=percent, effective_percent=round(effective * 100.0, 3),
+                    job=job.record.job_id if job is not None else "-"))
         return {"ok": True, "requested_percent": percent, "effective_percent": round(effective * 100.0, 3)}
 
     def inject_fault(self, spec: str) -> dict[str, Any]:
@@ -139,13 +175,15 @@ class Controller:
         return {"ok": True}
 
     def job_info(self, job_id: str) -> dict[str, Any]:
-        record = self.records.find(job_id)
-        if record is None:
-            raise InputError("field 'id'", f"no job {job_id!r} in {self.records.root}")
-        active = self._job
-        running = active is not None and active.record.job_id == job_id
-        return {"ok": True, "job": {"id": job_id, "folder": str(record.folder), "running": running,
-                                    "plan": record.plan(), "outcome": None if running else record.outcome()}}
+        return {"ok": True, "job": self.records.info(job_id, self._running_id())}
+
+    def jobs(self, limit: int = 20) -> dict[str, Any]:
+        """The newest ``limit`` records (newest first), one summary each."""
+        return {"ok": True, **self.records.listing(limit, self._running_id())}
+
+    def _running_id(self) -> str | None:
+        job = self._job
+        return job.record.job_id if job is not None else None
 
     # ------------------------------------------------------------------ status
     def state(self, status: MasterStatus | None = None) -> str:
@@ -179,7 +217,9 @@ class Controller:
                 "cycles": {"count": t.cycles, "late": t.late_cycles, "missed": t.missed_cycles,
                            "send_errors": t.send_errors, "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3),
                            "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)},
-                "faults": [fault_dict(f) for f in status.faults[self._faults_acknowledged:]],
+                "faults": [self._fault_record(f, status, job.start_cycle if job is not None else
+                                              self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
+                           for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
@@ -189,8 +229,11 @@ class Controller:
         index = status.job_index if status.job_index is not None and status.job_length == total else -1
         cycle = max(index + 1, 0)
         feed = float(job.plan.trajectory.feed_mm_s[min(max(index, 0), total - 1)]) * self._effective(job)
+        reached = self._line_reached(job, index)
         return {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
                 "total": total, "percent": round(100.0 * cycle / total, 2), "feed_mm_s": round(feed, 3),
+                "override_percent": round(self._effective(job) * 100.0, 3),
+                "line": reached["where"] if reached else None, "started_at": job.started_at,
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
 
     def _override_status(self, job: ActiveJob | None) -> dict[str, Any]:
@@ -216,6 +259,7 @@ class Controller:
         record = None
         try:
             record = self.records.create(name, text)
+            record.write_config(config_dict(self.config))
             record.write_plan(plan.summary, plan.write_trace)
             return record
         except OSError as err:
@@ -223,6 +267,54 @@ class Controller:
                 shutil.rmtree(record.folder, ignore_errors=True)
             raise InputError("data_dir", f"cannot write the job record in {self.records.root}: "
                              f"{err.strerror or err}") from None
+
+    def _record_rejection(self, name: str, text: str, err: InputError) -> None:
+        """A rejected program leaves a record (program + error lines) and one log line."""
+        errors = str(err).splitlines()
+        job_id = "-"
+        try:
+            job_id = self.records.create_rejected(name, text, errors).job_id
+        except OSError as os_err:
+            log.warning(kv("rejection_not_recorded", name=name, error=os_err.strerror or os_err))
+        log.info(kv("submit_rejected", name=name, record=job_id, errors=len(errors), first=errors[0]))
+
+    def _record_feedback(self, record: JobRecord) -> FeedbackLog | None:
+        """feedback.csv: every TPDO1 of the job (service.feedback), from before the first set-point
+        (monitoring.feedback_log: false records none)."""
+        if not self.config.monitoring.feedback_log:
+            return None
+        try:
+            feedback = FeedbackLog(record.feedback_path, self.link.axis_map)
+        except OSError as err:
+            log.warning(kv("feedback_not_recorded", job=record.job_id, error=err.strerror or err))
+            return None
+        self.link.record_feedback(feedback.add)
+        return feedback
+
+    def _stop_feedback(self, job: ActiveJob) -> None:
+        if job.feedback is None:
+            return
+        self.link.record_feedback(None)
+        try:
+            job.feedback.close(max(job.start_cycle, 0))
+        except OSError as err:
+            log.warning(kv("feedback_not_written", job=job.record.job_id, error=err.strerror or err))
+
+    def _flush_feedback(self, job: ActiveJob) -> None:
+        if job.feedback is not None and job.start_cycle >= 0:
+            try:
+                job.feedback.flush(job.start_cycle)
+            except OSError as err:
+                log.warning(kv("feedback_not_written", job=job.record.job_id, error=err.strerror or err))
+                self.link.record_feedback(None)
+                job.feedback = None
+
+    def _override_entry(self, job: ActiveJob, effective: float, by: str, index: int) -> dict[str, Any]:
+        """One entry of the job's override history: when (seconds since the job started and
+        the planned set-point reached), who, requested and effective percent."""
+        return {"at_s": round(time.monotonic() - job.started_s, 3), "setpoint": index, "by": by,
+                "requested_percent": round(self._override * 100.0, 3),
+                "effective_percent": round(effective * 100.0, 3)}
 
     def _record_traffic(self, record: JobRecord) -> None:
         """monitoring.traffic_log: every bus frame of the job into its folder (log: candump,
@@ -259,7 +351,10 @@ class Controller:
         result = None
         while result is None:
             result = job.handle.wait(1.0)
-        outcome = self._outcome(job, result)
+            self._flush_feedback(job)
+        status, settled = self._settled_status()
+        self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
+        outcome = self._outcome(job, result, status, settled)
         self._stop_traffic()
         if self.simulation is not None:
             try:
@@ -271,27 +366,76 @@ class Controller:
         except OSError as err:  # the record is incomplete, but the daemon must stay usable
             log.error(kv("outcome_not_written", job=job.record.job_id, error=err))
         finally:
-            log.info(kv("job_ended", job=job.record.job_id, outcome=outcome["outcome"]))
+            reached = outcome["line_reached"]
+            log.info(kv("job_ended", job=job.record.job_id, outcome=outcome["outcome"], sent=outcome["sent"],
+                        planned=outcome["planned"], line=reached["where"] if reached else "-",
+                        motion_time_s=outcome["motion_time_s"], reason=outcome["reason"] or "-"))
             with self._lock:
+                self._last_job_faults = {(f["node"], f["kind"], f["master_cycle"]): job.start_cycle
+                                         for f in outcome["faults"]}
                 self._last = {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), **{
-                    k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")}}
+                    k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")},
+                    "line_reached": reached["where"] if reached else None}
                 self._job = None
 
-    def _outcome(self, job: ActiveJob, result: JobResult) -> dict[str, Any]:
+    def _settled_status(self) -> tuple[MasterStatus, bool]:
+        """The status once every axis' position actual is within one count of its set-point
+        (the servo caught up; after a quick stop the master's set-point follows the actual),
+        or after SETTLE_S: (status, settled)."""
+        deadline = time.monotonic() + SETTLE_S
+        while True:
+            status = self.link.status()
+            settled = all(a.position_counts is not None and abs(a.position_counts - a.setpoint_counts) <= 1
+                          for a in status.axes)
+            if settled or time.monotonic() >= deadline:
+                return status, settled
+            time.sleep(self.config.cycle_period_s)
+
+    def _outcome(self, job: ActiveJob, result: JobResult, status: MasterStatus, settled: bool) -> dict[str, Any]:
         outcome = OUTCOME_OF_RESULT.get(result.outcome, "fault")
         if result.faults:
             outcome = "fault"
-        first = result.faults[0] if result.faults else None
-        reason = str(first) if first else {"stop": "stopped on request", "shutdown": "stopped: the daemon was asked "
-                                           "to end", "abort": "aborted on request (quick stop)"}.get(
-            job.stop_requested, "")
+        faults = [self._fault_record(f, status, job.start_cycle) for f in result.faults]
+        reason = faults[0]["message"] if faults else {
+            "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
+            "abort": "aborted on request (quick stop)"}.get(job.stop_requested, "")
         return {"outcome": outcome, "job": job.record.job_id, "name": job.name, "reason": reason,
-                "fault": fault_dict(first) if first else None, "faults": [fault_dict(f) for f in result.faults],
+                "fault": faults[0] if faults else None, "faults": faults,
                 "sent": result.sent, "planned": result.length,
+                "line_reached": self._line_reached(job, result.sent - 1),
+                "final_position": self._positions_mm(status), "settled": settled,
+                "overrides": job.overrides,
+                "feedback_rows": job.feedback.rows if job.feedback is not None else None,
                 "motion_time_s": round(time.monotonic() - job.started_s, 3),
                 "missed_cycles": result.missed_cycles - job.missed_before,
                 "late_cycles": result.late_cycles - job.late_before,
-                "ended_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
+                "start_cycle": job.start_cycle, "started_at": job.started_at, "ended_at": now_iso()}
+
+    def _line_reached(self, job: ActiveJob, index: int) -> dict[str, Any] | None:
+        """The program line of planned set-point ``index`` (None before the first one)."""
+        program, blocks = job.plan.program, job.plan.trajectory.block
+        if program is None or index < 0 or not len(blocks):
+            return None
+        block = int(blocks[min(index, len(blocks) - 1)])
+        source = program.blocks[block].source
+        return {"where": str(source), "line": source.line, "text": source.text, "block": block, "setpoint": index}
+
+    def _positions_mm(self, status: MasterStatus) -> dict[str, dict[str, float | None]]:
+        """Per axis: the last set-point sent and the drive's position actual (TPDO1), in mm."""
+        axis_map = self.link.axis_map
+        commanded = axis_map.to_mm(np.array([[a.setpoint_counts for a in status.axes]]))[0]
+        actual = axis_map.to_mm(np.array([[a.position_counts or 0 for a in status.axes]]))[0]
+        return {a.name: {"commanded_mm": round(float(commanded[i]), 6),
+                         "actual_mm": None if a.position_counts is None else round(float(actual[i]), 6)}
+                for i, a in enumerate(status.axes)}
+
+    def _fault_record(self, fault: FaultReport, status: MasterStatus, start_cycle: int | None = None) -> dict[str, Any]:
+        """fault_record() with the axis' scale and last EMCY code from the status."""
+        axis = next((a for a in status.axes if a.node_id == fault.node_id), None)
+        config = next((a for a in self.config.axes if a.node_id == fault.node_id), None)
+        mm_per_count = None if config is None else (-1.0 if config.invert else 1.0) / config.counts_per_mm
+        return fault_record(fault, start_cycle, mm_per_count, axis.last_emcy_code if axis else None,
+                            axis.statusword if axis else None)
 
     # ------------------------------------------------------------------ shutdown
     def shutdown(self, timeout_s: float = 10.0) -> None:
@@ -311,6 +455,41 @@ def check_program_name(name: str) -> None:
         raise InputError("field 'name'", "must be a file name of 1-255 printable characters")
 
 
-def fault_dict(fault: FaultReport) -> dict[str, Any]:
-    return {"node": fault.node_id, "axis": fault.axis, "kind": fault.kind, "code": fault.code,
-            "cycle": fault.cycle, "message": fault.message}
+def config_dict(config: MachineConfig) -> dict[str, Any]:
+    """The configuration a job ran with, every default filled in (config.json of a record)."""
+    out = dataclasses.asdict(config)
+    out.pop("lines", None)
+    return out
+
+
+def fault_record(fault: FaultReport, start_cycle: int | None, mm_per_count: float | None,
+                 last_emcy: int | None, statusword: int | None) -> dict[str, Any]:
+    """A fault as records and the status show it.
+
+    ``code``: the CiA-301 EMCY error code (``emcy``; for ``fault_bit`` the axis' last EMCY,
+    if any), else None. ``measured``: the value that tripped it, in its own field: the
+    following error in counts and mm, the NMT state a heartbeat reported, the statusword.
+    ``cycle``: job-relative (0 = the cycle that sent the job's first set-point) when
+    ``start_cycle`` is known, else the master's; ``master_cycle`` always the master's.
+    """
+    code: int | None = None
+    measured: dict[str, Any] | None = None
+    if fault.kind == "emcy":
+        code = fault.code
+    elif fault.kind == "following_error" and fault.code:
+        measured = {"following_error_counts": fault.code,
+                    "following_error_mm": None if mm_per_count is None else round(fault.code * mm_per_count, 6)}
+    elif fault.kind == "heartbeat" and fault.code >= 0:
+        measured = {"nmt_state": fault.code}
+    elif fault.kind == "fault_bit":
+        code = last_emcy if last_emcy and last_emcy & 0xFF00 else None
+        measured = None if statusword is None else {"statusword": statusword}
+    elif fault.kind == "bringup":
+        measured = {"statusword": fault.code}
+    cycle, message = fault.cycle, fault.message
+    if start_cycle is not None and start_cycle >= 0 and fault.cycle >= 0:
+        cycle = fault.cycle - start_cycle
+        message = message.replace(f"at cycle {fault.cycle}", f"at job cycle {cycle}")
+    return {"node": fault.node_id, "axis": fault.axis, "kind": fault.kind, "code": code,
+            "code_hex": None if code is None else f"0x{code:04X}", "measured": measured, "cycle": cycle,
+            "master_cycle": fault.cycle, "message": message}

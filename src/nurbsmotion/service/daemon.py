@@ -2,8 +2,10 @@
 
 Start-up order: mark jobs left without outcome 'interrupted' -> simulated drives (if
 configured) -> bring-up of every axis -> control socket -> READY=1 (systemd). Shutdown
-order: refuse new jobs -> controlled stop of a running job (outcome 'stopped') -> drives
-disabled -> socket removed -> simulated drives stopped.
+order: refuse new jobs (and every request that would move or re-enable something) ->
+controlled stop of a running job (outcome 'stopped') -> drives disabled -> socket removed
+-> simulated drives stopped. The socket keeps answering ``status`` and ``job`` until it is
+removed, so a client following the job sees its outcome, never an internal error.
 """
 
 from __future__ import annotations
@@ -27,14 +29,17 @@ from nurbsmotion.service.server import ControlServer
 
 log = logging.getLogger(__name__)
 
+ANSWERED_WHILE_CLOSING = frozenset({"status", "job", "jobs", "stop", "abort"})  # read, or stop sooner
+
 
 def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     """Route one checked request to the controller."""
     f = request.fields
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
-        "submit": lambda: controller.submit(f["name"], f["program"]),
+        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False))),
         "status": controller.status,
         "job": lambda: controller.job_info(f["id"]),
+        "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
         "stop": controller.stop,
         "abort": controller.abort,
         "reset": controller.reset,
@@ -74,24 +79,32 @@ class Daemon:
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
 
     def _handle(self, request: Request) -> dict[str, Any]:
-        assert self.controller is not None
-        if self._closing and request.cmd == "submit":
-            raise Refused("submit", "the daemon is shutting down")
-        return dispatch(self.controller, request)
+        controller = self.controller
+        if controller is None or self._closing and request.cmd not in ANSWERED_WHILE_CLOSING:
+            raise Refused(request.cmd, "the daemon is shutting down")
+        return dispatch(controller, request)
 
     def close(self) -> None:
         self._closing = True
         sd_notify("STOPPING=1")
-        self._stop_motion()
+        if self.controller is not None:
+            self.controller.shutdown()  # the socket still answers status and job meanwhile
         if self.server is not None:
             self.server.close()
             self.server = None
-        log.info(kv("daemon_stopped"))
+        served = self.controller is not None
+        self.controller = None
+        self._stop_simulation()
+        if served:  # a start-up that failed has said so in its error already
+            log.info(kv("daemon_stopped"))
 
     def _stop_motion(self) -> None:
         if self.controller is not None:
             self.controller.shutdown()
             self.controller = None
+        self._stop_simulation()
+
+    def _stop_simulation(self) -> None:
         if self.simulation is not None:
             self.simulation.stop()
             self.simulation = None

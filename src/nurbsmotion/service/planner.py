@@ -8,6 +8,7 @@ Every failure is an InputError naming file:line (or the axis and cycle); nothing
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -62,6 +63,34 @@ def axis_positions(trajectory: Trajectory, config: MachineConfig, source: str) -
     return pos[:, columns]
 
 
+def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Program,
+                     config: MachineConfig) -> InputError | None:
+    """The first set-point (in program order) beyond an axis' soft limit, as the error of its
+    program line: ``part.nc:42: X650: axis X would reach 650 mm, beyond the soft limit 600 mm``
+    (the farthest the axis gets within that block; the word only when it is that position,
+    not for an arc's bulge or an incremental or offset coordinate)."""
+    first: tuple[int, int, float] | None = None  # cycle, axis, limit
+    for j, axis in enumerate(config.axes):
+        if axis.soft_limits_mm is None:
+            continue
+        for limit, outside in ((axis.soft_limits_mm[1], positions[:, j] > axis.soft_limits_mm[1]),
+                               (axis.soft_limits_mm[0], positions[:, j] < axis.soft_limits_mm[0])):
+            if outside.any() and (first is None or int(np.argmax(outside)) < first[0]):
+                first = (int(np.argmax(outside)), j, limit)
+    if first is None:
+        return None
+    cycle, j, limit = first
+    block = int(trajectory.block[cycle])
+    in_block = positions[trajectory.block == block, j]
+    reached = float(in_block.max() if limit == config.axes[j].soft_limits_mm[1] else in_block.min())
+    source = program.blocks[block].source
+    name = config.axes[j].name
+    word = re.search(rf"(?<![A-Za-z]){name}\s*([-+]?(\d+\.?\d*|\.\d+))", source.text, re.IGNORECASE)
+    named = word is not None and abs(float(word.group(1)) - reached) < 1e-6  # the word is the cause (not an arc's bulge)
+    where = f"{source}: {word.group(0).replace(' ', '')}" if named else str(source)
+    return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
+
+
 def parse(name: str, text: str, start_mm: np.ndarray) -> Program:
     """The program readers, chosen by the name's suffix as ``read_program`` does for files;
     a G-code program starts at ``start_mm`` (where the axes hold)."""
@@ -90,6 +119,9 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
         raise InputError(f"{name}: {err.where}" if err.where else name, err.message) from None
     planning_s = time.perf_counter() - t0
     positions = axis_positions(trajectory, config, name)
+    beyond = soft_limit_error(positions, trajectory, program, config)
+    if beyond is not None:
+        raise beyond
     try:
         counts = axis_map.to_counts(positions)
     except InputError as err:

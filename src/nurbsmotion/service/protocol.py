@@ -18,9 +18,10 @@ MAX_REQUEST_BYTES = 10 * 1024 * 1024
 
 # command -> {field: (type name, required)}
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
-    "submit": {"name": ("string", True), "program": ("string", True)},
+    "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False)},
     "status": {},
     "job": {"id": ("string", True)},
+    "jobs": {"limit": ("number", False)},
     "stop": {},
     "abort": {},
     "reset": {},
@@ -42,6 +43,8 @@ class Request:
 def _type_ok(value: Any, type_name: str) -> bool:
     if type_name == "string":
         return isinstance(value, str)
+    if type_name == "boolean":
+        return isinstance(value, bool)
     return isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= 1e308  # no NaN/inf/huge int
 
 

@@ -1,9 +1,13 @@
-"""Job records: one folder per job under ``<data_dir>/jobs/<timestamp>-<id>/``.
+"""Job records: one folder per job under ``<data_dir>/jobs/<YYYYmmdd-HHMMSS.mmm>-<id>/`` (the
+time of the submission to the millisecond, so the folders sort in submission order).
 
-Written in the order that loses nothing when a job ends badly: the program as submitted and
-the plan (summary + trace) before any motion, ``outcome.json`` when the job has ended. A job
-folder without an outcome belongs to a daemon that died; the next daemon marks it
-``interrupted`` at start. Every file is written to a temporary name, flushed and renamed.
+Written in the order that loses nothing when a job ends badly: the program as submitted, the
+configuration in force and the plan (summary + trace) before any motion, the drives'
+feedback while the job runs, ``outcome.json`` when the job has ended. A job folder without
+an outcome belongs to a daemon that died; the next daemon marks it ``interrupted`` at start.
+A submission whose program is rejected leaves a folder too: the program and an outcome
+``rejected`` with its error lines. Every JSON file is written to a temporary name, flushed
+and renamed.
 """
 
 from __future__ import annotations
@@ -11,11 +15,13 @@ from __future__ import annotations
 import json
 import os
 import re
-import time
 import uuid
 from dataclasses import dataclass
+from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
+
+from nurbsmotion.errors import InputError
 
 PROGRAM_FILE = "program"  # suffix added from the submitted name (.nc, .yaml ...)
 PLAN_FILE = "plan.json"
@@ -23,11 +29,18 @@ TRACE_FILE = "trace.csv"
 OUTCOME_FILE = "outcome.json"
 DRIVES_DIR = "drives"  # simulated drives' set-point recordings (simulate: true)
 TRAFFIC_FILE = "traffic"  # + .log / .asc: every bus frame of the job (monitoring.traffic_log)
-OUTCOMES = ("completed", "stopped", "aborted", "fault", "interrupted")
+CONFIG_FILE = "config.json"  # the machine configuration the job ran with (defaults filled in)
+FEEDBACK_FILE = "feedback.csv"  # every TPDO1 of the job: statusword and position actual (service.feedback)
+OUTCOMES = ("completed", "stopped", "aborted", "fault", "interrupted", "rejected")
 
 
 def new_job_id() -> str:
     return uuid.uuid4().hex[:8]
+
+
+def now_iso() -> str:
+    """Local wall-clock time with milliseconds and UTC offset (2026-11-24T10:12:03.250+00:00)."""
+    return datetime.now().astimezone().isoformat(timespec="milliseconds")
 
 
 def write_atomic(path: Path, data: bytes) -> None:
@@ -66,6 +79,9 @@ class JobRecord:
         os.replace(tmp, self.folder / TRACE_FILE)
         write_json(self.folder / PLAN_FILE, summary)
 
+    def write_config(self, config: dict[str, Any]) -> None:
+        write_json(self.folder / CONFIG_FILE, config)
+
     def write_outcome(self, outcome: dict[str, Any]) -> None:
         if outcome.get("outcome") not in OUTCOMES:
             raise ValueError(f"unknown outcome {outcome.get('outcome')!r}")
@@ -87,6 +103,34 @@ class JobRecord:
     def drives_dir(self) -> Path:
         return self.folder / DRIVES_DIR
 
+    @property
+    def feedback_path(self) -> Path:
+        return self.folder / FEEDBACK_FILE
+
+    @property
+    def created_at(self) -> str:
+        """The folder's time stamp (the submission), as ``YYYY-mm-ddTHH:MM:SS.mmm``."""
+        stamp = self.folder.name.rsplit("-", 1)[0]
+        for form in ("%Y%m%d-%H%M%S.%f", "%Y%m%d-%H%M%S"):  # older records: whole seconds
+            try:
+                return datetime.strptime(stamp, form).isoformat(timespec="milliseconds")
+            except ValueError:
+                continue
+        return ""
+
+    def summary(self) -> dict[str, Any]:
+        """One line of ``jobs``: id, name, submitted, outcome (None while it runs), line reached."""
+        outcome = self.outcome() or {}
+        plan = self.plan() or {}
+        reached = outcome.get("line_reached") or {}
+        return {"id": self.job_id, "name": outcome.get("name") or plan.get("program") or self._program_name(),
+                "submitted_at": self.created_at, "outcome": outcome.get("outcome"),
+                "reason": outcome.get("reason", ""), "line_reached": reached.get("where"),
+                "motion_time_s": outcome.get("motion_time_s"), "folder": str(self.folder)}
+
+    def _program_name(self) -> str:
+        return next((p.name for p in self.folder.glob(f"{PROGRAM_FILE}.*")), "")
+
 
 class JobRecords:
     """The ``jobs`` folder of the data directory."""
@@ -98,11 +142,26 @@ class JobRecords:
         """A new job folder holding the program as submitted."""
         self.root.mkdir(parents=True, exist_ok=True)
         job_id = new_job_id()
-        folder = self.root / f"{time.strftime('%Y%m%d-%H%M%S')}-{job_id}"
+        now = datetime.now()
+        folder = self.root / f"{now:%Y%m%d-%H%M%S}.{now.microsecond // 1000:03d}-{job_id}"
         folder.mkdir()
         record = JobRecord(job_id, folder)
         record.write_program(name, text)
         return record
+
+    def create_rejected(self, name: str, text: str, errors: list[str]) -> JobRecord:
+        """The record of a submission whose program was rejected: the program and why."""
+        record = self.create(name, text)
+        record.write_outcome({"outcome": "rejected", "job": record.job_id, "name": name, "reason": errors[0],
+                              "errors": errors, "recorded_at": now_iso()})
+        return record
+
+    def all(self) -> list[JobRecord]:
+        """Every record, oldest first (folder names start with the submission time)."""
+        if not self.root.is_dir():
+            return []
+        return [JobRecord(p.name.rsplit("-", 1)[-1], p) for p in sorted(self.root.iterdir())
+                if p.is_dir() and "-" in p.name]
 
     def find(self, job_id: str) -> JobRecord | None:
         if not re.fullmatch(r"[0-9a-f]{1,32}", job_id) or not self.root.is_dir():
@@ -111,16 +170,31 @@ class JobRecords:
             return JobRecord(job_id, folder)
         return None
 
+    def info(self, job_id: str, running_id: str | None = None) -> dict[str, Any]:
+        """One record in full (the ``job`` response); InputError for an unknown id."""
+        record = self.find(job_id)
+        if record is None:
+            raise InputError("field 'id'", f"no job {job_id!r} in {self.root}")
+        running = job_id == running_id
+        return {"id": job_id, "folder": str(record.folder), "running": running, "submitted_at": record.created_at,
+                "plan": record.plan(), "outcome": None if running else record.outcome(),
+                "files": sorted(p.name for p in record.folder.iterdir() if not p.name.startswith("."))}
+
+    def listing(self, limit: int = 20, running_id: str | None = None) -> dict[str, Any]:
+        """The newest ``limit`` records, newest first (the ``jobs`` response)."""
+        if limit < 1:
+            raise InputError("field 'limit'", f"must be at least 1, got {limit:g}")
+        records = self.all()
+        rows = [{**r.summary(), "running": r.job_id == running_id} for r in reversed(records[-int(limit):])]
+        return {"jobs": rows, "total": len(records), "root": str(self.root)}
+
     def mark_interrupted(self) -> list[JobRecord]:
         """Give every job folder without an outcome the outcome 'interrupted'."""
         marked = []
-        if not self.root.is_dir():
-            return marked
-        for folder in sorted(p for p in self.root.iterdir() if p.is_dir()):
-            record = JobRecord(folder.name.rsplit("-", 1)[-1], folder)
-            if not (folder / OUTCOME_FILE).exists():
+        for record in self.all():
+            if not (record.folder / OUTCOME_FILE).exists():
                 record.write_outcome({"outcome": "interrupted", "job": record.job_id,
                                       "reason": "the daemon ended while this job was in progress",
-                                      "recorded_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")})
+                                      "recorded_at": now_iso()})
                 marked.append(record)
         return marked

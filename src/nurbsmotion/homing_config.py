@@ -1,0 +1,121 @@
+"""The ``homing:`` section of an axis: schema and validation (errors at the YAML line).
+
+```yaml
+homing: {method: 17, speed_search_mm_s: 20, speed_zero_mm_s: 2, accel_mm_s2: 200, offset_mm: 0}
+homing: {method: here, offset_mm: 0}
+```
+
+``method`` is the drive's CiA-402 homing method (0x6098: 1..35 and 37 standard, -128..-1
+manufacturer specific) or ``here`` (no drive homing: the current position becomes
+``offset_mm``). Drive methods other than 35/37 need the two speeds and the acceleration. The optional
+``speed_unit_counts_s``, ``accel_unit_counts_s2`` and ``home_offset_sign`` say what the
+drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
+``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
+
+config.py calls :func:`read_homing` for ``axes[i].homing`` (this module imports config's
+YAML readers; config imports this module only when it reads the section).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from nurbsmotion.config import _MISSING, _SHOWN, _Doc, _fields, _number
+
+HERE = "here"
+STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)
+DRIVE_KEYS = ("speed_search_mm_s", "speed_zero_mm_s", "accel_mm_s2")
+NO_MOTION_METHODS = (35, 37)  # the drive takes its current position as home: no speeds needed
+
+
+@dataclass(frozen=True)
+class HomingConfig:
+    """One axis' homing. ``method`` is an int (0x6098) or :data:`HERE`."""
+
+    method: int | str
+    offset_mm: float = 0.0
+    speed_search_mm_s: float | None = None
+    speed_zero_mm_s: float | None = None
+    accel_mm_s2: float | None = None
+    timeout_s: float = 60.0
+    speed_unit_counts_s: float = 1.0  # counts/s one unit of 0x6099 stands for
+    accel_unit_counts_s2: float = 1.0  # counts/s² one unit of 0x609A stands for
+    home_offset_sign: int = -1  # -1: CiA 402 (zero = home + 0x607C, the home reads -0x607C)
+
+    @property
+    def on_drive(self) -> bool:
+        """True when the drive homes (mode 6); False for ``method: here``."""
+        return self.method != HERE
+
+    @property
+    def moves(self) -> bool:
+        """True when the drive's method searches (needs 0x6099 speeds and 0x609A)."""
+        return self.on_drive and self.method not in NO_MOTION_METHODS
+
+
+def _method(doc: _Doc) -> Any:
+    value = doc.value()
+    if value == HERE:
+        return HERE
+    if isinstance(value, bool) or not isinstance(value, int):
+        doc.fail(f"must be a CiA-402 homing method number or 'here', got {_SHOWN.repr(value)}")
+        return _MISSING
+    if not (value in STANDARD_METHODS or -128 <= value <= -1):
+        doc.fail(f"homing method {value} is not defined by CiA 402 (1..35, 37; -128..-1 manufacturer specific)")
+        return _MISSING
+    return value
+
+
+def _sign(doc: _Doc) -> Any:
+    value = doc.value()
+    if value not in (-1, 1) or isinstance(value, bool):
+        doc.fail(f"must be -1 or 1, got {_SHOWN.repr(value)}")
+        return _MISSING
+    return value
+
+
+_POSITIVE = (_number, {"minimum": 0})
+_READERS = {
+    "method": (_method, {}),
+    "offset_mm": (_number, {}),
+    "speed_search_mm_s": _POSITIVE,
+    "speed_zero_mm_s": _POSITIVE,
+    "accel_mm_s2": _POSITIVE,
+    "timeout_s": _POSITIVE,
+    "speed_unit_counts_s": _POSITIVE,
+    "accel_unit_counts_s2": _POSITIVE,
+    "home_offset_sign": (_sign, {}),
+}
+
+
+def read_homing(doc: _Doc) -> Any:
+    """``axes[i].homing`` -> HomingConfig (or _MISSING after recording located errors)."""
+    before = len(doc.errors)
+    values = _fields(doc, _READERS, required=("method",))
+    method = values.get("method")
+    missing = [key for key in DRIVE_KEYS if key not in values]
+    if method not in (None, HERE, *NO_MOTION_METHODS) and missing and len(doc.errors) == before:
+        doc.fail(f"homing method {method} runs on the drive and needs {', '.join(missing)}")
+    if len(doc.errors) > before or method is None:
+        return _MISSING
+    return HomingConfig(**values)
+
+
+def homing_method_name(method: int | str) -> str:
+    """A short human name of a method, for logs and status (CiA 402-2 homing methods)."""
+    return _METHOD_NAMES.get(method, f"method {method}")
+
+
+_METHOD_NAMES: dict[int | str, str] = {
+    HERE: "here (current position)",
+    1: "negative limit switch + index",
+    2: "positive limit switch + index",
+    17: "negative limit switch",
+    18: "positive limit switch",
+    33: "index pulse, negative direction",
+    34: "index pulse, positive direction",
+    35: "current position",
+    37: "current position",
+}
+

@@ -1,0 +1,67 @@
+"""What the drives reported during a job: every TPDO1 the master received (statusword 0x6041,
+position actual 0x6064), written to the job's ``feedback.csv`` while the job runs.
+
+The master hands each TPDO1 to :meth:`FeedbackLog.add` on canopen's receive thread
+(``Master.record_feedback``); ``add`` only appends to a deque. The job's watcher thread
+calls :meth:`FeedbackLog.flush` about once a second and at the end, so memory stays small
+however long the job is. One row per TPDO (not one per cycle): when the receive thread lags,
+two answers of one axis may arrive within one master cycle, and both are kept.
+
+Columns: ``job_cycle`` (master cycle at arrival minus the job's start cycle: 0 is the cycle
+that sent the first set-point, negative rows were received before it), ``axis``, ``node``,
+``statusword``, ``position_counts``, ``position_mm`` (AxisMap.to_mm), ``time_s`` (receive
+time since the first row).
+"""
+
+from __future__ import annotations
+
+import collections
+from pathlib import Path
+from typing import TextIO
+
+from nurbsmotion.axes import AxisMap
+
+HEADER = "job_cycle,axis,node,statusword,position_counts,position_mm,time_s\n"
+
+
+class FeedbackLog:
+    """One job's feedback.csv (see module docstring)."""
+
+    def __init__(self, path: Path, axis_map: AxisMap) -> None:
+        self.path = path
+        self.rows = 0
+        self._prefix = [f"{name},{node}," for name, node in zip(axis_map.names, axis_map.node_ids)]
+        self._offset = [int(o) for o in axis_map.offset_counts]
+        self._mm_per_count = [float(s) / float(c) for s, c in zip(axis_map.sign, axis_map.counts_per_mm)]
+        self._samples: collections.deque[tuple[int, int, int, int, float]] = collections.deque()
+        self._t0: float | None = None
+        self._out: TextIO | None = open(path, "w", encoding="ascii")
+        self._out.write(HEADER)
+
+    def add(self, cycle: int, axis: int, statusword: int, position_counts: int, timestamp: float) -> None:
+        """The master's FeedbackSink: called on the receive thread, so only an append."""
+        self._samples.append((cycle, axis, statusword, position_counts, timestamp))
+
+    def flush(self, start_cycle: int) -> None:
+        """Write the samples received so far; ``start_cycle``: the master cycle of job cycle 0."""
+        out = self._out
+        if out is None or not self._samples:
+            return
+        samples = self._samples
+        if self._t0 is None:
+            self._t0 = samples[0][4]
+        t0, prefix, offset, scale = self._t0, self._prefix, self._offset, self._mm_per_count
+        lines = []
+        while samples:  # %-formatting with a per-axis prefix: half the time of an f-string per row
+            cycle, i, sw, pos, stamp = samples.popleft()
+            lines.append("%d,%s%d,%d,%.6f,%.6f\n" % (cycle - start_cycle, prefix[i], sw, pos,
+                                                       (pos - offset[i]) * scale[i], stamp - t0))
+        out.writelines(lines)
+        out.flush()
+        self.rows += len(lines)
+
+    def close(self, start_cycle: int) -> None:
+        self.flush(start_cycle)
+        if self._out is not None:
+            self._out.close()
+            self._out = None

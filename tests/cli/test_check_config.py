@@ -1,0 +1,47 @@
+"""``nurbsmotion check --config``: the machine's axes, limits and soft limits apply."""
+
+import json
+from pathlib import Path
+
+from nurbsmotion.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+DEMO = str(ROOT / "config" / "demo.yaml")  # X, Y, Z with soft limits [-200, 200]
+XY_ONLY = "axes:\n  - {name: X, node_id: 1, counts_per_mm: 100}\n  - {name: Y, node_id: 2, counts_per_mm: 100}\n"
+
+
+def test_a_program_beyond_the_soft_limit_passes_alone_and_fails_on_the_machine(tmp_path, capsys):
+    part = tmp_path / "part.nc"
+    part.write_text("G21 G90\nG01 X10 F3000\nG01 X250\n")
+    assert main(["check", str(part)]) == 0
+    capsys.readouterr()
+    assert main(["check", "--config", DEMO, str(part)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"nurbsmotion check: error: {part}:3: X250: axis X would reach 250 mm, "
+                   f"beyond the soft limit 200 mm"]
+
+
+def test_the_start_position_counts(tmp_path, capsys):
+    part = tmp_path / "part.nc"
+    part.write_text("G21 G91\nG01 X60 F3000\n")  # incremental: from X150 it ends at X210
+    assert main(["check", "--config", DEMO, "--start", "150", "0", "0", str(part)]) == 2
+    assert "part.nc:2: axis X would reach 210 mm" in capsys.readouterr().err
+
+
+def test_a_program_moving_an_axis_the_machine_lacks_is_refused(tmp_path, capsys):
+    part, config = tmp_path / "part.nc", tmp_path / "xy.yaml"
+    part.write_text("G21 G90\nG01 X10 Z5 F3000\n")
+    config.write_text(XY_ONLY)
+    assert main(["check", "--config", str(config), "--json", str(part)]) == 2
+    errors = json.loads(capsys.readouterr().out)["errors"]
+    assert errors == [{"where": str(part), "message": "the program moves Z, which this machine has no axis for"}]
+
+
+def test_a_good_program_reports_the_machine(tmp_path, capsys):
+    part = tmp_path / "part.nc"
+    part.write_text("G21 G90\nG01 X10 Y5 F3000\n")
+    assert main(["check", "--config", DEMO, str(part)]) == 0
+    assert f"machine   {DEMO}: axes X Y Z, within the axis and soft limits" in capsys.readouterr().out
+    assert main(["check", "--config", DEMO, "--json", str(part)]) == 0
+    machine = json.loads(capsys.readouterr().out)["machine"]
+    assert machine["axes"] == ["X", "Y", "Z"] and machine["cycles"] > 10

@@ -1,0 +1,75 @@
+"""The daemon object in this process (fake link): what clients see while it starts and ends."""
+
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from nurbsmotion.config import load_config
+from nurbsmotion.service.client import Client, DaemonUnavailable
+from nurbsmotion.service.daemon import Daemon
+from nurbsmotion.service.records import JobRecords
+from tests.service.fakes import FakeLink, with_data_dir
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture
+def config(tmp_path):
+    return with_data_dir(load_config(ROOT / "config" / "demo.yaml"), str(tmp_path / "data"), str(tmp_path / "ctl.sock"))
+
+
+def _daemon(config, cycle_s=0.002):
+    links = []
+
+    def open_motion(cfg):
+        links.append(FakeLink(cfg, cycle_s))
+        return links[0], None
+    return Daemon(config, open_motion), links
+
+
+def test_clients_polling_while_the_daemon_ends_mid_job_never_see_an_internal_error(config):
+    """Issue 15.8: ``run`` printed ``internal error: AssertionError`` when the daemon got
+    SIGTERM during a job (the handler asserted the controller while it was torn down)."""
+    daemon, _ = _daemon(config)
+    daemon.start()
+    responses: list[dict] = []
+    ended = threading.Event()
+
+    def poll() -> None:  # what `run` does: status until the job ends, then the job's record
+        try:
+            with Client(config.control.socket, timeout_s=5.0) as client:
+                while not ended.is_set():
+                    responses.append(client.request("status"))
+                    responses.append(client.request("job", id=job_id))
+        except DaemonUnavailable:
+            pass
+
+    try:
+        job_id = daemon.controller.submit("long.nc", "G21 G90\nG01 X20 F600\n")["job"]["id"]
+        poller = threading.Thread(target=poll)
+        poller.start()
+        time.sleep(0.1)
+    finally:
+        daemon.close()
+        ended.set()
+    poller.join(5.0)
+    errors = [r["error"] for r in responses if not r.get("ok")]
+    assert responses and not [e for e in errors if "internal error" in e], errors
+    assert all("shutting down" in e for e in errors), errors
+    assert JobRecords(config.data_dir).find(job_id).outcome()["outcome"] == "stopped"
+
+
+def test_the_socket_answers_only_once_the_controller_exists_and_not_after_close(config):
+    daemon, _ = _daemon(config)
+    with pytest.raises(DaemonUnavailable):
+        Client(config.control.socket).connect()
+    daemon.start()
+    try:
+        with Client(config.control.socket) as client:
+            assert client.request("status")["state"] == "idle"
+    finally:
+        daemon.close()
+    with pytest.raises(DaemonUnavailable):
+        Client(config.control.socket).connect()

@@ -1,0 +1,30 @@
+"""feedback.csv: one row per TPDO1, job-relative cycles, positions in counts and mm."""
+
+import csv
+
+from nurbsmotion.axes import AxisMap
+from nurbsmotion.config import parse_config
+from nurbsmotion.service.feedback import HEADER, FeedbackLog
+
+AXES = ("axes:\n  - {name: X, node_id: 4, counts_per_mm: 1000, offset_counts: 500}\n"
+        "  - {name: Z, node_id: 7, counts_per_mm: 200, invert: true}\n")
+
+
+def test_rows_are_written_per_tpdo_with_the_axis_scale_and_the_job_cycle(tmp_path):
+    log = FeedbackLog(tmp_path / "feedback.csv", AxisMap.from_config(parse_config(AXES, "m.yaml")))
+    log.add(99, 0, 0x0237, 1500, 50.000)  # before the job's cycle 0: the axes still held
+    log.add(100, 1, 0x1237, 400, 50.001)
+    log.flush(100)
+    log.add(101, 1, 0x1237, 410, 50.002)
+    log.add(101, 1, 0x1237, 420, 50.0025)  # two answers within one master cycle: both kept
+    log.close(100)
+    log.flush(100)  # after close: nothing, no error
+    text = (tmp_path / "feedback.csv").read_text()
+    assert text.startswith(HEADER)
+    rows = list(csv.DictReader(text.splitlines()))
+    assert [(r["job_cycle"], r["axis"], r["node"], r["statusword"], r["position_counts"]) for r in rows] == [
+        ("-1", "X", "4", str(0x0237), "1500"), ("0", "Z", "7", str(0x1237), "400"),
+        ("1", "Z", "7", str(0x1237), "410"), ("1", "Z", "7", str(0x1237), "420")]
+    assert [float(r["position_mm"]) for r in rows] == [1.0, -2.0, -2.05, -2.1]
+    assert [round(float(r["time_s"]), 4) for r in rows] == [0.0, 0.001, 0.002, 0.0025]
+    assert log.rows == 4
