@@ -100,8 +100,10 @@ class Listener:
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            msg = self.bus.recv(0.1)
+        while True:  # after stop(): drain what the socket still holds (a starved guest lags seconds)
+            msg = self.bus.recv(0.0 if self._stop.is_set() else 0.1)
+            if msg is None and self._stop.is_set():
+                return
             if msg is not None and (msg.arbitration_id == SYNC_ID or msg.arbitration_id in RPDO_IDS):
                 value = int.from_bytes(bytes(msg.data[2:6]), "little", signed=True) if msg.arbitration_id != SYNC_ID \
                     else 0
@@ -109,7 +111,7 @@ class Listener:
 
     def stop(self) -> None:
         self._stop.set()
-        self._thread.join(2.0)
+        self._thread.join(30.0)
 
 
 @dataclass

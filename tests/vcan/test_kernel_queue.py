@@ -48,14 +48,16 @@ class WireListener:
         self._thread.start()
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            msg = self.bus.recv(0.1)
+        while True:  # after stop(): drain what the socket still holds (a starved guest lags seconds)
+            msg = self.bus.recv(0.0 if self._stop.is_set() else 0.1)
+            if msg is None and self._stop.is_set():
+                return
             if msg is not None:
                 self.frames.append((msg.timestamp, msg.arbitration_id, bytes(msg.data)))
 
     def stop(self) -> None:
         self._stop.set()
-        self._thread.join(2.0)
+        self._thread.join(30.0)
         self.bus.shutdown()
 
 
