@@ -11,9 +11,9 @@ next SYNC. Python only keeps the ring ahead of the kernel:
   may be copying them: before Linux 6.15's "extend bcm_tx_lock usage" the copy takes no
   lock). Each TX_SETUP carries the whole ring, so those slots are rewritten with identical
   bytes. Stop, feed override and abort act from c + guard + 1 on: latency (guard + 1)·T.
-- **The lease.** Each renewal sets the op's ``count`` to the frames up to cycle
+- **The lease.** Each renewal sets the op's ``count`` to (L - c)·(1 + n) frames, with
   L = c + cycles - 1 - pad (SETTIMER without STARTTIMER keeps the phase). If Python stops
-  renewing, the kernel sends up to L (and the SYNC of L + 1) and stops by itself: SYNC
+  renewing, the kernel sends into cycle L and stops by itself: SYNC
   stops, drives notice. The planner keeps the cycles after its horizon a controlled stop
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
@@ -272,8 +272,10 @@ class BcmQueueWriter:
             self._pack(x, controlwords, setpoints)
 
     def stalled(self) -> bool:
-        """The lease ran out: the kernel sent its last cycle and stopped."""
-        return self.running and self.c > self.lease_end
+        """The lease ran out: the kernel sent the SYNC of its last cycle (L) and stops within
+        it (count = (L - c)·(1 + n) frames from a renewal inside cycle c ends inside cycle L),
+        and a count that reached 0 cannot be renewed (the op's timer is not re-armed)."""
+        return self.running and self.c >= self.lease_end
 
     def restart(self, c: int) -> None:
         """A fresh op (the expired one cannot be renewed): ring slot 0 is cycle c + 1."""

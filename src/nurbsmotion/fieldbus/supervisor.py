@@ -25,7 +25,6 @@ from nurbsmotion.log import kv
 log = logging.getLogger(__name__)
 
 SEARCH_CYCLES = 5  # SYNCs searched back for the one a TPDO1 answers
-BACKLOG_BLOCK = 256  # cycles per block of the drives' least backlog
 
 
 class CycleHistory:
@@ -61,16 +60,18 @@ class Supervisor:
         self.fe_cycles = [0] * n
         self.fe_checked_time = [0.0] * n
         self.fe_answered = [0] * n  # SYNC the last judged TPDO1 answered
-        self.backlog_floor = [[1 << 30, 1 << 30] for _ in range(n)]  # least SYNCs-minus-TPDO1s, two blocks
+        self.backlog_floor = [1 << 30] * n  # least SYNCs-minus-TPDO1s since enabled
+        self.late_warned: set[int] = set()
         self.faults: list[FaultReport] = []
         self.reported: set[tuple[int | None, str]] = set()
         self.bad_tpdo_warned: set[int] = set()
-        self.backlog_block = -1
 
     def reset(self) -> None:
         """Faults acknowledged (re-enabling): report them again when they recur."""
         self.reported.clear()
         self.fe_cycles[:] = [0] * len(self.fe_cycles)
+        self.backlog_floor[:] = [1 << 30] * len(self.backlog_floor)
+        self.late_warned.clear()
 
     # ------------------------------------------------------------------ once per cycle
     def check(self, k: int, phase: Phase, job: Any) -> list[tuple[str, Any]]:
@@ -181,19 +182,21 @@ class Supervisor:
 
     def _answers_late(self, i: int, k: int) -> bool:
         """The drive works through a backlog: more SYNCs on the wire than TPDO1s from it,
-        beyond the least such difference of the last BACKLOG_BLOCK..2·BACKLOG_BLOCK cycles
-        (a lost frame moves that floor for good, so it is renewed block by block). Its TPDO1
-        then answers an earlier SYNC than the latest one: no computed error is judged (the
-        drive's own check, statusword bit 13, still is). Real drives answer within the cycle;
-        a simulated drive in a starved process (User-Mode Linux) does not."""
+        beyond the least such difference since the axes were enabled. Its TPDO1 then answers
+        an earlier SYNC than the latest one, so no computed error is judged (the drive's own
+        check, statusword bit 13, still is); logged once per enable. Real drives answer
+        within the cycle; a simulated drive in a starved process (User-Mode Linux) falls
+        behind by seconds, growing slowly. A lost TPDO1 also counts as one cycle behind."""
         backlog = k - self.fb.tpdo_count[i]
-        floor = self.backlog_floor[i]
-        if k // BACKLOG_BLOCK != self.backlog_block:
-            self.backlog_block = k // BACKLOG_BLOCK
-            for f in self.backlog_floor:
-                f[0], f[1] = f[1], 1 << 30
-        floor[1] = min(floor[1], backlog)
-        return backlog - min(floor) > 1
+        if backlog < self.backlog_floor[i]:
+            self.backlog_floor[i] = backlog
+        late = backlog - self.backlog_floor[i] > 1
+        node = self.node_ids[i]
+        if late and node not in self.late_warned:
+            self.late_warned.add(node)
+            log.warning(kv("drive_answers_late", node=node, axis=self.names[i], cycles=backlog - self.backlog_floor[i],
+                           cycle=k, note="computed following error not judged while it lags"))
+        return late
 
     # ------------------------------------------------------------------ reports and reactions
     def report(self, node: int | None, axis: str | None, kind: str, code: int, k: int, message: str,
