@@ -6,7 +6,9 @@ Targets (issue 4):
   toppra's time-optimal duration on the same path, our limits holding on every cycle (and how
   far toppra's own samples exceed them between its grid points);
 - jerk-limited straight line: <= 1.01x ruckig's time-optimal 1-D profile;
-- >= 1,000,000 set-points per second planned on Wang's Table 1 curve at T = 1 ms;
+- >= 1,000,000 set-points per second planned on Wang's Table 1 curve at T = 1 ms, with and
+  (issue 17) without a jerk limit, in the nurbsmotion process (keep_freed_memory) and, for
+  the gap, a bare library call (glibc's default allocator);
 - a one-hour program at T = 1 ms planned and streamed in chunks with < 500 MB.
 
 Run: python benchmarks/bench_lookahead.py [--repeat R] [--hour-minutes M] (M = 0 skips the
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import time
@@ -208,7 +211,10 @@ def throughput(repeat: int) -> str:
             rate = result["count"] / result["best_s"]
             rows.append(f"| {label} | {process} | {result['count']} | {result['best_s']:.4f} | {result['faults']} | "
                         f"{rate:,.0f} | >= 1,000,000 ({'met' if rate >= 1e6 else 'NOT met'}) |")
-    return ("Best of the repetitions, each process fresh; page faults = minor faults during the best run.\n\n"
+    load = os.getloadavg()
+    return ("Best of the repetitions, each process fresh; page faults = minor faults during the best run. "
+            f"The machine was shared with other agents' work (load average {load[0]:.1f} / {load[1]:.1f} on "
+            f"{os.cpu_count()} cores at the end): the rates are lower bounds of a quiet machine's.\n\n"
             + "\n".join(rows))
 
 

@@ -49,6 +49,7 @@ OBJECTS: dict[int, tuple[str, int, object]] = {
     0x1008: ("Manufacturer device name", VAR, var("", VISIBLE_STRING, "const", "nurbsmotion simulated servo")),
     0x100A: ("Manufacturer software version", VAR, var("", VISIBLE_STRING, "const", "1.0")),
     0x1006: ("Communication cycle period", VAR, var("", UINT32, "rw", "1000")),
+    0x1007: ("Synchronous window length", VAR, var("", UINT32, "rw", "0")),
     0x1014: ("COB-ID EMCY", VAR, var("", UINT32, "rw", "$NODEID+0x80")),
     0x1016: ("Consumer heartbeat time", ARRAY, [var(f"Consumer heartbeat time {i}", UINT32, "rw") for i in range(1, 5)]),
     0x1017: ("Producer heartbeat time", VAR, var("", UINT16, "rw", "100")),

@@ -1,10 +1,11 @@
 """Configuration is validated once, and every error points at the YAML line and field."""
 
+import shutil
 from pathlib import Path
 
 import pytest
 
-from nurbsmotion.config import load_config, parse_config
+from nurbsmotion.config import default_eds_path, load_config, parse_config
 from nurbsmotion.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -74,6 +75,64 @@ def test_missing_file_is_an_input_error(tmp_path):
 
 
 def test_relative_eds_path_resolves_against_config_folder(tmp_path):
+    (tmp_path / "drives").mkdir()
+    shutil.copy(default_eds_path(), tmp_path / "drives" / "a.eds")
     (tmp_path / "m.yaml").write_text("axes: [{name: X, node_id: 1, eds: drives/a.eds}]\n")
     cfg = load_config(tmp_path / "m.yaml")
     assert cfg.axes[0].eds == str((tmp_path / "drives" / "a.eds").resolve())
+    assert cfg.axes[0].od is not None and 0x6040 in cfg.axes[0].od  # read with canopen's import_od
+
+
+def test_axis_without_eds_gets_the_packaged_description():
+    cfg = parse_config("axes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert Path(cfg.axes[0].eds).name == "nurbsmotion-servo.eds" and cfg.axes[0].od is not None
+
+
+def test_missing_or_unreadable_eds_is_one_error_at_its_line(tmp_path):
+    (tmp_path / "bad.eds").write_text("[1000]\nParameterName=x\nDataType=zz\n")
+    text = "axes:\n  - {name: X, node_id: 1, eds: nope.eds}\n  - {name: Y, node_id: 2, eds: bad.eds}\n"
+    (tmp_path / "m.yaml").write_text(text)
+    with pytest.raises(InputError) as info:
+        load_config(tmp_path / "m.yaml")
+    lines = str(info.value).splitlines()
+    assert lines[0].endswith("m.yaml:2: axes[0].eds (X, node 1): cannot read nope.eds: No such file or directory")
+    assert "m.yaml:3: axes[1].eds (Y, node 2): bad.eds is not a readable EDS/DCF: " in lines[1] and len(lines) == 2
+
+
+def test_sdo_list_is_checked_against_the_eds_at_its_lines():
+    errors = _errors("axes:\n  - name: X\n    node_id: 1\n    sdo:\n"
+                     "      - {index: 0x208E, value: 256}\n"
+                     "      - {index: 0x6041, value: 1}\n"
+                     "      - {index: 0x60C2, subindex: 1, value: 300}\n"
+                     "      - {index: 0x6065, value: 5, type: int16}\n"
+                     "      - {index: 0x60C4, subindex: 9, value: 1}\n"
+                     "      - {index: 0x1007, value: 1000, type: uint32}\n")
+    assert errors == [
+        "m.yaml:5: axes[0].sdo[0] (X, node 1): nurbsmotion-servo.eds has no 0x208E:00",
+        "m.yaml:6: axes[0].sdo[1] (X, node 1): nurbsmotion-servo.eds: 0x6041:00 (Statusword) is read-only "
+        "(AccessType=ro)",
+        "m.yaml:7: axes[0].sdo[2] (X, node 1): nurbsmotion-servo.eds: 0x60C2:01 (Interpolation time period value) "
+        "allows 0..255 (uint8), not 300",
+        "m.yaml:8: axes[0].sdo[3] (X, node 1): nurbsmotion-servo.eds: 0x6065:00 (Following error window) is uint32, "
+        "not int16",
+        "m.yaml:9: axes[0].sdo[4] (X, node 1): nurbsmotion-servo.eds: 0x60C4:09: 0x60C4 has no sub-index 9",
+    ]
+
+
+def test_sdo_entry_fields_are_validated():
+    errors = _errors("axes:\n  - name: X\n    node_id: 1\n    sdo:\n      - {index: 0x20, value: 1}\n"
+                     "      - {subindex: 1, value: 1}\n      - {index: 0x2000, value: 1, type: float}\n")
+    assert errors[0].startswith("m.yaml:5: axes[0].sdo[0].index: must be >= 4096")
+    assert errors[1].startswith("m.yaml:6: axes[0].sdo[1]: missing required key 'index'")
+    assert errors[2].startswith("m.yaml:7: axes[0].sdo[2].type: must be one of bool, int8")
+
+
+def test_master_node_and_heartbeat_keys():
+    cfg = parse_config("master: {node_id: 100}\nmonitoring: {master_heartbeat_ms: 50, "
+                       "master_heartbeat_consumer_multiple: 4}\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert cfg.master.node_id == 100 and cfg.monitoring.master_heartbeat_ms == 50
+    assert parse_config("axes: [{name: X, node_id: 1}]\n").master.node_id == 127
+    assert _errors("master: {node_id: 1}\naxes: [{name: X, node_id: 1}]\n") == [
+        "m.yaml:2: axes[0].node_id: node id 1 is the master's (master.node_id)"]
+    assert _errors("monitoring: {master_heartbeat_ms: 20000}\naxes: [{name: X, node_id: 1}]\n")[0].startswith(
+        "m.yaml:1: monitoring.master_heartbeat_ms: the drives' consumer time 100000 ms")

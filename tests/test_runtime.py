@@ -23,7 +23,7 @@ from nurbsmotion.planning.lookahead import plan_lookahead
 from nurbsmotion.runtime import keep_freed_memory
 
 def faults_of_a_plan():
-    limits = replace(WANG_LIMITS, period_s=0.001)
+    limits = replace(WANG_LIMITS, period_s=0.001, max_jerk_mm_s3=50000.0)  # the default planner's set-up
     for _ in range(3):  # warm up: the heap reaches its working size
         plan_lookahead(wang_program(), limits)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt

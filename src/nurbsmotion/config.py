@@ -14,7 +14,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import yaml
+from canopen.objectdictionary import ObjectDictionary
 
+from nurbsmotion import drive_od
 from nurbsmotion.errors import InputError, InputErrors
 
 if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
@@ -34,12 +36,15 @@ class BusConfig:
     broadcast manager (fieldbus.bcm_queue: a stall of the master shorter than the queue
     changes nothing on the wire; socketcan only); 'loop' sends them from the cycle thread at
     each deadline (a late thread delays the cycle); 'auto' (default): kernel on socketcan,
-    loop on every other interface."""
+    loop on every other interface. ``sync_window_us``: 0x1007 on the drives (RPDOs later
+    than this after SYNC are discarded); 0 = no window, the default (the kernel queue sends
+    the last RPDO T/(1 + n) before the next SYNC, the loop may be preempted between them)."""
 
     interface: str = "virtual"
     channel: str = "nurbsmotion"
     bitrate: int = 1_000_000
     sync_source: str = "auto"
+    sync_window_us: int = 0  # 0x1007 written on every drive that has it; 0 = no window
 
 
 @dataclass(frozen=True)
@@ -63,6 +68,19 @@ class IdentityConfig:
 
 
 @dataclass(frozen=True)
+class SdoEntry:
+    """One vendor object written after the standard bring-up (``axes[].sdo``), checked
+    against the axis' EDS at load time. ``type`` (int8 ... uint32), when given, must be the
+    EDS's data type. ``where`` is ``file:line: axes[i].sdo[j]`` for later messages."""
+
+    index: int
+    subindex: int
+    value: int
+    type: str | None = None
+    where: str = field(default="", compare=False)
+
+
+@dataclass(frozen=True)
 class AxisConfig:
     name: str
     node_id: int
@@ -76,8 +94,11 @@ class AxisConfig:
     max_accel_mm_s2: float | None = None
     following_error_window_mm: float = 1.0
     following_error_timeout_ms: int = 20
-    eds: str | None = None
+    eds: str | None = None  # after loading: the file read (the packaged EDS when not given)
     identity: IdentityConfig | None = None
+    quick_stop_decel: int | None = None  # 0x6085 in the drive's own units; None: left to the drive
+    sdo: tuple[SdoEntry, ...] = ()
+    od: ObjectDictionary | None = field(default=None, compare=False, repr=False)  # the EDS as canopen reads it
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -94,6 +115,15 @@ class MonitoringConfig:
     max_bus_load: float = 0.8
     traffic_log: str = "none"
     feedback_log: bool = True
+    master_heartbeat_ms: int = 100  # the master's own heartbeat period; 0 = none (and no 0x1016 written)
+    master_heartbeat_consumer_multiple: int = 5  # each drive's 0x1016 time = this x master_heartbeat_ms
+
+
+@dataclass(frozen=True)
+class MasterConfig:
+    """The master is a CANopen node too: its heartbeat carries ``node_id`` (CiA 301)."""
+
+    node_id: int = 127
 
 
 @dataclass(frozen=True)
@@ -114,6 +144,7 @@ class MachineConfig:
     data_dir: str
     io: IoConfig | None = None
     simulate: bool = False
+    master: MasterConfig = MasterConfig()
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -271,6 +302,25 @@ def _identity(doc: _Doc) -> Any:
     return IdentityConfig(**values) if len(values) == 2 else _MISSING
 
 
+def _sdo_entry(doc: _Doc) -> Any:
+    values = _fields(doc, {"index": (_number, {"integer": True, "minimum": 0x1000, "exclusive_min": False,
+                                               "maximum": 0xFFFF}),
+                           "subindex": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
+                                                  "maximum": 255}),
+                           "value": (_number, {"integer": True, "minimum": -(2**63), "exclusive_min": False,
+                                               "maximum": 2**64 - 1}),
+                           "type": (_string, {"choices": tuple(drive_od.TYPE_CODES)})},
+                     required=("index", "value"))
+    if "index" not in values or "value" not in values:
+        return _MISSING
+    return SdoEntry(values["index"], values.get("subindex", 0), values["value"], values.get("type"), doc.where())
+
+
+def _sdo_list(doc: _Doc) -> Any:
+    entries = [_sdo_entry(item) for item in doc.sequence()]
+    return tuple(e for e in entries if e is not _MISSING)
+
+
 _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "name": (_string, {}),
     "node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
@@ -286,6 +336,8 @@ _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "following_error_timeout_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
     "eds": (_optional(_string), {}),
     "identity": (_optional(_identity), {}),
+    "quick_stop_decel": (_optional(_number), {"integer": True, "minimum": 0, "maximum": 2**32 - 1}),
+    "sdo": (_sdo_list, {}),
 }
 
 
@@ -343,6 +395,8 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "cycle_period_ms": (_number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
     "bus": (_section(BusConfig, {"interface": (_string, {}), "channel": (_string, {}),
                                  "sync_source": (_string, {"choices": SYNC_SOURCES}),
+                                 "sync_window_us": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
+                                                              "maximum": 2**32 - 1}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
                                                        "maximum": 1_000_000})}), {}),
     "interpolation": (_interpolation, {}),
@@ -354,7 +408,12 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
         "max_bus_load": (_number, {"minimum": 0, "maximum": 1}),
         "traffic_log": (_string, {"choices": TRAFFIC_LOG_FORMATS}),
         "feedback_log": (_boolean, {}),
+        "master_heartbeat_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
+        "master_heartbeat_consumer_multiple": (_number, {"integer": True, "minimum": 3, "exclusive_min": False,
+                                                         "maximum": 100}),
     }), {}),
+    "master": (_section(MasterConfig, {"node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False,
+                                                             "maximum": 127})}), {}),
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "simulate": (_boolean, {}),
@@ -375,6 +434,16 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
              f"({mon.heartbeat_consumer_ms} <= {mon.heartbeat_producer_ms})")
+    consumer_ms = mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple
+    if consumer_ms > 0xFFFF:
+        multiple = "monitoring.master_heartbeat_consumer_multiple"
+        fail(multiple if multiple in cfg.lines else "monitoring.master_heartbeat_ms", f"the drives' consumer time {consumer_ms} ms "
+             f"(master_heartbeat_ms x multiple) does not fit 0x1016 (at most 65535 ms)")
+    if cfg.io is not None and cfg.io.node_id == cfg.master.node_id:
+        fail("io.node_id", f"node id {cfg.io.node_id} is the master's (master.node_id)")
+    for i, axis in enumerate(cfg.axes):
+        if axis.node_id == cfg.master.node_id:
+            fail(f"axes[{i}].node_id", f"node id {axis.node_id} is the master's (master.node_id)")
 
 
 def parse_config(text: str, source: str = "<config>", base_dir: Path | None = None) -> MachineConfig:
@@ -408,23 +477,69 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         control=values.get("control", ControlConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
+        master=values.get("master", MasterConfig()),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)
     if errors:
         raise InputErrors(errors)
-    return _resolve_paths(cfg, base_dir)
+    cfg = _with_descriptions(cfg, base_dir, errors)
+    if errors:
+        raise InputErrors(errors)
+    return cfg
 
 
-def _resolve_paths(cfg: MachineConfig, base_dir: Path | None) -> MachineConfig:
-    """Relative EDS paths are relative to the configuration file's folder."""
-    if base_dir is None:
-        return cfg
+def default_eds_path() -> str:
+    """The packaged description of nurbsmotion's simulated servo (eds/nurbsmotion-servo.eds)."""
+    from nurbsmotion import data
+
+    return str(data.path("nurbsmotion-servo.eds"))
+
+
+def axis_where(cfg: MachineConfig, i: int, field_name: str = "") -> str:
+    """``file:line: axes[i][.field] (X, node 1)``: the place named by drive-related errors."""
+    axis = cfg.axes[i]
+    path = f"axes[{i}].{field_name}" if field_name and f"axes[{i}].{field_name}" in cfg.lines else f"axes[{i}]"
+    return f"{cfg.where(path)} ({axis.name}, node {axis.node_id})"
+
+
+def _with_descriptions(cfg: MachineConfig, base_dir: Path | None, errors: list[InputError]) -> MachineConfig:
+    """Read each axis' EDS/DCF (relative to the configuration's folder; the packaged one when
+    not given) with canopen's import_od, and check its ``sdo:`` list against it."""
     from dataclasses import replace
 
-    axes = tuple(replace(a, eds=str((base_dir / a.eds).resolve())) if a.eds and not Path(a.eds).is_absolute() else a
-                 for a in cfg.axes)
-    return replace(cfg, axes=axes)
+    axes = []
+    for i, axis in enumerate(cfg.axes):
+        path = Path(axis.eds) if axis.eds else Path(default_eds_path())
+        if axis.eds and base_dir is not None and not path.is_absolute():
+            path = (base_dir / path).resolve()
+        try:
+            od = drive_od.load_description(path, axis.node_id)
+        except drive_od.DescriptionError as err:
+            errors.append(InputError(axis_where(cfg, i, "eds"), str(err)))
+            axes.append(axis)
+            continue
+        for entry in axis.sdo:
+            problem = _sdo_problem(od, entry)
+            if problem:
+                joint = " " if problem.startswith("has no") else ": "
+                errors.append(InputError(f"{entry.where} ({axis.name}, node {axis.node_id})",
+                                         f"{path.name}{joint}{problem}"))
+        axes.append(replace(axis, eds=str(path), od=od))
+    return replace(cfg, axes=tuple(axes))
+
+
+def _sdo_problem(od: ObjectDictionary, entry: SdoEntry) -> str | None:
+    """Why the drive described by ``od`` would refuse this write (missing, read-only, range)."""
+    where = drive_od.name_of(entry.index, entry.subindex)
+    var = drive_od.find(od, entry.index, entry.subindex)
+    if var is None:
+        return f"has no {where}" if entry.index not in od.indices else f"{where}: 0x{entry.index:04X} has no " \
+            f"sub-index {entry.subindex}"
+    if entry.type is not None and drive_od.TYPE_CODES[entry.type] != var.data_type:
+        return f"{where} ({var.name}) is {drive_od.type_name(var)}, not {entry.type}"
+    problem = drive_od.write_problem(var, entry.value)
+    return f"{where} ({var.name}) {problem}" if problem else None
 
 
 def load_config(path: str | Path) -> MachineConfig:

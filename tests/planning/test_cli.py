@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from nurbsmotion.cli import main
@@ -102,3 +103,30 @@ def test_plot_without_matplotlib_is_one_line_before_any_work(capsys, tmp_path, m
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--plot" in err[0] and "matplotlib" in err[0]
     assert not trace.exists() and not png.exists()
+
+
+def test_plan_streams_the_same_trace_and_figures_as_a_whole_plan(capsys, tmp_path):
+    """--trace is written chunk by chunk (bounded memory); the figures equal a whole-plan
+    measure and the trace equals write_trace of the whole trajectory."""
+    from nurbsmotion.planning import PlanLimits
+    from nurbsmotion.planning.lookahead import plan_lookahead
+    from nurbsmotion.planning.measure import measure
+    from nurbsmotion.planning.trace import write_trace
+    from nurbsmotion.program import read_program
+
+    trace = tmp_path / "streamed.csv"
+    assert main(["plan", WANG_NC, "--period-ms", "1", "--max-jerk-mm-s3", "50000", "--trace", str(trace),
+                 "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    program = read_program(WANG_NC)
+    whole = plan_lookahead(program, PlanLimits(period_s=0.001, max_jerk_mm_s3=50000.0))
+    m = measure(whole, program)
+    assert data["measured"]["cycles"] == m.cycles
+    assert data["measured"]["max_jerk_mm_s3"] == pytest.approx(m.max_jerk_mm_s3, rel=1e-9)
+    assert data["measured"]["max_chord_error_mm"] == pytest.approx(m.max_chord_error_mm, rel=1e-12)
+    reference = tmp_path / "whole.csv"
+    write_trace(reference, whole, m)
+    streamed, expected = read_trace(trace), read_trace(reference)
+    for column in TRACE_COLUMNS:
+        assert np.allclose(streamed[column], expected[column], rtol=1e-6, atol=1e-6), column
+    assert not (tmp_path / "streamed.csv.part").exists()

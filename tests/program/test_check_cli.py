@@ -93,3 +93,54 @@ def test_windows_line_ends_and_a_byte_order_mark_are_accepted(tmp_path):
 def test_a_non_finite_start_position_is_an_input_error(capsys):
     assert main(["check", "--start", "nan", "0", "0", str(EXAMPLES / "mixed.nc")]) == 2
     assert "start position: must be 3 finite numbers" in capsys.readouterr().err
+
+
+POST_WITH_FIVE_PROBLEMS = """%
+O1001 (BRACKET)
+(T1 D=6. CR=0. - ZMIN=-3. - FLAT END MILL)
+G90 G94 G17 G91.1
+G21
+G53 G0 Z0.
+T1 M6
+S8000 M3
+G54
+G0 X10. Y10.
+G43 Z15. H1
+G0 Z5.
+G1 Z-3. F300.
+G1 X40. A5.
+G2 X50. Y20. I0. J10.
+G41 D1 X60.
+G3 X40. Y40. R15.
+G81 X20. Y20. Z-5. R2. F100.
+G1 X10. Y10. Q2
+M5
+G28 G91 Z0.
+M30
+%
+"""
+
+
+def test_check_reports_every_problem_of_a_post_in_one_run(tmp_path, capsys):
+    """The issue's user needed five edit-and-check rounds; one run now names all five."""
+    path = tmp_path / "post.nc"
+    path.write_text(POST_WITH_FIVE_PROBLEMS)
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    prefix = f"nurbsmotion check: error: {path}:"
+    assert all(line.startswith(prefix) for line in err), err
+    where = [line[len(prefix):].split(":")[0] for line in err]
+    assert where == ["11", "14", "16", "18", "19"], err  # the bad lines 14 and 16 end where they were meant to
+    assert "G43 needs a tool table for tool 1" in err[0] and "unsupported: axis A" in err[1]
+
+
+def test_check_accepts_the_post_with_a_tool_table_and_json_lists_events(tmp_path, capsys):
+    fixed = POST_WITH_FIVE_PROBLEMS.replace(" A5.", "").replace(" Q2", "").replace("G41 D1 ", "G1 ")
+    text = "\n".join(line for line in fixed.splitlines() if "G81" not in line) + "\n"
+    (tmp_path / "post.nc").write_text(text)
+    (tmp_path / "tools.yaml").write_text("tools:\n  - number: 1\n    length_mm: 50\n    diameter_mm: 6\n")
+    assert main(["check", "--json", "--tool-table", str(tmp_path / "tools.yaml"), str(tmp_path / "post.nc")]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["events_by_kind"] == {"tool_change": 1, "spindle": 2}
+    assert data["tools"] == [1] and data["requires_spindle"] is True and data["requires_coolant"] is False
+    assert data["bbox_max_mm"][2] == pytest.approx(65)  # G43 H1 Z15 in G54 (zero offsets): machine Z 15 + 50

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.program import Program, parse_curve_yaml, parse_gcode
+from nurbsmotion.program import Program, ReadOptions, parse_curve_yaml, parse_gcode
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 CASES_PER_KIND = 1500
@@ -32,6 +32,51 @@ G5.3
 G20 G1 X0.1 F10
 G21 G0 Z1
 M30
+"""
+EXTRA_RS274NGC = """%
+O1001 (syntax of issue 16)
+#<_r> = 5
+#1 = [2 * #<_r>] F600
+G10 L2 P2 X10 Y-5
+G55 G90.1
+T1 M6 G43 H0 S1000 M3 M8
+o100 sub
+  G1 X[#1 + ATAN[1]/[2]] Y-#<_r> F[60 * 10]
+  o100 return [#1 MOD 3]
+o100 endsub
+o101 repeat [2]
+  o100 call [#1]
+  G91 G91.1 G2 X [#<_value> * 0 + 2] Y0 I1 J0 Z-1 P2
+  G90
+o101 endrepeat
+o102 while [#1 GT 8]
+  #1 = [#1 - 1]
+  o103 if [#1 EQ 9]
+    G4 P0.1
+  o103 elseif [#1 LT 0]
+    o102 break
+  o103 else
+    M0
+  o103 endif
+o102 endwhile
+G64 P0.01
+G61.1
+/ G92 X0
+G28 G91 Z0
+G53 G90 G0 Z0
+G18 G1 X0 Y0 Z0
+G5.2 P1 L3
+X3 Z1
+X4 Z2 P2
+G5.3
+G17 G6.2 P3 K0 Q1
+G6.2 X1 Y1 K0 R1
+X2 Y3 K0
+G6.2 K1
+G6.2 K1
+G6.2 K1
+M30
+%
 """
 EXTRA_YAML = """name: two
 feed_mm_min: 1200
@@ -79,7 +124,7 @@ def mutate(text: str, rng: random.Random) -> str:
             lines[a], lines[b] = lines[b], lines[a]
             text = "\n".join(lines)
         else:  # insert a random character
-            text = text[:i] + rng.choice("XYZIJKRFGMPLN0123456789.-+ ()%;:[]{},#\t\r\"'é") + text[i:]
+            text = text[:i] + rng.choice("XYZIJKRFGMPLNOTHQ0123456789.-+*/ ()%;:[]{},#<>=\t\r\"'é@^") + text[i:]
     return text
 
 
@@ -108,8 +153,10 @@ def check_outcome(parse, text: str, source: str) -> bool:
 def test_mutated_programs_are_accepted_or_rejected_cleanly(kind):
     rng = random.Random(20261122 + (kind == "yaml"))
     if kind == "gcode":
-        seeds = [(EXAMPLES / n).read_text() for n in ("wang_table1.nc", "mixed.nc", "zhang_invalid.nc")] + [EXTRA_GCODE]
-        parse, source = parse_gcode, "fuzz.nc"
+        seeds = [(EXAMPLES / n).read_text() for n in ("wang_table1.nc", "mixed.nc", "zhang_invalid.nc")] + [EXTRA_GCODE, EXTRA_RS274NGC]
+        def parse(text: str, source: str) -> Program:  # a mutated loop may never end: stop it early
+            return parse_gcode(text, source, options=ReadOptions(max_loop_lines=10_000))
+        source = "fuzz.nc"
     else:
         seeds = [(EXAMPLES / n).read_text() for n in ("wang_table1.yaml", "zhang_invalid.yaml")] + [EXTRA_YAML]
         parse, source = parse_curve_yaml, "fuzz.yaml"

@@ -35,7 +35,8 @@ def machine_config(channel: str, period_ms: float = PERIOD_MS, n_axes: int = 3) 
     """Three axes (CSP, CSP, IP) with v_max/a_max set, on ``channel`` of the virtual bus."""
     axes = "".join(
         f"  - {{name: {'XYZ'[i]}, node_id: {i + 1}, mode: {MODES[i]}, counts_per_mm: {COUNTS_PER_MM},"
-        f" max_velocity_mm_s: {V_MAX_MM_S}, max_accel_mm_s2: {A_MAX_MM_S2}, following_error_window_mm: 2.0}}\n"
+        f" max_velocity_mm_s: {V_MAX_MM_S}, max_accel_mm_s2: {A_MAX_MM_S2}, following_error_window_mm: 2.0,"
+        f" quick_stop_decel: {int(A_MAX_MM_S2 * COUNTS_PER_MM)}}}\n"  # 0x6085: the simulated servo's unit is counts/s²
         for i in range(n_axes))
     text = (f"cycle_period_ms: {period_ms}\nbus: {{interface: virtual, channel: {channel}}}\n"
             f"monitoring: {{heartbeat_producer_ms: {HEARTBEAT_PRODUCER_MS},"

@@ -23,7 +23,7 @@ CONFIG_DIR = Path(__file__).resolve().parents[2] / "config"
 SOURCE = "fuzz.yaml"
 CASES = 1500  # per kind of mutation: 3000 configurations
 MAX_LINE = 2000  # one readable line (an unknown key is echoed in full, twice)
-FULL = """cycle_period_ms: 2
+FULL_TEMPLATE = """cycle_period_ms: 2
 simulate: false
 bus: {interface: virtual, channel: fuzz, bitrate: 500000}
 interpolation: {algorithm: wang, feed_mm_min: 3000, rapid_feed_mm_min: 6000, chord_error_mm: 0.01,
@@ -41,11 +41,18 @@ axes:
     following_error_window_mm: 2.0
     following_error_timeout_ms: 40
     identity: {vendor_id: 0x1234, product_code: 66}
+    quick_stop_decel: 2000000
+    sdo:
+      - {index: 0x60C4, subindex: 2, value: 1, type: uint32}
+      - {index: 0x1007, value: 1500}
   - {name: Y, node_id: 2, mode: csp, eds: drives/servo.eds}
-monitoring: {heartbeat_producer_ms: 100, heartbeat_consumer_ms: 300, max_bus_load: 0.8}
+master: {node_id: 100}
+monitoring: {heartbeat_producer_ms: 100, heartbeat_consumer_ms: 300, max_bus_load: 0.8, master_heartbeat_ms: 50,
+             master_heartbeat_consumer_multiple: 4}
 control: {socket: /tmp/fuzz.sock, group: null}
 data_dir: var/fuzz
 """
+FULL = FULL_TEMPLATE.replace("drives/servo.eds", str(CONFIG_DIR.parent / "eds" / "nurbsmotion-servo.eds"))
 LAUGHS = "".join(f"{c}: &{c} [" + ", ".join([f"*{p}"] * 9) + "]\n" for p, c in zip("abcdefgh", "bcdefghi"))
 YAML_VALUES = GARBAGE + [
     "~", "null", "[]", "{}", "[1, [2, [3]]]", "{a: 1}", "!!binary aGVsbG8=", "!!python/object:os.system ls",

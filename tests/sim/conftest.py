@@ -1,14 +1,21 @@
 """A bench for simulated drives: the drives on one virtual bus, a minimal canopen master
 (RemoteNode) on a second bus of the same channel, and a recorder of every frame the master
-sees. Every wait polls a condition with a timeout; nothing sleeps and hopes."""
+sees. Every wait polls a condition with a timeout; nothing sleeps and hopes.
+
+Time: the bench stamps every SYNC it sends with an exact time (``Bench.sync_period_s``
+apart, or ``at_s``) in the frame's timestamp, which the drives take as the SYNC's arrival
+time; a slow or loaded machine changes nothing the drives feel. Tests of deadlines give a
+drive a ``ManualClock`` instead."""
 
 from __future__ import annotations
 
+import configparser
 import contextlib
 import struct
 import threading
 import time
 import uuid
+from pathlib import Path
 from typing import Callable, Iterator
 
 import can
@@ -32,6 +39,20 @@ def wait_until(condition: Callable[[], object], timeout_s: float = TIMEOUT_S, wh
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(0.001)
+
+
+class ManualClock:
+    """A drive clock that moves only when a test says so."""
+
+    def __init__(self, start_s: float = 1000.0) -> None:
+        self.now_s = start_s
+
+    def __call__(self) -> float:
+        return self.now_s
+
+    def advance(self, seconds: float) -> float:
+        self.now_s += seconds
+        return self.now_s
 
 
 class FrameLog(can.Listener):
@@ -62,11 +83,14 @@ class Bench:
         self.master = master
         self.frames = frames
         self.nodes: dict[int, canopen.RemoteNode] = {}
+        self.sync_period_s = 1e-3  # SYNC stamps advance by this (the drives' default 0x60C2)
+        self._wall_base_s = time.time()
+        self.sync_time_s = 0.0  # of the last SYNC, relative to the bench start
 
     def add(self, node_id: int, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
         """Start drive ``node_id``; wait for its boot-up; return it and its master-side node."""
         drive = self.sim.add_drive(node_id, **drive_kwargs)
-        node = canopen.RemoteNode(node_id, str(default_eds_path()))
+        node = canopen.RemoteNode(node_id, str(drive.eds_path))  # the master reads the drive's own EDS
         node.sdo.RESPONSE_TIMEOUT = 1.0
         self.master.add_node(node)
         self.nodes[node_id] = node
@@ -80,18 +104,28 @@ class Bench:
         self.enable(node_id, mode)
         return drive, node
 
-    def send(self, can_id: int, data: bytes) -> None:
-        self.master.send_message(can_id, data)
+    def send(self, can_id: int, data: bytes, at_s: float | None = None) -> None:
+        """Send a frame; ``at_s`` (bench time, like ``sync_time_s``) stamps its arrival,
+        else the drive stamps it with its own clock."""
+        if at_s is None:
+            self.master.send_message(can_id, data)
+            return
+        message = can.Message(arbitration_id=can_id, data=data, is_extended_id=False,
+                              timestamp=self._wall_base_s + at_s)
+        with self.master.send_lock:
+            self.master.bus.send(message)
 
     def nmt(self, command: int, node_id: int) -> None:
         self.send(0x000, bytes([command, node_id]))
 
-    def sync(self, counter: int | None = None) -> None:
-        """Send one SYNC and wait until every drive on the bus has taken it."""
+    def sync(self, counter: int | None = None, at_s: float | None = None) -> None:
+        """Send one SYNC stamped ``sync_period_s`` after the previous one (or at ``at_s``)
+        and wait until every drive on the bus has taken it."""
         drives = list(self.sim.drives.values())
         before = [d.stats.syncs for d in drives]
         operational = [d.nmt_state == 0x05 and not d.silent for d in drives]
-        self.send(0x80, b"" if counter is None else bytes([counter]))
+        self.sync_time_s = self.sync_time_s + self.sync_period_s if at_s is None else at_s
+        self.send(0x80, b"" if counter is None else bytes([counter]), at_s=self.sync_time_s)
         wait_until(
             lambda: all(d.stats.syncs > b or not op for d, b, op in zip(drives, before, operational)),
             what="SYNC processed",
@@ -134,7 +168,8 @@ def open_bench(interface: str, channel: str) -> Iterator[Bench]:
     frames = FrameLog()
     master = canopen.Network()
     master.NOTIFIER_CYCLE = 0.05
-    master.connect(interface=interface, channel=channel)
+    # virtual: keep the stamps the bench puts on its frames (SYNC arrival times)
+    master.connect(interface=interface, channel=channel, **({"preserve_timestamps": True} if interface == "virtual" else {}))
     assert master.notifier is not None
     master.notifier.add_listener(frames)
     sim = SimNetwork(interface=interface, channel=channel)
@@ -150,3 +185,32 @@ def open_bench(interface: str, channel: str) -> Iterator[Bench]:
 def bench(channel: str) -> Iterator[Bench]:
     with open_bench("virtual", channel) as opened:
         yield opened
+
+
+def derived_eds(directory: Path, drop: tuple[str, ...] = (), change: dict[str, dict[str, str | None]] | None = None) -> Path:
+    """The packaged EDS with sections dropped (``"6066"``, ``"1600sub2"``) and keys changed
+    (``{"607A": {"PDOMapping": "0"}}``; None removes the key; a new section is created), so a
+    test can describe exactly the drive whose rule it checks."""
+    eds = configparser.RawConfigParser()
+    eds.optionxform = str  # keep the keys' case
+    eds.read(default_eds_path(), encoding="ascii")
+    for section in drop:
+        eds.remove_section(section)
+    for section, keys in (change or {}).items():
+        if not eds.has_section(section):
+            eds.add_section(section)
+        for key, value in keys.items():
+            if value is None:
+                eds.remove_option(section, key)
+            else:
+                eds.set(section, key, value)
+    path = directory / f"derived-{uuid.uuid4().hex[:8]}.eds"
+    with path.open("w", encoding="ascii") as out:
+        eds.write(out)
+    return path
+
+
+def variable_section(name: str, data_type: int, access: str, default: str | None = "0") -> dict[str, str | None]:
+    """Keys of a VAR section for ``derived_eds`` (e.g. 0x1007, 0x1019 the packaged EDS lacks)."""
+    return {"ParameterName": name, "ObjectType": "0x7", "DataType": f"0x{data_type:04X}", "AccessType": access,
+            "DefaultValue": default, "PDOMapping": "0"}

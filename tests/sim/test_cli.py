@@ -56,8 +56,9 @@ def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_
         z = canopen.RemoteNode(2, str(net[2].eds_path))
         master.add_node(z)
         assert (z.sdo[0x1018][1].raw, z.sdo[0x1018][2].raw) == (0x99, 0x42)
-        assert z.sdo[0x6061].raw == 7 and (z.sdo[0x60C2][1].raw, z.sdo[0x60C2][2].raw) == (2, -3)
-        assert net[2].period_s == pytest.approx(0.002)
+        # out of the box: the EDS defaults, not the configuration's mode and 2 ms cycle
+        assert z.sdo[0x6061].raw == 8 and (z.sdo[0x60C2][1].raw, z.sdo[0x60C2][2].raw) == (1, -3)
+        assert net[2].period_s == pytest.approx(0.001)
         master.send_message(0x000, bytes([0x01, 0]))
         wait_until(lambda: all(d.nmt_state == 0x05 for d in net.drives.values()), what="operational")
         for word in (0x06, 0x07, 0x0F):
@@ -85,6 +86,8 @@ def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_
         (["--fault", "kind=fault"], "node is required"),
         (["--lag-cycles", "-1"], "--lag-cycles: must be >= 0"),
         (["--max-velocity-counts-s", "0"], "--max-velocity-counts-s: must be > 0"),
+        (["--missing-setpoint", "guess"], "--missing-setpoint: must be one of hold, extrapolate, got 'guess'"),
+        (["--sync-loss-periods", "0.5"], "--sync-loss-periods: must be >= 1, got 0.5"),
     ],
 )
 def test_bad_options_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str) -> None:
@@ -98,7 +101,8 @@ def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Pat
     config = write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}")
     env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
     proc = subprocess.Popen(
-        [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config), "--record-dir", str(tmp_path / "rec")],
+        [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config), "--record-dir", str(tmp_path / "rec"),
+         "--missing-setpoint", "extrapolate", "--own-cycle", "--sync-loss-periods", "4"],
         stderr=subprocess.PIPE, env=env,
     )
     try:
@@ -114,7 +118,7 @@ def test_sigterm_exits_0_within_a_second_and_writes_the_recordings(tmp_path: Pat
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["node1.csv", "node2.csv"]
+    assert sorted(p.name for p in (tmp_path / "rec").iterdir()) == ["node1.csv", "node1.sync.csv", "node2.csv", "node2.sync.csv"]
 
 
 def test_an_eds_that_does_not_load_names_the_axis_field(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -122,7 +126,7 @@ def test_an_eds_that_does_not_load_names_the_axis_field(tmp_path: Path, capsys: 
     config.write_text("bus: {interface: virtual, channel: x}\naxes:\n  - {name: X, node_id: 1}\n  - {name: Y, node_id: 2, eds: none.eds}\n")
     assert main(["sim", "--config", str(config)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and f"{config}:4: axes[1].eds: cannot simulate axis Y" in err[0]
+    assert len(err) == 1 and f"{config}:4: axes[1].eds (Y, node 2): cannot read none.eds" in err[0]
 
 
 def test_a_bus_that_does_not_open_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -6,6 +6,7 @@ import canopen
 import pytest
 
 from nurbsmotion.sim import default_eds_path
+from nurbsmotion.sim.eds import check_range, initial_data, limits, supported_modes
 
 REQUIRED = [
     0x1000, 0x1001, 0x1003, 0x1005, 0x1006, 0x1014, 0x1016, 0x1017, 0x1018,
@@ -56,3 +57,35 @@ def test_generated_file_is_up_to_date() -> None:
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     assert module.eds_text() == default_eds_path().read_text(encoding="ascii")
+
+
+CORPUS = default_eds_path().parents[1] / "tests" / "data" / "eds"
+
+
+def entry(file: str, index: int, subindex: int = 0):
+    od = canopen.import_od(str(CORPUS / file), 1)
+    obj = od[index]
+    return obj if subindex == 0 and not hasattr(obj, "subindices") else obj[subindex]
+
+
+def test_a_signed_default_written_in_hex_is_its_twos_complement() -> None:
+    var = entry("maxon_epos2_347717.eds", 0x60C0)  # DefaultValue=0xFFFF on an INTEGER16
+    assert var.decode_raw(initial_data(var)) == -1
+
+
+def test_an_entry_without_default_starts_at_0_or_at_its_nearest_limit() -> None:
+    assert entry("zeroerr_eDriver_V1.5.eds", 0x607F).decode_raw(initial_data(entry("zeroerr_eDriver_V1.5.eds", 0x607F))) == 100
+    var = entry("elmo_Elmo.eds", 0x6502)
+    assert var.default is None and var.decode_raw(initial_data(var)) == 0
+
+
+def test_an_inverted_range_is_no_range() -> None:
+    var = entry("faulhaber_605.3150.73-A-EK-2-60.eds", 0x6061)  # 0..0xFF on INTEGER8 reads 0..-1
+    assert limits(var) == (None, None)
+    check_range(var, 5)
+
+
+def test_supported_modes_from_0x6502_or_the_range_of_0x6060() -> None:
+    assert supported_modes(0x3A5) == {1, 3, 6, 8, 9, 10}  # EPOS4: CSP, no IP
+    assert supported_modes(0, entry("faulhaber_605.3150.73-A-EK-2-60.eds", 0x6060)) == {1, 2, 3, 4, 6}
+    assert supported_modes(0) == {1, 2, 3, 4, 6, 7, 8, 9, 10}

@@ -249,3 +249,16 @@ def test_fault_injected_before_start_fires_right_after_boot(channel: str) -> Non
     finally:
         sim.stop()
         listener.shutdown()
+
+
+def test_the_setpoint_of_the_sync_whose_following_error_faults_is_recorded_as_sent(bench: Bench) -> None:
+    drive, node = bench.add_enabled(7)
+    node.sdo[0x6065].raw = 100
+    node.sdo[0x6066].raw = 0  # fault at the first SYNC outside the window
+    drive.inject(FaultInjection("stall"))
+    bench.sync()
+    bench.send(0x207, rpdo(0x0F, 1000))
+    bench.sync()
+    assert drive.state is State.FAULT
+    assert [r.setpoint_counts for r in drive.recorder.records()] == [1000]
+    assert drive.timeline.records()[-1].demand_counts == 1000

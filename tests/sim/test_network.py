@@ -9,15 +9,8 @@ import pytest
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, SimNetwork
-from nurbsmotion.sim.network import DriveSetupError, period_as_value_exponent
-
-
-@pytest.mark.parametrize(
-    "period_s,encoded",
-    [(0.001, (1, -3)), (0.004, (4, -3)), (0.0005, (5, -4)), (0.00025, (25, -5)), (0.1, (1, -1)), (0.0123456, (123, -4))],
-)
-def test_0x60c2_encoding_of_a_period(period_s: float, encoded: tuple[int, int]) -> None:
-    assert period_as_value_exponent(period_s) == encoded
+from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
+from nurbsmotion.sim.network import DriveSetupError
 
 
 def machine(channel: str, eds: str | None = None) -> SimpleNamespace:
@@ -26,14 +19,17 @@ def machine(channel: str, eds: str | None = None) -> SimpleNamespace:
                            cycle_period_s=0.004, axes=[axis])
 
 
-def test_for_machine_commissions_each_drive_for_its_axis(channel: str) -> None:
-    net = SimNetwork.for_machine(machine(channel), lag_cycles=3, max_velocity_counts_s=1234.0)
+def test_for_machine_builds_each_axis_drive_out_of_the_box(channel: str) -> None:
+    sync = SyncSettings(missing_setpoint=MissingSetpoint.EXTRAPOLATE, loss_periods=3)
+    net = SimNetwork.for_machine(machine(channel), lag_cycles=3, max_velocity_counts_s=1234.0, sync=sync)
     drive = net[4]
     assert (net.interface, net.channel) == ("virtual", channel)
     with net:
-        assert drive.axis.mode_display == 7 and drive.period_s == pytest.approx(0.004)
+        # nothing the master must write is pre-stored: mode and cycle are the EDS defaults
+        assert drive.axis.mode_display == 8 and drive.period_s == pytest.approx(0.001)
+        assert drive.value(0x1006) == 1000 and (drive.value(0x60C2, 1), drive.value(0x60C2, 2)) == (1, -3)
         assert drive.servo.lag_cycles == 3 and drive.servo.max_velocity_counts_s == 1234.0
-        assert drive.value(0x1018, 1) == 7 and drive.value(0x1006) == 4000
+        assert drive.value(0x1018, 1) == 7 and drive.sync_settings == sync
 
 
 def test_for_machine_names_the_axis_whose_eds_does_not_load(channel: str, tmp_path: Path) -> None:
@@ -57,3 +53,5 @@ def test_write_recordings_one_file_per_drive(channel: str, tmp_path: Path) -> No
         net.add_drive(node_id)
     paths = net.write_recordings(tmp_path / "rec")
     assert [p.name for p in paths] == ["node1.csv", "node3.csv"]
+    paths = net.write_recordings(tmp_path / "rec", timelines=True)
+    assert [p.name for p in paths] == ["node1.csv", "node1.sync.csv", "node3.csv", "node3.sync.csv"]

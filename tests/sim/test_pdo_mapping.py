@@ -113,12 +113,15 @@ def test_event_tpdo_is_sent_when_its_data_changes(bench: Bench, trans_type: int)
     drive, node = bench.add(8)
     node.sdo[0x1800][2].raw = trans_type
     bench.operational(8)
-    for _ in range(3):
+    for _ in range(3):  # the statusword changes once: bit 8 when the drive has locked onto SYNC
         bench.sync()
-    assert len(bench.frames.of(0x188)) == 1
+    sent = len(bench.frames.of(0x188))
+    assert sent == 2 and drive.sync_locked
+    bench.sync()
+    assert len(bench.frames.of(0x188)) == sent
     node.sdo[0x6040].raw = 0x06
     bench.sync()
-    assert len(bench.frames.of(0x188)) == 2
+    assert len(bench.frames.of(0x188)) == sent + 1
 
 
 def test_tpdo_mapping_may_hold_any_readable_mappable_object(bench: Bench) -> None:
@@ -133,3 +136,26 @@ def test_tpdo_mapping_may_hold_any_readable_mappable_object(bench: Bench) -> Non
     bench.operational(9)
     bench.sync()
     assert bench.frames.of(0x289) == [struct.pack("<bH", 7, 0)]
+
+
+@pytest.mark.parametrize("can_id", [0x000, 0x07F, 0x581, 0x605, 0x704, 0x7E5])
+def test_a_restricted_can_id_cannot_be_a_pdo(bench: Bench, can_id: int) -> None:
+    _, node = bench.add(3)
+    node.sdo[0x1400][1].raw = 0x8000_0203
+    with pytest.raises(SdoAbortedError) as err:
+        node.sdo[0x1400][1].raw = can_id  # CiA 301 7.3.5: NMT, SDO, heartbeat, LSS ... ids
+    assert err.value.code == 0x06090030
+    node.sdo[0x1400][1].raw = 0x8000_0000 | can_id  # stored while disabled: harmless
+
+
+def test_a_count_over_entries_never_written_is_refused(bench: Bench) -> None:
+    # e.g. canopen's PdoMap.save on an ARRAY mapping object: sub 0 set to 0 makes it write no entry
+    _, node = bench.add(3)
+    node.sdo[0x1400][1].raw = 0x8000_0203
+    node.sdo[0x1600][0].raw = 0
+    node.sdo[0x1600][1].raw = 0x60400010
+    node.sdo[0x1600][2].raw = 0
+    with pytest.raises(SdoAbortedError) as err:
+        node.sdo[0x1600][0].raw = 2
+    assert err.value.code == 0x06040041
+    node.sdo[0x1600][0].raw = 1

@@ -8,27 +8,29 @@ import numpy as np
 import pytest
 
 from nurbsmotion.sim import SetpointRecord, SetpointRecorder, read_csv
+from nurbsmotion.sim.recording import SetpointSource, SyncRecord, SyncRecorder, read_sync_csv
 
 
 def test_rows_in_order_as_records_and_array(tmp_path: Path) -> None:
     recorder = SetpointRecorder()
-    recorder.append(1, 8, -5, -4, -1)
-    recorder.append(2, 7, 2**40, 2**40 - 1, 255)
-    assert recorder.records() == [SetpointRecord(1, 8, -5, -4, -1), SetpointRecord(2, 7, 2**40, 2**40 - 1, 255)]
+    recorder.append(1, 8, -5, -4, -1, 1_000_000)
+    recorder.append(2, 7, 2**40, 2**40 - 1, 255, 2_000_000)
+    assert recorder.records() == [SetpointRecord(1, 8, -5, -4, -1, 1_000_000),
+                                  SetpointRecord(2, 7, 2**40, 2**40 - 1, 255, 2_000_000)]
     assert np.array_equal(recorder.as_array()[:, 0], [1, 2]) and recorder.as_array().dtype == np.int64
     assert read_csv(recorder.write_csv(tmp_path / "r.csv")) == recorder.records()
 
 
 def test_disabled_recorder_keeps_nothing_and_writes_an_empty_table(tmp_path: Path) -> None:
     recorder = SetpointRecorder(enabled=False)
-    recorder.append(1, 8, 0, 0, -1)
-    assert len(recorder) == 0 and recorder.as_array().shape == (0, 5)
+    recorder.append(1, 8, 0, 0, -1, 0)
+    assert len(recorder) == 0 and recorder.as_array().shape == (0, 6)
     assert read_csv(recorder.write_csv(tmp_path / "r.csv")) == []
 
 
 def test_clear() -> None:
     recorder = SetpointRecorder()
-    recorder.append(1, 8, 0, 0, -1)
+    recorder.append(1, 8, 0, 0, -1, 0)
     recorder.clear()
     assert len(recorder) == 0
 
@@ -36,5 +38,15 @@ def test_clear() -> None:
 def test_read_csv_refuses_another_file(tmp_path: Path) -> None:
     path = tmp_path / "other.csv"
     path.write_text("a,b\n1,2\n")
-    with pytest.raises(ValueError, match="not a set-point recording"):
+    with pytest.raises(ValueError, match="not a SetpointRecord recording"):
         read_csv(path)
+
+
+def test_sync_timeline_rows_round_trip(tmp_path: Path) -> None:
+    timeline = SyncRecorder()
+    timeline.append(1, 1_000_000, -1, 0, int(SetpointSource.INACTIVE), 0, 0, 0, -1)
+    timeline.append(2, 3_000_000, 2_000_000, 1, int(SetpointSource.FRESH), 10, 5, 5, 2)
+    assert timeline.records()[1] == SyncRecord(2, 3_000_000, 2_000_000, 1, 1, 10, 5, 5, 2)
+    assert read_sync_csv(timeline.write_csv(tmp_path / "t.csv")) == timeline.records()
+    with pytest.raises(ValueError, match="not a SetpointRecord recording"):
+        read_csv(tmp_path / "t.csv")

@@ -1,10 +1,11 @@
 """``nurbsmotion check PROGRAM``: read and validate a program, print what it does.
 
 Exit 0 with a summary (blocks by kind, length, bounding box of the sampled path, feed
-range), or exit 2 with one line per error (``file:line: word: message``). With ``--config``
-the program is also planned for that machine exactly as the daemon's ``submit`` does: its
-axes, limits and soft limits apply (``part.nc:42: X650: axis X would reach 650 mm, beyond
-the soft limit 600 mm``).
+range, events between moves), or exit 2 with one line per error (``file:line: word:
+message``): every problem of the file, in line order, up to 50. With ``--config`` the
+program is also planned for that machine exactly as the daemon's ``submit`` does: its axes,
+limits and soft limits apply (``part.nc:42: X650: axis X would reach 650 mm, beyond the
+soft limit 600 mm``).
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import sys
 from pathlib import Path
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.program import read_program
+from nurbsmotion.program import ReadOptions, load_tool_table, read_program
 from nurbsmotion.program.summary import ProgramSummary, summarize
 
 HELP = "validate a G-code or YAML curve program and summarise it"
@@ -26,6 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
     parser.add_argument("--start", nargs=3, type=float, metavar=("X", "Y", "Z"), default=(0.0, 0.0, 0.0),
                         help="machine position (mm) the G-code program starts from (default 0 0 0)")
+    parser.add_argument("--tool-table", metavar="YAML", help="tool table for T, M6 and G43 H (docs/programs.md)")
+    parser.add_argument("--no-block-delete", action="store_true", help="run '/' lines (block delete switch off)")
+    parser.add_argument("--no-optional-stop", action="store_true", help="M1 does not pause (optional stop switch off)")
     parser.add_argument("--config", metavar="FILE", help="machine configuration: also plan the program for it and "
                                                          "check its axes, limits and soft limits as submit does")
 
@@ -58,7 +62,7 @@ def format_summary(s: ProgramSummary) -> str:
         feeds = f"{s.feed_min_mm_min:g} .. {s.feed_max_mm_min:g} mm/min"
         if s.blocks_at_machine_feed:
             feeds += f" ({s.blocks_at_machine_feed} blocks at the machine's rapid/default feed)"
-    return "\n".join([
+    lines = [
         f"program   {s.name}: OK",
         f"blocks    {s.blocks} ({kinds})",
         f"length    {s.length_mm:.3f} mm" + (f" ({lengths})" if lengths else ""),
@@ -67,7 +71,15 @@ def format_summary(s: ProgramSummary) -> str:
         f"bbox min  {xyz(s.bbox_min_mm)}",
         f"bbox max  {xyz(s.bbox_max_mm)}",
         f"feed      {feeds}",
-    ])
+    ]
+    if s.events_by_kind:
+        events = ", ".join(f"{n} {k}" for k, n in sorted(s.events_by_kind.items()))
+        lines.append(f"events    {events}" + (f"; dwell {s.dwell_s:g} s" if s.dwell_s else "")
+                     + (f"; tools {' '.join(f'T{t}' for t in s.tools)}" if s.tools else ""))
+    needs = [name for name, needed in (("spindle", s.requires_spindle), ("coolant", s.requires_coolant)) if needed]
+    if needs:
+        lines.append(f"needs     {' and '.join(needs)}")
+    return "\n".join(lines)
 
 
 def errors_as_json(err: InputError) -> str:
@@ -77,7 +89,9 @@ def errors_as_json(err: InputError) -> str:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        program = read_program(args.program, args.start)
+        table = load_tool_table(args.tool_table) if args.tool_table else None
+        options = ReadOptions(tool_table=table, block_delete=not args.no_block_delete, optional_stop=not args.no_optional_stop)
+        program = read_program(args.program, args.start, options)
     except InputError as err:
         if not args.json:
             raise

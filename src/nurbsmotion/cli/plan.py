@@ -11,11 +11,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import dataclass
+from typing import Callable
 
 from nurbsmotion.cli._planning_options import add_planning_arguments, limits_summary, planner, planning_setup
+from nurbsmotion.errors import InputError
 from nurbsmotion.planning import ALGORITHM_MODULES, PlanLimits, Trajectory
-from nurbsmotion.planning.measure import Measurements, measure
-from nurbsmotion.planning.trace import write_trace
+from nurbsmotion.planning.lookahead import PlanStream
+from nurbsmotion.planning.lookahead.api import ALGORITHM
+from nurbsmotion.planning.measure import Measurements, MeasureStream
+from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.program import Program
 
 HELP = "interpolate a program cycle by cycle and report the measured chord error, acceleration, jerk"
@@ -29,7 +34,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--plot", metavar="OUT.png", help="write a PNG of path, curvature, feed, chord error, acceleration, jerk")
 
 
-def guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[dict[str, object]]:
+def guarantees(trajectory: "Trajectory | PlanSummary", limits: PlanLimits) -> list[dict[str, object]]:
     """What a planner that verifies its set-points (lookahead) guarantees on every cycle: each
     limit with the largest figure its own check measured (Trajectory.notes). Empty for the
     papers' methods, which check nothing."""
@@ -59,7 +64,7 @@ def guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[dict[str, obj
     return rows
 
 
-def format_guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[str]:
+def format_guarantees(trajectory: "Trajectory | PlanSummary", limits: PlanLimits) -> list[str]:
     rows = guarantees(trajectory, limits)
     if not rows:
         return []
@@ -74,13 +79,21 @@ def format_guarantees(trajectory: Trajectory, limits: PlanLimits) -> list[str]:
     return lines
 
 
-def format_summary(program: Program, trajectory: Trajectory, m: Measurements, limits: PlanLimits) -> str:
+def fallbacks(notes: dict) -> str:
+    """The planner's fallbacks (docs/lookahead.md, 'No give-ups'), when it needed any."""
+    stops, slower = int(notes.get("fallback_stops", 0)), int(notes.get("fallback_slower_blocks", 0))
+    if not stops and not slower:
+        return ""
+    return f"; {stops} of them added where repairs failed, {slower} blocks at a lower feed"
+
+
+def format_summary(program: Program, trajectory: "Trajectory | PlanSummary", m: Measurements, limits: PlanLimits) -> str:
     rate = m.cycles / trajectory.planning_time_s if trajectory.planning_time_s > 0 else float("inf")
     return "\n".join([
         f"program      {program.name}: {len(program.blocks)} blocks, {program.length_mm:.3f} mm",
         f"algorithm    {trajectory.algorithm}: T {limits.period_s * 1000:g} ms, chord error <= {limits.chord_error_mm:g} mm, "
         f"acceleration <= {limits.max_accel_mm_s2:g} mm/s^2, acc/dec time {limits.acc_time_s:g} s",
-        f"cycles       {m.cycles} (motion time {m.duration_s:.3f} s, {trajectory.notes.get('stops', 0)} stops)",
+        f"cycles       {m.cycles} (motion time {m.duration_s:.3f} s, {trajectory.notes.get('stops', 0)} stops{fallbacks(trajectory.notes)})",
         f"length       {m.length_mm:.3f} mm along the set-points",
         "measured on the set-points:",
         f"  max chord error          {m.max_chord_error_mm * 1000:.4f} um (min {m.min_chord_error_mm * 1000:.4f} um)",
@@ -96,28 +109,95 @@ def format_summary(program: Program, trajectory: Trajectory, m: Measurements, li
     ])
 
 
+STREAM_CHUNK_CYCLES = 20000  # set-points per chunk when streaming (lookahead): memory ~ one window
+
+
+@dataclass(eq=False)
+class PlanSummary:
+    """What the report needs of a plan streamed through: its notes and planning time (the
+    set-points themselves went to the trace and the measurements chunk by chunk)."""
+
+    algorithm: str
+    planning_time_s: float
+    notes: dict[str, float | str]
+
+
+def streamed_plan(name: str, program: Program, limits: PlanLimits,
+                  chunks_out: Callable[[Trajectory], None]) -> PlanSummary:
+    """Plan and hand every chunk to ``chunks_out``: the lookahead planner in bounded memory
+    (PlanStream), the papers' methods as one whole trajectory."""
+    if name == ALGORITHM:
+        stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES)
+        for chunk in stream:
+            chunks_out(chunk)
+        return PlanSummary(name, stream.planning_time_s, stream.notes)
+    trajectory = planner(name)(program, limits)
+    chunks_out(trajectory)
+    return PlanSummary(trajectory.algorithm, trajectory.planning_time_s, trajectory.notes)
+
+
+def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits,
+                  name: str) -> tuple[PlanSummary, Measurements, Trajectory | None]:
+    """Plan, measure and write the trace chunk by chunk; the whole trajectory is kept only for --plot."""
+    stream = MeasureStream(program, keep_rows=bool(args.plot))
+    trace = TraceWriter(args.trace) if args.trace else None
+    kept: list[Trajectory] = []
+
+    def consume(chunk: Trajectory) -> None:
+        figures = stream.add(chunk)
+        if figures is not None and trace is not None:
+            trace.write(figures)
+        if args.plot:
+            kept.append(chunk)
+
+    try:
+        summary = streamed_plan(name, program, limits, consume)
+        last = stream.finish()
+        if last is not None and trace is not None:
+            trace.write(last)
+    except BaseException:
+        if trace is not None:
+            trace.discard()
+        raise
+    if trace is not None:
+        trace.close()
+    return summary, stream.measurements(), Trajectory.concatenate(kept) if kept else None
+
+
+def error_json(err: InputError) -> str:
+    """The --json answer when the command fails: one error object (where, message)."""
+    return json.dumps({"error": {"where": err.where, "message": err.message, "text": str(err)}}, indent=2)
+
+
 def run(args: argparse.Namespace) -> int:
+    try:
+        return plan_and_report(args)
+    except InputError as err:
+        if args.json:
+            print(error_json(err))
+            sys.stdout.flush()
+        raise
+
+
+def plan_and_report(args: argparse.Namespace) -> int:
     program, limits, default = planning_setup(args)
     name = args.algorithm or default
-    plan_fn = planner(name)
+    planner(name)  # an unknown algorithm is an error before anything is planned
     if args.plot:
         from nurbsmotion.planning.plot import require_matplotlib
 
         require_matplotlib()
-    trajectory = plan_fn(program, limits)
-    m = measure(trajectory, program)
-    if args.trace:
-        write_trace(args.trace, trajectory, m)
+    plan, m, whole = measured_plan(args, program, limits, name)
     if args.plot:
         from nurbsmotion.planning.plot import plot_run
 
-        plot_run(args.plot, program, trajectory, m, limits)
+        plot_run(args.plot, program, whole, m, limits)
     if args.json:
-        print(json.dumps({"program": program.name, "algorithm": trajectory.algorithm, "limits": limits_summary(limits),
-                          "planning_time_s": trajectory.planning_time_s, "measured": m.summary(),
-                          "guarantees": guarantees(trajectory, limits), "tolerance": trajectory.notes.get("tolerance"),
-                          "trace": args.trace, "plot": args.plot}, indent=2))
+        print(json.dumps({"program": program.name, "algorithm": plan.algorithm, "limits": limits_summary(limits),
+                          "planning_time_s": plan.planning_time_s, "measured": m.summary(),
+                          "guarantees": guarantees(plan, limits), "tolerance": plan.notes.get("tolerance"),
+                          "notes": plan.notes, "trace": args.trace, "plot": args.plot}, indent=2))
     else:
-        print(format_summary(program, trajectory, m, limits))
+        print(format_summary(program, plan, m, limits))
     sys.stdout.flush()
     return 0

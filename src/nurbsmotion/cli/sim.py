@@ -17,6 +17,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim import FaultInjection, SimNetwork, parse_fault_spec
 from nurbsmotion.sim.network import DriveSetupError
+from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
 
 HELP = "run simulated CiA-402 drives for the configuration's axes until SIGINT/SIGTERM"
 
@@ -32,6 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--lag-cycles", type=int, default=1, metavar="N", help="servo lag in SYNC cycles (default 1)")
     parser.add_argument("--max-velocity-counts-s", type=float, default=None, metavar="V", help="servo velocity limit (default: none)")
+    parser.add_argument("--missing-setpoint", default=MissingSetpoint.HOLD.value, metavar="hold|extrapolate",
+                        help="what a drive does in a cycle without a fresh set-point (default hold)")
+    parser.add_argument("--own-cycle", action="store_true",
+                        help="drives run their own cycle locked onto SYNC: a late SYNC leaves cycles without one")
+    parser.add_argument("--sync-loss-periods", type=float, default=None, metavar="N",
+                        help="fault (EMCY 0x8700) when no SYNC came for N cycle periods while enabled (default: off)")
 
 
 def parse_faults(specs: list[str], machine: MachineConfig) -> list[FaultInjection]:
@@ -46,6 +53,16 @@ def parse_faults(specs: list[str], machine: MachineConfig) -> list[FaultInjectio
             raise InputError(f"fault spec {text!r}", f"node {fault.node_id} is not an axis of {machine.source} (nodes {sorted(nodes)})")
         faults.append(fault)
     return faults
+
+
+def sync_settings(missing_setpoint: str, sync_loss_periods: float | None, own_cycle: bool = False) -> SyncSettings:
+    if sync_loss_periods is not None and not sync_loss_periods >= 1:
+        raise InputError("--sync-loss-periods", f"must be >= 1, got {sync_loss_periods}")
+    choices = [m.value for m in MissingSetpoint]
+    if missing_setpoint not in choices:
+        raise InputError("--missing-setpoint", f"must be one of {', '.join(choices)}, got {missing_setpoint!r}")
+    return SyncSettings(missing_setpoint=MissingSetpoint(missing_setpoint), own_cycle=own_cycle,
+                        loss_periods=sync_loss_periods)
 
 
 def check_options(lag_cycles: int, max_velocity_counts_s: float | None, record_dir: str | None) -> None:
@@ -69,12 +86,13 @@ def serve(
     max_velocity_counts_s: float | None = None,
     record_dir: str | Path | None = None,
     on_ready: Callable[[SimNetwork], Any] | None = None,
+    sync: SyncSettings | None = None,
 ) -> SimNetwork:
     """Run the drives until ``stop`` is set; then stop them and write the recordings
-    (set-points are recorded only when ``record_dir`` is given)."""
+    (set-points and SYNC timelines are recorded only when ``record_dir`` is given)."""
     try:
         net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s,
-                                     record=record_dir is not None)
+                                     record=record_dir is not None, sync=sync)
     except DriveSetupError as err:
         raise InputError(machine.where(f"axes[{err.axis_index}].eds"), err.message) from None
     try:
@@ -93,9 +111,10 @@ def serve(
         for node_id, drive in sorted(net.drives.items()):
             s = drive.stats
             log.info(kv("sim.summary", node=node_id, state=drive.state.name, syncs=s.syncs, setpoints=s.setpoints_applied,
-                        rpdos=s.rpdos_received, dropped=s.rpdos_dropped, overwritten=s.rpdos_overwritten, emcys=s.emcys_sent))
+                        rpdos=s.rpdos_received, dropped=s.rpdos_dropped, overwritten=s.rpdos_overwritten, emcys=s.emcys_sent,
+                        late_syncs=s.syncs_late, missed_cycles=s.ticks_missed, missing_setpoints=s.setpoints_missing))
         if record_dir is not None:
-            for path in net.write_recordings(record_dir):
+            for path in net.write_recordings(record_dir, timelines=True):
                 log.info(kv("sim.recording", path=str(path)))
     return net
 
@@ -104,12 +123,13 @@ def run(args: argparse.Namespace) -> int:
     machine = load_config(args.config)
     faults = parse_faults(args.fault, machine)
     check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
+    sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)
     logging.getLogger("nurbsmotion.sim").setLevel(min(logging.getLogger().level, logging.INFO))
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         serve(machine, faults, stop, lag_cycles=args.lag_cycles, max_velocity_counts_s=args.max_velocity_counts_s,
-              record_dir=args.record_dir)
+              record_dir=args.record_dir, sync=sync)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)

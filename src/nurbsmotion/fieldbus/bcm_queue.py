@@ -123,6 +123,7 @@ class BcmQueueWriter:
         self.stats = LatenessStats(late_threshold_s)
         self.send_errors = 0
         self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
+        self.scratch = [bytearray(dlc) for _, dlc, _, _ in frames.rpdos]
         self._init_frames()
         self.bcm_sock: socket.socket | None = None
         self.echo: SyncEcho | None = None
@@ -133,8 +134,9 @@ class BcmQueueWriter:
         self.h = 0  # horizon committed last
         self.c_committed = 0  # wire cycle at the last commit
         self.lease_end = 0
-        self.tail_sp = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
-        self.tail_cw = [[0] * (self.fpc - 1) for _ in range(self.cycles)]
+        n_axes = len(history.sp[0])
+        self.tail_sp = [[0] * n_axes for _ in range(self.cycles)]
+        self.tail_cw = [[0] * n_axes for _ in range(self.cycles)]
         self.correction_s = self.frequency_s = 0.0
         self.t_ref, self.k_ref = 0.0, -1
         self.intervals: collections.deque[float] = collections.deque(maxlen=TRIM_WINDOW)
@@ -148,8 +150,8 @@ class BcmQueueWriter:
         for slot in range(self.cycles):
             base = slot * self.fpc * FRAME_BYTES
             CAN_FRAME_HEAD.pack_into(self.buf, base, self.frames.sync_id, 0)
-            for i, can_id in enumerate(self.frames.rpdo_ids):
-                CAN_FRAME_HEAD.pack_into(self.buf, base + (1 + i) * FRAME_BYTES, can_id, self.frames.rpdo_size)
+            for j, (can_id, dlc, _, _) in enumerate(self.frames.rpdos):
+                CAN_FRAME_HEAD.pack_into(self.buf, base + (1 + j) * FRAME_BYTES, can_id, dlc)
 
     # ------------------------------------------------------------------ CycleWriter
     def start(self) -> None:
@@ -208,10 +210,14 @@ class BcmQueueWriter:
         self._renew(c)
 
     def _pack(self, x: int, cw: list[int], sp: list[int]) -> None:
+        """The RPDO data of cycle x into its ring slot (each frame packed into its scratch buffer)."""
         base = ((x - self.op_base) % self.cycles) * self.fpc * FRAME_BYTES + FRAME_BYTES + 8
-        pack, buf = self.frames.pack_rpdo, self.buf
-        for i in range(self.fpc - 1):
-            pack(buf, base + i * FRAME_BYTES, cw[i], sp[i])
+        buf = self.buf
+        for j, (_, dlc, i, pack) in enumerate(self.frames.rpdos):
+            data = self.scratch[j]
+            pack(data, cw[i], sp[i])
+            offset = base + j * FRAME_BYTES
+            buf[offset:offset + dlc] = data
 
     def _renew(self, c: int) -> None:
         """TX_SETUP with the whole ring, count = frames up to the lease end, trimmed ival."""
@@ -260,10 +266,9 @@ class BcmQueueWriter:
         """Quick-stop RPDOs on the bus at once, and the same controlword in the queued cycles
         up to c + guard (the master rewrites the later ones): a queued 'enable operation'
         could otherwise re-enable a drive in QUICK STOP ACTIVE (0x605A 5-8, transition 16)."""
-        frames = self.frames
-        for i, can_id in enumerate(frames.rpdo_ids):
-            data = bytearray(frames.rpdo_size)
-            frames.pack_rpdo(data, 0, controlwords[i], setpoints[i])
+        for can_id, dlc, i, pack in self.frames.rpdos:
+            data = bytearray(dlc)
+            pack(data, controlwords[i], setpoints[i])
             try:
                 self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
             except (can.CanError, OSError):

@@ -1,24 +1,35 @@
-"""Bring-up steps done by SDO and NMT before the cyclic loop starts (blocking, per node).
+"""Bring-up of one drive through canopen, as its authors intend: an EDS-backed RemoteNode,
+typed ``sdo[...]`` access, its PDO maps (clear/add_variable/save), ``nmt`` and ``emcy``.
 
-Order (CiA 301/402): NMT reset communication -> wait for every boot-up message -> identity
-check (0x1018) -> supported modes (0x6502) -> configuration writes in PRE-OPERATIONAL (see
-:func:`nurbsmotion.fieldbus.pdo.drive_configuration`) -> read position actual. Every failure
-raises FieldbusError naming the node and the step.
+Order (CiA 301/402): NMT reset communication -> every boot-up message -> identity (0x1018)
+-> supported modes (0x6502, where readable) -> the steps of the drive's
+:class:`~nurbsmotion.fieldbus.bringup_plan.DrivePlan` in PRE-OPERATIONAL -> read 0x6064 and
+0x6041. Every failure raises FieldbusError naming the node, the step and the object, e.g.
+``node 1: bring-up step 'map RPDO1': SDO abort 0x06040041 (Object cannot be mapped to the PDO)
+writing 0x1600:02 = 0x60C10120 (0x60C1:01, 32 bit)``.
 """
 
 from __future__ import annotations
 
-import struct
+import logging
 import threading
 import time
 from typing import Any, Iterable
 
+import canopen
+from canopen.objectdictionary import ObjectDictionary, datatypes
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from nurbsmotion import cia402 as c
+from nurbsmotion import drive_od
 from nurbsmotion.config import AxisConfig
 from nurbsmotion.errors import FieldbusError
-from nurbsmotion.fieldbus.pdo import ABORT_OBJECT_DOES_NOT_EXIST, ABORT_SUBINDEX_DOES_NOT_EXIST, SdoWrite
+from nurbsmotion.fieldbus.bringup_plan import DrivePlan, PdoSetup, ReadBack, Write, describe_value
+from nurbsmotion.log import kv
+
+log = logging.getLogger(__name__)
+
+READ_BACK_TIMEOUT_S = 0.2  # a drive may show the new mode in 0x6061 a little later
 
 
 def step_error(node_id: int, step: str, message: str) -> FieldbusError:
@@ -50,62 +61,164 @@ class BootupWatch:
         return [n for n, e in self._events.items() if not e.is_set()]
 
 
-def _describe_abort(err: SdoAbortedError) -> str:
-    return f"SDO abort {err}"
+class SdoTrail:
+    """Remembers the SDO access under way on a node, so an abort raised deep inside canopen
+    (e.g. PdoMap.save) names the object and value: wraps the client's upload/download."""
+
+    def __init__(self, node: canopen.RemoteNode) -> None:
+        self.node = node
+        self.last: tuple[int, int, bytes | None] = (0, 0, None)  # index, subindex, data (None: an upload)
+        sdo = node.sdo
+        plain_download, plain_upload = sdo.download, sdo.upload
+
+        def download(index: int, subindex: int, data: bytes, force_segment: bool = False) -> None:
+            self.last = (index, subindex, bytes(data))
+            plain_download(index, subindex, data, force_segment)
+
+        def upload(index: int, subindex: int) -> bytes:
+            self.last = (index, subindex, None)
+            return plain_upload(index, subindex)
+
+        sdo.download, sdo.upload = download, upload  # type: ignore[method-assign]
+
+    def describe(self) -> str:
+        index, subindex, data = self.last
+        od = self.node.object_dictionary
+        if data is None:
+            return f"reading 0x{index:04X}:{subindex:02X}"
+        var = drive_od.find(od, index, subindex)
+        signed = var is not None and var.data_type in datatypes.SIGNED_TYPES
+        value = int.from_bytes(data[:8], "little", signed=signed)
+        return f"writing {describe_value(od, index, subindex, value)}"
 
 
-def sdo_upload(sdo: Any, node_id: int, step: str, index: int, subindex: int, fmt: str) -> int:
+def open_node(network: canopen.Network, node_id: int, od: ObjectDictionary, sdo_timeout_s: float
+              ) -> tuple[canopen.RemoteNode, SdoTrail]:
+    node = canopen.RemoteNode(node_id, od)
+    node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+    network.add_node(node)
+    return node, SdoTrail(node)
+
+
+def _variable(node: canopen.RemoteNode, index: int, subindex: int) -> Any:
+    """The typed SDO variable of (index, subindex) from the node's EDS; a step naming an
+    object the EDS lacks is refused before any frame (the plan never does: a safety net)."""
     try:
-        data = sdo.upload(index, subindex)
-    except SdoAbortedError as err:
-        raise step_error(node_id, step, f"{_describe_abort(err)} reading 0x{index:04X}:{subindex:02X}") from None
-    except SdoCommunicationError as err:
-        raise step_error(node_id, step, f"no SDO answer reading 0x{index:04X}:{subindex:02X} ({err})") from None
-    size = struct.calcsize(fmt)
-    if len(data) < size:
-        raise step_error(node_id, step, f"0x{index:04X}:{subindex:02X} answered {len(data)} bytes, expected {size}")
-    return struct.unpack_from(fmt, data)[0]
+        obj = node.sdo[index]
+        return obj if isinstance(obj, canopen.sdo.SdoVariable) else obj[subindex]
+    except KeyError:
+        raise FieldbusError(f"node {node.id}: the drive's EDS has no 0x{index:04X}:{subindex:02X}") from None
 
 
-def sdo_download(sdo: Any, node_id: int, write: SdoWrite) -> None:
+def _sdo(trail: SdoTrail, step: str, action: Any) -> Any:
+    """Run one SDO action; an abort or silence becomes the step's one-line error."""
+    node_id = trail.node.id
     try:
-        sdo.download(write.index, write.subindex, write.data())
+        return action()
     except SdoAbortedError as err:
-        if write.optional and err.code in (ABORT_OBJECT_DOES_NOT_EXIST, ABORT_SUBINDEX_DOES_NOT_EXIST):
-            return
-        raise step_error(node_id, write.step, f"{_describe_abort(err)} writing 0x{write.index:04X}:"
-                         f"{write.subindex:02X} = {write.value}") from None
+        text = SdoAbortedError.CODES.get(err.code, "unknown abort code")
+        raise step_error(node_id, step, f"SDO abort 0x{err.code:08X} ({text}) {trail.describe()}") from None
     except SdoCommunicationError as err:
-        raise step_error(node_id, write.step, f"no SDO answer writing 0x{write.index:04X}:{write.subindex:02X} "
-                         f"({err})") from None
+        raise step_error(node_id, step, f"no SDO answer {trail.describe()} ({err})") from None
 
 
-def check_identity(sdo: Any, axis: AxisConfig) -> None:
+def read(trail: SdoTrail, step: str, index: int, subindex: int = 0) -> int:
+    return _sdo(trail, step, lambda: _variable(trail.node, index, subindex).raw)
+
+
+def check_identity(trail: SdoTrail, axis: AxisConfig) -> None:
     if axis.identity is None:
         return
-    vendor = sdo_upload(sdo, axis.node_id, "identity check", c.IDENTITY, 1, "<I")
-    product = sdo_upload(sdo, axis.node_id, "identity check", c.IDENTITY, 2, "<I")
+    vendor = read(trail, "identity check", c.IDENTITY, 1)
+    product = read(trail, "identity check", c.IDENTITY, 2)
     if (vendor, product) != (axis.identity.vendor_id, axis.identity.product_code):
         raise step_error(axis.node_id, "identity check", f"drive reports vendor 0x{vendor:08X} product 0x{product:08X}, "
                          f"axis {axis.name} expects vendor 0x{axis.identity.vendor_id:08X} "
                          f"product 0x{axis.identity.product_code:08X}")
 
 
-def check_supported_mode(sdo: Any, axis: AxisConfig, mode: c.Mode) -> None:
-    modes = sdo_upload(sdo, axis.node_id, "check supported modes", c.SUPPORTED_DRIVE_MODES, 0, "<I")
-    if not modes >> c.SUPPORTED_MODE_BIT[mode] & 1:
-        raise step_error(axis.node_id, "check supported modes", f"0x6502 = 0x{modes:08X}: the drive does not support "
-                         f"mode {mode.name} ({int(mode)}) configured for axis {axis.name}")
+def check_supported_mode(trail: SdoTrail, plan: DrivePlan) -> None:
+    """0x6502 must have the mode's bit. A drive answering 0 reports no modes at all (EDS
+    entries without a default, e.g. Elmo, EPOS2, Schunk): then the 0x6061 read-back after
+    0x6060 is what proves the mode."""
+    if not plan.check_supported_modes:
+        return
+    modes = read(trail, "check supported modes", c.SUPPORTED_DRIVE_MODES)
+    if modes == 0:
+        log.info(kv("supported_modes_not_reported", node=plan.node_id, axis=plan.axis))
+        return
+    if not modes >> c.SUPPORTED_MODE_BIT[plan.mode] & 1:
+        raise step_error(plan.node_id, "check supported modes", f"0x6502 = 0x{modes:08X}: the drive does not support "
+                         f"mode {plan.mode.name} ({int(plan.mode)}) configured for axis {plan.axis}")
 
 
-def configure_drive(sdo: Any, node_id: int, writes: list[SdoWrite]) -> None:
-    for write in writes:
-        sdo_download(sdo, node_id, write)
+def _write(trail: SdoTrail, step: Write) -> None:
+    def action() -> None:
+        _variable(trail.node, step.index, step.subindex).raw = step.value
+    _sdo(trail, step.step, action)
 
 
-def read_position(sdo: Any, node_id: int) -> int:
-    return sdo_upload(sdo, node_id, "read position actual", c.POSITION_ACTUAL, 0, "<i")
+def _read_back(trail: SdoTrail, step: ReadBack) -> None:
+    end = time.monotonic() + READ_BACK_TIMEOUT_S
+    while True:
+        value = read(trail, step.step, step.index, step.subindex)
+        if value == step.expect:
+            return
+        if time.monotonic() > end:
+            raise step_error(trail.node.id, step.step, f"0x{step.index:04X}:{step.subindex:02X} reads {value}, "
+                             f"expected {step.expect}: the drive did not take the mode")
+        time.sleep(0.01)
 
 
-def mode_of_axis(axis: AxisConfig) -> c.Mode:
-    return c.Mode.INTERPOLATED_POSITION if axis.mode == "ip" else c.Mode.CYCLIC_SYNC_POSITION
+def _map_pdo(trail: SdoTrail, step: PdoSetup) -> None:
+    """canopen's PdoMap: clear, add the entries, save (disable, count 0, entries, count,
+    enable: CiA 301 order). The cycle loop reads and writes these frames itself (hand-written
+    per-cycle path), so canopen's own listener on the COB-ID is removed again."""
+    node = trail.node
+    maps = node.rpdo if step.kind == "RPDO" else node.tpdo
+    pdo = maps[step.number]
+    assert step.frame is not None
+    pdo.clear()
+    pdo.cob_id = step.cob_id
+    pdo.trans_type = c.TRANSMISSION_SYNC_EVERY
+    pdo.enabled = True
+    for fld in step.frame.fields:
+        pdo.add_variable(fld.index, fld.subindex)
+    if isinstance(pdo.map_array, canopen.sdo.SdoArray):
+        _sdo(trail, step.step, lambda: _save_array_mapped(pdo))
+    else:
+        _sdo(trail, step.step, pdo.save)
+        node.network.unsubscribe(step.cob_id, pdo.on_message)  # save() subscribed it
+
+
+def _save_array_mapped(pdo: Any) -> None:
+    """PdoMap.save for a mapping object of type ARRAY (ZeroErr's 0x1600/0x1A00), in the same
+    CiA 301 order. canopen 2.4.1's save() iterates an SdoArray over 1..sub0 read back from the
+    drive right after it wrote sub0 = 0, so it writes no entry, then a count over entries that
+    were never written (a strict drive refuses it, a lax one maps stale entries)."""
+    pdo.com_record[1].raw = pdo.cob_id | c.PDO_COB_ID_INVALID
+    pdo.com_record[2].raw = pdo.trans_type
+    pdo.map_array[0].raw = 0
+    for subindex, var in enumerate(pdo.map, 1):
+        pdo.map_array[subindex].raw = var.index << 16 | var.subindex << 8 | var.length
+    pdo.map_array[0].raw = len(pdo.map)
+    pdo.com_record[1].raw = pdo.cob_id
+
+
+def configure(trail: SdoTrail, plan: DrivePlan) -> None:
+    """Every step of the plan, in order."""
+    for step in plan.steps:
+        if isinstance(step, Write):
+            _write(trail, step)
+        elif isinstance(step, ReadBack):
+            _read_back(trail, step)
+        else:
+            _map_pdo(trail, step)
+
+
+def read_position(trail: SdoTrail) -> int:
+    return read(trail, "read position actual", c.POSITION_ACTUAL)
+
+
+def read_statusword(trail: SdoTrail) -> int:
+    return read(trail, "read statusword", c.STATUSWORD)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import collections
 import time
-from typing import Callable
+from typing import Any, Callable
 
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 
@@ -72,11 +72,30 @@ class Feedback:
             self.fe[i] = unpack(data)[0]
         return on_tpdo2
 
-    def emcy_callback(self, i: int) -> Callback:
-        def on_emcy(can_id: int, data: bytearray, timestamp: float) -> None:
-            if len(data) < 2:
+    def split_tpdo_callback(self, i: int, size: int, unpack: Callable[[bytearray], tuple[int, ...]],
+                            status: bool) -> Callback:
+        """A TPDO carrying the statusword alone (``status``) or the position alone."""
+        def on_split_tpdo(can_id: int, data: bytearray, timestamp: float) -> None:
+            if len(data) != size:
+                self.bad_tpdo[i] += 1
+                self.events.append((EVENT_BAD_TPDO, i, len(data)))
                 return
-            code = data[0] | data[1] << 8
+            if status:
+                self.status[i] = unpack(data)[0]
+                return
+            self.pos[i] = unpack(data)[0]
+            self.cycle[i] = self.wire_cycle
+            self.tpdo_count[i] += 1
+            self.time[i] = timestamp
+            sink = self.sink
+            if sink is not None:
+                sink(self.wire_cycle, i, self.status[i] or 0, self.pos[i], timestamp)
+        return on_split_tpdo
+
+    def emcy_callback(self, i: int) -> Callable[[Any], None]:
+        """canopen's EMCY consumer callback: ``entry.code`` (canopen.emcy.EmcyError)."""
+        def on_emcy(entry: Any) -> None:
+            code = entry.code
             self.emcy_count[i] += 1
             self.last_emcy[i] = code
             self.events.append((EVENT_EMCY, i, code))

@@ -33,19 +33,20 @@ from typing import Any, Callable
 import can
 import canopen
 import numpy as np
-from canopen.objectdictionary import ObjectDictionary
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import bringup
-from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load, fits_following_error_tpdo
+from nurbsmotion.fieldbus.bringup_plan import DrivePlan, Field, PdoFrame, plan_within_load, rpdo_packer
+from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load
 from nurbsmotion.fieldbus.cycle import LatenessStats
 from nurbsmotion.fieldbus.controller import MOVING_PHASES, CycleController, Phase
 from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP, state_name
 from nurbsmotion.fieldbus.feedback import Feedback
-from nurbsmotion.fieldbus.pdo import RPDO_FORMAT, cycles_of_ms, drive_configuration
+from nurbsmotion.fieldbus.heartbeat import MasterHeartbeat
+from nurbsmotion.fieldbus.pdo import cycles_of_ms
 from nurbsmotion.fieldbus.playback import Playback
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
 from nurbsmotion.fieldbus.stop_ramp import ramp_slope
@@ -145,7 +146,6 @@ class Master:
         self.config = config
         self.axis_map = AxisMap.from_config(config)
         self.bus_load: BusLoad = check_bus_load(config) if check_load else config_bus_load(config)
-        self.following_error_tpdo = fits_following_error_tpdo(config)
         self._bus = bus
         self._own_bus = bus is None
         self._traffic_path = traffic_log
@@ -179,7 +179,14 @@ class Master:
                                       [cycles_of_ms(a.following_error_timeout_ms, self._period_s) for a in axes],
                                       config.monitoring.heartbeat_consumer_ms / 1000.0, self._period_s, self._fb,
                                       self._history)
-        self._frames = CyclicFrames(self._node_ids)
+        # each axis' bring-up plan from its EDS: refused here (one line per axis) before the bus is touched
+        self.plans: list[DrivePlan] = plan_within_load(config, self._fe_window, check_load)
+        self.following_error_tpdo = any(p.layout.has_following_error for p in self.plans)
+        self._trails: list[bringup.SdoTrail] = []  # per axis after connect(): its SDO access, named in errors
+        self._frames = CyclicFrames([(frame.cob_id, frame.dlc, i, rpdo_packer(frame))
+                                     for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos])
+        self._heartbeat: MasterHeartbeat | None = None
+        self._heartbeat_cycle = -1  # the cycle the heartbeat watchdog saw last
         self._writer: CycleWriter | None = None
         self._bootup = bringup.BootupWatch(self._node_ids)
         self._cycle = 0
@@ -245,14 +252,15 @@ class Master:
         self._wrap_network_send(network, self._traffic_log)
         self._traffic = self._traffic_log if self._traffic_path else None
         network.connect()
-        for i, node_id in enumerate(self._node_ids):
-            node = canopen.RemoteNode(node_id, ObjectDictionary())
-            node.sdo.RESPONSE_TIMEOUT = self._sdo_timeout_s
-            network.add_node(node)
-            network.subscribe(c.COB_TPDO[0] + node_id, self._tpdo1_callback(i))
-            network.subscribe(c.COB_TPDO[1] + node_id, self._tpdo2_callback(i))
-            network.subscribe(c.COB_EMCY + node_id, self._emcy_callback(i))
-            network.subscribe(c.COB_HEARTBEAT + node_id, self._heartbeat_callback(i))
+        self._trails = []
+        for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
+            assert axis.od is not None  # loaded with the configuration
+            node, trail = bringup.open_node(network, axis.node_id, axis.od, self._sdo_timeout_s)
+            self._trails.append(trail)
+            for frame in plan.layout.tpdos:
+                network.subscribe(frame.cob_id, self._tpdo_callback(i, frame))
+            node.emcy.add_callback(self._emcy_callback(i))
+            network.subscribe(c.COB_HEARTBEAT + axis.node_id, self._heartbeat_callback(i))
         network.subscribe(c.COB_SYNC, self._on_sync_seen)
         self._network = network
 
@@ -274,7 +282,15 @@ class Master:
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
         return self._fb.tpdo2_callback(i)
 
-    def _emcy_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
+    def _tpdo_callback(self, i: int, frame: PdoFrame) -> Callable[[int, bytearray, float], None]:
+        """The decoder of one TPDO of axis i's layout (statusword + position, or split)."""
+        if frame.fields == (Field.STATUSWORD, Field.POSITION):
+            return self._tpdo1_callback(i)
+        if frame.fields == (Field.FOLLOWING_ERROR,):
+            return self._tpdo2_callback(i)
+        return self._fb.split_tpdo_callback(i, frame.dlc, frame.fmt.unpack_from, frame.fields == (Field.STATUSWORD,))
+
+    def _emcy_callback(self, i: int) -> Callable[[canopen.emcy.EmcyError], None]:
         return self._fb.emcy_callback(i)
 
     def _heartbeat_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
@@ -297,6 +313,7 @@ class Master:
         assert self._network is not None
         if self._thread is not None:
             raise FieldbusError("bring-up: the cycle loop is already running (call shutdown() first)")
+        self._start_heartbeat()
         try:
             self._bring_up_by_sdo(self._network)
         except FieldbusError as err:
@@ -304,40 +321,62 @@ class Master:
             self._faults.append(FaultReport(None, None, "bringup", 0, -1, str(err)))
             raise err from None
         for node_id in self._node_ids:
-            self._network.send_message(c.COB_NMT, bytes([c.NmtCommand.START, node_id]))
+            self._network[node_id].nmt.send_command(c.NmtCommand.START)
         now = time.perf_counter()
         self._hb_time = [now] * self._n
         self._start_loop()
         self._wait_enabled()
 
+    def _start_heartbeat(self) -> None:
+        """The master's heartbeat (fieldbus.heartbeat), before any drive is told to consume it."""
+        period_ms = self.config.monitoring.master_heartbeat_ms
+        if period_ms == 0 or self._heartbeat is not None:
+            return
+        assert self._bus is not None
+        self._heartbeat = MasterHeartbeat(self._bus, self.config.master.node_id, period_ms / 1000.0,
+                                          self._making_progress)
+        self._heartbeat.start()
+
+    def _making_progress(self) -> bool:
+        """For the heartbeat's watchdog: no cycle loop yet (bring-up), or it advanced."""
+        k = self._cycle
+        moved = self._thread is None or k != self._heartbeat_cycle
+        self._heartbeat_cycle = k
+        return moved
+
+    def _stop_heartbeat(self) -> None:
+        if self._heartbeat is not None:
+            self._heartbeat.stop()
+            self._heartbeat = None
+
     def _bring_up_by_sdo(self, network: canopen.Network) -> None:
         self._bootup.arm()
         for node_id in self._node_ids:
-            network.send_message(c.COB_NMT, bytes([c.NmtCommand.RESET_COMMUNICATION, node_id]))
+            network[node_id].nmt.send_command(c.NmtCommand.RESET_COMMUNICATION)
         missing = self._bootup.wait(self._bootup_timeout_s)
         if missing:
             names = ", ".join(f"{n} (axis {self._names[self._node_ids.index(n)]})" for n in missing)
             raise FieldbusError(f"node {missing[0]}: bring-up step 'boot-up': no boot-up message within "
                                 f"{self._bootup_timeout_s * 1000:.0f} ms after NMT reset communication "
                                 f"(missing: node {names}; unpowered, unplugged or wrong node id?)")
-        for i, axis in enumerate(self.config.axes):
-            sdo = network[axis.node_id].sdo
-            mode = bringup.mode_of_axis(axis)
-            bringup.check_identity(sdo, axis)
-            bringup.check_supported_mode(sdo, axis, mode)
-            writes = drive_configuration(axis.node_id, mode, self._period_s,
-                                         self.config.monitoring.heartbeat_producer_ms, self._fe_window[i],
-                                         axis.following_error_timeout_ms, self.following_error_tpdo,
-                                         int(self._accel_counts_s2[i]))
-            bringup.configure_drive(sdo, axis.node_id, writes)
-            self._fb_pos[i] = bringup.read_position(sdo, axis.node_id)
-            self._fb_status[i] = bringup.sdo_upload(sdo, axis.node_id, "read statusword", c.STATUSWORD, 0, "<H")
+        for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
+            trail = self._trails[i]
+            network[axis.node_id].emcy.reset()  # canopen keeps every EMCY in a list: start it empty
+            bringup.check_identity(trail, axis)
+            bringup.check_supported_mode(trail, plan)
+            bringup.configure(trail, plan)
+            self._fb_pos[i] = bringup.read_position(trail)
+            self._fb_status[i] = bringup.read_statusword(trail)
             self._hold[i] = self._sp[i] = self._fb_pos[i]
             log.info(kv("drive_configured", node=axis.node_id, axis=axis.name, mode=axis.mode,
-                        position=self._fb_pos[i], statusword=f"0x{self._fb_status[i]:04X}"))
+                        rpdos=len(plan.layout.rpdos), tpdos=len(plan.layout.tpdos),
+                        skipped=",".join(s.what for s in plan.skipped), position=self._fb_pos[i],
+                        statusword=f"0x{self._fb_status[i]:04X}"))
         twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
         if twin is not None:
             raise twin
+        if self._heartbeat is not None:  # CiA 301: a drive monitors from the first heartbeat it receives after
+            time.sleep(1.5 * self._heartbeat.period_s)  # 0x1016 is written: let every drive hear one first
 
     def _twin_error(self) -> FieldbusError | None:
         """Two boot-ups of one node after one NMT reset: two devices with that node id."""
@@ -484,8 +523,8 @@ class Master:
         if self._traffic is not None:
             self._bus.set_filters(None)
             return
-        ids = [base + node for node in self._node_ids
-               for base in (c.COB_EMCY, c.COB_TPDO[0], c.COB_TPDO[1], c.COB_SDO_TX, c.COB_HEARTBEAT)]
+        ids = [base + node for node in self._node_ids for base in (c.COB_EMCY, c.COB_SDO_TX, c.COB_HEARTBEAT)]
+        ids += [frame.cob_id for plan in self.plans for frame in plan.layout.tpdos]
         self._bus.set_filters([{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in ids])
 
     def shutdown(self, timeout_s: float = 5.0) -> None:
@@ -504,6 +543,7 @@ class Master:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+        self._stop_heartbeat()
         if self._network is not None:
             for node_id in self._node_ids:
                 try:
@@ -740,10 +780,10 @@ class Master:
 
     def _emergency_quick_stop(self) -> None:
         assert self._bus is not None
-        for can_id in self._frames.rpdo_ids:
+        for can_id, dlc, i, pack in self._frames.rpdos:
             try:
-                data = bytearray(RPDO_FORMAT.size)
-                RPDO_FORMAT.pack_into(data, 0, CW_QUICK_STOP, 0)
+                data = bytearray(dlc)
+                pack(data, CW_QUICK_STOP, self._sp[i])
                 self._bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
             except (can.CanError, OSError):
                 pass

@@ -24,25 +24,27 @@ import can
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
-from nurbsmotion.fieldbus.pdo import RPDO_FORMAT
 from nurbsmotion.fieldbus.supervisor import CycleHistory
 
 
-class CyclicFrames:
-    """SYNC (COB-ID 0x80, no data) then RPDO1 of each axis: controlword u16 + set-point i32."""
+RpdoSlot = tuple[int, int, int, Callable[[bytearray, int, int], None]]  # COB-ID, DLC, axis, pack(data, cw, sp)
 
-    def __init__(self, node_ids: list[int]) -> None:
+
+class CyclicFrames:
+    """SYNC (COB-ID 0x80, no data), then the RPDOs of every axis as bring-up mapped them
+    (bringup_plan.rpdo_packer: controlword + set-point in one frame, or split in two)."""
+
+    def __init__(self, rpdos: list[RpdoSlot]) -> None:
         self.sync_id = c.COB_SYNC
-        self.rpdo_ids = [c.COB_RPDO[0] + node for node in node_ids]
-        self.rpdo_size = RPDO_FORMAT.size
-        self.pack_rpdo = RPDO_FORMAT.pack_into  # (buffer, offset, controlword, set-point)
-        self.per_cycle = 1 + len(node_ids)
+        self.rpdos = rpdos
+        self.rpdo_ids = [cob_id for cob_id, _, _, _ in rpdos]
+        self.per_cycle = 1 + len(rpdos)
 
     def messages(self) -> tuple[can.Message, list[can.Message]]:
-        """One reusable SYNC message and one RPDO message per axis."""
+        """One reusable SYNC message and one message per RPDO."""
         sync = can.Message(arbitration_id=self.sync_id, is_extended_id=False, data=b"")
-        return sync, [can.Message(arbitration_id=i, is_extended_id=False, data=bytearray(self.rpdo_size))
-                      for i in self.rpdo_ids]
+        return sync, [can.Message(arbitration_id=cob_id, is_extended_id=False, data=bytearray(dlc))
+                      for cob_id, dlc, _, _ in self.rpdos]
 
 
 class CycleWriter(Protocol):
@@ -104,12 +106,12 @@ class LoopWriter:
         history = self.history
         row = k % history.size
         cw, sp = history.cw[row], history.sp[row]
-        send, pack = self.bus.send, self.frames.pack_rpdo
+        send = self.bus.send
         try:
             history.sync_time[row] = time.time()  # frame timestamps are time.time() based
             send(self.sync_msg)
-            for i, msg in enumerate(self.rpdo_msgs):
-                pack(msg.data, 0, cw[i], sp[i])
+            for msg, (_, _, i, pack) in zip(self.rpdo_msgs, self.frames.rpdos):  # one or two RPDOs per axis
+                pack(msg.data, cw[i], sp[i])
                 send(msg)
         except (can.CanError, OSError) as err:
             self.send_errors += 1

@@ -195,37 +195,142 @@ def chord_errors(trajectory: Trajectory, program: Program) -> NDArray[np.float64
     return errors
 
 
+@dataclass(eq=False)
+class RowFigures:
+    """Measured figures of consecutive rows ``first_row``.. of a plan (MeasureStream.add)."""
+
+    first_row: int
+    rows: Trajectory
+    chord_error_mm: NDArray[np.float64]
+    speed_mm_s: NDArray[np.float64]
+    accel_mm_s2: NDArray[np.float64]
+    jerk_mm_s3: NDArray[np.float64]
+    fluctuation: NDArray[np.float64]
+    axis_velocity_mm_s: NDArray[np.float64]  # (n, dim) |p_i - p_i-1| / T
+    axis_accel_mm_s2: NDArray[np.float64]  # (n, dim)
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+
+def _rows(trajectory: Trajectory, sl: slice) -> Trajectory:
+    return Trajectory(trajectory.algorithm, trajectory.period_s, trajectory.block[sl], trajectory.u[sl],
+                      trajectory.position_mm[sl], trajectory.feed_mm_s[sl])
+
+
+class MeasureStream:
+    """measure() for a plan that arrives in chunks, in memory bounded by the chunk: ``add``
+    each chunk in order, then ``finish``; both return the rows measured so far (a row is
+    measured once the row after it is known: its acceleration is a central difference).
+    ``measurements()`` then has the summary figures (its per-row arrays are empty unless
+    ``keep_rows``). The machine is at rest before the first and after the last row."""
+
+    def __init__(self, program: Program, keep_rows: bool = False) -> None:
+        self.program = program
+        self.keep_rows = keep_rows
+        self.kept: list[RowFigures] = []
+        self.pending: Trajectory | None = None  # received rows not yet measured
+        self.history: NDArray[np.float64] | None = None  # the two positions before ``pending``
+        self.previous: Trajectory | None = None  # the last measured row (chord error of the next step)
+        self.rows = 0
+        self.first: NDArray[np.float64] | None = None
+        self.last: NDArray[np.float64] | None = None
+        self.period_s = 0.0
+        self.max = {"chord": 0.0, "speed": 0.0, "accel": 0.0, "jerk": 0.0, "fluctuation": 0.0}
+        self.min_chord = np.inf
+        self.length_mm = 0.0
+        self.axis_v: NDArray[np.float64] | None = None
+        self.axis_a: NDArray[np.float64] | None = None
+
+    def add(self, chunk: Trajectory) -> RowFigures | None:
+        if len(chunk) == 0:
+            return None
+        self.period_s = chunk.period_s
+        if self.first is None:
+            self.first = np.asarray(chunk.position_mm[0], float)
+            self.history = np.repeat(self.first[None, :], 2, axis=0)
+        rows = chunk if self.pending is None else Trajectory.concatenate([self.pending, chunk])
+        self.pending = _rows(rows, slice(len(rows) - 1, None))
+        return self._measure(rows, len(rows) - 1, np.zeros((0, rows.position_mm.shape[1])))
+
+    def finish(self) -> RowFigures | None:
+        """Measure the last row (the machine then stays at rest there)."""
+        if self.pending is None:
+            return None
+        rows, self.pending = self.pending, None
+        self.last = np.asarray(rows.position_mm[-1], float)
+        return self._measure(rows, len(rows), np.repeat(rows.position_mm[-1:], 2, axis=0))
+
+    def _measure(self, rows: Trajectory, n: int, after: NDArray[np.float64]) -> RowFigures | None:
+        """Figures of the first ``n`` rows of ``rows``; ``after`` the positions following them."""
+        period = rows.period_s
+        p = np.asarray(rows.position_mm, float)
+        ext = np.concatenate([self.history, p, after])  # p_-2, p_-1, p_0 .. p_n (.. p_n+1 at the end)
+        v = np.diff(ext, axis=0)[1: n + 1] / period
+        second = (ext[2:] - 2.0 * ext[1:-1] + ext[:-2]) / period**2  # a_-1 .. a_n
+        a = second[1: n + 1]
+        jerk = np.linalg.norm(np.diff(second, axis=0), axis=1) / period  # j_0 .. j_n
+        extra_jerk = float(jerk[n]) if len(jerk) > n else 0.0  # coming to rest after the last row
+        jerk = jerk[:n]
+        self.history = ext[n: n + 2]
+        if n == 0:
+            return None
+        part = _rows(rows, slice(0, n))
+        speed = np.linalg.norm(v, axis=1)
+        feed = np.asarray(part.feed_mm_s, float)
+        planned = feed > 1e-12
+        fluctuation = np.where(planned, np.abs(speed - feed) / np.where(planned, feed, 1.0), 0.0)
+        joined = part if self.previous is None else Trajectory.concatenate([self.previous, part])
+        chord = chord_errors(joined, self.program)[len(joined) - n:]
+        if self.previous is None:
+            fluctuation[0] = 0.0
+        figures = RowFigures(self.rows, part, chord, speed, np.linalg.norm(a, axis=1), jerk, fluctuation,
+                             np.abs(v), np.abs(a))
+        self._accumulate(figures, extra_jerk)
+        self.previous = _rows(part, slice(n - 1, n))
+        return figures
+
+    def _accumulate(self, f: RowFigures, extra_jerk: float) -> None:
+        for key, values in (("chord", f.chord_error_mm), ("speed", f.speed_mm_s), ("accel", f.accel_mm_s2),
+                            ("jerk", f.jerk_mm_s3), ("fluctuation", f.fluctuation)):
+            self.max[key] = max(self.max[key], float(values.max(initial=0.0)))
+        self.max["jerk"] = max(self.max["jerk"], extra_jerk)
+        later = f.chord_error_mm[1:] if f.first_row == 0 else f.chord_error_mm
+        self.min_chord = min(self.min_chord, float(later.min(initial=np.inf)))
+        self.length_mm += float(f.speed_mm_s.sum() * self.period_s)
+        self.axis_v = f.axis_velocity_mm_s.max(axis=0) if self.axis_v is None else np.maximum(self.axis_v, f.axis_velocity_mm_s.max(axis=0))
+        self.axis_a = f.axis_accel_mm_s2.max(axis=0) if self.axis_a is None else np.maximum(self.axis_a, f.axis_accel_mm_s2.max(axis=0))
+        self.rows += len(f)
+        if self.keep_rows:
+            self.kept.append(f)
+
+    def measurements(self) -> Measurements:
+        """The figures of every row measured (call after finish)."""
+        def rows(name: str) -> NDArray[np.float64]:
+            return np.concatenate([getattr(k, name) for k in self.kept]) if self.kept else np.zeros(0)
+
+        start = self.program.blocks[0].start if self.program.blocks else self.program.start_position
+        dim = len(self.first) if self.first is not None else 3
+        return Measurements(
+            chord_error_mm=rows("chord_error_mm"), speed_mm_s=rows("speed_mm_s"), accel_mm_s2=rows("accel_mm_s2"),
+            jerk_mm_s3=rows("jerk_mm_s3"), fluctuation=rows("fluctuation"),
+            max_chord_error_mm=self.max["chord"],
+            min_chord_error_mm=float(self.min_chord) if self.rows > 1 else 0.0,
+            max_speed_mm_s=self.max["speed"], max_accel_mm_s2=self.max["accel"], max_jerk_mm_s3=self.max["jerk"],
+            max_fluctuation=self.max["fluctuation"],
+            start_error_mm=float(np.linalg.norm(self.first - start)) if self.first is not None else float("nan"),
+            end_error_mm=float(np.linalg.norm(self.last - self.program.end_position)) if self.last is not None else float("nan"),
+            axis_max_velocity_mm_s=tuple(float(x) for x in (self.axis_v if self.axis_v is not None else np.zeros(dim))),
+            axis_max_accel_mm_s2=tuple(float(x) for x in (self.axis_a if self.axis_a is not None else np.zeros(dim))),
+            cycles=max(self.rows - 1, 0),
+            duration_s=max(self.rows - 1, 0) * self.period_s,
+            length_mm=self.length_mm,
+        )
+
+
 def measure(trajectory: Trajectory, program: Program) -> Measurements:
     """All measured figures of a trajectory (see the module docstring for the definitions)."""
-    period = trajectory.period_s
-    p = np.asarray(trajectory.position_mm, dtype=np.float64)
-    v, a, j = rest_padded_differences(p, period)
-    speed = np.linalg.norm(v, axis=1)
-    accel = np.linalg.norm(a, axis=1)
-    jerk_all = np.linalg.norm(j, axis=1)
-    feed = np.asarray(trajectory.feed_mm_s, dtype=np.float64)
-    planned = feed > 1e-12
-    fluctuation = np.where(planned, np.abs(speed - feed) / np.where(planned, feed, 1.0), 0.0)
-    fluctuation[0] = 0.0
-    chord = chord_errors(trajectory, program)
-    start = program.blocks[0].start if program.blocks else program.start_position
-    return Measurements(
-        chord_error_mm=chord,
-        speed_mm_s=speed,
-        accel_mm_s2=accel,
-        jerk_mm_s3=jerk_all[:-1],
-        fluctuation=fluctuation,
-        max_chord_error_mm=float(chord.max(initial=0.0)),
-        min_chord_error_mm=float(chord[1:].min()) if len(chord) > 1 else 0.0,
-        max_speed_mm_s=float(speed.max(initial=0.0)),
-        max_accel_mm_s2=float(accel.max(initial=0.0)),
-        max_jerk_mm_s3=float(jerk_all.max(initial=0.0)),
-        max_fluctuation=float(fluctuation.max(initial=0.0)),
-        start_error_mm=float(np.linalg.norm(p[0] - start)) if len(p) else float("nan"),
-        end_error_mm=float(np.linalg.norm(p[-1] - program.end_position)) if len(p) else float("nan"),
-        axis_max_velocity_mm_s=tuple(float(x) for x in np.abs(v).max(axis=0, initial=0.0)),
-        axis_max_accel_mm_s2=tuple(float(x) for x in np.abs(a).max(axis=0, initial=0.0)),
-        cycles=max(len(p) - 1, 0),
-        duration_s=trajectory.duration_s,
-        length_mm=float(speed.sum() * period),
-    )
+    stream = MeasureStream(program, keep_rows=True)
+    stream.add(trajectory)
+    stream.finish()
+    return stream.measurements()

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.planning.measure import Measurements
+from nurbsmotion.planning.measure import Measurements, RowFigures
 from nurbsmotion.planning.trajectory import Trajectory
 
 TRACE_COLUMNS = ("t", "block", "u", "x", "y", "z", "feed", "chord_error", "accel", "jerk")
@@ -30,6 +30,44 @@ def trace_table(trajectory: Trajectory, measurements: Measurements) -> NDArray[n
         raise ValueError(f"trace needs XYZ set-points, got {p.shape[1]} coordinates")
     return np.column_stack([trajectory.t_s, trajectory.block, trajectory.u, p, trajectory.feed_mm_s,
                             measurements.chord_error_mm, measurements.accel_mm_s2, measurements.jerk_mm_s3])
+
+
+class TraceWriter:
+    """The trace CSV written as the plan is measured, in chunks (MeasureStream's RowFigures):
+    memory bounded by a chunk. Written to ``PATH.part`` and renamed to PATH by ``close()``;
+    ``discard()`` removes it (a plan that fails leaves no trace behind)."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + ".part")
+        try:
+            self.out = open(self.part, "w", encoding="ascii", newline="")
+            self.out.write(",".join(TRACE_COLUMNS) + "\n")
+        except OSError as err:
+            raise InputError(str(path), f"cannot write trace: {err.strerror or err}") from None
+
+    def write(self, figures: RowFigures) -> None:
+        rows = figures.rows
+        t = (figures.first_row + np.arange(len(rows))) * rows.period_s
+        table = np.column_stack([t, rows.block, rows.u, rows.position_mm, rows.feed_mm_s, figures.chord_error_mm,
+                                 figures.accel_mm_s2, figures.jerk_mm_s3])
+        try:
+            np.savetxt(self.out, table, fmt=list(_FORMATS), delimiter=",")
+        except OSError as err:
+            self.discard()
+            raise InputError(str(self.path), f"cannot write trace: {err.strerror or err}") from None
+
+    def close(self) -> None:
+        try:
+            self.out.close()
+            self.part.replace(self.path)
+        except OSError as err:
+            self.discard()
+            raise InputError(str(self.path), f"cannot write trace: {err.strerror or err}") from None
+
+    def discard(self) -> None:
+        self.out.close()
+        self.part.unlink(missing_ok=True)
 
 
 def write_trace(path: str | Path, trajectory: Trajectory, measurements: Measurements) -> None:

@@ -8,6 +8,16 @@ Centre: I J K are offsets from the start (always incremental). With R, the centr
 the perpendicular bisector of the chord at distance h = sqrt(R^2 - d^2/4): on the left of
 the chord for a counter-clockwise arc with R > 0 (sweep <= 180 deg), on the right for
 clockwise; R < 0 asks for the arc longer than 180 deg (the other centre).
+
+Helical arcs: the normal axis may change between start and end (G17 with Z): the arc is
+then a helix rising linearly with the angle (geometry.primitives.arc_curve). ``turns``
+(LinuxCNC's P word) adds full turns.
+
+Radius tolerances are LinuxCNC's (src/emc/rs274ngc/interp_internal.hh, interp_arc.cc):
+centre format: the radii at start and end may differ by ``abs_err``; an error when
+abs_err > 100 tol or (abs_err > tol and abs_err / r > 0.001), with tol = 2 sqrt(2) 0.001 in
+(G20) or 2 sqrt(2) 0.01 mm (G21): any arc whose numbers were rounded to 0.001 in or 0.01 mm
+is accepted. R format: R may be short of half the chord by 0.00005 in (0.00127 mm).
 """
 
 from __future__ import annotations
@@ -22,9 +32,11 @@ from numpy.typing import NDArray
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import arc_curve, arc_sweep_rad
 
-RADIUS_TOLERANCE_MM = 0.002
-RADIUS_TOLERANCE_REL = 0.001
-HELIX_TOLERANCE_MM = 1e-6
+MM_PER_INCH = 25.4
+CENTRE_TOLERANCE_MM = {False: 2 * math.sqrt(2) * 0.01, True: 2 * math.sqrt(2) * 0.001 * MM_PER_INCH}  # by inch units
+CENTRE_TOLERANCE_REL = 0.001
+CENTRE_TOLERANCE_CAP = 100.0  # abs_err above cap * tol is always an error
+R_TOLERANCE_MM = 0.00005 * MM_PER_INCH
 SAME_POINT_MM = 1e-9
 
 
@@ -67,11 +79,12 @@ def _angle(plane: Plane, v: NDArray[np.float64]) -> float:
     return math.atan2(b, a)
 
 
-def check_not_helical(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64]) -> None:
-    axis = plane.normal_axis
-    if abs(end[axis] - start[axis]) > HELIX_TOLERANCE_MM:
-        letter = AXIS_LETTERS[axis]
-        raise ArcError(f"unsupported: helical arc ({letter} changes in a {plane.code} arc)", letter)
+def radii_agree(r_start: float, r_end: float, inch: bool) -> bool:
+    """LinuxCNC's centre-format rule (module docstring)."""
+    tol = CENTRE_TOLERANCE_MM[inch]
+    abs_err = abs(r_start - r_end)
+    rel_err = abs_err / max(r_start, r_end)
+    return not (abs_err > CENTRE_TOLERANCE_CAP * tol or (rel_err > CENTRE_TOLERANCE_REL and abs_err > tol))
 
 
 def centre_from_radius(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64], radius_mm: float,
@@ -85,7 +98,7 @@ def centre_from_radius(plane: Plane, start: NDArray[np.float64], end: NDArray[np
         raise ArcError("arc radius must not be zero", radius_word)
     r = abs(radius_mm)
     excess = d / 2 - r
-    if excess > max(RADIUS_TOLERANCE_MM, RADIUS_TOLERANCE_REL * r):
+    if excess > R_TOLERANCE_MM:
         raise ArcError(f"radius {r:g} mm is too small for the chord of {d:.6g} mm between start and end", radius_word)
     h = math.sqrt(max(r * r - d * d / 4, 0.0))
     left = np.array([-chord[1], chord[0]]) / d
@@ -98,19 +111,19 @@ def centre_from_radius(plane: Plane, start: NDArray[np.float64], end: NDArray[np
 
 
 def arc_nurbs(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64], centre: NDArray[np.float64],
-              clockwise: bool, full_circle_if_closed: bool) -> NurbsCurve:
-    """Exact arc from start to end about centre; radii must agree within tolerance.
+              clockwise: bool, full_circle_if_closed: bool, inch: bool = False, turns: int = 1) -> NurbsCurve:
+    """Exact arc (or helix) from start to end about centre; radii must agree within tolerance.
 
     When the two radii differ (within tolerance) the centre is moved onto the chord's
     perpendicular bisector so the arc passes exactly through both programmed points.
     """
-    check_not_helical(plane, start, end)
     r_start = float(np.hypot(*_in_plane(plane, start - centre)))
     r_end = float(np.hypot(*_in_plane(plane, end - centre)))
     if r_start <= SAME_POINT_MM:
         raise ArcError("arc radius is zero (the centre is at the start point)")
-    if abs(r_start - r_end) > max(RADIUS_TOLERANCE_MM, RADIUS_TOLERANCE_REL * r_start):
-        raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end")
+    if not radii_agree(r_start, r_end, inch):
+        raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end "
+                       f"(LinuxCNC's tolerance: {CENTRE_TOLERANCE_MM[inch]:.4g} mm, or {CENTRE_TOLERANCE_REL:g} of the radius)")
     closed = float(np.hypot(*_in_plane(plane, end - start))) <= SAME_POINT_MM
     if closed and not full_circle_if_closed:
         raise ArcError("arc end equals its start")
@@ -124,9 +137,11 @@ def arc_nurbs(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64]
         sweep = -2 * math.pi if clockwise else 2 * math.pi
     if sweep == 0:
         raise ArcError("arc end equals its start")
-    curve = arc_curve(centre, start, sweep, plane.normal)
+    sweep += math.copysign(2 * math.pi * (turns - 1), sweep)
+    rise = float(end[plane.normal_axis] - start[plane.normal_axis])
+    curve = arc_curve(centre, start, sweep, plane.normal, rise_mm=rise)
     points = curve.control_points.copy()
-    points[0], points[-1] = start, (start if closed else end)  # exact programmed end points
+    points[0], points[-1] = start, end  # exact programmed end points
     points.setflags(write=False)
     return dataclasses.replace(curve, control_points=points)  # moved by rounding only: still valid
 

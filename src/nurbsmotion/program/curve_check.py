@@ -50,6 +50,12 @@ def weight_problems(weights: Sequence[float], n_points: int) -> list[CurveProble
     return problems
 
 
+def decreasing_knot_problems(knots: Sequence[float] | np.ndarray) -> list[CurveProblem]:
+    k = np.asarray(knots, dtype=float)
+    return [CurveProblem("knots", f"knot {i + 1} ({k[i]:g}) is less than knot {i} ({k[i - 1]:g}); knots must not decrease", int(i))
+            for i in np.flatnonzero(np.diff(k) < 0) + 1]
+
+
 def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[CurveProblem]:
     """Count, order, clamped ends, non-empty range, interior multiplicity <= degree."""
     k = np.asarray(knots, dtype=float)
@@ -58,9 +64,7 @@ def knot_problems(knots: Sequence[float], n_points: int, degree: int) -> list[Cu
     if len(k) != expected:
         problems.append(CurveProblem(
             "knots", f"need {expected} knots ({n_points} control points + degree {degree} + 1), got {len(k)}"))
-    for i in np.flatnonzero(np.diff(k) < 0) + 1:
-        problems.append(CurveProblem(
-            "knots", f"knot {i + 1} ({k[i]:g}) is less than knot {i} ({k[i - 1]:g}); knots must not decrease", int(i)))
+    problems += decreasing_knot_problems(k)
     if len(k) < 2 * (degree + 1) or problems:
         return problems
     first, last = k[: degree + 1], k[-degree - 1:]

@@ -1,51 +1,88 @@
-"""G-code reader: G00/G01, G02/G03 arcs, Fanuc G06.2 and LinuxCNC G5.2/G5.3 NURBS -> Program.
+"""G-code reader: RS274NGC as LinuxCNC runs it, plus Fanuc G06.2 NURBS -> Program.
 
-The accepted language, with every error, is described in docs/programs.md. Lines are
-read in order with a modal state (motion G, plane, G90/G91, G20/G21, F); the first bad
-line raises InputError naming ``file:line: WORD`` and nothing after it is read. Problems of
-one NURBS definition (weights, knots, ...) are all reported together (InputErrors).
+The accepted language, with every error, is described in docs/programs.md. The text is
+lexed line by line (gcode_words), O-word constructs are paired (owords), then the lines
+run in program order with a modal state, ``#`` parameters and a call stack. Each line
+follows RS274NGC's order of execution (LinuxCNC "G-code overview", Order of Execution):
+F, S, T, M6/M61, M3-M5, M7-M9, G4, plane, units, G43/G49, G54-G59.3, G61/G64, G90/G91,
+G10/G28/G30/G92, motion (G53 applies to it), M0/M1/M2/M30.
+
+Every problem is reported (up to ``ReadOptions.max_errors``), one line each, in line
+order: a bad line is skipped and reading goes on. Positions in the Program are machine
+coordinates: work offsets, G92 and tool length offsets are applied here.
+
+The reader is one class from parts: this module (driver, words, modal codes, events,
+moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_nurbs
+(G6.2, G5.2/G5.3); gcode_line is the evaluated line they share.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import dataclasses
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from nurbsmotion.errors import InputError
-from nurbsmotion.geometry import NurbsCurve, clamped_uniform_knots
+from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
-from nurbsmotion.program.curve_check import CurveProblem, build_curve
-from nurbsmotion.program.gcode_words import Word, split_words
-from nurbsmotion.program.model import Block, BlockKind, Program, SourceRef
+from nurbsmotion.program.coordinates import CoordinateState, Offsets
+from nurbsmotion.program.expressions import ExpressionError, Number
+from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
+from nurbsmotion.program.gcode_line import GcodeLine
+from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
+from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
+from nurbsmotion.program.gcode_offsets import OffsetCommands
+from nurbsmotion.program.gcode_words import LexedLine, Word, check_number, lex_line
+from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
+from nurbsmotion.program.owords import Flow, index_owords
+from nurbsmotion.program.parameters import ParameterStore
+from nurbsmotion.program.tools import ToolTable
 
 MM_PER_INCH = 25.4
-SAME_POSITION_MM = 1e-6  # first NURBS control point vs current position
 ZERO_MOVE_MM = 1e-9  # shorter G00/G01 moves are skipped
 
-# G codes as round(10 * value): motion (modal group 01) and the others we understand
-RAPID, LINE, ARC_CW, ARC_CCW, NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END = 0, 10, 20, 30, 62, 52, 53
-MOTION_CODES = {RAPID, LINE, ARC_CW, ARC_CCW, NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END}
-PLANE_CODES = {170: 17, 180: 18, 190: 19}
-UNIT_CODES = {200: MM_PER_INCH, 210: 1.0}
-DISTANCE_CODES = {900: True, 910: False}
-FEED_MODE_CODES = {940}
-NO_OP_CODES = {400, 490, 800, 540}  # cancel cutter/length compensation and canned cycles, default work offset
-END_CODES = {2, 30}  # M02, M30
-IGNORED_M_CODES = {3, 4, 5, 8, 9}  # spindle and coolant: no spindle here
-IGNORED_LETTERS = {"N", "S"}  # line numbers; spindle speed
-
-MOTION_WORDS = {
-    RAPID: "XYZ", LINE: "XYZ", ARC_CW: "XYZIJKR", ARC_CCW: "XYZIJKR",
-    NURBS_FANUC: "KXYZRP", NURBS_LINUXCNC: "XYPL", NURBS_LINUXCNC_END: "",
+# G codes as round(10 * value)
+RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
+G_GROUPS: dict[int, str] = {
+    RAPID: "motion", LINE: "motion", ARC_CW: "motion", ARC_CCW: "motion",
+    NURBS_FANUC: "motion", NURBS_LINUXCNC: "motion", NURBS_LINUXCNC_END: "motion",
+    170: "plane", 180: "plane", 190: "plane", 200: "units", 210: "units",
+    900: "distance", 910: "distance", 901: "arc distance", 911: "arc distance", 940: "feed mode",
+    400: "cutter compensation", 430: "tool length", 431: "tool length", 490: "tool length",
+    540: "coordinate system", 550: "coordinate system", 560: "coordinate system", 570: "coordinate system",
+    580: "coordinate system", 590: "coordinate system", 591: "coordinate system", 592: "coordinate system",
+    593: "coordinate system", 610: "path control", 611: "path control", 640: "path control",
+    980: "retract mode", 990: "retract mode", 800: "canned cycle", 960: "spindle mode", 970: "spindle mode",
+    40: "non-modal", 100: "non-modal", 280: "non-modal", 281: "non-modal", 300: "non-modal", 301: "non-modal",
+    530: "non-modal", 920: "non-modal", 921: "non-modal", 922: "non-modal", 923: "non-modal",
 }
-NURBS_ORDERS = (2, 4)  # G06.2 P and G5.2 L: order = degree + 1
-
-
+UNSUPPORTED_G = {
+    50: "cubic spline G5", 51: "quadratic spline G5.1", 70: "lathe diameter mode", 80: "lathe radius mode",
+    330: "spindle-synchronised motion", 331: "rigid tapping", 382: "probing", 383: "probing", 384: "probing",
+    385: "probing", 410: "cutter radius compensation", 411: "cutter radius compensation",
+    420: "cutter radius compensation", 421: "cutter radius compensation", 432: "additional tool length offset",
+    520: "local coordinate offset", 730: "canned cycle", 760: "threading cycle", 930: "inverse time feed",
+    950: "feed per revolution", 150: "polar coordinates",
+    160: "polar coordinates", 680: "coordinate rotation", 690: "coordinate rotation", 500: "scaling", 510: "scaling",
+    **{c: "canned cycle" for c in range(810, 900, 10)},
+}
+SYSTEM_CODES = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 593: 9}
+AXIS_USERS = {100: "G10", 280: "G28", 300: "G30", 920: "G92", 431: "G43.1"}  # use the block's axis words
+M_GROUPS = {0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping", 6: "tool change", 61: "tool change",
+            70: "modal state", 71: "modal state", 72: "modal state", 73: "modal state",
+            3: "spindle", 4: "spindle", 5: "spindle", 7: "coolant", 8: "coolant", 9: "coolant"}
+END_CODES = {2, 30}
+ROTARY_LETTERS = "ABCUVW"
+WORD_LETTERS = "XYZIJKRFPLQSTHND"
+MOTION_WORDS = {
+    RAPID: "XYZ", LINE: "XYZ", ARC_CW: "XYZIJKRP", ARC_CCW: "XYZIJKRP",
+    NURBS_FANUC: "KXYZRPQ", NURBS_LINUXCNC: "XYZPL", NURBS_LINUXCNC_END: "",
+}
 G_NAMES = {RAPID: "G00", LINE: "G01", ARC_CW: "G02", ARC_CCW: "G03", NURBS_FANUC: "G06.2",
            NURBS_LINUXCNC: "G5.2", NURBS_LINUXCNC_END: "G5.3"}
 
@@ -55,68 +92,33 @@ def g_name(code: int) -> str:
 
 
 @dataclass
-class _Line:
-    """One parsed line: where it is, its words sorted by kind."""
+class ReadOptions:
+    """What a G-code reader starts from besides the text (all optional).
 
-    file: str
-    number: int
-    text: str
-    g_words: list[Word] = field(default_factory=list)
-    m_words: list[Word] = field(default_factory=list)
-    words: dict[str, Word] = field(default_factory=dict)
-    unsupported: list[Word] = field(default_factory=list)
+    ``coordinates``: work offsets, G92 and G28/G30 positions in effect at the start (the
+    service passes the persisted ones; Program.coordinates are those at the end).
+    ``tool_in_spindle``: the tool the machine holds (M6 of that tool then needs no hold).
+    """
 
-    @property
-    def where(self) -> str:
-        return f"{self.file}:{self.number}"
-
-    def at(self, word: Word | str | None) -> str:
-        return f"{self.where}: {word}" if word else self.where
-
-    @property
-    def source(self) -> SourceRef:
-        return SourceRef(self.file, self.number, self.text.strip())
+    tool_table: ToolTable | None = None
+    coordinates: CoordinateState | None = None
+    tool_in_spindle: int | None = None
+    block_delete: bool = True  # '/' lines are skipped (the switch on)
+    optional_stop: bool = True  # M1 pauses like M0 (the switch on)
+    max_errors: int = 50
+    max_loop_lines: int = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
 
 
-@dataclass
-class _Nurbs:
-    """A NURBS being collected block by block, with the place of every value."""
-
-    kind: int  # NURBS_FANUC | NURBS_LINUXCNC
-    order: int
-    feed_mm_s: float | None
-    first: _Line
-    points: list[NDArray[np.float64]] = field(default_factory=list)
-    weights: list[float] = field(default_factory=list)
-    knots: list[float] = field(default_factory=list)
-    point_at: list[str] = field(default_factory=list)
-    weight_at: list[str] = field(default_factory=list)
-    knot_at: list[str] = field(default_factory=list)
-    closing: int = 0  # G06.2 blocks holding only K seen so far
-    last: _Line | None = None
-
-    def add_point(self, line: _Line, point: NDArray[np.float64], weight: Word | None, knot: Word | None) -> None:
-        self.points.append(point)
-        self.weights.append(weight.value if weight else 1.0)
-        self.point_at.append(line.where)
-        self.weight_at.append(line.at(weight))
-        if knot is not None:
-            self.knots.append(knot.value)
-            self.knot_at.append(line.at(knot))
-        self.last = line
-
-    def locate(self, problem: CurveProblem) -> str:
-        places = {"control_points": self.point_at, "weights": self.weight_at, "knots": self.knot_at}.get(problem.field)
-        if places and problem.index is not None and problem.index < len(places):
-            return places[problem.index]
-        return self.first.at(self.first.words.get("P" if self.kind == NURBS_FANUC else "L"))
+class _Stop(Exception):
+    """Too many problems: stop reading."""
 
 
-class GcodeParser:
-    """Reads one program; ``parse`` returns the Program or raises InputError."""
+class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands):
+    """Reads one program; ``parse`` returns the Program or raises InputError(s)."""
 
-    def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0)) -> None:
+    def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> None:
         self.source = source
+        self.options = options or ReadOptions()
         start = np.asarray(start_position, dtype=float)
         if start.shape != (3,) or not np.all(np.isfinite(start)):
             raise InputError(f"{source}: start position", f"must be 3 finite numbers X Y Z in mm, got {start_position!r}")
@@ -125,92 +127,273 @@ class GcodeParser:
         self.motion: int | None = None
         self.plane = 17
         self.absolute = True
+        self.arc_absolute = False  # G90.1 / G91.1 (default): I J K relative to the start
         self.mm_per_unit = 1.0
         self.feed_mm_s: float | None = None
-        self.nurbs: _Nurbs | None = None
+        self.offsets = Offsets.from_state(self.options.coordinates or CoordinateState())
+        self.exact_stop_mode = False
+        self.blend_tolerance_mm: float | None = None
+        self.tool_selected: int | None = None
+        self.tool_loaded: int | None = self.options.tool_in_spindle
+        self.spindle = SpindleDirection.OFF
+        self.spindle_rpm = 0.0
+        self.constant_surface_speed = False  # G96: S is a surface speed (G97: rpm)
+        self.coolant: set[CoolantMode] = set()
+        self.saved_states: list[ModalSnapshot | None] = [None]  # M70 per call level
+        self.frames: list[_Frame] = []
         self.blocks: list[Block] = []
+        self.events: list[ProgramEvent] = []
+        self.params = ParameterStore(self.system_parameter)
+        self.errors: list[tuple[int, InputError]] = []
+        self.lines: list[LexedLine | InputError] = []
+        self.top_repeats: dict[int, int] = {}
+        self.init_nurbs()
 
     # ---- driver ------------------------------------------------------------------------
     def parse(self, text: str) -> Program:
-        for number, raw in enumerate(text.split("\n"), start=1):
-            if self.read_line(number, raw):
-                break
-        if self.nurbs is not None:
-            self.fail_unfinished_nurbs(None)
+        self.lines = lines = self.lex(text.split("\n"))
+        flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
+        try:
+            for err in structure:  # the program cannot run: say so, with every unreadable line
+                self.record(err_line(err), err)
+            for number, line in enumerate(lines, start=1):
+                if structure and isinstance(line, InputError):
+                    self.record(number, line)
+            if not structure:
+                self.run(lines, flow)
+        except _Stop:
+            pass
+        if self.errors:
+            raise self.collected_errors()
         name = Path(self.source).stem or self.source
-        return Program(name, tuple(self.blocks), self.start.copy())
+        return Program(name, tuple(self.blocks), self.start.copy(), tuple(self.events), self.offsets.state(), self.tool_loaded)
 
-    def read_line(self, number: int, raw: str) -> bool:
-        """Interpret one line; True when it ends the program (M02/M30)."""
-        if not raw.strip() or raw.strip().startswith("%"):
-            return False
-        line = _Line(self.source, number, raw)
-        self.sort_words(line, split_words(raw, line.where))
-        motion = self.apply_g_codes(line)
-        ends = self.apply_m_codes(line)
-        if line.unsupported:
-            w = line.unsupported[0]
-            raise InputError(line.at(w), f"unsupported word {w.letter}")
-        if motion is not None:
-            self.change_motion(line, motion)
+    def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
+        lines: list[LexedLine | InputError] = []
+        for number, raw in enumerate(raw_lines, start=1):
+            try:
+                lines.append(lex_line(number, raw, self.source))
+            except InputError as err:
+                lines.append(err)
+        return lines
+
+    def record(self, number: int, err: InputError) -> None:
+        for e in getattr(err, "errors", [err]):
+            if not any(e.where == old.where and e.message == old.message for _, old in self.errors):
+                self.errors.append((err_line(e) or number, e))
+        if len(self.errors) >= self.options.max_errors:
+            raise _Stop
+
+    def collected_errors(self) -> InputError:
+        ordered = [e for _, e in sorted(self.errors, key=lambda item: item[0])][: self.options.max_errors]
+        if len(self.errors) >= self.options.max_errors:
+            ordered.append(InputError(self.source, f"stopped after {self.options.max_errors} problems; fix these and check again"))
+        return ordered[0] if len(ordered) == 1 else InputErrors(ordered)
+
+    def run(self, lines: list[LexedLine | InputError], flow: Flow) -> None:
+        """Run the lines in program order (O-word jumps and calls); stop at M2/M30 or a closing '%'."""
+        frames = self.frames
+        first = next((ln for ln in lines if not (isinstance(ln, LexedLine) and ln.empty)), None)
+        percent_ends = isinstance(first, LexedLine) and first.percent
+        seen_percent = False
+        pc, executed, looped_to = 0, 0, 0
+        while pc < len(lines):
+            line = lines[pc]
+            executed += 1
+            if executed > len(lines) + self.options.max_loop_lines:
+                number = looped_to + 1  # the line the last backward jump went to: the loop's head
+                self.record(number, InputError(f"{self.source}:{number}", f"more than {self.options.max_loop_lines:,} lines run in loops and calls: "
+                                                                        f"an O-word loop that never ends?"))
+                raise _Stop
+            if isinstance(line, InputError):
+                self.record(pc + 1, line)
+                pc += 1
+                continue
+            if line.percent:
+                if percent_ends and seen_percent:
+                    break
+                seen_percent = True
+                pc += 1
+                continue
+            if line.empty or (line.block_delete and self.options.block_delete) or line.program_number is not None:
+                pc += 1
+                continue
+            try:
+                if line.oword is not None:
+                    after = self.run_oword(pc, line, flow, frames)
+                    if after <= pc:
+                        looped_to = after - 1 if lines_is_loop_body(after, flow) else after
+                    pc = after
+                    continue
+                if self.run_line(line):
+                    break
+            except InputError as err:
+                self.params.discard()
+                self.record(line.number, err)
+                self.recover_position(line)
+                pc = self.after_failed(pc, line, flow)
+                continue
+            pc += 1
+        if self.nurbs is not None:
+            try:
+                self.fail_unfinished_nurbs(None)
+            except InputError as err:
+                self.record(err_line(err), err)
+
+    def recover_position(self, lexed: LexedLine) -> None:
+        """After a bad move line, go on from where it was meant to end (fewer follow-on errors)."""
+        if self.nurbs is not None or self.motion not in (RAPID, LINE, ARC_CW, ARC_CCW) or lexed.oword is not None:
+            return
+        line = GcodeLine(self.source, lexed.number, lexed.text)
+        for raw in lexed.words:
+            if raw.letter in "XYZ":
+                try:
+                    line.words[raw.letter] = Word(raw.letter, self.evaluate(raw.expr, ""), raw.text)
+                except InputError:
+                    return
+        self.position = self.target(line, self.position)
+
+    def evaluate(self, expr: object, where: str) -> float:
+        try:
+            value = expr.evaluate(self.params)  # type: ignore[attr-defined]
+        except ExpressionError as err:
+            raise InputError(where, str(err)) from None
+        if not np.isfinite(value):
+            raise InputError(where, "the value is not finite")
+        return float(value)
+
+    def system_parameter(self, key: int | str) -> float | None:
+        """LinuxCNC's read-only parameters: offsets #5161-#5390, tool #5400, position #5420-#5422, #<_x> ..."""
+        program = (self.position - self.offsets.total()) / self.mm_per_unit
+        if isinstance(key, int):
+            if 5420 <= key <= 5422:
+                return float(program[key - 5420])
+            if key == 5400:
+                return float(self.tool_loaded or 0)
+            if key >= 5161:
+                return self.offsets.parameter(key)
+            return None
+        named: dict[str, Callable[[], float]] = {
+            "_x": lambda: float(program[0]), "_y": lambda: float(program[1]), "_z": lambda: float(program[2]),
+            "_metric": lambda: float(self.mm_per_unit == 1.0), "_imperial": lambda: float(self.mm_per_unit != 1.0),
+            "_absolute": lambda: float(self.absolute), "_incremental": lambda: float(not self.absolute),
+            "_feed": lambda: (self.feed_mm_s or 0.0) * 60.0 / self.mm_per_unit, "_rpm": lambda: self.spindle_rpm,
+            "_current_tool": lambda: float(self.tool_loaded or 0), "_selected_tool": lambda: float(self.tool_selected or -1),
+            "_coord_system": lambda: float(next(c for c, s in SYSTEM_CODES.items() if s == self.offsets.active)),
+        }
+        return named[key]() if key in named else None
+
+    # ---- one line ----------------------------------------------------------------------
+    def run_line(self, lexed: LexedLine) -> bool:
+        """Interpret one line in RS274NGC order; True when it ends the program (M02/M30)."""
+        line = GcodeLine(self.source, lexed.number, lexed.text)
+        self.sort_words(line, self.evaluate_words(lexed, line))
+        for a in lexed.assignments:
+            where = line.at(a.text)
+            try:
+                self.params.stage(a.target.resolve(self.params), self.evaluate(a.expr, where))
+            except ExpressionError as err:
+                raise InputError(where, str(err)) from None
+        groups = self.group_g_codes(line)
+        if "D" in line.words:
+            raise InputError(line.at(line.words["D"]), "unsupported word D (cutter radius compensation)")
+        m_codes = self.group_m_codes(line)
+        self.apply_modes(line, groups)
         self.apply_feed(line)
-        self.move(line, motion)
-        return ends
+        self.apply_spindle_speed(line, "spindle" in m_codes)
+        self.apply_tool(line, m_codes)
+        self.apply_modal_state(line, m_codes.get("modal state"), self.frames[-1].autorestore if self.frames else [None])
+        self.apply_spindle_and_coolant(line, m_codes)
+        self.apply_dwell(line, groups)
+        self.apply_tool_length(line, groups.get("tool length"))
+        self.apply_path_control(line, groups.get("path control"))
+        axis_user = self.axis_user(line, groups)
+        motion = groups.get("motion")
+        if motion is not None:
+            self.change_motion(line, round(motion.value * 10))
+        self.check_leftover_words(line, axis_user is not None)
+        if axis_user is not None:
+            self.run_axis_user(line, axis_user)
+        else:
+            self.move_with_g53(line, motion is not None, groups.get("non-modal"))
+        self.params.commit()
+        return self.apply_stop(line, m_codes)
 
-    def sort_words(self, line: _Line, words: Sequence[Word]) -> None:
+    def evaluate_words(self, lexed: LexedLine, line: GcodeLine) -> list[Word]:
+        words = []
+        for raw in lexed.words:
+            if isinstance(raw.expr, Number):  # checked by the lexer
+                words.append(Word(raw.letter, raw.expr.value, raw.text))
+                continue
+            value = self.evaluate(raw.expr, line.at(raw.text))
+            check_number(value, raw.letter, raw.text[1:], line.where)
+            words.append(Word(raw.letter, value, raw.text))
+        return words
+
+    def sort_words(self, line: GcodeLine, words: list[Word]) -> None:
         for w in words:
             if w.letter == "G":
                 line.g_words.append(w)
             elif w.letter == "M":
                 line.m_words.append(w)
-            elif w.letter in IGNORED_LETTERS:
+            elif w.letter == "N":
                 continue
+            elif w.letter in ROTARY_LETTERS:
+                raise InputError(line.at(w), f"unsupported: axis {w.letter} (this machine has X Y Z)")
+            elif w.letter not in WORD_LETTERS:
+                raise InputError(line.at(w), f"unsupported word {w.letter}")
             elif w.letter in line.words:
                 raise InputError(line.at(w), f"{w.letter} appears twice in one block")
-            elif w.letter not in "XYZIJKRFPL":
-                line.unsupported.append(w)
             else:
                 line.words[w.letter] = w
 
-    # ---- modal codes ------------------------------------------------------------------
-    def apply_m_codes(self, line: _Line) -> bool:
-        ends = False
-        for w in line.m_words:
-            code = int(w.value) if w.value == int(w.value) else -1
-            if code in END_CODES:
-                ends = True
-            elif code not in IGNORED_M_CODES:
-                raise InputError(line.at(w), f"unsupported M code {w.text}")
-        return ends
-
-    def apply_g_codes(self, line: _Line) -> int | None:
-        """Set plane, units, distance mode; return this line's motion code, if any."""
-        motion = None
+    def group_g_codes(self, line: GcodeLine) -> dict[str, Word]:
         seen: dict[str, Word] = {}
         for w in line.g_words:
             code = round(w.value * 10)
-            if abs(w.value * 10 - code) > 1e-6:
-                raise InputError(line.at(w), f"unsupported G code {w.text}")
-            group = ("motion" if code in MOTION_CODES else "plane" if code in PLANE_CODES else
-                     "units" if code in UNIT_CODES else "distance" if code in DISTANCE_CODES else
-                     "feed mode" if code in FEED_MODE_CODES else "none" if code in NO_OP_CODES else None)
+            group = G_GROUPS.get(code) if abs(w.value * 10 - code) <= 1e-6 else None
             if group is None:
-                raise InputError(line.at(w), f"unsupported G code {w.text}")
-            if group in seen and group != "none":
+                what = UNSUPPORTED_G.get(code) if abs(w.value * 10 - code) <= 1e-6 else None
+                raise InputError(line.at(w), f"unsupported G code {w.text}" + (f" ({what})" if what else ""))
+            if group in seen:
                 raise InputError(line.at(w), f"{w.text} and {seen[group].text} in one block: both set the {group}")
             seen[group] = w
-            if group == "motion":
-                motion = code
-            elif group == "plane":
-                self.plane = PLANE_CODES[code]
-            elif group == "units":
-                self.mm_per_unit = UNIT_CODES[code]
-            elif group == "distance":
-                self.absolute = DISTANCE_CODES[code]
-        return motion
+        return seen
 
-    def apply_feed(self, line: _Line) -> None:
-        f = line.words.get("F")
+    def group_m_codes(self, line: GcodeLine) -> dict[str, Word]:
+        seen: dict[str, Word] = {}
+        for w in line.m_words:
+            code = int(w.value) if w.value == int(w.value) else -1
+            group = M_GROUPS.get(code)
+            if group is None:
+                raise InputError(line.at(w), f"unsupported M code {w.text}")
+            if group in seen and not (group == "coolant" and {code, int(seen[group].value)} == {7, 8}):
+                raise InputError(line.at(w), f"{w.text} and {seen[group].text} in one block: both set the {group}")
+            seen[group if group not in seen else group + " 2"] = w
+        return seen
+
+    # ---- modal codes ------------------------------------------------------------------
+    def apply_modes(self, line: GcodeLine, groups: dict[str, Word]) -> None:
+        """Plane, units, distance modes, coordinate system (they apply before F and the move)."""
+        for group, w in groups.items():
+            code = round(w.value * 10)
+            if group == "plane":
+                if self.nurbs is not None and self.plane != code // 10:
+                    raise InputError(line.at(w), f"{w.text} inside the NURBS of line {self.nurbs.first.number}")
+                self.plane = code // 10
+            elif group == "units":
+                self.mm_per_unit = MM_PER_INCH if code == 200 else 1.0
+            elif group == "distance":
+                self.absolute = code == 900
+            elif group == "arc distance":
+                self.arc_absolute = code == 901
+            elif group == "coordinate system":
+                self.offsets.active = SYSTEM_CODES[code]
+            elif group == "spindle mode":
+                self.constant_surface_speed = code == 960
+
+    def apply_feed(self, line: GcodeLine) -> None:
+        f = line.claim("F").get("F")
         if f is None:
             return
         if f.value <= 0:
@@ -219,65 +402,208 @@ class GcodeParser:
             raise InputError(line.at(f), "F inside a NURBS definition: give the feed on its first block")
         self.feed_mm_s = f.value * self.mm_per_unit / 60.0
 
-    def change_motion(self, line: _Line, motion: int) -> None:
-        """A motion G code on this line: ends G06.2 mode; G5.2 ... G5.3 must be closed first."""
-        word = next(w for w in line.g_words if round(w.value * 10) == motion)
+    def apply_spindle_speed(self, line: GcodeLine, spindle_code_on_line: bool) -> None:
+        s = line.claim("S").get("S")
+        if s is None:
+            return
+        if s.value < 0:
+            raise InputError(line.at(s), f"spindle speed must be >= 0, got {s.value:g}")
+        changed = s.value != self.spindle_rpm
+        self.spindle_rpm = s.value
+        if changed and self.spindle is not SpindleDirection.OFF and not spindle_code_on_line:
+            self.add_event(line, EventKind.SPINDLE, s.text, spindle=self.spindle, spindle_rpm=self.spindle_rpm,
+                           constant_surface_speed=self.constant_surface_speed)
+
+    def tool_number(self, line: GcodeLine, w: Word) -> int:
+        if w.value != int(w.value) or w.value < 0:
+            raise InputError(line.at(w), f"a tool number is a whole number >= 0, got {w.value:g}")
+        number = int(w.value)
+        table = self.options.tool_table
+        if table is not None and number != 0 and table.get(number) is None:
+            raise InputError(line.at(w), f"tool {number} is not in the tool table {table.source}")
+        return number
+
+    def apply_tool(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
+        t = line.claim("T").get("T")
+        if t is not None:
+            self.tool_selected = self.tool_number(line, t)
+        m = m_codes.get("tool change")
+        if m is None:
+            return
+        if int(m.value) == 61:
+            q = line.claim("Q").get("Q")
+            if q is None:
+                raise InputError(line.at(m), "M61 needs Q (the tool now in the spindle)")
+            self.tool_loaded = self.tool_number(line, q)
+            return
+        tool = self.tool_selected if self.tool_selected is not None else 0
+        if tool != self.tool_loaded:
+            self.add_event(line, EventKind.TOOL_CHANGE, m.text, tool=tool)
+        self.tool_loaded = tool
+
+    def apply_spindle_and_coolant(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
+        m = m_codes.get("spindle")
+        if m is not None:
+            self.spindle = {3: SpindleDirection.CW, 4: SpindleDirection.CCW, 5: SpindleDirection.OFF}[int(m.value)]
+            self.add_event(line, EventKind.SPINDLE, m.text, spindle=self.spindle,
+                           spindle_rpm=None if self.spindle is SpindleDirection.OFF else self.spindle_rpm,
+                           constant_surface_speed=self.constant_surface_speed)
+        for key in ("coolant", "coolant 2"):
+            m = m_codes.get(key)
+            if m is not None:
+                mode = {7: CoolantMode.MIST, 8: CoolantMode.FLOOD, 9: CoolantMode.OFF}[int(m.value)]
+                self.coolant = set() if mode is CoolantMode.OFF else self.coolant | {mode}
+                self.add_event(line, EventKind.COOLANT, m.text, coolant=mode)
+
+    def apply_dwell(self, line: GcodeLine, groups: dict[str, Word]) -> None:
+        g = groups.get("non-modal")
+        if g is None or round(g.value * 10) != 40:
+            return
+        if "X" in line.words and "motion" not in groups:  # Fanuc's 'G04 X1.5': would move the modal motion here
+            raise InputError(line.at(line.words["X"]), "G4 takes P, the dwell in seconds (Fanuc's G04 X is not read)")
+        p = line.claim("P").get("P")
+        if p is None:
+            raise InputError(line.at(g), "G4 needs P: the dwell time in seconds")
+        if p.value < 0:
+            raise InputError(line.at(p), f"dwell time must be >= 0 s, got {p.value:g}")
+        self.add_event(line, EventKind.DWELL, g.text, dwell_s=p.value)
+
+    def apply_tool_length(self, line: GcodeLine, g: Word | None) -> None:
+        if "H" in line.words and (g is None or round(g.value * 10) != 430):
+            raise InputError(line.at(line.words["H"]), "H without G43 (tool length offset from the tool table)")
+        if g is None:
+            return
+        code = round(g.value * 10)
+        if code == 490:
+            self.offsets.tool_length_mm = 0.0
+        elif code == 430:
+            h = line.claim("H").get("H")
+            number = self.tool_number(line, h) if h is not None else (self.tool_loaded or 0)
+            table = self.options.tool_table
+            if number != 0 and table is None:
+                raise InputError(line.at(h or g), f"G43 needs a tool table for tool {number} (none given)")
+            self.offsets.tool_length_mm = table.length_mm(number) if table is not None else 0.0
+
+    def apply_path_control(self, line: GcodeLine, g: Word | None) -> None:
+        if g is None:
+            return
+        code = round(g.value * 10)
+        self.exact_stop_mode = code in (610, 611)
+        if code != 640:
+            return
+        words = line.claim("PQ")
+        p, q = words.get("P"), words.get("Q")
+        for w in (p, q):
+            if w is not None and w.value < 0:
+                raise InputError(line.at(w), f"G64 {w.letter} is a tolerance: >= 0, got {w.value:g}")
+        self.blend_tolerance_mm = p.value * self.mm_per_unit if p is not None and p.value > 0 else None  # P0: no limit
+
+    def axis_user(self, line: GcodeLine, groups: dict[str, Word]) -> Word | None:
+        """G10/G28/G30/G92/G43.1 take the axis words; a motion G code with them is an error."""
+        users = [w for w in (groups.get("non-modal"), groups.get("tool length")) if w is not None and round(w.value * 10) in AXIS_USERS]
+        if not users:
+            return None
+        user = users[0]
+        motion = groups.get("motion")
+        if motion is not None:
+            raise InputError(line.at(motion), f"{motion.text} and {user.text} in one block: both use the axis words")
+        return user
+
+    def check_leftover_words(self, line: GcodeLine, axis_user: bool) -> None:
+        """Words no code of this block uses (the motion's are checked by move)."""
+        if axis_user:
+            return
+        if self.motion is None:
+            leftover = [w for k, w in line.words.items() if k != "F"]
+            if leftover:
+                w = leftover[0]
+                if w.letter in "XYZ":
+                    raise InputError(line.at(w), "no motion mode: give G00, G01, G02, G03, G06.2 or G5.2 first")
+                raise InputError(line.at(w), f"{w.letter} is not used by any code of this block")
+
+    def apply_stop(self, line: GcodeLine, m_codes: dict[str, Word]) -> bool:
+        m = m_codes.get("stopping")
+        if m is None:
+            return False
+        code = int(m.value)
+        if code in END_CODES:
+            return True
+        if code == 0 or self.options.optional_stop:
+            self.add_event(line, EventKind.PAUSE, m.text)
+        return False
+
+    def add_event(self, line: GcodeLine, kind: EventKind, code: str, **values: object) -> None:
         if self.nurbs is not None:
-            if self.nurbs.kind == NURBS_LINUXCNC and motion != NURBS_LINUXCNC_END:
-                raise InputError(line.at(word), f"{word.text} inside G5.2 (line {self.nurbs.first.number}): close the NURBS with G5.3 first")
-            if self.nurbs.kind == NURBS_FANUC:
-                self.fail_unfinished_nurbs(line, word)
-        if motion == NURBS_LINUXCNC_END and (self.nurbs is None or self.nurbs.kind != NURBS_LINUXCNC):
-            raise InputError(line.at(word), "G5.3 without an open G5.2")
-        self.motion = motion
+            raise InputError(line.at(code), f"{code} inside the NURBS of line {self.nurbs.first.number}: "
+                                            f"finish the NURBS first")
+        event = ProgramEvent(kind, len(self.blocks), line.source, code, **values)  # type: ignore[arg-type]
+        self.events.append(event)
+        if event.stops_motion and self.blocks and not self.blocks[-1].exact_stop:
+            self.blocks[-1] = dataclasses.replace(self.blocks[-1], exact_stop=True)
 
     # ---- moves ------------------------------------------------------------------------
-    def move(self, line: _Line, motion_on_line: int | None) -> None:
+    def move_with_g53(self, line: GcodeLine, motion_on_line: bool, non_modal: Word | None) -> None:
+        code = round(non_modal.value * 10) if non_modal is not None else None
+        self.apply_stored_offsets(code)
+        if code != 530:
+            self.move(line, motion_on_line)
+            return
+        assert non_modal is not None
+        if self.motion not in (RAPID, LINE):
+            raise InputError(line.at(non_modal), "G53 needs G0 or G1 (machine coordinates for a straight move)")
+        if not self.absolute:
+            raise InputError(line.at(non_modal), "G53 needs G90: machine coordinates are absolute")
+        self.offsets.machine_mode = True
+        try:
+            self.move(line, motion_on_line)
+        finally:
+            self.offsets.machine_mode = False
+
+    def move(self, line: GcodeLine, motion_on_line: bool) -> None:
         axis_words = {k: w for k, w in line.words.items() if k != "F"}
         if self.motion is None:
-            if axis_words:
-                w = next(iter(axis_words.values()))
-                raise InputError(line.at(w), "no motion mode: give G00, G01, G02, G03, G06.2 or G5.2 first")
             return
         allowed = MOTION_WORDS[self.motion]
         for letter, w in axis_words.items():
-            if letter not in allowed:
+            if letter not in allowed or (self.motion == NURBS_LINUXCNC and letter == "XYZ"[PLANES[self.plane].normal_axis]):
                 raise InputError(line.at(w), f"{letter} not allowed in a {g_name(self.motion)} block")
-        if not axis_words and motion_on_line is None and self.motion != NURBS_LINUXCNC_END:
+        if not motion_on_line and (not axis_words or self.motion == NURBS_LINUXCNC_END):
             return
         handler = {RAPID: self.straight, LINE: self.straight, ARC_CW: self.arc, ARC_CCW: self.arc,
                    NURBS_FANUC: self.fanuc_nurbs, NURBS_LINUXCNC: self.linuxcnc_nurbs,
                    NURBS_LINUXCNC_END: self.linuxcnc_end}[self.motion]
-        handler(line, motion_on_line is not None)
+        handler(line, motion_on_line)
 
-    def need_feed(self, line: _Line) -> float:
+    def need_feed(self, line: GcodeLine) -> float:
         if self.feed_mm_s is None:
             raise InputError(line.where, f"no feed rate: F missing for {g_name(self.motion or 0)}")
         return self.feed_mm_s
 
-    def target(self, line: _Line, base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]:
-        """Programmed point: G90 absolute or G91 relative to ``base``; missing axes keep base."""
+    def target(self, line: GcodeLine, base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]:
+        """Programmed point in machine mm: G90 absolute (+ offsets) or G91 relative to ``base``."""
         point = base.copy()
+        offset = self.offsets.total()
         for axis, letter in enumerate("XYZ"):
             w = line.words.get(letter)
             if w is not None and letter in letters:
                 value = w.value * self.mm_per_unit
-                point[axis] = value if self.absolute else base[axis] + value
+                point[axis] = value + offset[axis] if self.absolute else base[axis] + value
         return point
 
-    def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: _Line) -> None:
-        self.blocks.append(Block(kind, curve, feed_mm_s, line.source))
+    def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: GcodeLine) -> None:
+        self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm))
         self.position = curve.end_point
 
-    def straight(self, line: _Line, _explicit: bool) -> None:
-        rapid = self.motion == RAPID
+    def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
-        end = self.target(line, self.position)
         if np.linalg.norm(end - self.position) <= ZERO_MOVE_MM:
             return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 
-    def arc(self, line: _Line, _explicit: bool) -> None:
+    def straight(self, line: GcodeLine, _explicit: bool) -> None:
+        self.add_straight(line, self.target(line, self.position), rapid=self.motion == RAPID)
+
+    def arc(self, line: GcodeLine, _explicit: bool) -> None:
         feed = self.need_feed(line)
         plane = PLANES[self.plane]
         clockwise = self.motion == ARC_CW
@@ -285,129 +611,47 @@ class GcodeParser:
         end = self.target(line, start)
         offsets = [line.words[k] for k in "IJK" if k in line.words]
         radius = line.words.get("R")
+        turns = line.words.get("P")
         for w in offsets:
             if w.letter not in plane.offset_letters:
                 raise InputError(line.at(w), f"{w.letter} not allowed in a {plane.code} arc (centre offsets {' '.join(plane.offset_letters)})")
         if radius is not None and offsets:
             raise InputError(line.at(radius), "give either R or I J K for an arc, not both")
-        gword = next((w for w in line.g_words if round(w.value * 10) == self.motion), None)
+        if turns is not None and (turns.value != int(turns.value) or turns.value < 1):
+            raise InputError(line.at(turns), f"P (turns) must be a whole number >= 1, got {turns.value:g}")
+        gword = line.g(self.motion or 0)
+        inch = self.mm_per_unit != 1.0
         try:
             if radius is not None:
                 centre = centre_from_radius(plane, start, end, radius.value * self.mm_per_unit, clockwise, radius.text)
-                curve = arc_nurbs(plane, start, end, centre, clockwise, full_circle_if_closed=False)
+                curve = arc_nurbs(plane, start, end, centre, clockwise, False, inch, int(turns.value) if turns else 1)
             elif offsets:
                 centre = start.copy()
+                origin = self.offsets.total()
                 for w in offsets:
-                    centre["XYZ".index({"I": "X", "J": "Y", "K": "Z"}[w.letter])] += w.value * self.mm_per_unit
-                curve = arc_nurbs(plane, start, end, centre, clockwise, full_circle_if_closed=True)
+                    axis = "IJK".index(w.letter)
+                    value = w.value * self.mm_per_unit
+                    centre[axis] = value + origin[axis] if self.arc_absolute else start[axis] + value
+                curve = arc_nurbs(plane, start, end, centre, clockwise, True, inch, int(turns.value) if turns else 1)
             else:
                 raise ArcError(f"an arc needs centre offsets {' '.join(plane.offset_letters)} or a radius R", gword.text if gword else "")
         except ArcError as err:
+            self.position = end  # the next line starts where this one was meant to end
             word = line.words[err.word].text if err.word in line.words else err.word
             word = word or " ".join(w.text for w in offsets) or (radius.text if radius else "")
             raise InputError(line.at(word), str(err)) from None
         self.add_block(BlockKind.ARC, curve, feed, line)
 
-    # ---- Fanuc G06.2 ------------------------------------------------------------------
-    def fanuc_nurbs(self, line: _Line, _explicit: bool) -> None:
-        knot = line.words.get("K")
-        if knot is None:
-            raise InputError(line.where, "K missing: every G06.2 block gives one knot")
-        if self.nurbs is None:
-            self.start_fanuc_nurbs(line, knot)
-            return
-        nurbs = self.nurbs
-        for letter in "PF":
-            if letter in line.words:
-                raise InputError(line.at(line.words[letter]), f"{letter} only allowed on the first block of a G06.2 NURBS")
-        point_words = [line.words[k] for k in "XYZR" if k in line.words]
-        if not point_words:
-            nurbs.knots.append(knot.value)
-            nurbs.knot_at.append(line.at(knot))
-            nurbs.closing += 1
-            nurbs.last = line
-            if nurbs.closing == nurbs.order:
-                self.finish_nurbs(BlockKind.NURBS)
-            return
-        if nurbs.closing:
-            raise InputError(line.at(point_words[0]), f"control point after a closing K block: the last {nurbs.order} blocks hold only K")
-        point = self.target(line, nurbs.points[-1])
-        nurbs.add_point(line, point, line.words.get("R"), knot)
 
-    def start_fanuc_nurbs(self, line: _Line, knot: Word) -> None:
-        order = self.nurbs_order(line, line.words.get("P"), default=4)
-        feed = self.need_feed(line)
-        nurbs = _Nurbs(NURBS_FANUC, order, feed, line)
-        first = self.target(line, self.position)
-        if np.linalg.norm(first - self.position) > SAME_POSITION_MM:
-            word = next(line.words[k] for k in "XYZ" if k in line.words)
-            raise InputError(line.at(word), f"the first NURBS control point {_fmt(first)} must be the current position {_fmt(self.position)}")
-        nurbs.add_point(line, self.position.copy(), line.words.get("R"), knot)
-        self.nurbs = nurbs
-
-    def nurbs_order(self, line: _Line, word: Word | None, default: int) -> int:
-        if word is None:
-            return default
-        lo, hi = NURBS_ORDERS
-        if word.value != int(word.value) or not lo <= word.value <= hi:
-            raise InputError(line.at(word), f"NURBS order must be an integer from {lo} to {hi} (degree {lo - 1} to {hi - 1}), got {word.value:g}")
-        return int(word.value)
-
-    def fail_unfinished_nurbs(self, line: _Line | None, word: Word | None = None) -> None:
-        nurbs = self.nurbs
-        assert nurbs is not None
-        if nurbs.kind == NURBS_LINUXCNC:
-            where = (nurbs.last or nurbs.first).where
-            raise InputError(where, f"G5.2 NURBS of line {nurbs.first.number} not closed with G5.3 at the end of the program")
-        what = f"{word.text} ends" if word else "the program ends"
-        where = line.at(word) if line else (nurbs.last or nurbs.first).where
-        raise InputError(where, f"missing K blocks: {what} the NURBS of line {nurbs.first.number} after "
-                                f"{nurbs.closing} of its {nurbs.order} closing K blocks")
-
-    def finish_nurbs(self, kind: BlockKind) -> None:
-        nurbs = self.nurbs
-        assert nurbs is not None
-        self.nurbs = None
-        curve = build_curve(nurbs.order - 1, nurbs.points, nurbs.weights, nurbs.knots, nurbs.locate,
-                            min_degree=NURBS_ORDERS[0] - 1, max_degree=NURBS_ORDERS[1] - 1, zero_length_mm=SAME_POSITION_MM)
-        self.add_block(kind, curve, nurbs.feed_mm_s, nurbs.first)
-
-    # ---- LinuxCNC G5.2 / G5.3 ---------------------------------------------------------
-    def linuxcnc_nurbs(self, line: _Line, explicit: bool) -> None:
-        if explicit:
-            if self.plane != 17:
-                word = next(w for w in line.g_words if round(w.value * 10) == NURBS_LINUXCNC)
-                raise InputError(line.at(word), f"G5.2 works in the XY plane only (G17), not G{self.plane}")
-            order = self.nurbs_order(line, line.words.get("L"), default=3)
-            self.nurbs = _Nurbs(NURBS_LINUXCNC, order, self.need_feed(line), line)
-            self.nurbs.add_point(line, self.position.copy(), None, None)
-        elif "L" in line.words:
-            raise InputError(line.at(line.words["L"]), "L only allowed on the G5.2 line")
-        nurbs = self.nurbs
-        assert nurbs is not None
-        if "X" in line.words or "Y" in line.words:
-            nurbs.add_point(line, self.target(line, nurbs.points[-1], "XY"), line.words.get("P"), None)
-        elif "P" in line.words:
-            raise InputError(line.at(line.words["P"]), "a weight P needs its control point X Y")
-
-    def linuxcnc_end(self, line: _Line, explicit: bool) -> None:
-        nurbs = self.nurbs
-        assert nurbs is not None and explicit
-        if len(nurbs.points) < nurbs.order:
-            raise InputError(line.where, f"the G5.2 NURBS of line {nurbs.first.number} (order {nurbs.order}) needs at least "
-                                         f"{nurbs.order} control points (the current position + {nurbs.order - 1} X Y lines), "
-                                         f"got {len(nurbs.points)}")
-        nurbs.knots = list(clamped_uniform_knots(len(nurbs.points), nurbs.order - 1))
-        nurbs.knot_at = [line.where] * len(nurbs.knots)
-        nurbs.last = line
-        self.finish_nurbs(BlockKind.NURBS)
-        self.motion = None
+def err_line(err: InputError) -> int:
+    parts = err.where.split(":")
+    try:
+        return int(parts[1].split()[0]) if len(parts) > 1 else 0
+    except ValueError:
+        return 0
 
 
-def _fmt(point: NDArray[np.float64]) -> str:
-    return "(" + ", ".join(f"{v:.6g}" for v in point) + ")"
-
-
-def parse_gcode(text: str, source: str = "<gcode>", start_position: ArrayLike = (0.0, 0.0, 0.0)) -> Program:
+def parse_gcode(text: str, source: str = "<gcode>", start_position: ArrayLike = (0.0, 0.0, 0.0),
+                options: ReadOptions | None = None) -> Program:
     """Parse G-code text into a Program starting at ``start_position`` (machine XYZ, mm)."""
-    return GcodeParser(source, start_position).parse(text)
+    return GcodeParser(source, start_position, options).parse(text)

@@ -1,7 +1,12 @@
 """A Program: the toolpath as blocks, every block a NURBS curve with its feed and source line.
 
 Lines are degree-1 NURBS and arcs exact rational quadratics (geometry.primitives), so the
-planners only ever see NurbsCurve. Positions are machine XYZ in mm; feeds in mm/s.
+planners only ever see NurbsCurve. Positions are machine XYZ in mm (work, G92 and tool
+offsets already applied); feeds in mm/s.
+
+What happens between moves (dwell, pause, tool change, spindle, coolant) is a
+``ProgramEvent`` anchored before a block index: it takes place once ``blocks[:before_block]``
+are done. Events that stop motion mark the block before them ``exact_stop``.
 """
 
 from __future__ import annotations
@@ -13,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.geometry import NurbsCurve
+from nurbsmotion.program.coordinates import CoordinateState
 
 AXES = ("X", "Y", "Z")
 
@@ -42,6 +48,8 @@ class Block:
     curve: NurbsCurve
     feed_mm_s: float | None  # None: the machine's feed applies (rapid feed for RAPID, default feed otherwise)
     source: SourceRef
+    exact_stop: bool = False  # come to rest at the end of this block (G61/G61.1, or a stopping event follows)
+    blend_tolerance_mm: float | None = None  # G64 P: path tolerance at this block's start; None: the machine's
 
     def feed_or_default_mm_s(self, default_feed_mm_s: float, rapid_feed_mm_s: float) -> float:
         """The programmed feed, or the machine's: rapid feed for RAPID blocks, default feed otherwise."""
@@ -62,13 +70,86 @@ class Block:
         return self.curve.length
 
 
+class EventKind(str, enum.Enum):
+    DWELL = "dwell"  # G4 P: the axes rest dwell_s
+    PAUSE = "pause"  # M0, or M1 with the optional-stop switch on: hold until resume
+    TOOL_CHANGE = "tool_change"  # M6: manual tool change to ``tool``, hold until resume
+    SPINDLE = "spindle"  # M3/M4/M5, or S while the spindle turns
+    COOLANT = "coolant"  # M7/M8/M9
+
+
+class SpindleDirection(str, enum.Enum):
+    CW = "cw"  # M3
+    CCW = "ccw"  # M4
+    OFF = "off"  # M5
+
+
+class CoolantMode(str, enum.Enum):
+    MIST = "mist"  # M7
+    FLOOD = "flood"  # M8
+    OFF = "off"  # M9
+
+
+HOLDING_EVENTS = (EventKind.PAUSE, EventKind.TOOL_CHANGE)
+STOPPING_EVENTS = HOLDING_EVENTS + (EventKind.DWELL,)
+
+
+@dataclass(frozen=True)
+class ProgramEvent:
+    """Something between moves, with the line it came from."""
+
+    kind: EventKind
+    before_block: int
+    source: SourceRef
+    code: str  # as written: 'G4', 'M0', 'M1', 'M6', 'M3', 'M8', 'S'
+    dwell_s: float | None = None
+    tool: int | None = None
+    spindle: SpindleDirection | None = None
+    spindle_rpm: float | None = None  # the S value: rpm, or surface speed (units/min) under G96
+    constant_surface_speed: bool = False  # G96 in effect
+    coolant: CoolantMode | None = None
+
+    @property
+    def holds(self) -> bool:
+        """The job waits for the operator (resume) here."""
+        return self.kind in HOLDING_EVENTS
+
+    @property
+    def stops_motion(self) -> bool:
+        return self.kind in STOPPING_EVENTS
+
+
 @dataclass(frozen=True, eq=False)
 class Program:
-    """An ordered list of blocks; consecutive blocks meet (end of one = start of the next)."""
+    """An ordered list of blocks; consecutive blocks meet (end of one = start of the next).
+
+    ``coordinates`` are the offsets in effect at the end (G10/G92/G28.1 may change them):
+    hand them to the next reader (ReadOptions.coordinates) to carry them over.
+    """
 
     name: str
     blocks: tuple[Block, ...]
     start_position: NDArray[np.float64]
+    events: tuple[ProgramEvent, ...] = ()
+    coordinates: CoordinateState | None = None
+    tool_at_end: int | None = None  # tool in the spindle after the last M6/M61 (None: never changed)
+
+    @property
+    def requires_spindle(self) -> bool:
+        """M3 or M4 somewhere: refuse to run on a machine without a spindle."""
+        return any(e.kind is EventKind.SPINDLE and e.spindle is not SpindleDirection.OFF for e in self.events)
+
+    @property
+    def requires_coolant(self) -> bool:
+        return any(e.kind is EventKind.COOLANT and e.coolant is not CoolantMode.OFF for e in self.events)
+
+    def dwell_s_before(self) -> dict[int, float]:
+        """Total G4 dwell before each block index (the planner holds the axes that long)."""
+        out: dict[int, float] = {}
+        for e in self.events:
+            if e.kind is EventKind.DWELL and e.dwell_s:
+                out[e.before_block] = out.get(e.before_block, 0.0) + e.dwell_s
+        return out
 
     @property
     def length_mm(self) -> float:

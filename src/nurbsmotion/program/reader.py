@@ -8,18 +8,19 @@ from numpy.typing import ArrayLike
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.program.curve_yaml import parse_curve_yaml
-from nurbsmotion.program.gcode import parse_gcode
+from nurbsmotion.program.gcode import ReadOptions, parse_gcode
 from nurbsmotion.program.model import Program
 
 GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap")
 YAML_SUFFIXES = (".yaml", ".yml")
 
 
-def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0)) -> Program:
+def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> Program:
     """Read a G-code (.nc .ngc .gcode .tap) or YAML curve (.yaml .yml) program.
 
     ``start_position`` (machine XYZ in mm) is where a G-code program starts; a YAML curve
-    file starts at its first point and ignores it.
+    file starts at its first point and ignores it. ``options`` (G-code only): tool table,
+    initial coordinate offsets, block delete and optional stop switches, error limit.
     """
     source = str(path)
     suffix = Path(path).suffix.lower()
@@ -34,4 +35,4 @@ def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0)) 
         raise InputError(source, f"cannot read: {err.strerror or err}") from None
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, source)
-    return parse_gcode(text, source, start_position)
+    return parse_gcode(text, source, start_position, options)

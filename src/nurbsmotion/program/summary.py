@@ -1,4 +1,5 @@
-"""What a program does, in numbers: blocks by kind, length, bounding box, feed range."""
+"""What a program does, in numbers: blocks by kind, length, bounding box, feed range, and
+what happens between moves (dwell, pauses, tool changes, spindle, coolant)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from nurbsmotion.geometry import NurbsCurve
-from nurbsmotion.program.model import Program
+from nurbsmotion.program.model import EventKind, Program
 
 SAMPLES_PER_SPAN = 64
 
@@ -27,6 +28,12 @@ class ProgramSummary:
     feed_min_mm_min: float | None  # over blocks with a programmed feed (rapids excluded)
     feed_max_mm_min: float | None
     blocks_at_machine_feed: int  # rapids and YAML curves without feed_mm_min
+    events_by_kind: dict[str, int]  # dwell, pause, tool_change, spindle, coolant
+    dwell_s: float  # total G4 dwell
+    tools: tuple[int, ...]  # tools of the M6 tool changes, in order
+    requires_spindle: bool
+    requires_coolant: bool
+    exact_stops: int  # blocks that end at rest (G61, or before a dwell/pause/tool change)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -64,4 +71,15 @@ def summarize(program: Program) -> ProgramSummary:
         start_mm=triple(start), end_mm=triple(end),
         bbox_min_mm=triple(cloud.min(axis=0)), bbox_max_mm=triple(cloud.max(axis=0)),
         feed_min_mm_min=min(feeds) if feeds else None, feed_max_mm_min=max(feeds) if feeds else None,
-        blocks_at_machine_feed=len(program.blocks) - len(feeds))
+        blocks_at_machine_feed=len(program.blocks) - len(feeds),
+        events_by_kind=events_by_kind(program), dwell_s=float(sum(program.dwell_s_before().values())),
+        tools=tuple(e.tool for e in program.events if e.kind is EventKind.TOOL_CHANGE and e.tool is not None),
+        requires_spindle=program.requires_spindle, requires_coolant=program.requires_coolant,
+        exact_stops=sum(b.exact_stop for b in program.blocks))
+
+
+def events_by_kind(program: Program) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    for e in program.events:
+        counts[e.kind.value] = counts.get(e.kind.value, 0) + 1
+    return counts

@@ -457,8 +457,11 @@ def check_program_name(name: str) -> None:
 
 def config_dict(config: MachineConfig) -> dict[str, Any]:
     """The configuration a job ran with, every default filled in (config.json of a record)."""
-    out = dataclasses.asdict(config)
+    plain_axes = tuple(dataclasses.replace(a, od=None) for a in config.axes)  # the EDS as read: not a value
+    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes))
     out.pop("lines", None)
+    for axis in out["axes"]:
+        axis.pop("od", None)
     return out
 
 

@@ -137,12 +137,19 @@ class JobRecords:
 
     def __init__(self, data_dir: str | Path) -> None:
         self.root = Path(data_dir) / "jobs"
+        self._last_stamp_ms = 0  # folder stamps strictly increase, so names sort in submission order
+
+    def _next_stamp(self) -> datetime:
+        """Now to the millisecond, or 1 ms after the previous record's stamp if that is not earlier."""
+        stamp_ms = max(int(datetime.now().timestamp() * 1000), self._last_stamp_ms + 1)
+        self._last_stamp_ms = stamp_ms
+        return datetime.fromtimestamp(stamp_ms // 1000).replace(microsecond=stamp_ms % 1000 * 1000)
 
     def create(self, name: str, text: str) -> JobRecord:
         """A new job folder holding the program as submitted."""
         self.root.mkdir(parents=True, exist_ok=True)
         job_id = new_job_id()
-        now = datetime.now()
+        now = self._next_stamp()
         folder = self.root / f"{now:%Y%m%d-%H%M%S}.{now.microsecond // 1000:03d}-{job_id}"
         folder.mkdir()
         record = JobRecord(job_id, folder)

@@ -8,21 +8,31 @@ from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.eds import default_eds_path
 from nurbsmotion.sim.faults import FaultInjection, parse_fault_spec
 from nurbsmotion.sim.network import SimNetwork
-from nurbsmotion.sim.recording import SetpointRecord, SetpointRecorder, read_csv
+from nurbsmotion.sim.recording import (SetpointRecord, SetpointRecorder, SetpointSource, SyncRecord, SyncRecorder, read_csv,
+                                       read_sync_csv)
 from nurbsmotion.sim.servo import ServoModel
-from nurbsmotion.sim.stats import DriveStats
+from nurbsmotion.sim.stats import DriveStats, StreamReport, stream_report
+from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
 
 __all__ = [
     "AxisParameters",
     "Cia402Axis",
     "DriveStats",
     "FaultInjection",
+    "MissingSetpoint",
     "ServoModel",
     "SetpointRecord",
     "SetpointRecorder",
+    "SetpointSource",
     "SimDrive",
     "SimNetwork",
+    "StreamReport",
+    "SyncRecord",
+    "SyncRecorder",
+    "SyncSettings",
     "default_eds_path",
     "parse_fault_spec",
     "read_csv",
+    "read_sync_csv",
+    "stream_report",
 ]

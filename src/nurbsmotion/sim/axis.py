@@ -14,41 +14,43 @@ from dataclasses import dataclass
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, Mode, State
 from nurbsmotion.log import kv
-from nurbsmotion.sim.recording import SetpointRecorder
+from nurbsmotion.sim.eds import STANDARD_MODES
+from nurbsmotion.sim.recording import SetpointRecorder, SetpointSource, SyncRecorder
 from nurbsmotion.sim.servo import ServoModel
 from nurbsmotion.sim.statemachine import apply_controlword, quick_stop_stays_active
 from nurbsmotion.sim.stats import DriveStats
+from nurbsmotion.sim.timing import MissingSetpoint, SyncTiming
 
 log = logging.getLogger("nurbsmotion.sim.drive")
 
-SUPPORTED_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION))
+CYCLIC_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION))
+SW_SYNCHRONIZED = 1 << 8  # manufacturer specific in CiA 402; sync status as Nanotec's
+EMCY_PARAMETER_ERROR = 0x6320  # CiA 301 'parameter error': IP/CSP enabled without a cycle period
+EMCY_SYNC_LOSS = 0x8700  # CiA 402 'sync controller'
 FE_WINDOW_DISABLED = 0xFFFF_FFFF
 ERROR_HISTORY_LENGTH = 8
+DEFAULT_CYCLE_S = 1e-3  # servo cycle outside IP/CSP when no cycle period is configured
+MAX_EXTRAPOLATED_TICKS = 10_000  # a drive extrapolating longer has long tripped its following error
 STATES_WITH_VOLTAGE = (State.SWITCHED_ON, State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE, State.FAULT_REACTION_ACTIVE)
 
 
 class UnsupportedMode(ValueError):
-    """0x6060 written with a mode this drive does not have."""
+    """0x6060 written with a mode this drive does not have (not in 0x6502)."""
 
 
 @dataclass
 class AxisParameters:
     """The object-dictionary parameters the per-SYNC step uses (cached by the drive)."""
 
-    ip_period_s: float = 1e-3  # 0x60C2, the IP cycle
-    sync_period_s: float = 1e-3  # 0x1006, the SYNC cycle (0 -> 0x60C2)
+    cycle_period_s: float = 1e-3  # 0x60C2 (else 0x1006): the IP/CSP cycle; 0 = not configured
     fe_window_counts: int = 10000  # 0x6065; 0xFFFFFFFF disables the monitor
     fe_timeout_ms: int = 20  # 0x6066
     quick_stop_option: int = 2  # 0x605A
     quick_stop_decel_counts_s2: float = 1e7  # 0x6085
     limit_min_counts: int = 0  # 0x607D sub 1; min >= max disables the limits
     limit_max_counts: int = 0  # 0x607D sub 2
-
-    def period_s(self, mode: int) -> float:
-        """The cycle one SYNC stands for: 0x60C2 in IP, 0x1006 in CSP (0x60C2 if 0x1006 is 0)."""
-        if mode == Mode.INTERPOLATED_POSITION or self.sync_period_s <= 0:
-            return self.ip_period_s
-        return self.sync_period_s
+    modes: frozenset[int] = STANDARD_MODES  # 0x6502: what 0x6060 accepts
+    missing_setpoint: MissingSetpoint = MissingSetpoint.HOLD
 
 
 def error_register_bits(code: int) -> int:
@@ -85,9 +87,12 @@ class Cia402Axis:
         emit_emcy: Callable[[int, int], None],
         name: str,
         mode: int,
+        timeline: SyncRecorder | None = None,
     ) -> None:
         self.servo = servo
         self.recorder = recorder
+        self.timeline = timeline if timeline is not None else SyncRecorder(enabled=False)
+        self.sync_locked = False  # statusword bit 8, set by the drive's SYNC monitor
         self.stats = stats
         self.params = AxisParameters()
         self._emit_emcy = emit_emcy
@@ -118,17 +123,30 @@ class Cia402Axis:
         new_state, taken = apply_controlword(self.state, controlword, previous, self.params.quick_stop_option)
         if taken:
             self._change_state(new_state, taken)
+        self.refuse_cyclic_without_period()
         self._update_statusword()
 
     def set_mode(self, mode: int) -> None:
-        """0x6060; 0x6061 follows at once. Raises UnsupportedMode for modes other than 7, 8."""
-        if mode not in SUPPORTED_MODES:
+        """0x6060; 0x6061 follows at once. Raises UnsupportedMode for a mode not in 0x6502."""
+        if mode not in self.params.modes:
             raise UnsupportedMode(mode)
         if mode != self.mode_display:
             self._hold_position()
             log.info(kv("sim.mode", node=self.name, mode=mode))
         self.mode = self.mode_display = mode
+        self.refuse_cyclic_without_period()
         self._update_statusword()
+
+    def cycle_period_missing(self) -> bool:
+        """IP/CSP needs the cycle period (0x60C2, else 0x1006): without it a real drive cannot
+        interpolate between set-points, so it must not run."""
+        return self.mode_display in CYCLIC_MODES and self.params.cycle_period_s <= 0
+
+    def refuse_cyclic_without_period(self) -> None:
+        """OPERATION ENABLED in IP/CSP with no cycle period configured: fault 0x6320."""
+        if self.state is State.OPERATION_ENABLED and self.cycle_period_missing():
+            log.warning(kv("sim.no_cycle_period", node=self.name, mode=self.mode_display))
+            self.raise_fault(EMCY_PARAMETER_ERROR)
 
     def set_target_position(self, value: int) -> None:
         """0x607A, the CSP set-point."""
@@ -165,6 +183,7 @@ class Cia402Axis:
         the last SYNC, whatever its order in the RPDO relative to the controlword)."""
         self.servo.hold(self.servo.actual)
         self._demand = self.servo.actual
+        self._demand_step = 0.0  # last set-point step, continued when extrapolating
         self.following_error = 0
         self._fe_cycles = 0
 
@@ -177,45 +196,100 @@ class Cia402Axis:
         return self.mode_display == Mode.INTERPOLATED_POSITION and bool(self.controlword & c.CW_ENABLE_IP)
 
     # ------------------------------------------------------------------ per SYNC
-    def step(self, sync_index: int, sync_counter: int) -> None:
-        """One SYNC: take the new set-point (recorded), move, check the following error."""
-        period_s = self.params.period_s(self.mode_display)
+    def run_missed_cycles(self, timing: SyncTiming) -> None:
+        """The cycles that ran without a SYNC before this one (``timing.missed_ticks``), each
+        holding or extrapolating; called before the SYNC's RPDO data takes effect."""
+        if self.state is not State.OPERATION_ENABLED:  # the quick-stop ramp advances per SYNC only
+            return
+        for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
+            self._run_cycle(False)
+
+    def step(self, sync_index: int, sync_counter: int, timing: SyncTiming | None = None) -> None:
+        """This SYNC's cycle (after ``run_missed_cycles``): take the new set-point (recorded),
+        move one cycle, check the following error."""
+        if timing is None:
+            timing = SyncTiming(0.0, self.params.cycle_period_s, 0)
         csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
         fresh = self._fresh_target if csp else self._fresh_ip
         self._fresh_target = self._fresh_ip = False
+        source, demand = self._run_cycle(fresh)
+        if source is SetpointSource.FRESH:  # recorded even if this cycle's following error faults the drive
+            self.recorder.append(sync_index, self.mode_display, demand, self.position_actual, sync_counter,
+                                 _ns(timing.time_s))
+        self.timeline.append(sync_index, _ns(timing.time_s), _ns(timing.interval_s), timing.missed_ticks, int(source),
+                             demand, self.position_actual, self.following_error, sync_counter)
+        self._update_statusword()
+
+    def _ticks_to_simulate(self, missed: int) -> int:
+        """Holding, the motor rests after the lag line has drained: simulating more changes
+        nothing (a long pause between jobs costs no time). Extrapolating moves every tick."""
+        if self.params.missing_setpoint is MissingSetpoint.HOLD:
+            return min(missed, self.servo.lag_cycles + 2)
+        return min(missed, MAX_EXTRAPOLATED_TICKS)
+
+    def _run_cycle(self, fresh: bool) -> tuple[SetpointSource, int]:
+        """One cycle of the drive's position loop (one cycle period: the drive interpolates
+        each set-point step over its cycle, however late the next SYNC comes); returns where
+        its set-point came from and the demand it followed (counts)."""
+        inactive = SetpointSource.INACTIVE
         if self.state is State.OPERATION_ENABLED:
-            if fresh and self.setpoint_active():
-                setpoint = self.target_position if csp else self.ip_setpoint
-                if not self._within_limits(setpoint):
-                    self.stats.setpoints_refused += 1
-                    self.raise_fault(EmcyCode.SOFTWARE_LIMIT)
-                    return
-                self._demand = setpoint
-                self.position_actual = int(round(self.servo.step(setpoint, period_s)))
-                self.recorder.append(sync_index, self.mode_display, setpoint, self.position_actual, sync_counter)
+            if self.cycle_period_missing():
+                self.raise_fault(EMCY_PARAMETER_ERROR)
+                return inactive, int(round(self._demand))
+            if not self.setpoint_active():
+                self.stats.setpoints_ignored += fresh
+                self._move(self._demand)
+                self._check_following_error()
+                return inactive, int(round(self._demand))
+            source, demand = self._cycle_demand(fresh)
+            if not self._within_limits(int(round(demand))):
+                self.stats.setpoints_refused += 1
+                self.raise_fault(EmcyCode.SOFTWARE_LIMIT)
+                return inactive, int(round(self._demand))
+            self._demand_step = demand - self._demand if source is SetpointSource.FRESH else self._demand_step
+            self._demand = demand
+            self._move(demand)
+            if source is SetpointSource.FRESH:
                 self.stats.setpoints_applied += 1
             else:
-                self.stats.setpoints_ignored += fresh
-                self.position_actual = int(round(self.servo.step(self._demand, period_s)))
-            self._check_following_error(period_s)
-        elif self.state is State.QUICK_STOP_ACTIVE:
-            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, period_s)
+                self.stats.setpoints_missing += 1
+            self._check_following_error()
+            return source, int(round(demand))
+        if self.state is State.QUICK_STOP_ACTIVE:  # the ramp advances per SYNC only (docs/sim.md)
+            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self._cycle_s())
             self._demand = self.servo.actual
             self.position_actual = int(round(self.servo.actual))
             if stopped and not quick_stop_stays_active(self.params.quick_stop_option):
                 self._change_state(State.SWITCH_ON_DISABLED, [12])
         else:
             self.stats.setpoints_ignored += fresh
-        self._update_statusword()
+        return inactive, int(round(self._demand))
+
+    def _cycle_demand(self, fresh: bool) -> tuple[SetpointSource, float]:
+        """The new set-point, else the last one held or its step continued (drive setting)."""
+        if fresh:
+            csp = self.mode_display == Mode.CYCLIC_SYNC_POSITION
+            return SetpointSource.FRESH, float(self.target_position if csp else self.ip_setpoint)
+        if self.params.missing_setpoint is MissingSetpoint.EXTRAPOLATE:
+            return SetpointSource.EXTRAPOLATED, self._demand + self._demand_step
+        return SetpointSource.HELD, self._demand
+
+    def _move(self, demand: float) -> None:
+        self.position_actual = int(round(self.servo.step(demand, self._cycle_s())))
+
+    def _cycle_s(self) -> float:
+        """The cycle the servo steps by: the IP/CSP cycle period (never 0 while IP/CSP runs),
+        1 ms in other modes when none is configured."""
+        return self.params.cycle_period_s if self.params.cycle_period_s > 0 else DEFAULT_CYCLE_S
 
     def _within_limits(self, setpoint: int) -> bool:
         """0x607D: min <= set-point <= max (limits disabled while min >= max)."""
         low, high = self.params.limit_min_counts, self.params.limit_max_counts
         return low >= high or low <= setpoint <= high
 
-    def _check_following_error(self, period_s: float) -> None:
+    def _check_following_error(self) -> None:
         """0x60F4 = demand - actual; fault 0x8611 when |e| > 0x6065 for longer than 0x6066 ms
-        (each SYNC outside the window counts one period)."""
+        (the drive counts its own cycles: each one outside the window counts one period)."""
         error = int(round(self._demand - self.servo.actual))
         self.following_error = error
         window = self.params.fe_window_counts
@@ -223,8 +297,12 @@ class Cia402Axis:
             self._fe_cycles = 0
             return
         self._fe_cycles += 1
-        if self._fe_cycles * period_s * 1000.0 > self.params.fe_timeout_ms:
+        if self._fe_cycles * self.params.cycle_period_s * 1000.0 > self.params.fe_timeout_ms:
             self.raise_fault(EmcyCode.FOLLOWING_ERROR, following_error=True)
+
+    def refresh_statusword(self) -> None:
+        """Recompute the statusword after a change the drive made (e.g. sync lock)."""
+        self._update_statusword()
 
     def _update_statusword(self) -> None:
         word = c.STATUSWORD_OF_STATE[self.state] | c.SW_REMOTE
@@ -234,6 +312,8 @@ class Cia402Axis:
             word |= c.SW_IP_ACTIVE
         if self._fe_flag:
             word |= c.SW_FOLLOWING_ERROR
+        if self.sync_locked:
+            word |= SW_SYNCHRONIZED
         self.statusword = word
 
     # ------------------------------------------------------------------ faults
@@ -254,3 +334,8 @@ class Cia402Axis:
         self._update_statusword()
         self._emit_emcy(code, self.error_register)
         log.warning(kv("sim.fault", node=self.name, code=f"0x{code:04X}"))
+
+
+def _ns(time_s: float) -> int:
+    """Seconds -> integer ns for the recordings (-1 for 'none', e.g. no interval yet)."""
+    return int(round(time_s * 1e9)) if time_s == time_s else -1

@@ -32,22 +32,34 @@ from canopen.sdo import SdoAbortedError
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
+from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import pdo as pdo_layout
-from nurbsmotion.sim.axis import Cia402Axis, UnsupportedMode
-from nurbsmotion.sim.eds import default_eds_path
+from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
+from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
-from nurbsmotion.sim.recording import SetpointRecorder
+from nurbsmotion.sim.recording import SetpointRecorder, SyncRecorder
+from nurbsmotion.sim.rpdo_timers import RpdoTimers
 from nurbsmotion.sim.servo import ServoModel
 from nurbsmotion.sim.stats import DriveStats
+from nurbsmotion.sim.timing import SyncMonitor, SyncSettings
 
 log = logging.getLogger(__name__)
 
 EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
+ABORT_WRITE_ONLY = 0x06010001
+ABORT_PARAMETER_INCOMPATIBLE = 0x06040043
 IP_LINEAR = 0  # 0x60C0 sub-mode
-DEFAULT_PERIOD_S = 1e-3  # if 0x60C2 is 0
+SYNC_WINDOW_LENGTH = 0x1007  # µs after SYNC in which synchronous RPDOs count (0 = no window)
+SYNC_COUNTER_OVERFLOW = 0x1019  # 0 = SYNC without counter, 2..240 = counter 1..value
+EMCY_SYNC_LENGTH = 0x8240  # CiA 301: unexpected SYNC data length
+EMCY_RPDO_TIMEOUT = 0x8250  # CiA 301: RPDO time-out
 TICK_MAX_S = 0.05  # the ticker looks at a drive at least this often
+RPDO_EVENT_TIMER_SUB = 5  # 0x14xx:05, ms: deadline for the next RPDO (0 = none)
+FE_WINDOW_DISABLED = 0xFFFF_FFFF  # no 0x6065: no following-error monitor
+DEFAULT_QUICK_STOP_OPTION = 2  # no 0x605A: CiA 402 default (quick-stop ramp, then disabled)
+DEFAULT_QUICK_STOP_DECEL = math.inf  # no 0x6085: the drive stops at once
 _FOREVER = math.inf
 
 
@@ -76,6 +88,19 @@ class _DriveNode(canopen.LocalNode):
         self.add_write_callback(drive._before_sdo_write)
         self.add_read_callback(drive._on_sdo_read)
 
+    def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
+        """As LocalNode, but an entry never written holds its EDS value, or 0 if the EDS gives
+        none (``eds.initial_data``), instead of an abort."""
+        obj = self._find_object(index, subindex)
+        if check_readable and not obj.readable:
+            raise SdoAbortedError(ABORT_WRITE_ONLY)
+        for callback in self._read_callbacks:
+            result = callback(index=index, subindex=subindex, od=obj)
+            if result is not None:
+                return obj.encode_raw(result)
+        stored = self.data_store.get(index, {}).get(subindex)
+        return stored if stored is not None else eds_rules.initial_data(obj)
+
     def set_data(self, index: int, subindex: int, data: bytes, check_writable: bool = False) -> None:
         super().set_data(index, subindex, data, check_writable)
         if check_writable:  # an SDO write from the bus
@@ -103,13 +128,18 @@ class _DriveNode(canopen.LocalNode):
 
 
 class SimDrive:
-    """A simulated CiA-402 servo drive (IP and CSP) with node id ``node_id``.
+    """A simulated CiA-402 servo drive with node id ``node_id``, described by ``eds`` (any
+    vendor EDS/DCF; default the packaged one) and exactly as capable as that description.
 
     Create it, then :meth:`attach` it to a connected ``canopen.Network`` (``SimNetwork`` does
     both). ``lag_cycles`` and ``max_velocity_counts_s`` set the servo model; ``identity``
     (vendor id, product code) overrides 0x1018 sub 1/2; ``parameters`` {(index, subindex):
     value} are the drive's stored values, restored instead of the EDS defaults on every reset;
-    ``record`` keeps every applied set-point in ``recorder``.
+    ``record`` keeps every applied set-point in ``recorder`` and every SYNC in ``timeline``.
+    ``sync`` (:class:`SyncSettings`) sets hold/extrapolate and the sync-loss fault.
+    ``clock`` (seconds, monotonic) is the drive's time: without one the drive uses the
+    frames' receive timestamps (kernel timestamps on SocketCAN) and ``time.monotonic``; with
+    one, every event is stamped by calling it, so a test decides exactly when a SYNC came.
     """
 
     def __init__(
@@ -123,7 +153,8 @@ class SimDrive:
         parameters: dict[tuple[int, int], int] | None = None,
         record: bool = True,
         name: str | None = None,
-        clock: Callable[[], float] = time.monotonic,
+        sync: SyncSettings | None = None,
+        clock: Callable[[], float] | None = None,
     ) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} outside 1..127")
@@ -138,13 +169,24 @@ class SimDrive:
             self._stored[(c.IDENTITY, 2)] = struct.pack("<I", identity[1])
         self.servo = ServoModel(lag_cycles, max_velocity_counts_s)
         self.recorder = SetpointRecorder(enabled=record)
+        self.timeline = SyncRecorder(enabled=record)
         self.stats = DriveStats()
-        self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode())
+        self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode(),
+                               self.timeline)
+        self.axis.params.missing_setpoint = (sync or SyncSettings()).missing_setpoint
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
         self.silent = False  # power loss: nothing in, nothing out
-        self._clock = clock
-        self._t0 = clock()
+        self._clock = clock if clock is not None else time.monotonic
+        self._frame_times = clock is None  # stamp SYNC/RPDO with the frames' receive time
+        self._wall_to_clock_s = time.monotonic() - time.time()
+        self._t0 = self._clock()
+        self._sync_monitor = SyncMonitor(sync or SyncSettings())
+        self._rpdo_timers = RpdoTimers()
+        self._sync_window_s = 0.0
+        self._sync_counter_overflow: int | None = None  # None: the EDS has no 0x1019
+        self._last_sync_counter: int | None = None
+        self._period_source = eds_rules.cycle_period_source(self.od)
         self._lock = threading.RLock()
         self._subscriptions: list[tuple[int, Callable[..., None]]] = []
         self._sync_cob: int | None = None
@@ -211,8 +253,22 @@ class SimDrive:
 
     @property
     def period_s(self) -> float:
-        """The cycle the servo model assumes now: 0x60C2 in IP, 0x1006 in CSP."""
-        return self.axis.params.period_s(self.axis.mode_display)
+        """The drive's IP/CSP cycle: 0x60C2 if the EDS has it, else 0x1006, else the measured
+        SYNC interval; 0 when not configured (then IP/CSP cannot be enabled)."""
+        return self.axis.params.cycle_period_s
+
+    @property
+    def sync_settings(self) -> SyncSettings:
+        return self._sync_monitor.settings
+
+    @property
+    def sync_locked(self) -> bool:
+        """Statusword bit 8: the drive's cycle is locked onto SYNC."""
+        return self.axis.sync_locked
+
+    def now(self) -> float:
+        """The drive's clock (s)."""
+        return self._clock()
 
     @property
     def sync_index(self) -> int:
@@ -229,6 +285,7 @@ class SimDrive:
             self._subscribe(c.COB_NMT, self._on_nmt)
             self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
             self._t0 = self._clock()
+            self._wall_to_clock_s = time.monotonic() - time.time()
             self._boot(reset_application=True)
             for fault in self._deferred:
                 self._apply_injection(fault)
@@ -273,10 +330,12 @@ class SimDrive:
             self.silent = False
             self._boot(reset_application=True)
 
-    def tick(self, now: float) -> float:
-        """Send a due heartbeat, fire due timed faults, watch consumed heartbeats; returns
-        the time this should be called again."""
+    def tick(self, now: float | None = None) -> float:
+        """Send a due heartbeat, fire due timed faults, watch consumed heartbeats, SYNC and
+        RPDO deadlines; returns the time (drive clock) this should be called again."""
         with self._lock:
+            if now is None:
+                now = self._clock()
             if self.network is None:
                 return now + TICK_MAX_S
             while self._time_faults and self._t0 + self._time_faults[0][0] <= now:
@@ -290,12 +349,32 @@ class SimDrive:
                 if not self.silent:
                     log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer))
                     self.axis.raise_fault(EmcyCode.HEARTBEAT)
-            deadline = min(now + TICK_MAX_S, self._heartbeat_consumer.next_deadline())
+            self._watch_sync_and_rpdos(now)
+            deadline = min(now + TICK_MAX_S, self._heartbeat_consumer.next_deadline(),
+                           self._sync_monitor.loss_deadline(self.period_s), self._rpdo_timers.next_deadline())
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
                 deadline = min(deadline, self._t0 + self._time_faults[0][0])
             return deadline
+
+    def _watch_sync_and_rpdos(self, now: float) -> None:
+        """Sync loss (no SYNC for loss_periods, while IP/CSP is running: EMCY 0x8700, fault)
+        and RPDO event timers (0x14xx:05 ran out: EMCY 0x8250, fault)."""
+        if self.silent or self.nmt_state != NmtState.OPERATIONAL:
+            return
+        if self._sync_monitor.lost(now, self.period_s):
+            self.axis.sync_locked = False
+            if self.axis.setpoint_active():
+                self.stats.sync_losses += 1
+                log.warning(kv("sim.sync_lost", node=self.node_id, periods=self.sync_settings.loss_periods))
+                self.axis.raise_fault(EMCY_SYNC_LOSS)
+            else:
+                self.axis.refresh_statusword()
+        for number in self._rpdo_timers.expired(now):
+            self.stats.rpdo_timeouts += 1
+            log.warning(kv("sim.rpdo_timeout", node=self.node_id, rpdo=number))
+            self.axis.raise_fault(EMCY_RPDO_TIMEOUT)
 
     def value(self, index: int, subindex: int = 0) -> Any:
         """An object's current value, as an SDO upload would read it."""
@@ -306,20 +385,30 @@ class SimDrive:
         """Write the applied set-points as CSV (see ``recording``)."""
         return self.recorder.write_csv(path)
 
+    def write_timeline(self, path: str | Path) -> Path:
+        """Write the per-SYNC timeline as CSV (see ``recording``)."""
+        return self.timeline.write_csv(path)
+
     # ------------------------------------------------------------------ boot and NMT
     def _encode_parameters(self, parameters: dict[tuple[int, int], int]) -> dict[tuple[int, int], bytes]:
         encoded = {}
         for (index, subindex), value in parameters.items():
-            var = pdo_layout.find_variable(self.od, index, subindex)
+            var = find_variable(self.od, index, subindex)
             if var is None:
                 raise ValueError(f"node {self.node_id}: no object 0x{index:04X} sub {subindex} in {self.eds_path}")
             encoded[(index, subindex)] = var.encode_raw(value)
         return encoded
 
     def _stored_mode(self) -> int:
-        var = self.od[c.MODES_OF_OPERATION]
+        """0x6060 after a reset: the stored value, the EDS value or default, else 0 (no mode)."""
+        var = find_variable(self.od, c.MODES_OF_OPERATION, 0)
+        if var is None:
+            return 0
         stored = self._stored.get((c.MODES_OF_OPERATION, 0))
-        return int(var.decode_raw(stored)) if stored else int(var.default)
+        if stored:
+            return int(var.decode_raw(stored))
+        value = var.value if var.value is not None else var.default
+        return int(value or 0)
 
     def _init_injections(self) -> None:
         self._ignore_syncs: float = 0
@@ -375,6 +464,9 @@ class SimDrive:
         if new == NmtState.OPERATIONAL:
             self._sync_index = 0
             self._pending.clear()
+            self._sync_monitor.reset()
+            self._rpdo_timers.reset()
+            self._last_sync_counter = None
             for slot in self._tpdos:
                 slot.sync_count = 0
                 slot.last_data = b""
@@ -386,10 +478,16 @@ class SimDrive:
             self._send(c.COB_HEARTBEAT + self.node_id, bytes([self.nmt_state]))
             self.stats.heartbeats_sent += 1
 
+    def _consumer_entries(self) -> list[int]:
+        """The 0x1016 entries (none if the EDS has no 0x1016)."""
+        if c.CONSUMER_HEARTBEAT_TIME not in self.od:
+            return []
+        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0]
+        return [self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in subs]
+
     def _configure_heartbeat_consumer(self) -> None:
         """Watch the producers listed in 0x1016 (EMCY 0x8130 and fault when one goes silent)."""
-        count = self._od_value(c.CONSUMER_HEARTBEAT_TIME, 0)
-        self._heartbeat_consumer.configure([self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, count + 1)])
+        self._heartbeat_consumer.configure(self._consumer_entries())
         for cob in self._consumed_cobs:
             self._unsubscribe(cob, self._on_peer_heartbeat)
         self._consumed_cobs = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
@@ -427,26 +525,52 @@ class SimDrive:
 
     # ------------------------------------------------------------------ parameters
     def _od_value(self, index: int, subindex: int = 0) -> Any:
-        var = pdo_layout.find_variable(self.od, index, subindex)
+        var = find_variable(self.od, index, subindex)
         assert var is not None, (hex(index), subindex)
         return var.decode_raw(self.node.get_data(index, subindex))
+
+    def _od_value_or(self, index: int, subindex: int, missing: Any) -> Any:
+        """An object's value, ``missing`` if the EDS does not have it."""
+        if find_variable(self.od, index, subindex) is None:
+            return missing
+        return self._od_value(index, subindex)
+
+    def _frame_time(self, timestamp: float) -> float:
+        """When a frame arrived, on the drive's clock: its receive timestamp (wall clock,
+        kernel time on SocketCAN) unless a clock was injected."""
+        if self._frame_times and timestamp > 0:
+            return timestamp + self._wall_to_clock_s
+        return self._clock()
+
+    def _cycle_period_s(self) -> float:
+        """0x60C2 (value·10^exponent s) if the EDS has it, else 0x1006 (µs), else the
+        measured SYNC interval (a drive that can only lock onto SYNC)."""
+        if self._period_source == c.IP_TIME_PERIOD:
+            value = self._od_value(c.IP_TIME_PERIOD, 1)
+            exponent = self._od_value_or(c.IP_TIME_PERIOD, 2, -3)
+            return max(value * 10.0**exponent, 0.0)
+        if self._period_source == c.COMM_CYCLE_PERIOD:
+            return self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
+        return self._sync_monitor.measured_period_s
 
     def _load_parameters(self) -> None:
         """Cache the parameters SYNC handling uses (after boot and every SDO write)."""
         params = self.axis.params
-        value, exponent = self._od_value(c.IP_TIME_PERIOD, 1), self._od_value(c.IP_TIME_PERIOD, 2)
-        ip_period_s = value * 10.0**exponent
-        params.ip_period_s = ip_period_s if ip_period_s > 0 else DEFAULT_PERIOD_S
-        params.sync_period_s = self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
-        params.fe_window_counts = self._od_value(c.FOLLOWING_ERROR_WINDOW)
-        params.fe_timeout_ms = self._od_value(c.FOLLOWING_ERROR_TIMEOUT)
-        params.quick_stop_option = self._od_value(c.QUICK_STOP_OPTION)
-        params.quick_stop_decel_counts_s2 = float(self._od_value(c.QUICK_STOP_DECELERATION))
-        params.limit_min_counts = self._od_value(c.SOFTWARE_POSITION_LIMIT, 1)
-        params.limit_max_counts = self._od_value(c.SOFTWARE_POSITION_LIMIT, 2)
-        self._emcy_cob = self._od_value(c.EMCY_COB_ID)
-        self._heartbeat_period_s = self._od_value(c.PRODUCER_HEARTBEAT_TIME) / 1000.0
-        sync_cob = self._od_value(c.SYNC_COB_ID) & 0x7FF
+        value = self._od_value_or
+        params.cycle_period_s = self._cycle_period_s()
+        params.fe_window_counts = value(c.FOLLOWING_ERROR_WINDOW, 0, FE_WINDOW_DISABLED)
+        params.fe_timeout_ms = value(c.FOLLOWING_ERROR_TIMEOUT, 0, 0)
+        params.quick_stop_option = value(c.QUICK_STOP_OPTION, 0, DEFAULT_QUICK_STOP_OPTION)
+        params.quick_stop_decel_counts_s2 = float(value(c.QUICK_STOP_DECELERATION, 0, DEFAULT_QUICK_STOP_DECEL))
+        params.limit_min_counts = value(c.SOFTWARE_POSITION_LIMIT, 1, 0)
+        params.limit_max_counts = value(c.SOFTWARE_POSITION_LIMIT, 2, 0)
+        params.modes = eds_rules.supported_modes(value(c.SUPPORTED_DRIVE_MODES, 0, 0),
+                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0))
+        self._sync_window_s = value(SYNC_WINDOW_LENGTH, 0, 0) * 1e-6
+        self._sync_counter_overflow = value(SYNC_COUNTER_OVERFLOW, 0, None)
+        self._emcy_cob = value(c.EMCY_COB_ID, 0, pdo_layout.COB_ID_INVALID_BIT)
+        self._heartbeat_period_s = value(c.PRODUCER_HEARTBEAT_TIME, 0, 0) / 1000.0
+        sync_cob = value(c.SYNC_COB_ID, 0, c.COB_SYNC) & 0x7FF
         if sync_cob != self._sync_cob and self.network is not None:
             if self._sync_cob is not None:
                 self._unsubscribe(self._sync_cob, self._on_sync)
@@ -480,7 +604,12 @@ class SimDrive:
         self._check_refusal(index, subindex)
         value = od.decode_raw(data)
         pdo_layout.check_parameter_write(self.od, self._od_value, index, subindex, value)
-        if index == c.PREDEFINED_ERROR_FIELD:
+        eds_rules.check_range(od, value)
+        if index == c.CONSUMER_HEARTBEAT_TIME and subindex > 0:
+            self._check_consumer_entry(subindex, value)
+        elif index == SYNC_COUNTER_OVERFLOW:
+            self._check_sync_counter_overflow(value)
+        elif index == c.PREDEFINED_ERROR_FIELD:
             if subindex != 0 or value != 0:
                 raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
             self.axis.error_history.clear()
@@ -500,6 +629,26 @@ class SimDrive:
             self._configure_heartbeat_consumer()
         else:
             self._load_parameters()
+            self.axis.refuse_cyclic_without_period()
+
+    def _check_consumer_entry(self, subindex: int, value: int) -> None:
+        """CiA 301 7.5.2.33: two 0x1016 entries with the same producer and a time > 0 are
+        refused (0x06040043)."""
+        producer = (value >> 16) & 0xFF
+        if producer == 0 or value & 0xFFFF == 0:
+            return
+        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0 and n != subindex]
+        for n in subs:
+            other = self._od_value(c.CONSUMER_HEARTBEAT_TIME, n)
+            if (other >> 16) & 0xFF == producer and other & 0xFFFF:
+                raise SdoAbortedError(ABORT_PARAMETER_INCOMPATIBLE)
+
+    def _check_sync_counter_overflow(self, value: int) -> None:
+        """CiA 301 7.5.2.22: 0x1019 changes only while 0x1006 is 0 (0x08000022); 0 or 2..240."""
+        if self._od_value_or(c.COMM_CYCLE_PERIOD, 0, 0) != 0:
+            raise SdoAbortedError(pdo_layout.ABORT_DEVICE_STATE)
+        if value == 1 or value > 240:
+            raise SdoAbortedError(eds_rules.ABORT_VALUE_INVALID)
 
     def _check_refusal(self, index: int, subindex: int) -> None:
         for refusal in self._sdo_refusals:
@@ -513,12 +662,18 @@ class SimDrive:
     # ------------------------------------------------------------------ PDO layouts
     def _mapping(self, map_index: int) -> list[int]:
         count = self._od_value(map_index, 0)
-        return [self._od_value(map_index, n) for n in range(1, count + 1)]
+        return [self._od_value_or(map_index, n, 0) for n in range(1, count + 1)]
 
-    def _layout(self, comm_index: int, map_index: int, number: int) -> pdo_layout.PdoLayout:
-        return pdo_layout.build_layout(
-            self.od, number, self._od_value(comm_index, 1), self._od_value(comm_index, 2), self._mapping(map_index)
-        )
+    def _layout(self, comm_index: int, number: int) -> pdo_layout.PdoLayout:
+        cob_id = self._od_value_or(comm_index, 1, pdo_layout.COB_ID_INVALID_BIT)
+        transmission_type = self._od_value_or(comm_index, 2, 255)
+        mapping = self._mapping(comm_index + pdo_layout.MAPPING_OFFSET)
+        return pdo_layout.build_layout(self.od, number, cob_id, transmission_type, mapping)
+
+    def _pdo_numbers(self, comm_range: range) -> list[tuple[int, int]]:
+        """(number, communication index) of the PDOs the EDS has (both objects present)."""
+        return [(index - comm_range.start + 1, index) for index in comm_range
+                if index in self.od and index + pdo_layout.MAPPING_OFFSET in self.od]
 
     def _rebuild_all_pdos(self) -> None:
         """Recompute every PDO's struct, setters/getters and subscription (after a remap)."""
@@ -526,16 +681,20 @@ class SimDrive:
             self._unsubscribe(cob_id, self._on_rpdo)
         self._rpdo_by_cob.clear()
         self._tpdos = []
-        for n in range(1, 5):
-            layout = self._layout(0x1400 + n - 1, 0x1600 + n - 1, n)
+        event_timers: dict[int, float] = {}
+        for number, comm in self._pdo_numbers(pdo_layout.RPDO_COMM_RANGE):
+            layout = self._layout(comm, number)
             if layout.enabled and layout.keys:
                 if layout.cob_id not in self._rpdo_by_cob and self.network is not None:
                     self._subscribe(layout.cob_id, self._on_rpdo)
                 self._rpdo_by_cob[layout.cob_id] = _RpdoSlot(layout, [self._setter(key) for key in layout.keys])
-            layout = self._layout(0x1800 + n - 1, 0x1A00 + n - 1, n)
+                event_timers[number] = self._od_value_or(comm, RPDO_EVENT_TIMER_SUB, 0) / 1000.0
+        for number, comm in self._pdo_numbers(pdo_layout.TPDO_COMM_RANGE):
+            layout = self._layout(comm, number)
             if layout.enabled and layout.keys:
                 message = can.Message(arbitration_id=layout.cob_id, is_extended_id=False, data=bytearray(layout.size))
                 self._tpdos.append(_TpdoSlot(layout, message, [self._getter(key) for key in layout.keys]))
+        self._rpdo_timers.configure(event_timers)
         self._pending.clear()
         self._load_parameters()
 
@@ -543,7 +702,7 @@ class SimDrive:
         live = self._live_write.get(key)
         if live is not None:
             return live
-        var = pdo_layout.find_variable(self.od, *key)
+        var = find_variable(self.od, *key)
         assert var is not None
         store = self.node.data_store
 
@@ -576,6 +735,11 @@ class SimDrive:
                 self.stats.rpdo_length_errors += 1
                 self._send_emcy(EmcyCode.PDO_LENGTH, self.axis.error_register)
                 return
+            now = self._frame_time(timestamp)
+            if slot.layout.synchronous and self._outside_sync_window(now):
+                self.stats.rpdos_outside_window += 1
+                return
+            self._rpdo_timers.received(slot.layout.number, now)
             values = slot.layout.codec.unpack_from(data)
             if slot.layout.synchronous:
                 if slot.layout.number in self._pending:
@@ -591,17 +755,22 @@ class SimDrive:
             except SdoAbortedError:
                 self.stats.pdo_values_refused += 1
 
+    def _outside_sync_window(self, now: float) -> bool:
+        """CiA 301 0x1007: a synchronous RPDO later than the window after SYNC is discarded."""
+        last_sync = self._sync_monitor.last_sync_s
+        return self._sync_window_s > 0 and last_sync is not None and now - last_sync > self._sync_window_s
+
     def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
         """CiA 301 SYNC: apply RPDO data received since the last SYNC, move, send TPDOs."""
         with self._lock:
             if self.silent or self.nmt_state != NmtState.OPERATIONAL:
                 return
             try:
-                self._handle_sync(data[0] if data else -1)
+                self._handle_sync(data, self._frame_time(timestamp))
             finally:
                 self.stats.syncs += 1  # counted once the SYNC's TPDOs are out
 
-    def _handle_sync(self, sync_counter: int) -> None:
+    def _handle_sync(self, data: bytes, now: float) -> None:
         self._sync_index += 1
         while self._sync_faults and self._sync_faults[0][0] <= self._sync_index:
             self._apply_injection(self._sync_faults.pop(0)[2])
@@ -611,12 +780,40 @@ class SimDrive:
             self._ignore_syncs -= 1
             self.stats.syncs_ignored += 1
             return
+        sync_counter = self._check_sync_counter(data)
+        timing = self._sync_monitor.on_sync(now, self.period_s)
+        if self._period_source is None:
+            self._load_parameters()  # the cycle is the measured SYNC interval
+        if timing.missed_ticks:
+            self.stats.syncs_late += 1
+            self.stats.ticks_missed += timing.missed_ticks
+        self.axis.sync_locked = self._sync_monitor.locked
+        self.axis.run_missed_cycles(timing)  # they ran before this SYNC: with the old RPDO data
         if self._pending:
             for setters, values in self._pending.values():
                 self._apply_values(setters, values)
             self._pending.clear()
-        self.axis.step(self._sync_index, sync_counter)
+        self.axis.step(self._sync_index, sync_counter, timing)
         self._send_tpdos()
+
+    def _check_sync_counter(self, data: bytes) -> int:
+        """The SYNC counter byte (-1 without). With 0x1019 in the EDS the length must fit it
+        (0: no data, else 1 byte; EMCY 0x8240 otherwise) and the counter must run 1..0x1019
+        without a jump (a jump means a SYNC was lost on the way)."""
+        counter = data[0] if data else -1
+        overflow = self._sync_counter_overflow
+        if overflow is None:
+            return counter
+        if len(data) != (1 if overflow > 0 else 0):
+            self.stats.sync_length_errors += 1
+            self._send_emcy(EMCY_SYNC_LENGTH, self.axis.error_register)
+            return counter
+        if overflow > 0:
+            last, self._last_sync_counter = self._last_sync_counter, counter
+            if last is not None and counter != last % overflow + 1:
+                self.stats.sync_counter_jumps += 1
+                log.warning(kv("sim.sync_counter_jump", node=self.node_id, previous=last, counter=counter))
+        return counter
 
     def _send_tpdos(self) -> None:
         """TPDOs of this SYNC: type 1..240 every n-th SYNC; 0, 254, 255 when the data

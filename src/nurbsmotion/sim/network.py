@@ -16,6 +16,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
+from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
 
@@ -23,22 +24,7 @@ log = logging.getLogger(__name__)
 NOTIFIER_CYCLE_S = 0.1
 
 
-MODE_OF_AXIS = {"ip": 7, "csp": 8}
 UNLIMITED_VELOCITY_COUNTS_S = math.inf
-
-
-def period_as_value_exponent(period_s: float) -> tuple[int, int]:
-    """0x60C2 encoding of a period: value (UINT8) * 10**exponent s; exact with the smallest
-    value if possible (1 ms = 1e-3), else the most precise."""
-    for exponent in range(0, -7, -1):
-        value = round(period_s / 10.0**exponent)
-        if 1 <= value <= 255 and abs(value * 10.0**exponent - period_s) <= 1e-12:
-            return value, exponent
-    for exponent in range(-6, 1):  # not exact: the closest value that fits
-        value = round(period_s / 10.0**exponent)
-        if 1 <= value <= 255:
-            return value, exponent
-    raise ValueError(f"period {period_s} s cannot be encoded in 0x60C2")
 
 
 class DriveSetupError(ValueError):
@@ -82,25 +68,20 @@ class SimNetwork:
 
     @classmethod
     def for_machine(
-        cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True
+        cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True,
+        sync: SyncSettings | None = None,
     ) -> "SimNetwork":
         """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
-        bus.interface/channel/bitrate, cycle_period_s, axes[].name/node_id/mode/eds/identity).
+        bus.interface/channel/bitrate, axes[].name/node_id/eds/identity).
 
-        Each drive is commissioned for the machine: its stored 0x6060 is the axis mode and
-        its stored 0x1006 / 0x60C2 the machine cycle; a master still writes what it needs.
+        Each drive is its EDS straight out of the box (plus the axis identity in 0x1018):
+        mode, cycle period and everything else are what the master writes, so a missing
+        write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive.
         """
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
-        value, exponent = period_as_value_exponent(machine.cycle_period_s)
         for axis_index, axis in enumerate(machine.axes):
             identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
-            parameters = {
-                (0x6060, 0): MODE_OF_AXIS[axis.mode],
-                (0x1006, 0): int(round(machine.cycle_period_s * 1e6)),
-                (0x60C2, 1): value,
-                (0x60C2, 2): exponent,
-            }
             try:
                 net.add_drive(
                     axis.node_id,
@@ -108,9 +89,9 @@ class SimNetwork:
                     lag_cycles=lag_cycles,
                     max_velocity_counts_s=max_velocity_counts_s or UNLIMITED_VELOCITY_COUNTS_S,
                     identity=identity,
-                    parameters=parameters,
                     record=record,
                     name=f"{axis.name}/node{axis.node_id}",
+                    sync=sync,
                 )
             except Exception as err:  # noqa: BLE001 - canopen raises many kinds for a bad EDS
                 raise DriveSetupError(axis_index, f"cannot simulate axis {axis.name}: {type(err).__name__}: {err}") from err
@@ -165,20 +146,25 @@ class SimNetwork:
         drive.inject(fault)
         self._wake.set()
 
-    def write_recordings(self, directory: str | Path) -> list[Path]:
-        """Write ``<dir>/node<id>.csv`` for every drive; returns the paths."""
+    def write_recordings(self, directory: str | Path, timelines: bool = False) -> list[Path]:
+        """Write ``<dir>/node<id>.csv`` (applied set-points) for every drive, and with
+        ``timelines`` ``<dir>/node<id>.sync.csv`` (every SYNC); returns the paths."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
-        return [drive.write_recording(directory / f"node{node_id}.csv") for node_id, drive in sorted(self.drives.items())]
+        paths = []
+        for node_id, drive in sorted(self.drives.items()):
+            paths.append(drive.write_recording(directory / f"node{node_id}.csv"))
+            if timelines:
+                paths.append(drive.write_timeline(directory / f"node{node_id}.sync.csv"))
+        return paths
 
     def _tick_loop(self) -> None:
         while not self._stop.is_set():
-            now = time.monotonic()
-            deadline = now + 0.05
+            wait_s = 0.05
             for drive in list(self.drives.values()):
                 try:
-                    deadline = min(deadline, drive.tick(now))
+                    wait_s = min(wait_s, drive.tick() - drive.now())  # each drive on its own clock
                 except Exception:  # noqa: BLE001 - one drive's error must not stop the others' heartbeat
                     log.exception("sim ticker: node %d", drive.node_id)
-            self._wake.wait(max(deadline - time.monotonic(), 0.0))
+            self._wake.wait(max(wait_s, 0.0))
             self._wake.clear()

@@ -12,17 +12,18 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from canopen import objectdictionary as od_types
-from canopen.objectdictionary import ObjectDictionary, ODVariable
+from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError
 
-ABORT_VALUE_INVALID = 0x06090030
-ABORT_VALUE_TOO_HIGH = 0x06090031
+from nurbsmotion.sim.eds import ABORT_VALUE_INVALID, find_variable
+
 ABORT_NOT_MAPPABLE = 0x06040041
 ABORT_PDO_LENGTH_EXCEEDED = 0x06040042
 ABORT_DEVICE_STATE = 0x08000022
 COB_ID_INVALID_BIT = 0x8000_0000
 COB_ID_EXTENDED_BIT = 0x2000_0000
 MAX_PDO_BITS = 64
+MAX_PDO_ENTRIES = 8  # CAN classic: 8 bytes, at least 8 bits per entry
 
 _STRUCT_CODE = {
     od_types.BOOLEAN: "?",
@@ -46,15 +47,6 @@ def split_entry(entry: int) -> tuple[int, int, int]:
     return (entry >> 16) & 0xFFFF, (entry >> 8) & 0xFF, entry & 0xFF
 
 
-def find_variable(od: ObjectDictionary, index: int, subindex: int) -> ODVariable | None:
-    if index not in od:
-        return None
-    obj = od[index]
-    if isinstance(obj, ODVariable):
-        return obj if subindex == 0 else None
-    return obj[subindex] if subindex in obj else None
-
-
 def check_entry(od: ObjectDictionary, entry: int, receive: bool) -> None:
     """Raise the SDO abort a drive answers when ``entry`` cannot be mapped (0 = empty entry)."""
     if entry == 0:
@@ -73,9 +65,11 @@ def check_entry(od: ObjectDictionary, entry: int, receive: bool) -> None:
 
 def check_entries(od: ObjectDictionary, entries: list[int], receive: bool) -> None:
     """Check a whole mapping before it is activated (writing the entry count)."""
-    if len(entries) > 8:
-        raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
+    if len(entries) > MAX_PDO_ENTRIES:
+        raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
     for entry in entries:
+        if entry == 0:  # counted but never written: object 0x0000:00 cannot be mapped
+            raise SdoAbortedError(ABORT_NOT_MAPPABLE)
         check_entry(od, entry, receive)
     if sum(split_entry(e)[2] for e in entries) > MAX_PDO_BITS:
         raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
@@ -85,7 +79,7 @@ def check_entries(od: ObjectDictionary, entries: list[int], receive: bool) -> No
 class PdoLayout:
     """One PDO as the drive currently sees it."""
 
-    number: int  # 1..4
+    number: int  # 1..512
     cob_id: int  # 11-bit CAN id
     enabled: bool
     transmission_type: int
@@ -102,6 +96,14 @@ class PdoLayout:
         return self.transmission_type <= 240
 
 
+# CiA 301 7.3.5: CAN ids no PDO may use (NMT, SYNC/EMCY group, TIME, SDO, heartbeat, LSS, ...)
+RESTRICTED_CAN_IDS = ((0x000, 0x07F), (0x101, 0x180), (0x581, 0x5FF), (0x601, 0x67F), (0x6E0, 0x6FF), (0x701, 0x7FF))
+
+
+def restricted_can_id(can_id: int) -> bool:
+    return any(low <= can_id <= high for low, high in RESTRICTED_CAN_IDS)
+
+
 def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmission_type: int, entries: list[int]) -> PdoLayout:
     """Layout of PDO ``number`` from its communication and mapping parameter values."""
     fmt = "<"
@@ -111,15 +113,15 @@ def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmiss
             continue
         index, subindex, bits = split_entry(entry)
         var = find_variable(od, index, subindex)
-        if var is None:  # dummy entry: skip its bytes
-            fmt += f"{bits // 8}x"
+        if var is None or var.data_type not in _STRUCT_CODE:  # dummy entry (or a type not simulated): skip its bytes
+            fmt += f"{(bits + 7) // 8}x"
             continue
         fmt += _STRUCT_CODE[var.data_type]
         keys.append((index, subindex))
     return PdoLayout(
         number=number,
         cob_id=cob_id_value & 0x7FF,
-        enabled=not cob_id_value & COB_ID_INVALID_BIT,
+        enabled=not cob_id_value & COB_ID_INVALID_BIT and not restricted_can_id(cob_id_value & 0x7FF),
         transmission_type=transmission_type,
         keys=keys,
         codec=struct.Struct(fmt),
@@ -129,25 +131,37 @@ def build_layout(od: ObjectDictionary, number: int, cob_id_value: int, transmiss
 Reader = Callable[[int, int], int]  # (index, subindex) -> current value in the drive
 
 
+RPDO_COMM_RANGE = range(0x1400, 0x1600)
+RPDO_MAPPING_RANGE = range(0x1600, 0x1800)
+TPDO_COMM_RANGE = range(0x1800, 0x1A00)
+TPDO_MAPPING_RANGE = range(0x1A00, 0x1C00)
+MAPPING_OFFSET = 0x200  # 0x16xx -> 0x14xx, 0x1Axx -> 0x18xx
+
+
 def is_pdo_parameter(index: int) -> bool:
-    """RPDO/TPDO 1-4 communication (0x1400.., 0x1800..) or mapping (0x1600.., 0x1A00..)."""
-    return any(base <= index <= base + 3 for base in (0x1400, 0x1600, 0x1800, 0x1A00))
+    """RPDO/TPDO communication (0x1400.., 0x1800..) or mapping (0x1600.., 0x1A00..) parameter."""
+    return 0x1400 <= index < 0x1C00
+
+
+def declared_entries(od: ObjectDictionary, map_index: int) -> int:
+    """How many mapping entries the drive's EDS declares for a PDO (IDM: 1, most: 8)."""
+    return sum(1 for sub in od[map_index].subindices if sub > 0)
 
 
 def check_parameter_write(od: ObjectDictionary, read: Reader, index: int, subindex: int, value: int) -> None:
     """Raise the SDO abort for a write to a PDO parameter that CiA 301 does not allow."""
-    if index in range(0x1400, 0x1404) or index in range(0x1800, 0x1804):
+    if index in RPDO_COMM_RANGE or index in TPDO_COMM_RANGE:
         check_communication_write(read, index, subindex, value)
-    elif index in range(0x1600, 0x1604) or index in range(0x1A00, 0x1A04):
+    elif index in RPDO_MAPPING_RANGE or index in TPDO_MAPPING_RANGE:
         check_mapping_write(od, read, index, subindex, value)
 
 
 def check_communication_write(read: Reader, index: int, subindex: int, value: int) -> None:
     """The CAN id of a valid PDO cannot change (disable it with bit 31 first); 11-bit ids
-    only; transmission types 241..251 are reserved."""
+    outside the restricted ones only; transmission types 241..251 are reserved."""
     if subindex == 1:
         current = read(index, 1)
-        if value & COB_ID_EXTENDED_BIT:
+        if value & COB_ID_EXTENDED_BIT or (not value & COB_ID_INVALID_BIT and restricted_can_id(value & 0x7FF)):
             raise SdoAbortedError(ABORT_VALUE_INVALID)
         both_valid = not current & COB_ID_INVALID_BIT and not value & COB_ID_INVALID_BIT
         if both_valid and (current & 0x7FF) != (value & 0x7FF):
@@ -157,13 +171,15 @@ def check_communication_write(read: Reader, index: int, subindex: int, value: in
 
 
 def check_mapping_write(od: ObjectDictionary, read: Reader, index: int, subindex: int, value: int) -> None:
-    """CiA 301 mapping procedure: PDO disabled, count 0, entries, count (checks them all)."""
-    receive = index < 0x1A00
-    if not read(index - 0x200, 1) & COB_ID_INVALID_BIT:  # 0x16xx -> 0x14xx, 0x1Axx -> 0x18xx
+    """CiA 301 mapping procedure: PDO disabled, count 0, entries, count (checks them all:
+    mappable, at most the entries the EDS declares, at most 64 bits)."""
+    receive = index in RPDO_MAPPING_RANGE
+    comm = index - MAPPING_OFFSET
+    if find_variable(od, comm, 1) is not None and not read(comm, 1) & COB_ID_INVALID_BIT:
         raise SdoAbortedError(ABORT_DEVICE_STATE)
     if subindex == 0:
-        if value > 8:
-            raise SdoAbortedError(ABORT_VALUE_TOO_HIGH)
+        if value > declared_entries(od, index):
+            raise SdoAbortedError(ABORT_PDO_LENGTH_EXCEEDED)
         check_entries(od, [read(index, n) for n in range(1, value + 1)], receive)
     else:
         if read(index, 0) != 0:

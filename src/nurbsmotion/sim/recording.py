@@ -1,20 +1,38 @@
-"""Recording of every set-point a simulated drive applied, for tests that prove no set-point
-was lost or repeated. One row per applied set-point: the drive's SYNC index (SYNCs received
-since it last entered NMT OPERATIONAL; the first is 1), the mode, the set-point and the
-actual position after that SYNC, and the SYNC frame's counter byte (-1 if the frame had none).
+"""What a simulated drive recorded, for tests that prove no set-point was lost, repeated or late.
 
-Rows are kept as 64-bit integers in one flat ``array`` (40 bytes per set-point: 144 MB per
-drive and hour at 1 kHz); a disabled recorder keeps nothing.
+Two tables, each row a few 64-bit integers in one flat ``array`` (a disabled recorder keeps
+nothing):
+
+- ``SetpointRecord``: one row per set-point the drive applied (a fresh one from the master):
+  the drive's SYNC index (SYNCs received since it last entered NMT OPERATIONAL; the first is
+  1), the mode, the set-point, the actual position after that SYNC, the SYNC frame's counter
+  byte (-1 if the frame had none) and the SYNC's time (ns, the drive's clock). 48 bytes per
+  set-point: 173 MB per drive and hour at 1 kHz.
+- ``SyncRecord``: one row per SYNC in NMT OPERATIONAL: its time, the interval since the
+  previous SYNC, the drive cycles that ran without a SYNC before it, where that cycle's
+  set-point came from (``SetpointSource``), the demand, the actual position and the
+  following error. This is where a stop-and-go shows (see ``stats.stream_report``).
 """
 
 from __future__ import annotations
 
 import array
 import csv
+import enum
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Generic, TypeVar
 
 import numpy as np
+
+
+class SetpointSource(enum.IntEnum):
+    """Where the set-point of a drive cycle came from."""
+
+    INACTIVE = 0  # no set-point in use (not OPERATION ENABLED, IP without bit 4, other mode)
+    FRESH = 1  # received from the master since the previous SYNC
+    HELD = 2  # none received: the last one kept
+    EXTRAPOLATED = 3  # none received: the last step continued
 
 
 @dataclass(frozen=True)
@@ -24,52 +42,98 @@ class SetpointRecord:
     setpoint_counts: int
     position_actual_counts: int
     sync_counter: int
+    sync_time_ns: int
 
 
-CSV_HEADER = tuple(f.name for f in fields(SetpointRecord))
-_WIDTH = len(CSV_HEADER)
+@dataclass(frozen=True)
+class SyncRecord:
+    sync_index: int
+    sync_time_ns: int
+    interval_ns: int  # -1 for the first SYNC after entering OPERATIONAL
+    missed_ticks: int
+    source: int  # SetpointSource
+    demand_counts: int
+    position_actual_counts: int
+    following_error_counts: int
+    sync_counter: int
 
 
-class SetpointRecorder:
-    """Append-only record of applied set-points (one ``array.extend`` per set-point)."""
+R = TypeVar("R", SetpointRecord, SyncRecord)
+
+
+class _Recorder(Generic[R]):
+    """Append-only table of ``record_type`` rows (one ``array.extend`` per row)."""
+
+    record_type: type[R]
 
     def __init__(self, enabled: bool = True) -> None:
         self.enabled = enabled
+        self._width = len(fields(self.record_type))
         self._values = array.array("q")
 
-    def append(self, sync_index: int, mode: int, setpoint: int, actual: int, sync_counter: int) -> None:
+    @classmethod
+    def header(cls) -> tuple[str, ...]:
+        return tuple(f.name for f in fields(cls.record_type))
+
+    def append(self, *values: int) -> None:
         if self.enabled:
-            self._values.extend((sync_index, mode, setpoint, actual, sync_counter))
+            self._values.extend(values)
 
     def __len__(self) -> int:
-        return len(self._values) // _WIDTH
+        return len(self._values) // self._width
 
     def as_array(self) -> np.ndarray:
-        """(n, 5) int64 copy with the columns of ``CSV_HEADER``."""
-        values = self._values[: len(self) * _WIDTH]  # a row being appended is left out
-        return np.frombuffer(values, dtype=np.int64).reshape(-1, _WIDTH).copy()
+        """(n, columns) int64 copy with the columns of ``header()``."""
+        values = self._values[: len(self) * self._width]  # a row being appended is left out
+        return np.frombuffer(values, dtype=np.int64).reshape(-1, self._width).copy()
 
-    def records(self) -> list[SetpointRecord]:
-        return [SetpointRecord(*(int(v) for v in row)) for row in self.as_array()]
+    def records(self) -> list[R]:
+        return [self.record_type(*(int(v) for v in row)) for row in self.as_array()]
 
     def clear(self) -> None:
         self._values = array.array("q")
 
     def write_csv(self, path: str | Path) -> Path:
-        """Write the records as CSV with a header line; returns the path."""
+        """Write the rows as CSV with a header line; returns the path."""
         path = Path(path)
         with path.open("w", newline="", encoding="utf-8") as out:
             writer = csv.writer(out)
-            writer.writerow(CSV_HEADER)
+            writer.writerow(self.header())
             writer.writerows(self.as_array().tolist())
         return path
 
 
-def read_csv(path: str | Path) -> list[SetpointRecord]:
-    """Read a file written by :meth:`SetpointRecorder.write_csv`."""
+class SetpointRecorder(_Recorder[SetpointRecord]):
+    """Applied set-points: ``append(sync_index, mode, setpoint, actual, sync_counter, sync_time_ns)``."""
+
+    record_type = SetpointRecord
+
+
+class SyncRecorder(_Recorder[SyncRecord]):
+    """Every SYNC: ``append(*SyncRecord fields)``."""
+
+    record_type = SyncRecord
+
+
+CSV_HEADER = SetpointRecorder.header()
+SYNC_CSV_HEADER = SyncRecorder.header()
+
+
+def _read(path: str | Path, record_type: type[R]) -> list[R]:
+    header_wanted = tuple(f.name for f in fields(record_type))
     with Path(path).open(newline="", encoding="utf-8") as src:
         reader = csv.reader(src)
         header = next(reader, None)
-        if header is None or tuple(header) != CSV_HEADER:
-            raise ValueError(f"{path}: not a set-point recording (header {header})")
-        return [SetpointRecord(*(int(v) for v in row)) for row in reader]
+        if header is None or tuple(header) != header_wanted:
+            raise ValueError(f"{path}: not a {record_type.__name__} recording (header {header})")
+        return [record_type(*(int(v) for v in row)) for row in reader]
+
+
+def read_csv(path: str | Path) -> list[SetpointRecord]:
+    """Read a file written by :meth:`SetpointRecorder.write_csv`."""
+    return _read(path, SetpointRecord)
+
+
+def read_sync_csv(path: str | Path) -> list[SyncRecord]:
+    """Read a file written by :meth:`SyncRecorder.write_csv`."""
+    return _read(path, SyncRecord)

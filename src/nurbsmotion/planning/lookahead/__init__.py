@@ -19,12 +19,12 @@ See docs/lookahead.md for the method and the guarantees.
 
 from __future__ import annotations
 
-from nurbsmotion.planning.lookahead.api import (DEFAULT_CHUNK_CYCLES, GUARANTEES, PlanState, Resume,
+from nurbsmotion.planning.lookahead.api import (DEFAULT_CHUNK_CYCLES, GUARANTEES, PlanState, PlanStream, Resume,
                                                 plan_from_state, plan_lookahead, plan_lookahead_chunks,
                                                 plan_lookahead_resumable)
 from nurbsmotion.planning.lookahead.planner import PlanningError
 
 ALGORITHMS = {"lookahead": plan_lookahead}
 
-__all__ = ["ALGORITHMS", "DEFAULT_CHUNK_CYCLES", "GUARANTEES", "PlanState", "PlanningError", "Resume",
+__all__ = ["ALGORITHMS", "DEFAULT_CHUNK_CYCLES", "GUARANTEES", "PlanState", "PlanStream", "PlanningError", "Resume",
            "plan_from_state", "plan_lookahead", "plan_lookahead_chunks", "plan_lookahead_resumable"]

@@ -13,8 +13,9 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
-from nurbsmotion.planning.lookahead.planner import Cursor, PlanSettings, WindowPlan, plan_run, settings_for
-from nurbsmotion.planning.lookahead.runs import Run, program_pieces, split_runs
+from nurbsmotion.planning.lookahead.planner import (FALLBACK_SLOWER, FALLBACK_SPLIT, FALLBACK_STOP, Cursor,
+                                                    PlanSettings, PlanningError, WindowPlan, plan_run, settings_for)
+from nurbsmotion.planning.lookahead.runs import ProgramStops, Run, program_pieces, split_runs, trailing_dwell_cycles
 from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
@@ -55,12 +56,15 @@ class _Figures:
         self.repairs = 0
         self.windows = 0
         self.runs = 0
+        self.fallbacks: dict[str, int] = {}
 
     def add(self, plan: WindowPlan) -> None:
         for key, value in plan.check.figures.items():
             self.values[key] = max(self.values.get(key, 0.0), value)
         self.repairs += plan.repairs
         self.windows += 1
+        if plan.fallback:
+            self.fallbacks[plan.fallback] = self.fallbacks.get(plan.fallback, 0) + 1
 
 
 def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, float | str]:
@@ -75,7 +79,9 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "repairs": figures.repairs,  # ints are floats to the notes' type (numeric tower)
         "windows": figures.windows,
         "runs": runs,
-        "stops": max(runs - 1, 0),  # exact stops inside the program (corners)
+        "stops": max(runs - 1, 0) + sum(figures.fallbacks.values()) - figures.fallbacks.get(FALLBACK_SLOWER, 0),
+        "fallback_stops": figures.fallbacks.get(FALLBACK_STOP, 0) + figures.fallbacks.get(FALLBACK_SPLIT, 0),
+        "fallback_slower_blocks": figures.fallbacks.get(FALLBACK_SLOWER, 0),
     }
     if limits.max_jerk_mm_s3 is not None:
         notes["jerk_limit_mm_s3"] = limits.max_jerk_mm_s3
@@ -95,37 +101,93 @@ class Resume:
     before: NDArray[np.float64]
     cursor: Cursor | None  # None: at rest there
     tau_f: float
+    stop: Trajectory | None = None  # verified set-points from here to rest along the path (None: at rest)
+
+
+def stop_path(plan: WindowPlan, period_s: float) -> Trajectory | None:
+    """The set-points after a non-final window's last one that bring the machine to rest on
+    the path: the rest of the window's own stop, verified with it (planner.plan_window)."""
+    if plan.stop is None:
+        return None
+    tail = WindowPlan(Samples(plan.stop.samples.piece[len(plan.samples.u):], plan.stop.samples.u[len(plan.samples.u):],
+                              plan.stop.samples.position_mm[len(plan.samples.u):]), plan.stop.s[len(plan.samples.u):],
+                      plan.stop.planned_ds[len(plan.samples.u):], plan.check, 0, True, None,
+                      plan.stop.blocks[len(plan.samples.u):])
+    return window_trajectory(tail, period_s, time.perf_counter())
+
+
+def resume_after(plan: WindowPlan, before: NDArray[np.float64], tau_f: float, period_s: float) -> Resume:
+    """Where the plan stands after ``plan``'s last set-point: moving (its cursor, and the
+    verified way to stop from there), at a stop the planner made inside a run (its last
+    set-point), or at rest at its run's end."""
+    run = plan.run
+    assert run is not None
+    if plan.cursor is not None:
+        return Resume(run.pieces[plan.cursor.piece_index].block, plan.cursor.u, before, plan.cursor, tau_f,
+                      stop_path(plan, period_s))
+    if plan.early_stop:
+        return Resume(int(plan.blocks[-1]), float(plan.samples.u[-1]), before, None, tau_f)
+    return Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, tau_f)
+
+
+def rest_chunk(piece: BlockPiece, u: float, point: NDArray[np.float64], cycles: int, period_s: float) -> Trajectory:
+    """``cycles`` set-points at rest at ``point`` (a G4 dwell)."""
+    return Trajectory(ALGORITHM, period_s, np.full(cycles, piece.block, np.int32), np.full(cycles, u),
+                      np.repeat(point.reshape(1, 3), cycles, axis=0), np.zeros(cycles))
 
 
 def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures,
-            before: NDArray[np.float64] | None = None) -> Iterator[tuple[Trajectory, Resume]]:
+            before: NDArray[np.float64] | None = None, trailing_rest: int = 0) -> Iterator[tuple[Trajectory, Resume]]:
     before = np.zeros((0, 3)) if before is None else before
     period = settings.limits.period_s
     for index, run in enumerate(runs):
         started = time.perf_counter()
         cursor = first if index == 0 and first is not None else None
+        if run.rest_cycles_before and cursor is None:
+            piece = run.pieces[0]
+            point = to_3d(piece.curve.points(np.array([piece.u_start])))[0]
+            yield (rest_chunk(piece, piece.u_start, point, run.rest_cycles_before, period),
+                   Resume(piece.block, piece.u_start, before, None, settings.tau_f))
         for plan in plan_run(run, settings, before, cursor):
             figures.add(plan)
             if len(plan.samples.u):
                 before = np.concatenate([before, plan.samples.position_mm])[-3:]
-                if plan.cursor is not None:
-                    piece = run.pieces[plan.cursor.piece_index]
-                    resume = Resume(piece.block, plan.cursor.u, before, plan.cursor, settings.tau_f)
-                else:
-                    resume = Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, settings.tau_f)
-                yield window_trajectory(plan, period, started), resume
+                yield window_trajectory(plan, period, started), resume_after(plan, before, settings.tau_f, period)
             started = time.perf_counter()
+    if trailing_rest and runs:
+        piece = runs[-1].pieces[-1]
+        yield (rest_chunk(piece, piece.u_end, before[-1], trailing_rest, period),
+               Resume(piece.block, piece.u_end, before, None, settings.tau_f))
 
 
-def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings]:
+def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings, int]:
+    """Runs, settings, and the set-points of a dwell after the last move."""
     pieces = program_pieces(program, limits)
     settings = settings_for(limits, max_feed(pieces), chunk_cycles)
-    return split_runs(pieces, limits, settings.min_pass_mm_s), settings
+    stops = ProgramStops.of(program, limits)
+    return split_runs(pieces, limits, settings.min_pass_mm_s, stops), settings, trailing_dwell_cycles(pieces, stops, limits.period_s)
 
 
 def _rest_chunk(program: Program, limits: PlanLimits) -> Trajectory:
     return Trajectory(ALGORITHM, limits.period_s, np.zeros(1, np.int32), np.zeros(1),
                       np.asarray(program.start_position, float).reshape(1, -1)[:, :3], np.zeros(1))
+
+
+def at_program_line(program: Program, error: PlanningError) -> PlanningError:
+    """``error`` with its place as the program's source line (file:line) of its block."""
+    if error.block is None or not 0 <= error.block < len(program.blocks):
+        return error
+    source = program.blocks[error.block].source
+    text = f" ({source.text.strip()})" if source.text.strip() else ""
+    return PlanningError(str(source), error.message + text, error.block)
+
+
+def _named_lines(program: Program, chunks: Iterator) -> Iterator:
+    """``chunks`` with every PlanningError re-raised at its program line."""
+    try:
+        yield from chunks
+    except PlanningError as error:
+        raise at_program_line(program, error) from None
 
 
 def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
@@ -134,7 +196,7 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
 
     Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
     from the highest feed), not by the program's length."""
-    runs, settings = _setup(program, limits, chunk_cycles)
+    runs, settings, trailing = _setup(program, limits, chunk_cycles)
     figures = _figures if _figures is not None else _Figures()
     if not runs:
         yield _rest_chunk(program, limits)
@@ -143,7 +205,7 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
     if state is not None:
         runs, first = start_from_state(program, runs, state, settings)
     figures.runs = len(runs)
-    for chunk, _ in _chunks(runs, settings, first, figures):
+    for chunk, _ in _named_lines(program, _chunks(runs, settings, first, figures, trailing_rest=trailing)):
         yield chunk
 
 
@@ -155,11 +217,11 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     real last set-points and the real filter memory. The acceleration and jerk limits must
     be those of the resumed plan (the filter memory depends on A/J); the feed, chord error and
     axis limits may change."""
-    runs, settings = _setup(program, limits, chunk_cycles)
+    runs, settings, trailing = _setup(program, limits, chunk_cycles)
     if not runs:
         return
     if resume is None:
-        yield from _chunks(runs, settings, None, _Figures())
+        yield from _named_lines(program, _chunks(runs, settings, None, _Figures(), trailing_rest=trailing))
         return
     if abs(resume.tau_f - settings.tau_f) > 1e-12:
         raise InputError("limits", "resuming needs the acceleration and jerk limits of the resumed plan "
@@ -167,7 +229,7 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     runs, first = resume_runs(runs, resume)
     if not runs:
         return
-    yield from _chunks(runs, settings, first, _Figures(), resume.before)
+    yield from _named_lines(program, _chunks(runs, settings, first, _Figures(), resume.before, trailing))
 
 
 def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | None]:
@@ -190,6 +252,43 @@ def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | No
             cursor = replace(resume.cursor, piece_index=0, u=u, run_s_mm=0.0, carry=None, previous=last)
             return [tail] + runs[r + 1:], cursor
     raise InputError("resume", f"block {resume.block + 1} is not part of this program's motion")
+
+
+class PlanStream:
+    """The plan as a generator of set-point chunks, for consumers that must not hold the
+    whole plan (``nurbsmotion plan``, a streaming job): iterate it for the chunks (each with
+    the Resume after it when ``with_resume``: where the plan stands and, while moving, the
+    verified set-points that stop the machine on the path from the end of that chunk);
+    ``notes`` has the guarantees and the verified maxima of the chunks planned so far.
+
+    Memory is one look-ahead window, whatever the program's length."""
+
+    def __init__(self, program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES) -> None:
+        self.program, self.limits, self.chunk_cycles = program, limits, chunk_cycles
+        self.figures = _Figures()
+        self.planning_time_s = 0.0
+
+    def chunks(self) -> Iterator[tuple[Trajectory, Resume | None]]:
+        runs, settings, trailing = _setup(self.program, self.limits, self.chunk_cycles)
+        self.figures.runs = len(runs)
+        if not runs:
+            yield _rest_chunk(self.program, self.limits), None
+            return
+        started = time.perf_counter()
+        for chunk, resume in _named_lines(self.program, _chunks(runs, settings, None, self.figures,
+                                                                trailing_rest=trailing)):
+            self.planning_time_s += time.perf_counter() - started
+            yield chunk, resume
+            started = time.perf_counter()
+        self.planning_time_s += time.perf_counter() - started
+
+    def __iter__(self) -> Iterator[Trajectory]:
+        for chunk, _ in self.chunks():
+            yield chunk
+
+    @property
+    def notes(self) -> dict[str, float | str]:
+        return notes_for(self.limits, self.figures, self.figures.runs)
 
 
 def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:

@@ -145,17 +145,34 @@ PLATEAU_SEARCH_STEPS = 40
 PLATEAU_MARGIN = 1.02  # plateaus last 2 % longer than tau_f (the grid is not the time axis)
 
 
-def superlevel_width(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, level: float) -> float:
-    """Length of the stretch around grid point ``peak`` where x >= level (linear crossings)."""
-    below_left = np.flatnonzero(x[:peak] < level)
-    below_right = np.flatnonzero(x[peak:] < level)
-    if len(below_left):
-        j = int(below_left[-1])
+@dataclass(frozen=True)
+class PeakSides:
+    """Running minima of x = v^2 going out from a peak to the left and to the right (both
+    start at the peak): the first point below a level either side is one binary search."""
+
+    peak: int
+    left_min: NDArray[np.float64]  # left_min[k] = min(x[peak - k .. peak])
+    right_min: NDArray[np.float64]  # right_min[k] = min(x[peak .. peak + k])
+
+    @classmethod
+    def of(cls, x: NDArray[np.float64], peak: int) -> "PeakSides":
+        return cls(peak, -np.minimum.accumulate(x[peak::-1]), -np.minimum.accumulate(x[peak:]))
+
+
+def superlevel_width(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakSides, level: float) -> float:
+    """Length of the stretch around the peak where x >= level (linear crossings), for
+    level <= x[peak]: from the last point below it on the left to the first on the right
+    (the same points as scanning x, found by binary search in the negated running minima)."""
+    peak = sides.peak
+    k = int(sides.left_min.searchsorted(-level, side="right"))
+    if k < len(sides.left_min):
+        j = peak - k
         left = s[j] + (level - x[j]) / (x[j + 1] - x[j]) * (s[j + 1] - s[j])
     else:
         left = s[0]
-    if len(below_right):
-        j = peak + int(below_right[0])
+    k = int(sides.right_min.searchsorted(-level, side="right"))
+    if k < len(sides.right_min):
+        j = peak + k
         right = s[j - 1] + (x[j - 1] - level) / (x[j - 1] - x[j]) * (s[j] - s[j - 1])
     else:
         right = s[-1]
@@ -166,10 +183,11 @@ def plateau_level(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, tau
                   allowance_mm: float) -> float:
     """Highest x = v^2 whose superlevel stretch around ``peak`` is PLATEAU_MARGIN v tau_f +
     allowance long (bisection)."""
+    sides = PeakSides.of(x, peak)
     lo, hi = 0.0, float(x[peak])
     for _ in range(PLATEAU_SEARCH_STEPS):
         mid = 0.5 * (lo + hi)
-        if superlevel_width(s, x, peak, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f + allowance_mm:
+        if superlevel_width(s, x, sides, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f + allowance_mm:
             lo = mid
         else:
             hi = mid

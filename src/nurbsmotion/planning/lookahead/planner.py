@@ -30,10 +30,11 @@ from nurbsmotion.planning.lookahead.runs import Run
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
 from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
-                                                         static_speed_limit, widen_dips)
+                                                         static_speed_limit, tangential_jerk_share, widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
+SHARE_ROUNDS = 3  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
@@ -53,7 +54,14 @@ NO_CAP = 1e30  # mm/s: a speed cap that never binds (finite, so caps can be inte
 
 
 class PlanningError(InputError):
-    """The limits cannot be held on every cycle at some place of the program."""
+    """The limits cannot be held on every cycle at some place of the program.
+
+    ``block`` is the program block's index (0-based) where known: the API replaces the
+    ``where`` with that block's source line (api.at_program_line)."""
+
+    def __init__(self, where: str, message: str, block: int | None = None) -> None:
+        super().__init__(where, message)
+        self.block = block
 
 
 
@@ -114,6 +122,11 @@ class WindowPlan:
     final: bool
     cursor: Cursor | None
     blocks: NDArray[np.int32]
+    stop: WindowPlan | None = None  # a non-final window's set-points all the way to its verified stop
+    run: Run | None = None  # the run the plan belongs to, when plan_run had to split or slow its run
+    start_piece: int = 0  # index into the run's pieces of the window's first piece
+    early_stop: bool = False  # a stop before the run's end (the planner's fallback)
+    fallback: str = ""  # set on the first plan of a run the fallback made: FALLBACK_STOP/_SPLIT/_SLOWER
 
 
 @dataclass
@@ -257,15 +270,22 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     grid = build_grid(pieces, settings.spacing_mm)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
+    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm)
     idx = scan_grid(grid, cursor.raw_offset_mm)
     if len(idx) < 2:  # a running start whose filter memory already reaches past the run's end
         raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
-                            "from this state; keep the current plan")
+                            "from this state; keep the current plan", pieces[-1].block)
     period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
-        bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale)
+        bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
         s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
+        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):  # the share at the planned speeds
+            speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds)
+            bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
+            x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
+            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)
         if not reaches_end:
@@ -280,7 +300,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
                 raise _WindowTooShort()
         if raw.end_time_s > MAX_WINDOW_CYCLES * period:
             raise PlanningError(f"block {pieces[0].block + 1}", "lookahead finds no speed at which the limits "
-                                f"hold here (the window would take {raw.end_time_s:.3g} s)")
+                                f"hold here (the window would take {raw.end_time_s:.3g} s)", pieces[0].block)
         full_raw = jp.prepend_history(cursor.history, raw) if cursor.history is not None else raw
         times = sample_times(raw, cursor, settings, reaches_end)
         s = np.clip(jp.filtered_position(full_raw, times, settings.tau_f), 0.0, grid.length_mm)
@@ -300,18 +320,22 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
             raise _violation_error(pieces, samples, result, bad)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
+    blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
+    stop = None
     if not reaches_end:
+        stop = WindowPlan(samples, s, planned_ds, result, repairs, True, None, blocks, start_piece=cursor.piece_index,
+                          early_stop=True)
         keep = times <= commit_t
         samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep], samples.arc_residual_mm[keep])
-        s, planned_ds, times = s[keep], planned_ds[keep], times[keep]
-    blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
+        s, planned_ds, times, blocks = s[keep], planned_ds[keep], times[keep], blocks[keep]
     next_cursor = None
     if not reaches_end:
         next_cursor = next_window_cursor(run, cursor, pieces, samples, s, times, full_raw, settings)
         carry = merge_carry(cursor.carry, (grid.s + cursor.run_s_mm, speed_cap, accel_scale))
         ahead = carry[0] >= next_cursor.run_s_mm - settings.stop_mm  # bounded memory: forget what is passed
         next_cursor.carry = (carry[0][ahead], carry[1][ahead], carry[2][ahead])
-    return WindowPlan(samples, s, planned_ds, result, repairs, reaches_end, next_cursor, blocks)
+    return WindowPlan(samples, s, planned_ds, result, repairs, reaches_end, next_cursor, blocks, stop,
+                      start_piece=cursor.piece_index)
 
 
 class _WindowTooShort(Exception):
@@ -324,7 +348,7 @@ def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: C
     block = pieces[int(samples.piece[row])].block
     value = float(getattr(result, name if name != "fluctuation" else "arc_fluctuation")[row])
     return PlanningError(f"block {block + 1}", f"lookahead cannot hold the {name} limit here "
-                         f"(figure {value:.6g} x the limit after {MAX_REPAIR_ROUNDS} repairs)")
+                         f"(figure {value:.6g} x the limit after {MAX_REPAIR_ROUNDS} repairs)", block)
 
 
 def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDArray[np.float64],
@@ -465,6 +489,21 @@ def merge_carry(a: tuple | None, b: tuple | None) -> tuple | None:
     return s, caps, scales
 
 
+MAX_FEED_HALVINGS = 16
+
+
+@dataclass
+class _Followup:
+    """What plan_run plans after a run it had to give up on: (run, feed floor) pairs, in order."""
+
+    runs: list[tuple[Run, float | None, str]] = field(default_factory=list)
+
+
+FALLBACK_STOP = "stop"  # the held-back window ran to its own stop; the rest of its run starts from rest
+FALLBACK_SPLIT = "split"  # a run failing from rest: an exact stop after its first block
+FALLBACK_SLOWER = "slower"  # a single block failing from rest: half its feed
+
+
 def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
              cursor: Cursor | None = None) -> Iterator[WindowPlan]:
     """All windows of one run, to rest at its end; from rest at its start unless ``cursor`` says otherwise.
@@ -472,7 +511,27 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
     One window is held back: when a window cannot be repaired (typically because the repair
     would have to start before its first set-point), the held-back window is planned again
     with twice the look-ahead, so it meets the trouble far enough ahead to slow down for it
-    (at most MAX_BACKTRACKS times in a row)."""
+    (at most MAX_BACKTRACKS times in a row). When that does not help either, the planner
+    falls back to slower plans, verified like every other (a plan only trades motion time
+    for existing): the held-back window runs to its own verified stop and the rest of the run
+    starts from rest there; a run that fails from rest stops after its first block; a single
+    block that fails from rest is planned at half its feed, down to 1/2**MAX_FEED_HALVINGS of
+    it (then PlanningError). Every yielded plan carries the (sub-)run it belongs to."""
+    todo: list[tuple[Run, Cursor | None, float | None, str]] = [(run, cursor, None, "")]
+    while todo:
+        part, start, floor, reason = todo.pop()
+        followup = _Followup()
+        for plan in run_windows(part, settings, before, start, floor, followup):
+            plan.run = plan.run or part
+            plan.fallback, reason = reason, ""
+            before = np.concatenate([before, plan.samples.position_mm])[-3:]
+            yield plan
+        todo.extend((r, None, f, why) for r, f, why in reversed(followup.runs))
+
+
+def run_windows(run: Run, settings: PlanSettings, before: NDArray[np.float64], cursor: Cursor | None,
+                feed_floor_mm_s: float | None, followup: _Followup) -> Iterator[WindowPlan]:
+    """The windows of one run (plan_run); where it gives up, the runs to plan instead go to ``followup``."""
     cursor = cursor if cursor is not None else Cursor(0, run.pieces[0].u_start, before=before)
     length = settings.window_mm
     line = straight_run_plan(run, cursor, settings)
@@ -484,7 +543,7 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
         yield short
         return
     pending: WindowPlan | None = None
-    pending_cursor: Cursor | None = None
+    pending_cursor = cursor
     backtracks = 0
     while True:
         try:
@@ -492,17 +551,28 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
         except _WindowTooShort:
             length *= 2.0
             continue
-        except PlanningError:
-            if pending is None or backtracks >= MAX_BACKTRACKS:
-                raise
-            backtracks += 1
-            length *= 2.0
-            pending = plan_window(run, pending_cursor, settings, length)
-            if pending.final:
-                yield pending
+        except PlanningError as error:
+            if pending is None:
+                if not cursor.at_rest:
+                    raise  # a running start (plan_from_state, resume): nothing committed to stop with
+                followup.runs.extend(runs_from_rest(run, feed_floor_mm_s, error))
                 return
-            cursor = pending.cursor
-            continue
+            if backtracks < MAX_BACKTRACKS:
+                backtracks += 1
+                length *= 2.0
+                try:
+                    pending = plan_window(run, pending_cursor, settings, length)
+                except (PlanningError, _WindowTooShort):
+                    pass  # keep the held-back window as it was: it has a verified stop
+                else:
+                    if pending.final:
+                        yield pending
+                        return
+                    cursor = pending.cursor
+                    continue
+            yield pending.stop
+            followup.runs.extend((rest, None, FALLBACK_STOP) for rest in rest_after_stop(run, pending.stop))
+            return
         backtracks = 0
         if pending is not None:
             yield pending
@@ -512,3 +582,29 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
         pending, pending_cursor = plan, cursor
         cursor = plan.cursor
         length = settings.window_mm
+
+
+def rest_after_stop(run: Run, stop: WindowPlan) -> list[Run]:
+    """The part of ``run`` after a window's stop (its last set-point, at rest), as a run from rest."""
+    index = stop.start_piece + int(stop.samples.piece[-1])
+    u = float(stop.samples.u[-1])
+    piece = run.pieces[index]
+    if u >= piece.u_end:
+        rest = Run(run.pieces[index + 1:], run.junction_speed_mm_s[index + 1:])
+    else:
+        rest = Run((replace(piece, u_start=u),) + run.pieces[index + 1:], run.junction_speed_mm_s[index:])
+    return [rest] if rest.pieces else []
+
+
+def runs_from_rest(run: Run, feed_floor_mm_s: float | None,
+                   error: PlanningError) -> list[tuple[Run, float | None, str]]:
+    """What to plan instead of a run that cannot be planned from rest: its first block to a
+    stop, then the rest; a single block at half its feed (raises ``error`` below the floor)."""
+    if len(run.pieces) > 1:
+        return [(Run(run.pieces[:1], ()), None, FALLBACK_SPLIT),
+                (Run(run.pieces[1:], run.junction_speed_mm_s[1:]), None, "")]
+    piece = run.pieces[0]
+    floor = feed_floor_mm_s if feed_floor_mm_s is not None else piece.feed_mm_s / 2.0**MAX_FEED_HALVINGS
+    if piece.feed_mm_s / 2.0 < floor:
+        raise error
+    return [(Run((replace(piece, feed_mm_s=piece.feed_mm_s / 2.0),), ()), floor, FALLBACK_SLOWER)]

@@ -11,12 +11,18 @@ what one cycle of acceleration (A T) or, with a jerk limit, of jerk (J T^2) give
 exact stop (passing that slowly gains nothing: it is the speed of the first cycles after a
 stop), and so, with the jerk filter, is a junction speed whose plateau (v tau) would be
 shorter than the path grid spacing; so are zero junction deviation and reversals. An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
+
+The program adds stops of its own: a block marked ``exact_stop`` (G61, or a dwell, pause or
+tool change after it) ends its run, and a G4 dwell before a block holds the axes at rest
+``ceil(dwell / T)`` cycles (counted from the last set-point of the arrival to the first
+that moves). A block's G64 P tolerance, when tighter than the machine's junction deviation,
+is the deviation of the junction into it.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -34,6 +40,7 @@ class Run:
 
     pieces: tuple[BlockPiece, ...]
     junction_speed_mm_s: tuple[float, ...]
+    rest_cycles_before: int = 0  # set-points held at the run's start before it moves (G4 dwell)
 
 
 def end_tangents(piece: BlockPiece) -> tuple[np.ndarray, np.ndarray]:
@@ -43,22 +50,25 @@ def end_tangents(piece: BlockPiece) -> tuple[np.ndarray, np.ndarray]:
     return d[0], d[1]
 
 
-def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits, min_pass_mm_s: float = 0.0) -> float:
-    """Largest speed through a junction of unit tangents t_in -> t_out (module docstring)."""
+def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits, min_pass_mm_s: float = 0.0,
+                   deviation_mm: float | None = None) -> float:
+    """Largest speed through a junction of unit tangents t_in -> t_out (module docstring);
+    ``deviation_mm`` replaces the machine's junction deviation (a block's G64 P)."""
     cos_theta = float(np.clip(np.dot(t_in, t_out), -1.0, 1.0))
     sin_half = math.sqrt(max(0.5 * (1.0 - cos_theta), 0.0))  # sin(theta/2)
     if sin_half <= 1e-12:
         return math.inf
     accel = MARGIN * limits.max_accel_mm_s2
     cos_half = math.sqrt(max(1.0 - sin_half * sin_half, 0.0))  # sin(phi/2), phi = pi - theta
-    deviation = math.sqrt(accel * limits.junction_deviation_mm * cos_half / (1.0 - cos_half)) if cos_half < 1 else math.inf
+    d = limits.junction_deviation_mm if deviation_mm is None else deviation_mm
+    deviation = math.sqrt(accel * d * cos_half / (1.0 - cos_half)) if cos_half < 1 else math.inf
     v = min(deviation, accel * limits.period_s / (2.0 * sin_half))
     stop_below = accel * limits.period_s
     if limits.max_jerk_mm_s3 is not None:
         jerk = MARGIN * limits.max_jerk_mm_s3
         v = min(v, jerk * limits.period_s**2 / (2.0 * sin_half))
         stop_below = jerk * limits.period_s**2
-    return v if v > max(stop_below, min_pass_mm_s) else 0.0
+    return v if v > max(stop_below, min_pass_mm_s) and d > 0 else 0.0
 
 
 def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
@@ -72,21 +82,64 @@ def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
     return pieces
 
 
-def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: float = 0.0) -> list[Run]:
+@dataclass(frozen=True)
+class ProgramStops:
+    """What the program itself asks of the junctions (module docstring)."""
+
+    stop_after: frozenset[int] = frozenset()  # block indices that end at rest
+    dwell_s_before: dict[int, float] | None = None  # block index -> G4 dwell before it
+    deviation_mm: dict[int, float] | None = None  # block index -> junction deviation into it
+
+    @classmethod
+    def of(cls, program: Program, limits: PlanLimits) -> "ProgramStops":
+        tolerances = {i: min(b.blend_tolerance_mm, limits.junction_deviation_mm) for i, b in enumerate(program.blocks)
+                      if b.blend_tolerance_mm is not None}
+        return cls(frozenset(i for i, b in enumerate(program.blocks) if b.exact_stop), program.dwell_s_before(), tolerances)
+
+    def dwell_between(self, after_block: int, up_to_block: int) -> float:
+        """Dwell before the blocks after_block + 1 .. up_to_block."""
+        return sum(s for b, s in (self.dwell_s_before or {}).items() if after_block < b <= up_to_block)
+
+
+def dwell_cycles(dwell_s: float, period_s: float, after_motion: bool) -> int:
+    """Set-points to add for a dwell: a stop already holds one cycle (the run's start repeats
+    the arrival point), so after motion ceil(dwell / T) - 1 more, before any motion ceil(dwell / T)."""
+    if dwell_s <= 0:
+        return 0
+    cycles = math.ceil(dwell_s / period_s - 1e-9)
+    return max(cycles - 1, 0) if after_motion else cycles
+
+
+def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: float = 0.0,
+               stops: ProgramStops = ProgramStops()) -> list[Run]:
     """Group pieces into runs separated by exact stops (junctions slower than ``min_pass_mm_s``
-    are stops too)."""
+    are stops too, and so are the program's own stops and dwells)."""
     runs: list[Run] = []
     current: list[BlockPiece] = []
     speeds: list[float] = []
+    rest = dwell_cycles(stops.dwell_between(-1, pieces[0].block), limits.period_s, False) if pieces else 0
     for piece in pieces:
         if current:
-            v = junction_speed(end_tangents(current[-1])[1], end_tangents(piece)[0], limits, min_pass_mm_s)
-            if v <= 0.0:
-                runs.append(Run(tuple(current), tuple(speeds)))
+            dwell_s = stops.dwell_between(current[-1].block, piece.block)
+            deviation = (stops.deviation_mm or {}).get(piece.block)
+            v = junction_speed(end_tangents(current[-1])[1], end_tangents(piece)[0], limits, min_pass_mm_s, deviation)
+            if v <= 0.0 or dwell_s > 0 or current[-1].block in stops.stop_after:
+                runs.append(Run(tuple(current), tuple(speeds), rest))
                 current, speeds = [], []
+                rest = dwell_cycles(dwell_s, limits.period_s, True)
             else:
                 speeds.append(v)
         current.append(piece)
     if current:
-        runs.append(Run(tuple(current), tuple(speeds)))
+        runs.append(Run(tuple(current), tuple(speeds), rest))
     return runs
+
+
+def trailing_dwell_cycles(pieces: list[BlockPiece], stops: ProgramStops, period_s: float) -> int:
+    """Set-points held at the end for a dwell after the last move."""
+    last = pieces[-1].block if pieces else -1
+    return dwell_cycles(stops.dwell_between(last, 1 << 62), period_s, False)
+
+
+def without_rest(run: Run) -> Run:
+    return replace(run, rest_cycles_before=0)

@@ -19,7 +19,9 @@ from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.speed_limits import AccelBounds
 
-SCAN_ROUNDS = 3
+SCAN_ROUNDS = 3  # at least
+SCAN_ROUNDS_MAX = 41  # odd: the result is an odd iterate (see speed_profile)
+SCAN_CONVERGED = 1e-3  # relative change of x = v^2 between consecutive odd iterates
 
 
 def forward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], accel: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -45,13 +47,28 @@ def interval_bounds(bounds: AccelBounds, x: NDArray[np.float64]) -> tuple[NDArra
 def speed_profile(s: NDArray[np.float64], cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:
     """x = v^2 at every grid point: under ``cap`` (x), decelerating into and accelerating out
     of every limit within the admissible tangential acceleration. cap[0] and cap[-1] carry
-    the start and end speeds."""
+    the start and end speeds.
+
+    The admissible acceleration shrinks as the speed grows, so the scan with the bounds
+    evaluated at a profile y, F(y), is decreasing in y, and the time-optimal profile x* is
+    its fixed point. From y_0 = cap >= x*, the iterates alternate around it: the odd ones
+    x_1 <= x_3 <= ... <= x* (each scanned with the bounds at a faster profile: admissible
+    at its own speeds), the even ones above. The result is an odd iterate, taken once two
+    consecutive odd iterates differ by at most SCAN_CONVERGED of the top speed^2 (at most
+    SCAN_ROUNDS_MAX rounds): near a curvature peak, where the path's own acceleration leaves
+    little to brake with, three rounds stay up to 7 % below x*."""
     ds = np.diff(s)
     x = cap.copy()
     evaluate_at = cap
-    for _ in range(SCAN_ROUNDS):
+    previous_odd = None
+    for round_index in range(SCAN_ROUNDS_MAX):
         decel, accel = interval_bounds(bounds, evaluate_at)
         x = forward_pass(backward_pass(cap, ds, decel), ds, accel)
         x = np.maximum(x, 0.0)
         evaluate_at = x
+        if round_index % 2 == 0:
+            if previous_odd is not None and round_index + 1 >= SCAN_ROUNDS and \
+                    float(np.max(x - previous_odd, initial=0.0)) <= SCAN_CONVERGED * float(x.max(initial=0.0)):
+                break
+            previous_odd = x
     return x

@@ -17,7 +17,12 @@ tangent, c = x_ss the curvature vector and c' = x_sss:
   v^3 (|c'| + |c|^2) <= JERK_SHARE J and 3 |c| v |a_t| <= JERK_SHARE J (each term its share,
   the verify-and-repair loop checks the sum); where the
   curvature vector jumps (knots of a degree-2 curve, a line meeting an arc) the second
-  difference jumps within two cycles: |dc| v^2 / (2 T) <= J.
+  difference jumps within two cycles: |dc| v^2 / (2 T) <= J. The jerk filter gives the
+  tangent j_t up to J wherever a_t changes by A; the normal jerk N = |3 c v a_t + c'_n v^3|
+  (c'_n: c' less its tangent part) adds to it at right angles, so on curves the raw tangential
+  acceleration starts at sqrt(1 - (N/J)^2) of A (tangential_jerk_share, never below
+  MIN_TANGENTIAL_SHARE), N estimated at full A and the point's speed cap, then (planner,
+  first round) at the speeds the scan planned.
 The acceleration constraints are convex in (x, a_t), so the speeds at which some a_t is
 admissible form an interval [0, x_max]: found by vectorised bisection.
 """
@@ -33,6 +38,7 @@ from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
+MIN_TANGENTIAL_SHARE = 0.4  # floor of tangential_jerk_share (repairs go lower where needed)
 BISECTION_STEPS = 40
 TINY = 1e-12
 
@@ -129,6 +135,27 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     k = row_norms(grid.dcurv) + np.einsum("ij,ij->i", grid.curv, grid.curv)
     with np.errstate(divide="ignore"):
         return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
+
+
+def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: float,
+                          speed_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+    """Share of A for the raw tangential acceleration, per grid point, so that the filter's
+    tangential jerk (share x J) and the path's normal jerk N = 3 |c| v A + |c'_n| v^3 (v the
+    point's speed cap: feed, chord, jerk terms and A / |c|, or ``speed_mm_s`` where lower: the
+    speeds a scan planned) add up to at most J: sqrt(1 - (N/J)^2), at least
+    MIN_TANGENTIAL_SHARE; the smallest within the filter's reach (v tau_f + ``reach_mm``)
+    either side. All ones without a jerk limit."""
+    if caps.jerk_mm_s3 is None or tau_f <= 0:
+        return np.ones(len(grid))
+    kappa = row_norms(grid.curv)
+    v = np.minimum(static_speed_limit(grid, caps, np.ones(len(grid))),
+                   np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
+    if speed_mm_s is not None:
+        v = np.minimum(v, speed_mm_s)
+    along = np.einsum("ij,ij->i", grid.dcurv, grid.tangent)
+    normal = 3.0 * kappa * v * caps.accel_mm_s2 + row_norms(grid.dcurv - along[:, None] * grid.tangent) * v**3
+    share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
+    return sliding_min(grid.s, share, v * tau_f + reach_mm)
 
 
 @dataclass(eq=False)
@@ -243,6 +270,21 @@ DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
 DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
 
 
+def spread_min(s: NDArray[np.float64], members: NDArray[np.intp], values: NDArray[np.float64],
+               half_width_mm: float) -> NDArray[np.float64]:
+    """At every grid point, the smallest of ``values`` (at grid points ``members``, in order)
+    within +-half_width_mm in s (inf where none): sliding_min of a signal that is inf
+    elsewhere, with the search over the members only."""
+    at = s[members]
+    lo = np.searchsorted(at, s - half_width_mm, side="left")
+    hi = np.searchsorted(at, s + half_width_mm, side="right") - 1
+    out = np.full(len(s), np.inf)
+    near = hi >= lo
+    if near.any():
+        out[near] = window_min(values, lo[near], hi[near])
+    return out
+
+
 def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
     """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
     moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
@@ -260,9 +302,9 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     out = v.copy()
     floor = -np.inf
     while True:
-        band = np.where((inner <= level) & (inner > floor), inner, np.inf)
-        width = np.full(len(s), DIP_WIDTH_FACTOR * level * averaging_s)
-        out = np.minimum(out, sliding_min(s, band, width))
+        members = np.flatnonzero((inner <= level) & (inner > floor))
+        if len(members):
+            out = np.minimum(out, spread_min(s, members, inner[members], DIP_WIDTH_FACTOR * level * averaging_s))
         if level >= top:
             out[0], out[-1] = v[0], v[-1]
             return out

@@ -177,9 +177,24 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
     kappa = -window_min(-grid.kappa_max, k_lo, np.maximum(k_hi, k_lo))
     arc = np.diff(s) * (1.0 + FLUCTUATION_LIMIT)
     chord = kappa * arc * arc / 8.0
-    for i in np.flatnonzero(piece[1:] != piece[:-1]):
+    crossing = np.flatnonzero(piece[1:] != piece[:-1])
+    polyline = crossing[polyline_steps(grid, piece[crossing], piece[crossing + 1])]
+    if len(polyline):
+        chord[polyline] = grid_chord_errors(grid, s[polyline], s[polyline + 1], p[polyline], p[polyline + 1])
+    for i in np.setdiff1d(crossing, polyline, assume_unique=True):
         chord[i] = junction_chord_error(grid, piece, u, p, s, int(i))
     return chord if start else np.concatenate([[0.0], chord])
+
+
+def polyline_steps(grid: PathGrid, first: NDArray[np.int32], last: NDArray[np.int32]) -> NDArray[np.bool_]:
+    """Steps across junctions that touch straight pieces only (pieces first..last of each).
+
+    Their chord error is exact from the grid points inside the step: the distance of a point
+    moving along a line from a fixed segment is convex, so on a polyline it is largest at a
+    vertex, and every vertex (junction) inside the step is a grid point."""
+    curved = np.array([not (q.curve.degree == 1 and len(q.curve.control_points) == 2) for q in grid.pieces])
+    curved_before = np.concatenate([[0], np.cumsum(curved)])
+    return curved_before[last + 1] - curved_before[first] == 0
 
 
 def rows_max(values: NDArray[np.float64], first_row: int, n: int) -> NDArray[np.float64]:

@@ -1,0 +1,48 @@
+"""PlanStream: the plan as chunks for a streaming consumer, each with a verified way to stop."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from nurbsmotion.planning import Trajectory
+from nurbsmotion.planning.lookahead import PlanStream, plan_lookahead
+from nurbsmotion.planning.measure import measure
+from nurbsmotion.program import read_program
+from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits
+
+LIMITS = replace(WANG_LIMITS, period_s=0.001)
+
+
+def test_the_stream_is_the_whole_plan_and_states_its_guarantees():
+    program = read_program(EXAMPLES / "mixed.nc")
+    stream = PlanStream(program, LIMITS, chunk_cycles=300)
+    chunks = list(stream)
+    assert len(chunks) > 5
+    streamed = Trajectory.concatenate(chunks)
+    assert_within_limits(measure(streamed, program), LIMITS)
+    notes = stream.notes
+    assert notes["verified_max_jerk_mm_s3"] <= LIMITS.max_jerk_mm_s3 * (1 + 1e-9)
+    assert notes["windows"] >= len(chunks) and stream.planning_time_s > 0
+    whole = plan_lookahead(program, LIMITS)
+    assert abs(len(whole) - len(streamed)) <= 0.01 * len(whole)  # other windows, nearly the same motion
+
+
+def test_every_chunk_can_stop_along_the_path_within_the_limits():
+    """A consumer may stop after any chunk: the chunks so far followed by that chunk's stop
+    set-points hold every limit and end at rest on the path."""
+    program = read_program(EXAMPLES / "wang_table1.nc")
+    pairs = list(PlanStream(program, LIMITS, chunk_cycles=500).chunks())
+    moving = [k for k, (_, resume) in enumerate(pairs) if resume is not None and resume.stop is not None]
+    assert len(moving) >= 3
+    curve = program.blocks[0].curve
+    for k in moving[:: max(len(moving) // 4, 1)]:
+        stop = pairs[k][1].stop
+        joined = Trajectory.concatenate([chunk for chunk, _ in pairs[: k + 1]] + [stop])
+        m = measure(joined, program)
+        ok = 1.0 + 1e-9
+        assert m.max_accel_mm_s2 <= LIMITS.max_accel_mm_s2 * ok and m.max_jerk_mm_s3 <= LIMITS.max_jerk_mm_s3 * ok
+        assert m.max_chord_error_mm <= LIMITS.chord_error_mm * ok
+        end = joined.position_mm[-1]
+        assert np.linalg.norm(curve.points(np.array([joined.u[-1]]))[0] - end) < 1e-9  # at rest on the path

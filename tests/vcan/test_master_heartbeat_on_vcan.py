@@ -1,0 +1,78 @@
+"""The master's heartbeat on a real kernel vcan0: SIGKILL of the daemon mid-motion, and every
+simulated drive (a separate `nurbsmotion sim` process, its 0x1016 written at bring-up)
+reports the loss and goes to FAULT by itself within its consumer time."""
+
+from __future__ import annotations
+
+import datetime
+import time
+
+import pytest
+import yaml
+
+from nurbsmotion.config import load_config
+from tests.integration.daemon_helpers import wait_until
+from tests.vcan.test_daemon_on_vcan import JOB_TIMEOUT_S, VcanDaemon, start_daemon, submit_wang
+
+pytestmark = pytest.mark.vcan
+# Inside User-Mode Linux the drives' process may be descheduled for hundreds of ms on a busy
+# host (test_daemon_on_vcan widens the drives' heartbeat for the same reason): the drives
+# consume the master's 100 ms heartbeat with 1500 ms.
+MASTER_HEARTBEAT_MS = 100
+CONSUMER_MULTIPLE = 15
+# A drive notices the loss at most the consumer time after the last heartbeat it received
+# (sent before the kill); the drives' process inside UML may start late by its scheduling
+# (hundreds of ms on a busy host, test_daemon_on_vcan): that much is allowed on top.
+SCHEDULING_S = 0.5
+
+
+def logged_at(line: str) -> float:
+    """Wall-clock time of a log line 'YYYY-mm-dd HH:MM:SS,mmm LEVEL ...' (local time)."""
+    stamp = datetime.datetime.strptime(line[:23], "%Y-%m-%d %H:%M:%S,%f")
+    return stamp.timestamp()
+
+
+@pytest.fixture
+def daemon_and_drives(vcan0, tmp_path, sim_process):
+    daemon = VcanDaemon(tmp_path / "data", vcan0)
+    config = yaml.safe_load(daemon.config_path.read_text())
+    config["monitoring"].update(master_heartbeat_ms=MASTER_HEARTBEAT_MS,
+                                master_heartbeat_consumer_multiple=CONSUMER_MULTIPLE)
+    daemon.config_path.write_text(yaml.safe_dump(config, sort_keys=False))
+    daemon.config = load_config(daemon.config_path)
+    sim = sim_process(daemon.config_path)
+    try:
+        yield start_daemon(daemon), sim
+    finally:
+        daemon.close()
+
+
+def test_sigkill_of_the_daemon_faults_every_drive_within_the_consumer_time(daemon_and_drives):
+    daemon, sim = daemon_and_drives
+    consumer_s = MASTER_HEARTBEAT_MS * CONSUMER_MULTIPLE / 1000.0
+    nodes = [a.node_id for a in daemon.config.axes]
+    master = daemon.config.master.node_id
+
+    def diagnosis() -> str:
+        return f"daemon log:\n{daemon.log()[-3000:]}\ndrives log:\n" + "\n".join(sim.log[-40:])
+
+    status = daemon.request("status")
+    assert status["state"] != "fault", f"{status}\n{diagnosis()}"
+    submit_wang(daemon)
+    daemon.wait_progress(0.1, timeout_s=JOB_TIMEOUT_S)
+    assert not [line for line in sim.log if "sim.heartbeat_lost" in line], diagnosis()
+
+    assert daemon.proc is not None
+    daemon.proc.kill()  # SIGKILL: no shutdown, no NMT stop; the kernel drops its BCM heartbeat task
+    killed = time.time()  # the drives' log lines carry wall-clock times
+
+    def lost() -> dict[int, float]:
+        wanted = {f"sim.heartbeat_lost node={n} producer={master}": n for n in nodes}
+        return {n: logged_at(line) for text, n in wanted.items() for line in sim.log if text in line}
+    wait_until(lambda: set(lost()) == set(nodes), consumer_s + SCHEDULING_S + 10.0, "every drive to report the loss")
+    delays = {n: round(at - killed, 3) for n, at in lost().items()}
+    print(f"drives noticed the loss after {delays} s (consumer time {consumer_s} s)")
+    assert max(delays.values()) <= consumer_s + SCHEDULING_S, f"{delays}\n{diagnosis()}"
+    sim.stop()
+    for n in nodes:  # each drive's closing summary: it went to FAULT by itself
+        assert any(f"sim.summary node={n} state=FAULT" in line for line in sim.log), sim.summary()
