@@ -2,6 +2,7 @@
 
 Start-up order: the bus and the control socket are ours (service.ownership: else one line
 naming the other daemon, nothing touched) -> mark jobs left without outcome 'interrupted' ->
+the persisted offsets (DATA_DIR/offsets.json; unreadable: one error, nothing started) ->
 simulated drives (if configured) -> bring-up of every axis -> control socket -> READY=1
 (systemd). Shutdown
 order: refuse new jobs (and every request that would move or re-enable something) ->
@@ -22,6 +23,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.link import open_link
+from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
@@ -39,7 +41,9 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     """Route one checked request to the controller."""
     f = request.fields
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
-        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False))),
+        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
+                                            bool(f.get("block_delete", True)), bool(f.get("optional_stop", True))),
+        "offsets": lambda: controller.offsets(f),
         "status": controller.status,
         "job": lambda: controller.job_info(f["id"]),
         "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
@@ -71,9 +75,11 @@ class Daemon:
         cap_switch_interval(self.config.cycle_period_s)  # process-wide: the cycle thread gets the GIL in time
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
+        machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         link, self.simulation = self._open_motion(self.config)
-        self.controller = Controller(self.config, link, lambda name, text, start: plan_job(name, text, self.config, start),
-                                     self.records, self.simulation)
+        self.controller = Controller(self.config, link,
+                                     lambda name, text, start, options: plan_job(name, text, self.config, start, options),
+                                     self.records, self.simulation, machine_state)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()
