@@ -32,6 +32,7 @@ from benchmarks._report import write_section  # noqa: E402
 
 from nurbsmotion.config import parse_config  # noqa: E402
 from nurbsmotion.fieldbus import Master  # noqa: E402
+from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY  # noqa: E402
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until  # noqa: E402
 from nurbsmotion.sim import SimNetwork  # noqa: E402
 
@@ -66,7 +67,7 @@ def run_case(n_axes: int, period_ms: float, seconds: float, gc_mode: str = "free
             sim.add_drive(i + 1)
         bus = can.Bus(interface="virtual", channel=channel)
         # the virtual bus has no bitrate: 6 axes at 1 ms exceed 1 Mbit/s, measured anyway
-        master = Master(config, bus, check_load=False, gc_mode=gc_mode)
+        master = Master(config, bus, check_load=False, gc_mode=gc_mode, rt_priority=CYCLE_THREAD_PRIORITY)
         try:
             master.bring_up()
             tids = master_thread_ids(master)

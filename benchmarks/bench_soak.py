@@ -32,6 +32,7 @@ from benchmarks._report import write_section  # noqa: E402
 
 from nurbsmotion.config import parse_config  # noqa: E402
 from nurbsmotion.fieldbus import Master  # noqa: E402
+from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY  # noqa: E402
 from nurbsmotion.sim import SimNetwork  # noqa: E402
 
 COUNTS_PER_MM = 1000
@@ -101,7 +102,7 @@ def three_axes(period_ms: float, name: str) -> Iterator[Master]:
         sim.add_drive(node, record=False)
     sim.start()
     bus = can.Bus(interface="virtual", channel=channel)
-    master = Master(config, bus)
+    master = Master(config, bus, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")  # as the daemon runs it
     try:
         master.bring_up()
         yield master

@@ -27,22 +27,23 @@ ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
 
 
-SYNC_SOURCES = ("loop", "kernel")
+SYNC_SOURCES = ("auto", "loop", "kernel")
 
 
 @dataclass(frozen=True)
 class BusConfig:
-    """``sync_source``: 'loop' sends SYNC from the cycle loop right before that cycle's RPDOs
-    (a late cycle delays SYNC, it never loses a set-point); 'kernel' lets the SocketCAN
-    broadcast manager send SYNC on its own clock (less SYNC jitter, but a cycle later than
-    half a period loses its set-point: measured on vcan0, docs/vcan.md). ``sync_window_us``:
-    0x1007 on the drives (RPDOs later than this after SYNC are discarded); 0 = no window, the
-    default, since a cycle thread preempted between its SYNC and its RPDOs would lose them."""
+    """``sync_source``: 'kernel' queues SYNC and RPDOs of the coming cycles in the SocketCAN
+    broadcast manager (fieldbus.bcm_queue: a stall of the master shorter than the queue
+    changes nothing on the wire; socketcan only); 'loop' sends them from the cycle thread at
+    each deadline (a late thread delays the cycle); 'auto' (default): kernel on socketcan,
+    loop on every other interface. ``sync_window_us``: 0x1007 on the drives (RPDOs later
+    than this after SYNC are discarded); 0 = no window, the default (the kernel queue sends
+    the last RPDO T/(1 + n) before the next SYNC, the loop may be preempted between them)."""
 
     interface: str = "virtual"
     channel: str = "nurbsmotion"
     bitrate: int = 1_000_000
-    sync_source: str = "loop"
+    sync_source: str = "auto"
     sync_window_us: int = 0  # 0x1007 written on every drive that has it; 0 = no window
 
 

@@ -15,6 +15,9 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import gc
+import os
+import sys
 
 M_TRIM_THRESHOLD = -1  # glibc <malloc.h>
 M_MMAP_THRESHOLD = -3
@@ -33,3 +36,57 @@ def keep_freed_memory() -> bool:
     mallopt.argtypes = (ctypes.c_int, ctypes.c_int)
     mallopt.restype = ctypes.c_int
     return mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES) == 1 and mallopt(M_TRIM_THRESHOLD, TRIM_THRESHOLD_BYTES) == 1
+
+
+# ---------------------------------------------------------------- cycle timing of the process
+# Applied by the daemon (service.daemon / service.link), never by the fieldbus master itself:
+# they change the whole process (switch interval, garbage collector) or its scheduling.
+
+GC_MODES = ("freeze", "disable", "none")
+CYCLE_THREAD_PRIORITY = 20  # SCHED_FIFO priority of the master's cycle thread (its receive thread: one less)
+
+
+def cap_switch_interval(period_s: float) -> float:
+    """A thread busy in pure Python keeps the GIL up to the switch interval (5 ms by default)
+    before a woken cycle thread gets it: cap it at a quarter period. Returns the interval."""
+    if sys.getswitchinterval() > period_s / 4:
+        sys.setswitchinterval(period_s / 4)
+    return sys.getswitchinterval()
+
+
+def set_thread_realtime(priority: int | None) -> str:
+    """SCHED_FIFO ``priority`` for the calling thread when allowed (root / CAP_SYS_NICE);
+    returns the policy in force ('SCHED_FIFO', or 'normal: <reason>')."""
+    if priority is None or not hasattr(os, "sched_setscheduler"):
+        return "normal: not requested"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, priority)))
+    except (PermissionError, OSError) as err:
+        return f"normal: {err}"
+    return "SCHED_FIFO"
+
+
+class GcQuiet:
+    """Keep the cyclic garbage collector from stalling the process for milliseconds during a job.
+
+    'freeze' moves every object alive now (the job's rows included) out of the collector's
+    reach, so collections during the job only scan what is allocated meanwhile; 'disable'
+    stops cyclic collection until :meth:`release` (reference counting still frees memory);
+    'none' changes nothing."""
+
+    def __init__(self, mode: str = "none") -> None:
+        if mode not in GC_MODES:
+            raise ValueError(mode)
+        self.mode = mode
+
+    def quiet(self) -> None:
+        if self.mode == "freeze":
+            gc.freeze()
+        elif self.mode == "disable":
+            gc.disable()
+
+    def release(self) -> None:
+        if self.mode == "freeze":
+            gc.unfreeze()
+        elif self.mode == "disable":
+            gc.enable()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-FAULT_KINDS = ("emcy", "heartbeat", "fault_bit", "following_error", "bus_error", "bringup")
+FAULT_KINDS = ("emcy", "heartbeat", "fault_bit", "following_error", "bus_error", "bringup", "stall")
 
 
 @dataclass(frozen=True)

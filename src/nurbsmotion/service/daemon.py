@@ -1,8 +1,10 @@
 """The daemon: drives up, job records checked, control socket served until SIGTERM/SIGINT.
 
-Start-up order: mark jobs left without outcome 'interrupted' -> the persisted offsets
-(DATA_DIR/offsets.json; unreadable: one error, nothing started) -> simulated drives (if
-configured) -> bring-up of every axis -> control socket -> READY=1 (systemd). Shutdown
+Start-up order: the bus and the control socket are ours (service.ownership: else one line
+naming the other daemon, nothing touched) -> mark jobs left without outcome 'interrupted' ->
+the persisted offsets (DATA_DIR/offsets.json; unreadable: one error, nothing started) ->
+simulated drives (if configured) -> bring-up of every axis -> control socket -> READY=1
+(systemd). Shutdown
 order: refuse new jobs (and every request that would move or re-enable something) ->
 controlled stop of a running job (outcome 'stopped') -> drives disabled -> socket removed
 -> simulated drives stopped. The socket keeps answering ``status`` and ``job`` until it is
@@ -18,11 +20,13 @@ from typing import Any, Callable
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
+from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
+from nurbsmotion.service.ownership import BusOwnership
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
@@ -64,8 +68,11 @@ class Daemon:
         self.server: ControlServer | None = None
         self.simulation: Simulation | None = None
         self._closing = False
+        self.ownership = BusOwnership(config)
 
     def start(self) -> None:
+        self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
+        cap_switch_interval(self.config.cycle_period_s)  # process-wide: the cycle thread gets the GIL in time
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
@@ -101,6 +108,7 @@ class Daemon:
         self._stop_simulation()
         if served:  # a start-up that failed has said so in its error already
             log.info(kv("daemon_stopped"))
+        self.ownership.release()
 
     def _stop_motion(self) -> None:
         if self.controller is not None:

@@ -12,6 +12,7 @@ import time
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.log import kv
+from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY
 
 log = logging.getLogger(__name__)
 
@@ -86,7 +87,7 @@ def open_link(config: MachineConfig) -> tuple[Master, SimulatedDrives | None]:
     """Start the simulated drives (if configured), bring every axis up; FieldbusError names
     the node and the step if that fails (and everything started is stopped again)."""
     simulation = SimulatedDrives(config).start() if config.simulate else None
-    master = Master(config)
+    master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")  # the daemon's process settings
     try:
         master.bring_up()
     except BaseException:

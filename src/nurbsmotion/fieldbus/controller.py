@@ -1,0 +1,327 @@
+"""The master's per-cycle controller: phase, controlwords and set-points of one cycle.
+
+``CycleController.step(cycle, feedback, requests)`` computes the commands (one controlword
+and one set-point per axis) of cycle k, to be sent after SYNC k and applied by the drives at
+SYNC k+1 (CiA 301). It touches no bus and no clock: the cycle writer decides when the
+commands go out (right after SYNC k, or queued in the kernel many cycles ahead), the
+supervisor judges the drives' answers and turns faults into requests. Phases and their
+transitions are one table (:data:`TRANSITIONS`), as in sim/statemachine.py:
+
+enabling (CiA-402 state machine towards OPERATION ENABLED, target = actual position) ->
+holding (re-send the held position) <-> streaming (the job's rows at the playback rate) ->
+stopping (controlled stop on the path) / quick_stop (quick-stop controlword) -> disabled;
+disabling at shutdown.
+"""
+
+from __future__ import annotations
+
+import collections
+import enum
+from typing import Any, Protocol
+
+from nurbsmotion import cia402 as c
+from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, enable_step, is_ready,
+                                              running_controlword)
+from nurbsmotion.fieldbus.playback import Playback, PlaybackState
+
+OE_MASK, OE_VALUE = 0x6F, 0x27  # statusword coding of OPERATION ENABLED
+QS_VALUE = 0x07  # QUICK STOP ACTIVE under the same mask
+
+
+class Phase(enum.Enum):
+    OFFLINE = "offline"
+    ENABLING = "enabling"
+    HOLDING = "holding"
+    STREAMING = "streaming"
+    STOPPING = "stopping"
+    QUICK_STOP = "quick_stop"
+    DISABLED = "disabled"
+    DISABLING = "disabling"
+
+
+RUNNING_PHASES = frozenset((Phase.HOLDING, Phase.STREAMING, Phase.STOPPING))
+MOVING_PHASES = frozenset((Phase.STREAMING, Phase.STOPPING))
+
+
+class Event(enum.Enum):
+    ENABLE = "enable"  # bring-up or reset_faults
+    READY = "ready"  # every axis follows set-points
+    ENABLE_FAILED = "enable failed"  # an axis stuck on its way to OPERATION ENABLED
+    JOB = "job"
+    LAST_ROW = "last row"  # the job's last planned row handed out
+    STOP = "stop"  # controlled stop requested (stop, or a fault while the drives follow)
+    AT_REST = "at rest"  # the stop ramp reached rate 0 (or nothing of the job was sent)
+    QUICK_STOP = "quick stop"  # abort, or a fault the drives may not follow through
+    DRIVES_STOPPED = "drives stopped"  # every axis left OPERATION ENABLED / QUICK STOP ACTIVE
+    DISABLE = "disable"  # shutdown
+
+
+P, E = Phase, Event
+_ANY_ONLINE = (P.ENABLING, P.HOLDING, P.STREAMING, P.STOPPING, P.QUICK_STOP, P.DISABLED)
+TRANSITIONS: dict[tuple[Phase, Event], Phase] = {
+    **{(p, E.ENABLE): P.ENABLING for p in (P.OFFLINE, *_ANY_ONLINE)},
+    (P.ENABLING, E.READY): P.HOLDING,
+    (P.ENABLING, E.ENABLE_FAILED): P.QUICK_STOP,
+    (P.ENABLING, E.QUICK_STOP): P.QUICK_STOP,
+    (P.HOLDING, E.JOB): P.STREAMING,
+    (P.STREAMING, E.LAST_ROW): P.HOLDING,
+    (P.STREAMING, E.STOP): P.STOPPING,
+    (P.STREAMING, E.AT_REST): P.HOLDING,
+    (P.STOPPING, E.AT_REST): P.HOLDING,
+    **{(p, E.QUICK_STOP): P.QUICK_STOP for p in RUNNING_PHASES},
+    (P.QUICK_STOP, E.DRIVES_STOPPED): P.DISABLED,
+    **{(p, E.DISABLE): P.DISABLING for p in _ANY_ONLINE},
+}
+
+
+def next_phase(phase: Phase, event: Event) -> Phase | None:
+    """The phase ``event`` leads to from ``phase``; None: the event does not apply there."""
+    return TRANSITIONS.get((phase, event))
+
+
+class Feedback(Protocol):
+    """What the controller reads of the drives' answers (fieldbus.feedback.Feedback)."""
+
+    status: list[int | None]
+    pos: list[int]
+    cycle: list[int]
+    last_emcy: list[int | None]
+    wire_cycle: int
+
+
+class JobLike(Protocol):
+    playback: Playback
+    outcome: str
+    finish_cycle: int
+    released: bool
+
+
+class CycleController:
+    """Phase and per-axis commands; ``sp``/``cw`` are reused lists (no allocation per cycle).
+
+    ``notices`` collects what the caller must act on outside the cycle: ('ready',),
+    ('enable_failed', axis, cycle), ('quick_stop', cycle), ('refused', job), ('quit',).
+    """
+
+    def __init__(self, n_axes: int, ip_mode: list[bool], accel_limits: list[float], period_s: float,
+                 stuck_cycles: int, enable_timeout_cycles: float) -> None:
+        self.n = n_axes
+        self.ip = ip_mode
+        self.accel_limits = accel_limits
+        self.period_s = period_s
+        self.stuck_cycles = stuck_cycles
+        self.enable_timeout_cycles = enable_timeout_cycles
+        self.run_cw = [running_controlword(ip) for ip in ip_mode]
+        self.sp = [0] * n_axes
+        self.cw = [0] * n_axes
+        self.hold = [0] * n_axes
+        self.axis_enabled = [False] * n_axes
+        self.since_cycle = [0] * n_axes
+        self.since_status: list[int | None] = [None] * n_axes
+        self.phase = Phase.OFFLINE
+        self.phase_cycle = 0
+        self.job: Any = None  # the job streaming or stopping (a JobLike)
+        self.rate = 1.0  # playback rate for the next jobs (feed override)
+        self.notices: collections.deque[tuple[Any, ...]] = collections.deque()
+
+    # ------------------------------------------------------------------ the cycle
+    def step(self, k: int, fb: Feedback, requests: list[tuple[str, Any]] | tuple = ()) -> tuple[list[int], list[int]]:
+        """Handle ``requests`` (in order), then return (controlwords, set-points) of cycle k."""
+        for what, arg in requests:
+            self.handle(what, arg, k, fb)
+        phase = self.phase
+        sp, cw = self.sp, self.cw
+        if phase is Phase.STREAMING:
+            job = self.job
+            cw[:] = self.run_cw
+            if job.playback.advance(sp):
+                self.hold[:] = sp
+                job.outcome, job.finish_cycle = "done", k + 1
+                self._set_phase(Event.LAST_ROW, k)
+        elif phase is Phase.HOLDING:
+            sp[:] = self.hold
+            cw[:] = self.run_cw
+        elif phase is Phase.STOPPING:
+            job = self.job
+            cw[:] = self.run_cw
+            if not job.playback.stop_step(sp):
+                self.hold[:] = sp
+                job.finish_cycle = k + 1
+                self._set_phase(Event.AT_REST, k)
+        elif phase is Phase.ENABLING:
+            self._enabling(k, fb)
+        elif phase is Phase.QUICK_STOP:
+            sp[:] = fb.pos
+            cw[:] = [CW_QUICK_STOP] * self.n
+            if k - self.phase_cycle > 2 and all(self._stopped_or_silent(i, fb) for i in range(self.n)):
+                self._set_phase(Event.DRIVES_STOPPED, k)
+        elif phase is Phase.DISABLED:
+            sp[:] = fb.pos
+            cw[:] = [CW_DISABLE_VOLTAGE] * self.n
+        elif phase is Phase.DISABLING:
+            sp[:] = self.hold
+            cw[:] = [CW_SHUTDOWN] * self.n
+            if all((s or 0) & OE_MASK != OE_VALUE for s in fb.status) and k - self.phase_cycle > 2 \
+                    or k - self.phase_cycle > self.stuck_cycles:
+                self.notices.append(("quit",))
+        return cw, sp
+
+    def handle(self, what: str, arg: Any, k: int, fb: Feedback) -> None:
+        """One request: job, stop, abort, quick_stop, fault_stop, rate, enable, disable."""
+        phase = self.phase
+        if what == "job":
+            if phase is Phase.HOLDING and self.job is None:
+                self.job = arg
+                self._set_phase(Event.JOB, k)
+            else:
+                self.notices.append(("refused", arg))
+        elif what in ("stop", "fault_stop"):
+            if phase is Phase.STREAMING and (what == "fault_stop" or self.job is arg):
+                self._controlled_stop(k, "stopped" if what == "stop" else "faulted")
+        elif what == "abort":
+            if self.job is arg and phase in RUNNING_PHASES:
+                self._quick_stop(k, "aborted")
+        elif what == "quick_stop":
+            if phase in RUNNING_PHASES or phase is Phase.ENABLING:
+                self._quick_stop(k, arg or "aborted")
+        elif what == "rate":
+            self.rate = arg
+            if self.job is not None:
+                self.job.playback.target = arg
+        elif what == "enable":
+            self._enter_enabling(k, fb)
+        elif what == "disable":
+            self._end_job("aborted", k)
+            self._set_phase(Event.DISABLE, k)
+
+    # ------------------------------------------------------------------ what a stall would leave on the wire
+    def stop_cycles(self) -> int:
+        """Cycles from now until the axes are at rest if no further request came: the length
+        of the controlled stop a queue must end with (1 when not moving)."""
+        if self.phase in MOVING_PHASES and self.job is not None:
+            return self.job.playback.stop_cycles(self.accel_limits, self.period_s)
+        return 1
+
+    def tail(self, sp_rows: list[list[int]], cw_rows: list[list[int]]) -> int:
+        """Fill the rows with what follows the last step if no request came: a controlled stop
+        from the playback state (streaming), the rest of the stop (stopping), else the last
+        commands repeated. The controller's state is left unchanged. Returns the number of
+        rows until rest (the rest repeats the final row)."""
+        job = self.job
+        moving = self.phase in MOVING_PHASES and job is not None
+        saved = job.playback.snapshot() if moving else None
+        out, cw = list(self.sp), list(self.cw)
+        if moving and not job.playback.stopping:
+            job.playback.start_stop(self.accel_limits, self.period_s)
+        at_rest = 0 if not moving else len(sp_rows)
+        for row in range(len(sp_rows)):
+            if row < at_rest and not job.playback.stop_step(out):
+                at_rest = row + 1
+            sp_rows[row][:] = out
+            cw_rows[row][:] = cw
+        if saved is not None:
+            job.playback.restore(saved)
+        return at_rest
+
+    # ------------------------------------------------------------------ rewinding (queued cycles)
+    def snapshot(self) -> tuple[Any, ...]:
+        job = self.job
+        state: PlaybackState | None = job.playback.snapshot() if job is not None else None
+        return (self.phase, self.phase_cycle, job, state, job.outcome if job else "", job.finish_cycle if job else -1,
+                tuple(self.hold), tuple(self.sp), tuple(self.cw), self.rate)
+
+    def restore(self, snap: tuple[Any, ...]) -> None:
+        """Back to the state right after an earlier step (snapshot taken then)."""
+        phase, self.phase_cycle, job, state, outcome, finish, hold, sp, cw, self.rate = snap
+        self.phase = phase
+        if job is not None and job.released and phase not in MOVING_PHASES:
+            job = None  # its end already reached the wire
+        self.job = job
+        if job is not None:
+            job.playback.restore(state)
+            job.outcome, job.finish_cycle = outcome, finish
+        self.hold[:] = hold
+        self.sp[:] = sp
+        self.cw[:] = cw
+
+    # ------------------------------------------------------------------ transitions
+    def _set_phase(self, event: Event, k: int) -> None:
+        phase = next_phase(self.phase, event)
+        if phase is None:
+            raise RuntimeError(f"controller: event {event.value} in phase {self.phase.value}")
+        self.phase = phase
+        self.phase_cycle = k
+        self.notices.append(("phase", phase, k))
+
+    def _enter_enabling(self, k: int, fb: Feedback) -> None:
+        for i in range(self.n):
+            self.since_cycle[i] = k
+            self.since_status[i] = fb.status[i]
+            self.axis_enabled[i] = False
+        self._set_phase(Event.ENABLE, k)
+
+    def _controlled_stop(self, k: int, outcome: str) -> None:
+        job = self.job
+        job.outcome = outcome
+        if job.playback.index < 0:  # nothing of the job sent yet: keep holding
+            job.finish_cycle = k
+            self._set_phase(Event.AT_REST, k)
+            self.job = None
+            return
+        job.playback.start_stop(self.accel_limits, self.period_s)
+        self._set_phase(Event.STOP, k)
+
+    def _quick_stop(self, k: int, outcome: str) -> None:
+        self._set_phase(Event.QUICK_STOP, k)
+        self.notices.append(("quick_stop", k))
+        self._end_job(outcome, k)
+
+    def _end_job(self, outcome: str, k: int) -> None:
+        job = self.job
+        if job is not None:
+            job.outcome, job.finish_cycle = outcome, k
+            self.job = None
+
+    def release_job(self, job: Any) -> None:
+        """The job's end reached the wire: forget it."""
+        job.released = True
+        if self.job is job and self.phase not in MOVING_PHASES:
+            self.job = None
+
+    def _enabling(self, k: int, fb: Feedback) -> None:
+        sp, cw = self.sp, self.cw
+        for i in range(self.n):
+            sw = fb.status[i]
+            state = c.state_of_statusword(sw) if sw is not None else None
+            if state is c.State.OPERATION_ENABLED:
+                if not self.axis_enabled[i]:
+                    self.axis_enabled[i] = True
+                    self.hold[i] = sp[i]
+                sp[i] = self.hold[i]
+            else:
+                self.axis_enabled[i] = False
+                sp[i] = fb.pos[i]
+            cw[i] = enable_step(state, cw[i], self.ip[i])[1]
+        self._check_enabling(k, fb)
+
+    def _check_enabling(self, k: int, fb: Feedback) -> None:
+        ready = True
+        for i in range(self.n):
+            sw = fb.status[i]
+            if sw is not None and is_ready(sw, self.ip[i]) and fb.cycle[i] > self.phase_cycle:
+                continue
+            ready = False
+            if sw != self.since_status[i]:
+                self.since_status[i], self.since_cycle[i] = sw, k
+            elif k - self.since_cycle[i] > self.stuck_cycles or k - self.phase_cycle > self.enable_timeout_cycles:
+                self.notices.append(("enable_failed", i, k))
+                self._set_phase(Event.ENABLE_FAILED, k)
+                return
+        if ready:
+            self.hold[:] = self.sp
+            self._set_phase(Event.READY, k)
+            self.notices.append(("ready",))
+
+    def _stopped_or_silent(self, i: int, fb: Feedback) -> bool:
+        """Axis i no longer enabled nor quick-stopping, or its TPDO1 stopped coming."""
+        return (fb.status[i] or 0) & OE_MASK not in (OE_VALUE, QS_VALUE) or fb.cycle[i] < fb.wire_cycle - 3

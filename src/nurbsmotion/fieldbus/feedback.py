@@ -1,0 +1,114 @@
+"""What the drives last reported, written by canopen's notifier thread.
+
+Plain lists whose items the callbacks store (an item store is atomic under the GIL), and a
+deque of events (EMCY, NMT state change, TPDO of the wrong length) the supervisor drains
+each cycle. ``wire_cycle`` is the master's count of SYNCs on the wire, set by the cycle
+loop; a TPDO1 is stamped with it.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from typing import Any, Callable
+
+from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
+
+EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3
+
+Callback = Callable[[int, bytearray, float], None]
+
+
+class Feedback:
+    """Per-axis answers of the drives (TPDO1/2, EMCY, heartbeat)."""
+
+    def __init__(self, n_axes: int) -> None:
+        self.status: list[int | None] = [None] * n_axes
+        self.pos: list[int] = [0] * n_axes
+        self.fe: list[int | None] = [None] * n_axes
+        self.cycle = [-1] * n_axes  # wire cycle when the last TPDO1 arrived
+        self.tpdo_count = [0] * n_axes  # TPDO1s received (one answers each SYNC)
+        self.time = [0.0] * n_axes  # its receive timestamp (time.time() based)
+        self.bad_tpdo = [0] * n_axes
+        self.emcy_count = [0] * n_axes
+        self.last_emcy: list[int | None] = [None] * n_axes
+        self.hb_time = [0.0] * n_axes  # perf_counter of the last heartbeat
+        self.hb_state: list[int | None] = [None] * n_axes
+        self.events: collections.deque[tuple[int, int, int]] = collections.deque()
+        self.wire_cycle = 0
+        self.sink: Callable[[int, int, int, int, float], None] | None = None  # Master.record_feedback
+
+    def tpdo1_callback(self, i: int, first_call: Callable[[], None] | None = None) -> Callback:
+        size = TPDO1_FORMAT.size
+        unpack = TPDO1_FORMAT.unpack_from
+        pending = [first_call]
+
+        def on_tpdo1(can_id: int, data: bytearray, timestamp: float) -> None:
+            if pending[0] is not None:
+                pending[0], call = None, pending[0]
+                call()
+            if len(data) != size:
+                self.bad_tpdo[i] += 1
+                self.events.append((EVENT_BAD_TPDO, i, len(data)))
+                return
+            self.status[i], self.pos[i] = unpack(data)
+            self.cycle[i] = self.wire_cycle
+            self.tpdo_count[i] += 1
+            sink = self.sink
+            if sink is not None:
+                sink(self.wire_cycle, i, self.status[i], self.pos[i], timestamp)
+            self.time[i] = timestamp
+        return on_tpdo1
+
+    def tpdo2_callback(self, i: int) -> Callback:
+        size = TPDO2_FORMAT.size
+        unpack = TPDO2_FORMAT.unpack_from
+
+        def on_tpdo2(can_id: int, data: bytearray, timestamp: float) -> None:
+            if len(data) != size:
+                self.bad_tpdo[i] += 1
+                self.events.append((EVENT_BAD_TPDO, i, len(data)))
+                return
+            self.fe[i] = unpack(data)[0]
+        return on_tpdo2
+
+    def split_tpdo_callback(self, i: int, size: int, unpack: Callable[[bytearray], tuple[int, ...]],
+                            status: bool) -> Callback:
+        """A TPDO carrying the statusword alone (``status``) or the position alone."""
+        def on_split_tpdo(can_id: int, data: bytearray, timestamp: float) -> None:
+            if len(data) != size:
+                self.bad_tpdo[i] += 1
+                self.events.append((EVENT_BAD_TPDO, i, len(data)))
+                return
+            if status:
+                self.status[i] = unpack(data)[0]
+                return
+            self.pos[i] = unpack(data)[0]
+            self.cycle[i] = self.wire_cycle
+            self.tpdo_count[i] += 1
+            self.time[i] = timestamp
+            sink = self.sink
+            if sink is not None:
+                sink(self.wire_cycle, i, self.status[i] or 0, self.pos[i], timestamp)
+        return on_split_tpdo
+
+    def emcy_callback(self, i: int) -> Callable[[Any], None]:
+        """canopen's EMCY consumer callback: ``entry.code`` (canopen.emcy.EmcyError)."""
+        def on_emcy(entry: Any) -> None:
+            code = entry.code
+            self.emcy_count[i] += 1
+            self.last_emcy[i] = code
+            self.events.append((EVENT_EMCY, i, code))
+        return on_emcy
+
+    def heartbeat_callback(self, i: int, on_state: Callable[[int], None]) -> Callback:
+        def on_heartbeat(can_id: int, data: bytearray, timestamp: float) -> None:
+            if not data:
+                return
+            state = data[0] & 0x7F
+            self.hb_time[i] = time.perf_counter()
+            if state != self.hb_state[i]:
+                self.hb_state[i] = state
+                self.events.append((EVENT_NMT, i, state))
+            on_state(state)
+        return on_heartbeat

@@ -1,0 +1,139 @@
+"""The per-cycle controller without a bus: phases, enabling, streaming, stops, rewinding."""
+
+import numpy as np
+import pytest
+
+from nurbsmotion.fieldbus.controller import TRANSITIONS, CycleController, Event, Phase, next_phase
+from nurbsmotion.fieldbus.drive_state import CW_ENABLED, CW_QUICK_STOP, CW_SHUTDOWN
+from nurbsmotion.fieldbus.playback import Playback
+from nurbsmotion.fieldbus.stop_ramp import ramp_slope
+
+SW_ENABLED = 0x0237  # OPERATION ENABLED
+SW_SWITCH_ON_DISABLED = 0x0240
+
+
+class Fb:
+    def __init__(self, n, status=None, pos=0):
+        self.status = [status] * n
+        self.pos = [pos] * n
+        self.cycle = [-1] * n
+        self.last_emcy = [None] * n
+        self.wire_cycle = 0
+
+
+class FakeJob:
+    def __init__(self, rows):
+        arr = np.asarray(rows, dtype=np.int64)
+        steps = np.abs(np.diff(arr, axis=0)).max(axis=0).astype(float).tolist()
+        self.playback = Playback(memoryview(arr), ramp_slope(arr, np.full(arr.shape[1], 1e6), 0.004), 1.0, steps,
+                                 [0.0] * arr.shape[1])
+        self.outcome, self.finish_cycle, self.released = "", -1, False
+
+
+def holding_controller(n=2):
+    ctl = CycleController(n, [False] * n, [1e6] * n, 0.004, stuck_cycles=100, enable_timeout_cycles=1000)
+    fb = Fb(n, SW_ENABLED)
+    ctl.handle("enable", None, 0, fb)
+    fb.cycle = [5] * n
+    ctl.step(1, fb)
+    assert ctl.phase is Phase.HOLDING
+    return ctl, fb
+
+
+def test_every_transition_is_in_the_table_and_nothing_else():
+    assert next_phase(Phase.HOLDING, Event.JOB) is Phase.STREAMING
+    assert next_phase(Phase.HOLDING, Event.LAST_ROW) is None
+    assert next_phase(Phase.DISABLED, Event.JOB) is None
+    assert all(isinstance(p, Phase) and isinstance(e, Event) for p, e in TRANSITIONS)
+
+
+def test_enabling_walks_the_state_machine_from_the_feedback():
+    ctl = CycleController(1, [False], [1e6], 0.004, stuck_cycles=100, enable_timeout_cycles=1000)
+    fb = Fb(1, SW_SWITCH_ON_DISABLED, pos=1234)
+    ctl.handle("enable", None, 0, fb)
+    cw, sp = ctl.step(1, fb)
+    assert (cw, sp, ctl.phase) == ([CW_SHUTDOWN], [1234], Phase.ENABLING)
+    fb.status, fb.cycle = [SW_ENABLED], [3]
+    cw, sp = ctl.step(2, fb)
+    assert cw == [CW_ENABLED] and ctl.phase is Phase.HOLDING and ctl.hold == [1234]
+    assert ("ready",) in ctl.notices
+
+
+def test_an_axis_stuck_while_enabling_is_named():
+    ctl = CycleController(2, [False, False], [1e6] * 2, 0.004, stuck_cycles=3, enable_timeout_cycles=1000)
+    fb = Fb(2, SW_SWITCH_ON_DISABLED)
+    ctl.handle("enable", None, 0, fb)
+    k = 0
+    while ctl.phase is Phase.ENABLING and k < 10:
+        k += 1
+        ctl.step(k, fb)
+    assert ctl.phase is Phase.QUICK_STOP and k == 4  # unchanged for more than 3 cycles
+    assert any(n[0] == "enable_failed" and n[1] == 0 for n in ctl.notices)
+
+
+def test_stream_plays_every_row_once_then_holds_the_last():
+    ctl, fb = holding_controller()
+    rows = [[i * 10, -i * 5] for i in range(6)]
+    job = FakeJob(rows)
+    sent = [list(ctl.step(k, fb, [("job", job)] if k == 2 else [])[1]) for k in range(2, 10)]
+    assert sent[:6] == rows and sent[6:] == [rows[-1]] * 2
+    assert ctl.phase is Phase.HOLDING and (job.outcome, job.finish_cycle) == ("done", 8)
+
+
+def test_stop_decelerates_on_the_path_and_ends_at_rest():
+    ctl, fb = holding_controller(1)
+    job = FakeJob([[i * 100] for i in range(1000)])
+    ctl.step(2, fb, [("job", job)])
+    for k in range(3, 50):
+        ctl.step(k, fb)
+    ctl.step(50, fb, [("stop", job)])
+    assert ctl.phase is Phase.STOPPING
+    points = [ctl.step(k, fb)[1][0] for k in range(51, 400)]
+    steps = np.diff(points)
+    assert ctl.phase is Phase.HOLDING and job.outcome == "stopped"
+    assert (steps >= 0).all() and steps[-1] == 0 and (np.diff(steps)[:20] <= 0).all()
+
+
+def test_abort_sends_quick_stop_with_the_actual_position():
+    ctl, fb = holding_controller()
+    job = FakeJob([[i, i] for i in range(100)])
+    ctl.step(2, fb, [("job", job)])
+    fb.pos = [7, 8]
+    cw, sp = ctl.step(3, fb, [("abort", job)])
+    assert ctl.phase is Phase.QUICK_STOP and cw == [CW_QUICK_STOP] * 2 and sp == [7, 8]
+    assert job.outcome == "aborted" and ctl.job is None
+
+
+def test_tail_is_a_stop_from_the_current_state_and_leaves_the_state_alone():
+    ctl, fb = holding_controller(1)
+    job = FakeJob([[i * 100] for i in range(1000)])
+    ctl.step(2, fb, [("job", job)])
+    for k in range(3, 30):
+        ctl.step(k, fb)
+    before = ctl.snapshot()
+    rows = [[0] for _ in range(ctl.stop_cycles() + 5)]
+    at_rest = ctl.tail(rows, [[0] for _ in rows])
+    assert at_rest <= ctl.stop_cycles() and rows[at_rest - 1] == rows[-1]
+    assert np.diff([r[0] for r in rows]).min() >= 0
+    assert ctl.snapshot() == before
+
+
+def test_rewinding_to_a_snapshot_replays_the_same_commands():
+    ctl, fb = holding_controller(1)
+    job = FakeJob([[i * i] for i in range(200)])
+    ctl.step(2, fb, [("job", job)])
+    snap = ctl.snapshot()
+    first = [ctl.step(k, fb)[1][0] for k in range(3, 20)]
+    ctl.restore(snap)
+    assert [ctl.step(k, fb)[1][0] for k in range(3, 20)] == first
+
+
+@pytest.mark.parametrize("rate", [0.5, 0.0])
+def test_rate_request_changes_the_playback_speed(rate):
+    ctl, fb = holding_controller(1)
+    job = FakeJob([[i * 100] for i in range(10000)])
+    ctl.step(2, fb, [("job", job)])
+    ctl.step(3, fb, [("rate", rate)])
+    for k in range(4, 400):
+        ctl.step(k, fb)
+    assert job.playback.r == pytest.approx(rate)
