@@ -65,13 +65,21 @@ class PlanningError(InputError):
 
 
 
+def axis_limit_array(values: tuple[float | None, ...] | None, scale: float = 1.0) -> NDArray[np.float64] | None:
+    """Per-axis X, Y, Z limits times ``scale``; an axis without a limit (None, or not given)
+    is unlimited (inf). A None must not become NaN: NaN would drop every axis's cap (min and
+    comparisons with NaN), so the given limits would not hold either."""
+    if values is None:
+        return None
+    given = [np.inf if v is None else v for v in values[:3]]
+    out = np.full(3, np.inf)
+    out[: len(given)] = np.asarray(given, dtype=np.float64) * scale
+    return out
+
+
 def caps_for(limits: PlanLimits) -> Caps:
     def axis(values: tuple[float | None, ...] | None) -> NDArray[np.float64] | None:
-        if values is None:
-            return None
-        out = np.full(3, np.inf)
-        out[: len(values)] = np.asarray(values[:3], dtype=float) * MARGIN
-        return out
+        return axis_limit_array(values, MARGIN)
 
     return Caps(period_s=limits.period_s, chord_error_mm=MARGIN * limits.chord_error_mm,
                 accel_mm_s2=MARGIN * limits.max_accel_mm_s2,
@@ -80,15 +88,8 @@ def caps_for(limits: PlanLimits) -> Caps:
 
 
 def machine_for(limits: PlanLimits) -> MachineLimits:
-    def axis(values: tuple[float | None, ...] | None) -> NDArray[np.float64] | None:
-        if values is None:
-            return None
-        out = np.full(3, np.inf)
-        out[: len(values)] = np.asarray(values[:3], dtype=float)
-        return out
-
     return MachineLimits(limits.period_s, limits.chord_error_mm, limits.max_accel_mm_s2, limits.max_jerk_mm_s3,
-                         axis(limits.axis_max_velocity_mm_s), axis(limits.axis_max_accel_mm_s2))
+                         axis_limit_array(limits.axis_max_velocity_mm_s), axis_limit_array(limits.axis_max_accel_mm_s2))
 
 
 def averaging_time_s(limits: PlanLimits) -> float:
