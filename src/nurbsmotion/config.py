@@ -144,6 +144,9 @@ class MachineConfig:
     io: IoConfig | None = None
     simulate: bool = False
     master: MasterConfig = MasterConfig()
+    tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
+    tool_table: Any = field(default=None, compare=False, repr=False)
+    spindle: str | None = None  # 'none' or absent: no spindle drive
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -256,7 +259,10 @@ def _optional(reader: Callable[..., Any]) -> Callable[..., Any]:
 
 
 def _section_reader(name: str) -> Callable[[_Doc], Any]:
-    """The reader of the ``homing`` / ``io`` sections (their modules import this one)."""
+    """The reader of the ``homing`` / ``io`` / ``tools`` / ``spindle`` sections (their modules import this one)."""
+    if name in ("tools", "spindle"):
+        from nurbsmotion import tooling_config
+        return tooling_config.read_tools if name == "tools" else tooling_config.read_spindle
     if name == "homing":
         from nurbsmotion.homing_config import read_homing
         return read_homing
@@ -416,6 +422,8 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "simulate": (_boolean, {}),
+    "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
+    "spindle": (_optional(lambda doc: _section_reader("spindle")(doc)), {}),
 }
 
 
@@ -477,6 +485,8 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
         master=values.get("master", MasterConfig()),
+        tools=values.get("tools"),
+        spindle=values.get("spindle"),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)
@@ -485,7 +495,8 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
     cfg = _with_descriptions(cfg, base_dir, errors)
     if errors:
         raise InputErrors(errors)
-    return cfg
+    from nurbsmotion.tooling_config import load_tool_file
+    return load_tool_file(cfg, base_dir)
 
 
 def default_eds_path() -> str:

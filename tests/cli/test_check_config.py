@@ -45,3 +45,26 @@ def test_a_good_program_reports_the_machine(tmp_path, capsys):
     assert main(["check", "--config", DEMO, "--json", str(part)]) == 0
     machine = json.loads(capsys.readouterr().out)["machine"]
     assert machine["axes"] == ["X", "Y", "Z"] and machine["cycles"] > 10
+
+
+def test_the_machine_gate_tool_table_and_persisted_offsets_apply(tmp_path, capsys):
+    """check --config reads as the daemon does: the config's tool table, DATA_DIR/offsets.json,
+    and what the machine lacks (spindle: none) refuses the program at its line."""
+    from nurbsmotion.service.machine_state import MachineState, save_state, with_offset
+
+    (tmp_path / "tools.yaml").write_text("tools:\n  - {number: 4, length_mm: 150, diameter_mm: 6}\n")
+    config = tmp_path / "m.yaml"
+    config.write_text(Path(DEMO).read_text().replace("data_dir:", "#") + f"data_dir: {tmp_path / 'data'}\n"
+                      "tools: tools.yaml\nspindle: none\n")
+    save_state(tmp_path / "data", with_offset(MachineState(), "G54", (100.0, 0.0, 0.0)))
+    part = tmp_path / "part.nc"
+    part.write_text("G21 G90\nG43 H4\nG01 X10 Z0 F3000\nM3 S9000\n")
+    assert main(["check", "--config", str(config), str(part)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"nurbsmotion check: error: {part}:4: M3 needs a spindle, and this machine has none (spindle: none in {config})"]
+    part.write_text("G21 G90\nG43 H4\nG01 X10 Z0 F3000\n")  # machine X 110, Z 150: within the limits
+    assert main(["check", "--config", str(config), "--json", str(part)]) == 0
+    assert json.loads(capsys.readouterr().out)["end_mm"] == [110.0, 0.0, 150.0]
+    part.write_text("G21 G90\nG43 H4\nG01 X10 Z60 F3000\n")  # machine Z 210: beyond
+    assert main(["check", "--config", str(config), str(part)]) == 2
+    assert "part.nc:3: axis Z would reach 210 mm, beyond the soft limit 200 mm" in capsys.readouterr().err

@@ -136,9 +136,9 @@ def line_plan(config: MachineConfig, start_mm: np.ndarray, end_x_mm: float, cycl
     return FakePlannedJob(traj, counts, {"program": "line", "cycles": cycles}, 1.2)
 
 
-def fake_planner(config: MachineConfig, cycles: int = 200) -> Callable[[str, str, np.ndarray], PlannedJob]:
+def fake_planner(config: MachineConfig, cycles: int = 200) -> Callable[..., PlannedJob]:
     """Programs are 'X<end>' (one line) or 'bad' (rejected with a file:line error)."""
-    def planner(name: str, text: str, start_mm: np.ndarray) -> PlannedJob:
+    def planner(name: str, text: str, start_mm: np.ndarray, options: object = None) -> PlannedJob:
         if not text.startswith("X"):
             raise InputError(f"{name}:1", f"unknown word {text.split()[0]!r}")
         return line_plan(config, start_mm, float(text[1:]), cycles)

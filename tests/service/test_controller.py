@@ -224,7 +224,7 @@ def test_jobs_lists_the_newest_first_and_marks_the_running_one(parts):
 def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
     config = load_config(ROOT / "config" / "demo.yaml")
     link = FakeLink(config, cycle_s=0.0005)
-    controller = Controller(config, link, lambda n, t, s: plan_job(n, t, config, s), JobRecords(tmp_path))
+    controller = Controller(config, link, lambda n, t, s, o: plan_job(n, t, config, s, o), JobRecords(tmp_path))
     try:
         job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\n")["job"]
         _wait(_ended(controller))

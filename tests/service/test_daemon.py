@@ -73,3 +73,18 @@ def test_the_socket_answers_only_once_the_controller_exists_and_not_after_close(
         daemon.close()
     with pytest.raises(DaemonUnavailable):
         Client(config.control.socket).connect()
+
+
+def test_a_corrupt_offsets_file_stops_the_start_with_one_line_naming_file_and_field(config):
+    from nurbsmotion.errors import InputError
+    from nurbsmotion.service.machine_state import state_path
+
+    Path(config.data_dir).mkdir(parents=True)
+    state_path(config.data_dir).write_text('{"format": 1, "coordinates": {"g92_mm": [1, "x", 3]}}')
+    daemon, links = _daemon(config)
+    with pytest.raises(InputError) as err:
+        daemon.start()
+    assert str(err.value) == (f"{state_path(config.data_dir)}: coordinates.g92_mm: must be 3 finite numbers "
+                              "[x, y, z] in mm, got [1, 'x', 3]")
+    assert links == [] and not Path(config.control.socket).exists()  # nothing was started
+    daemon.close()

@@ -7,7 +7,7 @@ are helpers, not commands. Only the CLI and the service put the layers together.
 
 Exit codes: 0 success, 1 the job failed (fault, stop), 2 bad input (one line per error on
 stderr), 3 no daemon answers on the control socket (run, status, stop, abort, reset,
-override), 70 internal error.
+override, offsets), 70 internal error.
 """
 
 from __future__ import annotations

@@ -11,11 +11,11 @@ import argparse
 import math
 from dataclasses import replace
 
-from nurbsmotion.config import load_config
+from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import DEFAULT_ALGORITHM, PlanLimits, algorithm
 from nurbsmotion.planning.limits import limits_from_config
-from nurbsmotion.program import Program, read_program
+from nurbsmotion.program import Program, ReadOptions, load_tool_table, read_program
 
 
 def positive_number(text: str) -> float:
@@ -61,9 +61,20 @@ def planning_setup(args: argparse.Namespace) -> tuple[Program, PlanLimits, str]:
         limits = replace(limits, **{k: v for k, v in overrides.items() if v is not None})
     except InputError as err:
         raise InputError(options.get(err.where, err.where), err.message) from None
-    program = read_program(args.program, args.start)
+    program = read_program(args.program, args.start, machine_read_options(config))
     default = config.interpolation.algorithm if config else DEFAULT_ALGORITHM
     return program, limits, default
+
+
+def machine_read_options(config: MachineConfig | None, tool_table: str | None = None, block_delete: bool = True,
+                         optional_stop: bool = True) -> ReadOptions:
+    """What the daemon's reader would start from on this machine: the persisted offsets and
+    tool (DATA_DIR/offsets.json), the configured tool table (``tool_table``, a file, wins)."""
+    from nurbsmotion.service.machine_state import MachineState, load_state
+
+    state = load_state(config.data_dir) if config is not None else MachineState()
+    table = load_tool_table(tool_table) if tool_table else (config.tool_table if config is not None else None)
+    return state.read_options(table, block_delete, optional_stop)
 
 
 def limits_summary(limits: PlanLimits) -> dict[str, float | None]:

@@ -5,7 +5,9 @@ range, events between moves), or exit 2 with one line per error (``file:line: wo
 message``): every problem of the file, in line order, up to 50. With ``--config`` the
 program is also planned for that machine exactly as the daemon's ``submit`` does: its axes,
 limits and soft limits apply (``part.nc:42: X650: axis X would reach 650 mm, beyond the
-soft limit 600 mm``).
+soft limit 600 mm``), the program starts from the daemon's persisted offsets and the
+configured tool table, and what the machine lacks is refused (``part.nc:7: M3 needs a
+spindle, and this machine has none``; M0/M1/M6: the daemon cannot hold a job yet).
 """
 
 from __future__ import annotations
@@ -17,7 +19,9 @@ from pathlib import Path
 from typing import TypedDict
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.program import ReadOptions, load_tool_table, read_program
+from nurbsmotion.cli._planning_options import machine_read_options
+from nurbsmotion.config import MachineConfig, load_config
+from nurbsmotion.program import ReadOptions, read_program
 from nurbsmotion.program.summary import ProgramSummary, summarize
 
 HELP = "validate a G-code or YAML curve program and summarise it"
@@ -45,18 +49,16 @@ class MachineCheck(TypedDict):
     algorithm: str
 
 
-def check_on_machine(args: argparse.Namespace) -> MachineCheck:
+def check_on_machine(args: argparse.Namespace, config: MachineConfig, options: ReadOptions) -> MachineCheck:
     """Plan the program for the ``--config`` machine (service.planner.plan_job, the daemon's
-    own checks); InputError names the program line."""
+    own checks: spindle, coolant, holds, limits); InputError names the program line."""
     import numpy as np
 
-    from nurbsmotion.config import load_config
     from nurbsmotion.service.planner import axis_columns, plan_job
 
-    config = load_config(args.config)
     start_mm = np.array(args.start, dtype=float)[axis_columns(config)]
     text = Path(args.program).read_text(encoding="utf-8")  # read_program read it already: it is readable
-    plan = plan_job(args.program, text, config, start_mm).summary
+    plan = plan_job(args.program, text, config, start_mm, options).summary
     return {"config": str(args.config), "axes": [a.name for a in config.axes], "cycles": plan["cycles"],
             "duration_s": plan["duration_s"], "algorithm": plan["algorithm"]}
 
@@ -100,8 +102,8 @@ def errors_as_json(err: InputError) -> str:
 
 def run(args: argparse.Namespace) -> int:
     try:
-        table = load_tool_table(args.tool_table) if args.tool_table else None
-        options = ReadOptions(tool_table=table, block_delete=not args.no_block_delete, optional_stop=not args.no_optional_stop)
+        config = load_config(args.config) if args.config else None
+        options = machine_read_options(config, args.tool_table, not args.no_block_delete, not args.no_optional_stop)
         program = read_program(args.program, args.start, options)
     except InputError as err:
         if not args.json:
@@ -110,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     summary = summarize(program)
     try:
-        machine = check_on_machine(args) if args.config else None
+        machine = check_on_machine(args, config, options) if config is not None else None
     except InputError as err:
         if not args.json:
             raise

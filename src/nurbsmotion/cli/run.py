@@ -30,6 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-progress", action="store_true", help="only print the outcome")
     parser.add_argument("--keep-override", action="store_true",
                         help="keep the feed override in force now (default: the job starts at 100 %%)")
+    parser.add_argument("--no-block-delete", action="store_true", help="run '/' lines (block delete switch off)")
+    parser.add_argument("--no-optional-stop", action="store_true", help="M1 does not pause (optional stop switch off)")
     add_socket_arguments(parser)
 
 
@@ -159,6 +161,8 @@ def run(args: argparse.Namespace) -> int:
 
     def body(client: Client) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
+        fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
+                                                ("optional_stop", args.no_optional_stop)) if off})
         response = client.request("submit", name=Path(args.program).name, program=text, **fields)
         if not response.get("ok"):
             for line in response.get("errors") or [response.get("error", "rejected")]:

@@ -26,6 +26,12 @@ def format_status(s: dict[str, Any]) -> list[str]:
     override = s["override"]
     lines = [f"state {s['state']} (drives {s['phase']}), override {override['requested_percent']:g} % "
              f"(effective {override['effective_percent']:g} %)"]
+    coords = s.get("coordinates")
+    if coords:
+        offset = " ".join(f"{a}{v:g}" for a, v in zip("XYZ", coords["active_offset_mm"]))
+        g92 = " ".join(f"{a}{v:g}" for a, v in zip("XYZ", coords["g92_mm"])) if coords["g92_applied"] else "off"
+        tool = f"T{coords['tool']}" if coords.get("tool") is not None else "unknown"
+        lines.append(f"coordinates {coords['active']} (offset {offset} mm), G92 {g92}, tool {tool}")
     job = s.get("job")
     if job:
         lines.append(f"job {job['id']} {job['name']}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "

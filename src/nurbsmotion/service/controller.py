@@ -21,7 +21,9 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
+from nurbsmotion.program import ReadOptions
 from nurbsmotion.service.feedback import FeedbackLog
+from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import PlannedJob
 from nurbsmotion.service.rate import effective_rate
@@ -29,7 +31,7 @@ from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now
 
 log = logging.getLogger(__name__)
 
-Planner = Callable[[str, str, np.ndarray], PlannedJob]  # (name, text, start position mm) -> plan
+Planner = Callable[[str, str, np.ndarray, ReadOptions], PlannedJob]  # (name, text, start mm, reader options) -> plan
 SETTLE_S = 0.5  # the longest a job's end waits for the axes to reach their last set-point (final_position)
 OUTCOME_OF_RESULT = {"done": "completed", "stopped": "stopped", "aborted": "aborted", "faulted": "fault"}
 
@@ -61,8 +63,9 @@ class ActiveJob:
 
 class Controller:
     def __init__(self, config: MachineConfig, link: MotionLink, planner: Planner, records: JobRecords,
-                 simulation: Simulation | None = None) -> None:
+                 simulation: Simulation | None = None, machine_state: MachineState | None = None) -> None:
         self.config = config
+        self.machine_state = machine_state or MachineState()  # offsets and tool: persisted after each completed job
         self.link = link
         self.planner = planner
         self.records = records
@@ -76,10 +79,13 @@ class Controller:
         self._override = 1.0  # requested, as a fraction
 
     # ------------------------------------------------------------------ requests
-    def submit(self, name: str, text: str, keep_override: bool = False) -> dict[str, Any]:
+    def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
+               optional_stop: bool = True) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors.
 
-        The feed override goes back to 100 % for the new job unless ``keep_override``."""
+        The program starts from the persisted offsets and tool with the block-delete and
+        optional-stop switches given. The feed override goes back to 100 % for the new job
+        unless ``keep_override``."""
         check_program_name(name)
         with self._lock:
             try:
@@ -92,7 +98,8 @@ class Controller:
             status = self.link.status()
             start_mm = self._held_position_mm(status)
             try:
-                plan = self.planner(name, text, start_mm)
+                options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop)
+                plan = self.planner(name, text, start_mm, options)
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
@@ -153,6 +160,38 @@ class Controller:
         self._faults_acknowledged = len(self.link.status().faults)
         log.info(kv("faults_reset"))
         return {"ok": True, "state": self.state()}
+
+    def offsets(self, fields: dict[str, Any]) -> dict[str, Any]:
+        """Show the offsets; with ``system`` (and x/y/z) set a work offset as G10 L2 does,
+        with ``clear`` zero one (G92 as G92.1), with ``select`` make a system active.
+        Changes are refused while a job runs (its program started from the old ones)."""
+        changes = [k for k in ("system", "clear", "select") if k in fields]
+        if any(k in fields for k in "xyz") and "system" not in fields:
+            raise InputError("field 'system'", "required with x, y or z: the work offset to set (G54 ... G59.3)")
+        if not changes:
+            return {"ok": True, "offsets": self.machine_state.status()}
+        with self._lock:
+            if self._job is not None or self._planning:
+                raise Refused("offsets", "a job is running; offsets change only between jobs")
+            state = self.machine_state
+            if "system" in fields:
+                state = with_offset(state, fields["system"], tuple(fields.get(k) for k in "xyz"))  # type: ignore[arg-type]
+            if "clear" in fields:
+                state = cleared(state, fields["clear"])
+            if "select" in fields:
+                state = selected(state, fields["select"])
+            self._persist(state, "offsets_command")
+        return {"ok": True, "offsets": self.machine_state.status()}
+
+    def _persist(self, state: MachineState, reason: str) -> None:
+        """Keep ``state`` and write it to DATA_DIR/offsets.json (InputError naming data_dir if it cannot)."""
+        try:
+            save_state(self.config.data_dir, state)
+        except OSError as err:
+            raise InputError("data_dir", f"cannot write the offsets in {self.config.data_dir}: "
+                             f"{err.strerror or err}") from None
+        self.machine_state = state
+        log.info(kv("offsets_saved", reason=reason, active=state.coordinates.active_name, tool=state.tool_in_spindle))
 
     def override(self, percent: float) -> dict[str, Any]:
         if not 0.0 <= percent <= 150.0:
@@ -220,7 +259,8 @@ class Controller:
                 "faults": [self._fault_record(f, status, job.start_cycle if job is not None else
                                               self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]],
-                "last_job": self._last, "simulate": self.simulation is not None}
+                "last_job": self._last, "simulate": self.simulation is not None,
+                "coordinates": self.machine_state.status()}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
@@ -361,6 +401,7 @@ class Controller:
                 outcome["drive_recordings"] = self.simulation.write_recordings(str(job.record.drives_dir))
             except OSError as err:
                 log.warning(kv("recording_not_written", job=job.record.job_id, error=err))
+        self._keep_program_state(job, outcome["outcome"])
         try:
             job.record.write_outcome(outcome)
         except OSError as err:  # the record is incomplete, but the daemon must stay usable
@@ -377,6 +418,22 @@ class Controller:
                     k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")},
                     "line_reached": reached["where"] if reached else None}
                 self._job = None
+
+    def _keep_program_state(self, job: ActiveJob, outcome: str) -> None:
+        """A completed program's final offsets and tool become the machine's (offsets.json).
+        A job that ended early keeps the state it started from: the reader's end state
+        includes G10/G92 lines the machine never reached."""
+        program = job.plan.program
+        if outcome != "completed" or program is None or program.coordinates is None:
+            return
+        tool = program.tool_at_end if program.tool_at_end is not None else self.machine_state.tool_in_spindle
+        state = MachineState(program.coordinates, tool)
+        if state == self.machine_state:
+            return
+        try:
+            self._persist(state, f"job {job.record.job_id} completed")
+        except InputError as err:
+            log.error(kv("offsets_not_saved", job=job.record.job_id, error=err))
 
     def _settled_status(self) -> tuple[MasterStatus, bool]:
         """The status once every axis' position actual is within one count of its set-point

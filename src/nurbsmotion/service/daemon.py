@@ -1,6 +1,7 @@
 """The daemon: drives up, job records checked, control socket served until SIGTERM/SIGINT.
 
-Start-up order: mark jobs left without outcome 'interrupted' -> simulated drives (if
+Start-up order: mark jobs left without outcome 'interrupted' -> the persisted offsets
+(DATA_DIR/offsets.json; unreadable: one error, nothing started) -> simulated drives (if
 configured) -> bring-up of every axis -> control socket -> READY=1 (systemd). Shutdown
 order: refuse new jobs (and every request that would move or re-enable something) ->
 controlled stop of a running job (outcome 'stopped') -> drives disabled -> socket removed
@@ -19,6 +20,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.link import open_link
+from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.planner import plan_job
@@ -35,7 +37,9 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     """Route one checked request to the controller."""
     f = request.fields
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
-        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False))),
+        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
+                                            bool(f.get("block_delete", True)), bool(f.get("optional_stop", True))),
+        "offsets": lambda: controller.offsets(f),
         "status": controller.status,
         "job": lambda: controller.job_info(f["id"]),
         "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
@@ -64,9 +68,11 @@ class Daemon:
     def start(self) -> None:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
+        machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         link, self.simulation = self._open_motion(self.config)
-        self.controller = Controller(self.config, link, lambda name, text, start: plan_job(name, text, self.config, start),
-                                     self.records, self.simulation)
+        self.controller = Controller(self.config, link,
+                                     lambda name, text, start, options: plan_job(name, text, self.config, start, options),
+                                     self.records, self.simulation, machine_state)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()

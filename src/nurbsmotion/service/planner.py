@@ -23,8 +23,9 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.planning import Trajectory, plan
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
-from nurbsmotion.program import AXES, Program, parse_curve_yaml, parse_gcode
+from nurbsmotion.program import AXES, Program, ReadOptions, parse_curve_yaml, parse_gcode
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
+from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
 
@@ -91,25 +92,28 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
-def parse(name: str, text: str, start_mm: np.ndarray) -> Program:
+def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | None = None) -> Program:
     """The program readers, chosen by the name's suffix as ``read_program`` does for files;
-    a G-code program starts at ``start_mm`` (where the axes hold)."""
+    a G-code program starts at ``start_mm`` (where the axes hold) with ``options``."""
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, name)
     if suffix in GCODE_SUFFIXES:
-        return parse_gcode(text, name, start_mm)
+        return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
 
 
-def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None) -> PlannedJob:
-    """Parse, plan, check and convert ``text`` (see the module docstring)."""
+def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+             options: ReadOptions | None = None) -> PlannedJob:
+    """Parse, plan, check and convert ``text`` (see the module docstring). ``options``: the
+    reader's start (persisted offsets, tool, switches); default: the machine's tool table."""
     axis_map = AxisMap.from_config(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
         start_xyz[axis_columns(config)] = start_mm
-    program = parse(name, text, start_xyz)
+    program = parse(name, text, start_xyz, options or ReadOptions(tool_table=config.tool_table))
+    check_machine_can_run(program, config)  # spindle, coolant, holds: before any planning
     if not program.blocks:
         raise InputError(name, "the program has no motion")
     t0 = time.perf_counter()

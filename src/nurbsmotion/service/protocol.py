@@ -18,7 +18,8 @@ MAX_REQUEST_BYTES = 10 * 1024 * 1024
 
 # command -> {field: (type name, required)}
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
-    "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False)},
+    "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False),
+               "block_delete": ("boolean", False), "optional_stop": ("boolean", False)},
     "status": {},
     "job": {"id": ("string", True)},
     "jobs": {"limit": ("number", False)},
@@ -26,6 +27,8 @@ COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "abort": {},
     "reset": {},
     "override": {"percent": ("number", True)},
+    "offsets": {"system": ("string", False), "x": ("number", False), "y": ("number", False), "z": ("number", False),
+                "clear": ("string", False), "select": ("string", False)},
     "inject_fault": {"spec": ("string", True)},  # only when the daemon simulates its drives
 }
 

@@ -1,0 +1,70 @@
+"""What the machine lacks refuses the program at its line: spindle, coolant, holds."""
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from nurbsmotion.config import load_config
+from nurbsmotion.errors import InputError
+from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.program import ReadOptions, parse_gcode
+from nurbsmotion.service.planner import plan_job
+from nurbsmotion.service.program_gate import check_machine_can_run
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = load_config(ROOT / "config" / "demo.yaml")
+
+
+def _errors(text: str, config=CONFIG, **options) -> list[str]:
+    program = parse_gcode(text, "part.nc", options=ReadOptions(**options))
+    try:
+        check_machine_can_run(program, config)
+    except InputError as err:
+        return str(err).splitlines()
+    return []
+
+
+def test_spindle_on_without_a_spindle_is_refused_at_its_line():
+    errors = _errors("G21 G90\nS1000 M3\nG1 X1 F600\nM4\nM5\n")
+    assert errors == ["part.nc:2: M3 needs a spindle, and this machine has none (no spindle: key in "
+                      f"{CONFIG.source})", f"part.nc:4: M4 needs a spindle, and this machine has none (no spindle: "
+                      f"key in {CONFIG.source})"]
+    stated = dataclasses.replace(CONFIG, spindle="none")
+    assert _errors("M3 S100\nG1 X1 F600\n", stated)[0].endswith("has none (spindle: none in " f"{CONFIG.source})")
+
+
+def test_spindle_off_and_coolant_off_alone_pass():
+    assert _errors("G21 G90\nM5\nM9\nG1 X1 F600\n") == []
+
+
+@pytest.mark.parametrize("outputs, m7, m8", [
+    ((), None, None), (("coolant",), "coolant", "coolant"), (("mist",), "mist", None),
+    (("coolant_flood",), None, "coolant_flood"), (("spindle_enable",), None, None)])
+def test_coolant_needs_an_output_of_that_kind_and_is_refused_until_outputs_are_driven(outputs, m7, m8):
+    io = IoConfig(10, outputs=tuple(IoSignal(n, i) for i, n in enumerate(outputs)))
+    config = dataclasses.replace(CONFIG, io=io)
+    for code, mode, output in (("M7", "mist", m7), ("M8", "flood", m8)):
+        errors = _errors(f"{code}\nG1 X1 F600\n", config)
+        assert len(errors) == 1
+        if output is not None:  # the output exists, but nothing would switch it: refused, not run dry
+            assert errors == [f"part.nc:1: {code} {mode} coolant (output {output}): the daemon does not switch io "
+                              f"outputs yet (io: is read but not driven)"]
+    if m8 is None:
+        assert _errors("M8\nG1 X1 F600\n", config) == [
+            f"part.nc:1: M8 needs flood coolant, and this machine has no output named coolant, flood or coolant_flood "
+            f"(io.outputs in {CONFIG.source})"]
+
+
+def test_holds_are_refused_until_the_daemon_can_pause():
+    errors = _errors("G21 G90\nG1 X1 F600\nT1 M6\nM0\nG1 X2\nM01\nG1 X3\n")
+    assert errors == ["part.nc:3: M6 tool change to T1: the daemon cannot pause a job yet (hold/resume is not built)",
+                      "part.nc:4: M0 program pause: the daemon cannot pause a job yet (hold/resume is not built)",
+                      "part.nc:6: M01 optional stop (submit with the optional stop switch off to skip it): the daemon "
+                      "cannot pause a job yet (hold/resume is not built)"]
+    assert _errors("G21 G90\nG1 X1 F600\nM1\nG1 X2\n", optional_stop=False) == []
+
+
+def test_plan_job_applies_the_gate_before_planning():
+    with pytest.raises(InputError, match=r"^part.nc:2: M3 needs a spindle"):
+        plan_job("part.nc", "G21 G90\nM3 S8000\nG1 X1 F600\n", CONFIG)
