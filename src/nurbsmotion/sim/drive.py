@@ -26,7 +26,7 @@ from typing import Any
 
 import can
 import canopen
-from canopen.objectdictionary import ODArray, ObjectDictionary
+from canopen.objectdictionary import ODArray, ObjectDictionary, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
 from nurbsmotion import cia402 as c
@@ -64,6 +64,11 @@ FE_WINDOW_DISABLED = 0xFFFF_FFFF  # no 0x6065: no following-error monitor
 DEFAULT_QUICK_STOP_OPTION = 2  # no 0x605A: CiA 402 default (quick-stop ramp, then disabled)
 DEFAULT_QUICK_STOP_DECEL = math.inf  # no 0x6085: the drive stops at once
 _FOREVER = math.inf
+
+
+def _subindices(entry: ODArray | ODRecord | ODVariable) -> list[int]:
+    """The sub-indices of a record or array entry (none for a plain variable)."""
+    return list(entry.subindices) if isinstance(entry, (ODArray, ODRecord)) else []
 
 
 @dataclass
@@ -498,7 +503,7 @@ class SimDrive:
         """The 0x1016 entries (none if the EDS has no 0x1016)."""
         if c.CONSUMER_HEARTBEAT_TIME not in self.od:
             return []
-        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0]
+        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0]
         return [self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in subs]
 
     def _configure_heartbeat_consumer(self) -> None:
@@ -675,7 +680,7 @@ class SimDrive:
         producer = (value >> 16) & 0xFF
         if producer == 0 or value & 0xFFFF == 0:
             return
-        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0 and n != subindex]
+        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0 and n != subindex]
         for n in subs:
             other = self._od_value(c.CONSUMER_HEARTBEAT_TIME, n)
             if (other >> 16) & 0xFF == producer and other & 0xFFFF:
@@ -877,7 +882,8 @@ class SimDrive:
                     continue
                 slot.last_data = bytes(data)
             with network.send_lock:
-                network.bus.send(slot.message)
+                if network.bus is not None:
+                    network.bus.send(slot.message)
             self.stats.tpdos_sent += 1
 
     # ------------------------------------------------------------------ fault injection
