@@ -23,6 +23,10 @@ CONSUMER_MULTIPLE = 15
 # A drive notices the loss at most the consumer time after the last heartbeat it received
 # (sent before the kill); the drives' process inside UML may start late by its scheduling
 # (hundreds of ms on a busy host, test_daemon_on_vcan): that much is allowed on top.
+# The drives' process also handles each frame late by a backlog that grows with the frames
+# per cycle (0.7 s measured with the kernel queue, 0.03 s with the loop writer): a firmware
+# stamps a heartbeat when it arrives, so the drive's own reception lag of its last heartbeat
+# (logged as rx_lag_s, kernel stamp to handling) is measured and taken off, not allowed for.
 SCHEDULING_S = 0.5
 
 
@@ -66,13 +70,19 @@ def test_sigkill_of_the_daemon_faults_every_drive_within_the_consumer_time(daemo
     daemon.proc.kill()  # SIGKILL: no shutdown, no NMT stop; the kernel drops its BCM heartbeat task
     killed = time.time()  # the drives' log lines carry wall-clock times
 
-    def lost() -> dict[int, float]:
+    def lost() -> dict[int, str]:
         wanted = {f"sim.heartbeat_lost node={n} producer={master}": n for n in nodes}
-        return {n: logged_at(line) for text, n in wanted.items() for line in sim.log if text in line}
+        return {n: line for text, n in wanted.items() for line in sim.log if text in line}
     wait_until(lambda: set(lost()) == set(nodes), consumer_s + SCHEDULING_S + 10.0, "every drive to report the loss")
-    delays = {n: round(at - killed, 3) for n, at in lost().items()}
-    print(f"drives noticed the loss after {delays} s (consumer time {consumer_s} s)")
-    assert max(delays.values()) <= consumer_s + SCHEDULING_S, f"{delays}\n{diagnosis()}"
+    delays = {n: round(logged_at(line) - killed, 3) for n, line in lost().items()}
+    rx_lags = {n: float(line.split("rx_lag_s=")[1].split()[0]) for n, line in lost().items()}
+    reaction = {n: round(delays[n] - rx_lags[n], 3) for n in nodes}
+    print(f"drives noticed the loss after {delays} s, their reception lag {rx_lags} s, so {reaction} s after "
+          f"the heartbeat stopped arriving (consumer time {consumer_s} s)")
+    assert max(reaction.values()) <= consumer_s + SCHEDULING_S, f"{delays} {rx_lags}\n{diagnosis()}"
+    # the last heartbeat left up to one period before the kill: no drive may react earlier than that allows
+    earliest_s = consumer_s - MASTER_HEARTBEAT_MS / 1000.0 - 0.02
+    assert min(reaction.values()) >= earliest_s, f"{delays} {rx_lags}: before the consumer time ran out"
     sim.stop()
     for n in nodes:  # each drive's closing summary: it went to FAULT by itself
         assert any(f"sim.summary node={n} state=FAULT" in line for line in sim.log), sim.summary()

@@ -196,6 +196,7 @@ class SimDrive:
         self.nmt_state = NmtState.BOOTUP
         self.silent = False  # power loss: nothing in, nothing out
         self._clock = clock if clock is not None else time.monotonic
+        self._heartbeat_rx_lag_s: dict[int, float] = {}  # producer -> reception lag of its last heartbeat
         self._frame_times = clock is None  # stamp SYNC/RPDO with the frames' receive time
         self._wall_to_clock_s = time.monotonic() - time.time()
         self._t0 = self._clock()
@@ -368,7 +369,8 @@ class SimDrive:
                     self._next_heartbeat = now + self._heartbeat_period_s
             for producer in self._heartbeat_consumer.newly_failed(now):
                 if not self.silent:
-                    log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer))
+                    log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer,
+                                   rx_lag_s=round(self._heartbeat_rx_lag_s.get(producer, 0.0), 3)))
                     self.axis.raise_fault(EmcyCode.HEARTBEAT)
             self._watch_sync_and_rpdos(now)
             deadline = min(now + TICK_MAX_S, self._heartbeat_consumer.next_deadline(),
@@ -518,7 +520,11 @@ class SimDrive:
 
     def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:
-            self._heartbeat_consumer.seen(can_id - c.COB_HEARTBEAT, self._clock())
+            producer = can_id - c.COB_HEARTBEAT
+            self._heartbeat_consumer.seen(producer, self._clock())
+            # how late this process handles the frame after the kernel received it (SocketCAN
+            # stamps frames with wall-clock time; a process inside a starved guest lags by seconds)
+            self._heartbeat_rx_lag_s[producer] = time.time() - timestamp if timestamp > 1e9 else 0.0
 
     def _send(self, can_id: int, data: bytes) -> None:
         if self.network is not None and not self.silent:
