@@ -508,8 +508,11 @@ class Master:
         timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
                             stats.percentile_s(0.99), stats.max_s, writer.send_errors if writer is not None else 0)
         job = self._job
+        ctl_job = self._ctl.job
+        pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
+            and ctl_job.playback.at_pause() else None
         return MasterStatus(self._phase, k, tuple(axes), timing, self._wire_index(job) if job else None,
-                            job.length if job else None, tuple(self._faults))
+                            job.length if job else None, tuple(self._faults), pause)
 
     def faults(self) -> list[FaultReport]:
         return list(self._faults)

@@ -49,6 +49,8 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
         "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
         "stop": controller.stop,
         "abort": controller.abort,
+        "hold": controller.hold,
+        "resume": controller.resume,
         "reset": controller.reset,
         "override": lambda: controller.override(float(f["percent"])),
         "inject_fault": lambda: controller.inject_fault(f["spec"]),

@@ -25,6 +25,8 @@ COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "jobs": {"limit": ("number", False)},
     "stop": {},
     "abort": {},
+    "hold": {},
+    "resume": {},
     "reset": {},
     "override": {"percent": ("number", True)},
     "offsets": {"system": ("string", False), "x": ("number", False), "y": ("number", False), "z": ("number", False),
