@@ -80,3 +80,20 @@ def _home(daemon: DaemonProcess) -> None:
     if status["state"] == "idle" and any(abs(a["commanded_mm"]) > 1e-6 for a in status["axes"]):
         job = daemon.request("submit", name="home.nc", program="G01 X0 Y0 Z0 F3000\n")["job"]
         daemon.wait_job_end(job["id"])
+
+
+def test_the_cli_holds_and_resumes(daemon, capsys):
+    from nurbsmotion.cli import main
+
+    _home(daemon)
+    job_id = daemon.request("submit", name="long.nc", program=LONGER)["job"]["id"]
+    daemon.wait_progress(0.2)
+    assert main(["hold", "--socket", str(daemon.socket)]) == 0
+    _state(daemon, "held")
+    assert main(["resume", "--socket", str(daemon.socket)]) == 0
+    assert daemon.wait_job_end(job_id)["outcome"]["outcome"] == "completed"
+    out = capsys.readouterr().out
+    assert f"job {job_id}: holding" in out and f"job {job_id}: resumed" in out
+    assert main(["resume", "--socket", str(daemon.socket)]) == 2
+    assert "resume: no job is running" in capsys.readouterr().err
+    _home(daemon)

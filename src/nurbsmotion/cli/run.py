@@ -46,7 +46,14 @@ def progress_text(status: dict[str, Any]) -> str:
     job = status["job"]
     positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
     return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
-            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{status['state']}]")
+            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
+
+
+def _state_text(status: dict[str, Any]) -> str:
+    """'running', 'held', or 'held: M6 tool change to T3 at part.nc:20 (resume to continue)'."""
+    paused = (status.get("job") or {}).get("paused")
+    return f"{status['state']}: {paused} (resume to continue)" if status["state"] == "held" and paused else \
+        status["state"]
 
 
 class _Plain:
@@ -81,7 +88,7 @@ class _Rich:
         positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
         self.progress.update(self.task, total=job["total"], completed=job["cycle"],
                              info=f"{job['feed_mm_s']:6.1f} mm/s ovr {job['override_percent']:g} % "
-                                  f"{job.get('line') or '-'} {positions} {status['state']}")
+                                  f"{job.get('line') or '-'} {positions} {_state_text(status)}")
 
     def close(self) -> None:
         self.progress.stop()
