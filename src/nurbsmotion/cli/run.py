@@ -163,6 +163,28 @@ def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict
         return None
 
 
+def start_and_follow(client: Client, args: argparse.Namespace, name: str, cmd: str, **fields: Any) -> int:
+    """Send ``cmd`` (submit, mdi), follow the job it started with a progress display, print
+    its outcome; the exit code (0 completed, 1 not, 2 rejected)."""
+    response = client.request(cmd, **fields)
+    if not response.get("ok"):
+        for line in response.get("errors") or [response.get("error", "rejected")]:
+            error_line(args, line)
+        return EXIT_REFUSED
+    job = response["job"]
+    display = _display(name, args.no_progress)
+    try:
+        info = follow_to_the_end(client, job, display)
+    finally:
+        if display is not None:
+            display.close()
+    if info is None:
+        error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
+        return 1
+    print(describe_outcome(info))
+    return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+
+
 def run(args: argparse.Namespace) -> int:
     text = read_program(args.program)
 
@@ -170,22 +192,7 @@ def run(args: argparse.Namespace) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
         fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
                                                 ("optional_stop", args.no_optional_stop)) if off})
-        response = client.request("submit", name=Path(args.program).name, program=text, **fields)
-        if not response.get("ok"):
-            for line in response.get("errors") or [response.get("error", "rejected")]:
-                error_line(args, line)
-            return EXIT_REFUSED
-        job = response["job"]
-        display = _display(Path(args.program).name, args.no_progress)
-        try:
-            info = follow_to_the_end(client, job, display)
-        finally:
-            if display is not None:
-                display.close()
-        if info is None:
-            error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
-            return 1
-        print(describe_outcome(info))
-        return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+        name = Path(args.program).name
+        return start_and_follow(client, args, name, "submit", name=name, program=text, **fields)
 
     return with_client(args, body)

@@ -124,3 +124,4 @@ class Playback:
     def restore(self, state: PlaybackState) -> None:
         (self.s, self.r, self.target, self.index, self.stopping, self.ramp.s, self.ramp.r, self.ramp.dr,
          self.pause_i) = state
+        self.ramp.last = self.next_pause

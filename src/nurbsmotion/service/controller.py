@@ -27,7 +27,7 @@ from nurbsmotion.program import ReadOptions
 from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
-from nurbsmotion.service.planner import PlannedJob
+from nurbsmotion.service.planner import MDI_NAME, PlannedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
@@ -136,6 +136,18 @@ class Controller:
                     duration_s=plan.trajectory.duration_s, override_percent=round(rate * 100.0, 3),
                     folder=record.folder))
         return {"ok": True, "job": {"id": record.job_id, "folder": str(record.folder), "summary": plan.summary}}
+
+    def mdi(self, text: str) -> dict[str, Any]:
+        """Run G-code lines typed by the operator as a job named ``<mdi>``: from where the axes
+        hold (the reader's start is the commanded position, in the active work coordinates
+        from the persisted offsets), with the same parsing, gate, planning and soft-limit
+        checks as a program, recorded like one; the feed override is kept."""
+        if not text.strip():
+            raise InputError("field 'text'", "no G-code to run")
+        try:
+            return self.submit(MDI_NAME, text if text.endswith("\n") else text + "\n", keep_override=True)
+        except Refused as err:
+            raise Refused("mdi", err.message) from None
 
     def stop(self) -> dict[str, Any]:
         job = self._running_job("stop")

@@ -43,6 +43,7 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
         "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
                                             bool(f.get("block_delete", True)), bool(f.get("optional_stop", True))),
+        "mdi": lambda: controller.mdi(f["text"]),
         "offsets": lambda: controller.offsets(f),
         "status": controller.status,
         "job": lambda: controller.job_info(f["id"]),

@@ -120,13 +120,16 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
+MDI_NAME = "<mdi>"  # the program name of MDI lines (G-code, errors read '<mdi>:1: ...')
+
+
 def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | None = None) -> Program:
     """The program readers, chosen by the name's suffix as ``read_program`` does for files;
     a G-code program starts at ``start_mm`` (where the axes hold) with ``options``."""
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, name)
-    if suffix in GCODE_SUFFIXES:
+    if suffix in GCODE_SUFFIXES or name == MDI_NAME:
         return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")

@@ -20,6 +20,7 @@ MAX_REQUEST_BYTES = 10 * 1024 * 1024
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False),
                "block_delete": ("boolean", False), "optional_stop": ("boolean", False)},
+    "mdi": {"text": ("string", True)},
     "status": {},
     "job": {"id": ("string", True)},
     "jobs": {"limit": ("number", False)},
