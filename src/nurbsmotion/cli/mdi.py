@@ -19,4 +19,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     text = "\n".join(args.lines) + "\n"
-    return with_client(args, lambda client: start_and_follow(client, args, MDI_NAME, "mdi", text=text))
+    return with_client(args, lambda client: start_and_follow(client, args, MDI_NAME, "mdi", {"text": text}))

@@ -163,7 +163,7 @@ def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict
         return None
 
 
-def start_and_follow(client: Client, args: argparse.Namespace, name: str, cmd: str, **fields: Any) -> int:
+def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: str, fields: dict[str, Any]) -> int:
     """Send ``cmd`` (submit, mdi), follow the job it started with a progress display, print
     its outcome; the exit code (0 completed, 1 not, 2 rejected)."""
     response = client.request(cmd, **fields)
@@ -172,7 +172,7 @@ def start_and_follow(client: Client, args: argparse.Namespace, name: str, cmd: s
             error_line(args, line)
         return EXIT_REFUSED
     job = response["job"]
-    display = _display(name, args.no_progress)
+    display = _display(title, args.no_progress)
     try:
         info = follow_to_the_end(client, job, display)
     finally:
@@ -193,6 +193,6 @@ def run(args: argparse.Namespace) -> int:
         fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
                                                 ("optional_stop", args.no_optional_stop)) if off})
         name = Path(args.program).name
-        return start_and_follow(client, args, name, "submit", name=name, program=text, **fields)
+        return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **fields})
 
     return with_client(args, body)
