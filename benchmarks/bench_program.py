@@ -36,7 +36,7 @@ def arcs_program(n: int) -> str:
 def nurbs_program(n_points: int) -> str:
     """One cubic G06.2 NURBS through a helix-like polygon of n_points control points."""
     knots = [0.0] * 4 + [i / (n_points - 3) for i in range(1, n_points - 3)] + [1.0] * 4
-    out = [f"G21 G90\nG06.2 P4 K0 X0 Y0 Z0 F3000"]
+    out = ["G21 G90\nG06.2 P4 K0 X0 Y0 Z0 F3000"]
     for i in range(1, n_points):
         a = i * 0.3
         out.append(f"K{knots[i]:.9f} X{20 * math.cos(a) - 20:.4f} Y{20 * math.sin(a):.4f} Z{i * 0.01:.3f} R1")

@@ -377,7 +377,7 @@ def _section(cls: type, readers: dict[str, tuple[Callable[..., Any], dict[str, A
 
 _POSITIVE: tuple[Callable[..., Any], dict[str, Any]] = (_number, {"minimum": 0})
 
-_INTERPOLATION_READERS = {
+_INTERPOLATION_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "algorithm": (_string, {"choices": ALGORITHMS}),
     "feed_mm_min": _POSITIVE,
     "rapid_feed_mm_min": _POSITIVE,

@@ -64,7 +64,7 @@ class IoConfig:
         return self.groups(self.outputs)
 
 
-_BIT = (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": MAX_BITS - 1})
+_BIT: tuple[Callable[..., Any], dict[str, Any]] = (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": MAX_BITS - 1})
 
 
 def _signal(name: str, doc: _Doc) -> Any:

@@ -135,3 +135,45 @@ def test_a_bus_that_does_not_open_is_one_line(tmp_path: Path, capsys: pytest.Cap
     assert main(["sim", "--config", str(config)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bus: cannot open socketcan channel nurbs-no-such-if" in err[0]
+
+
+def test_home_sensors_specs_are_parsed_per_axis_node(tmp_path: Path) -> None:
+    from nurbsmotion.cli.sim import parse_home_sensors
+    from nurbsmotion.errors import InputError
+    from nurbsmotion.sim.homing import HomeSensors
+
+    machine = load_config(write_config(tmp_path, "unused"))
+    sensors = parse_home_sensors(["node=1,negative_limit=-2500,positive_limit=2500,index_pitch=1000,index_phase=300"],
+                                 machine)
+    assert sensors == {1: HomeSensors(-2500.0, 2500.0, 1000.0, 300.0)}
+    for spec, message in [("node=5,negative_limit=0", "node must be an axis"),
+                          ("node=1,negative=0", "unknown key 'negative'"),
+                          ("node=1,index_pitch=x", "index_pitch='x' is not a number"),
+                          ("node=1,index_pitch=0", "index_pitch must be > 0"),
+                          ("node=1,negative_limit=5,positive_limit=5", "must be below positive_limit"),
+                          ("node=1,negative_limit", "expected key=value")]:
+        with pytest.raises(InputError, match=message):
+            parse_home_sensors([spec], machine)
+    with pytest.raises(InputError, match="node 1 given twice"):
+        parse_home_sensors(["node=1", "node=1"], machine)
+
+
+def test_a_spindle_spec_adds_a_velocity_drive_at_a_free_node(tmp_path: Path) -> None:
+    from nurbsmotion.cli.sim import parse_spindle
+    from nurbsmotion.errors import InputError
+    from nurbsmotion.sim import SpindleSim
+
+    machine = load_config(write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}"))
+    spindle = parse_spindle("node=5,counts_per_rev=4096", machine)
+    assert spindle == SpindleSim(5, 4096.0) and spindle.rpm(4096) == 60.0
+    assert parse_spindle(None, machine) is None
+    for spec, message in [("node=1,counts_per_rev=4096", "not an axis or io node"),
+                          ("node=5", "both required"), ("node=5,counts_per_rev=0", "must be > 0"),
+                          ("node=5,rpm=3", "expected node=N,counts_per_rev=C"),
+                          ("node=x,counts_per_rev=1", "must be numbers")]:
+        with pytest.raises(InputError, match=message):
+            parse_spindle(spec, machine)
+    net = SimNetwork.for_machine(machine, spindle=spindle)
+    assert net.spindle == spindle and net[5].name == "spindle/node5"
+    with net:
+        assert {3, 9} <= net[5].axis.params.modes

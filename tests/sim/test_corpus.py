@@ -13,6 +13,7 @@ from canopen.sdo import SdoAbortedError
 
 from nurbsmotion.cia402 import State
 from nurbsmotion.sim.eds import supported_modes
+from nurbsmotion.sim.velocity import REQUIRED_OBJECTS
 
 from conftest import Bench
 
@@ -52,6 +53,9 @@ def test_a_drive_built_from_a_real_eds_answers_sdo_for_its_objects(bench: Bench,
 def test_a_drive_takes_only_the_modes_its_eds_declares(bench: Bench, path: Path) -> None:
     drive, node = bench.add(5, eds=path)
     modes = supported_modes(drive.value(0x6502) if 0x6502 in drive.od else 0, drive.od[0x6060])
+    # a velocity mode also needs its objects (sim.velocity.REQUIRED_OBJECTS): Schunk's PRL120
+    # declares CSV/PV without 0x60FF
+    modes -= {mode for mode, objects in REQUIRED_OBJECTS.items() if any(i not in drive.od for i in objects)}
     assert drive.axis.params.modes == modes
     for mode in (1, 7, 8):
         if mode in modes:

@@ -91,7 +91,7 @@ def test_segmented_upload_of_a_long_object_is_served(bench: Bench) -> None:
         (0x2000, 0, b"\x01\x00\x00\x00", 0x06020000),  # no such object
         (0x607D, 9, b"\x01\x00\x00\x00", 0x06090011),  # no such sub-index
         (0x6065, 0, b"\x01\x00", 0x06070010),  # wrong length
-        (0x6060, 0, b"\x03", 0x06090030),  # unsupported mode
+        (0x6060, 0, b"\x04", 0x06090030),  # unsupported mode (profile torque)
         (0x60C0, 0, b"\x01\x00", 0x06090030),  # only linear interpolation
         (0x1400, 2, b"\xF5", 0x06090030),  # reserved transmission type 245
     ],

@@ -16,6 +16,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import TypedDict
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.cli._planning_options import machine_read_options
@@ -38,7 +39,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                          "check its axes, limits and soft limits as submit does")
 
 
-def check_on_machine(args: argparse.Namespace, config: MachineConfig, options: ReadOptions) -> dict[str, object]:
+class MachineCheck(TypedDict):
+    """What ``check --config`` adds: the machine and the plan's length on it."""
+
+    config: str
+    axes: list[str]
+    cycles: int
+    duration_s: float
+    algorithm: str
+
+
+def check_on_machine(args: argparse.Namespace, config: MachineConfig, options: ReadOptions) -> MachineCheck:
     """Plan the program for the ``--config`` machine (service.planner.plan_job, the daemon's
     own checks: spindle, coolant, holds, limits); InputError names the program line."""
     import numpy as np

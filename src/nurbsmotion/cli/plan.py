@@ -191,6 +191,7 @@ def plan_and_report(args: argparse.Namespace) -> int:
     if args.plot:
         from nurbsmotion.planning.plot import plot_run
 
+        assert whole is not None, "measured_plan keeps the whole trajectory whenever --plot is given"
         plot_run(args.plot, program, whole, m, limits)
     if args.json:
         print(json.dumps({"program": program.name, "algorithm": plan.algorithm, "limits": limits_summary(limits),

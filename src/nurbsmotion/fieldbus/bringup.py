@@ -67,6 +67,7 @@ class SdoTrail:
 
     def __init__(self, node: canopen.RemoteNode) -> None:
         self.node = node
+        self.node_id = int(node.id or 0)  # a RemoteNode always has its id (canopen types it Optional)
         self.last: tuple[int, int, bytes | None] = (0, 0, None)  # index, subindex, data (None: an upload)
         sdo = node.sdo
         plain_download, plain_upload = sdo.download, sdo.upload
@@ -79,7 +80,7 @@ class SdoTrail:
             self.last = (index, subindex, None)
             return plain_upload(index, subindex)
 
-        sdo.download, sdo.upload = download, upload  # type: ignore[method-assign]
+        sdo.download, sdo.upload = download, upload
 
     def describe(self) -> str:
         index, subindex, data = self.last
@@ -112,7 +113,7 @@ def _variable(node: canopen.RemoteNode, index: int, subindex: int) -> Any:
 
 def _sdo(trail: SdoTrail, step: str, action: Any) -> Any:
     """Run one SDO action; an abort or silence becomes the step's one-line error."""
-    node_id = trail.node.id
+    node_id = trail.node_id
     try:
         return action()
     except SdoAbortedError as err:
@@ -165,7 +166,7 @@ def _read_back(trail: SdoTrail, step: ReadBack) -> None:
         if value == step.expect:
             return
         if time.monotonic() > end:
-            raise step_error(trail.node.id, step.step, f"0x{step.index:04X}:{step.subindex:02X} reads {value}, "
+            raise step_error(trail.node_id, step.step, f"0x{step.index:04X}:{step.subindex:02X} reads {value}, "
                              f"expected {step.expect}: the drive did not take the mode")
         time.sleep(0.01)
 

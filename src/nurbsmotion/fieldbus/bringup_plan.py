@@ -477,7 +477,7 @@ def cyclic_load(config: MachineConfig, plans: list[DrivePlan]) -> float:
     """Bus load of the planned cyclic frames: (SYNC + every axis' RPDOs and TPDOs + the
     drives' and the master's heartbeats per cycle) bits / (bitrate · T); see busload."""
     period_s, mon = config.cycle_period_s, config.monitoring
-    bits = frame_bits(SYNC_DLC) + sum(frame_bits(f.dlc) for p in plans for f in p.layout.rpdos + p.layout.tpdos)
+    bits: float = frame_bits(SYNC_DLC) + sum(frame_bits(f.dlc) for p in plans for f in p.layout.rpdos + p.layout.tpdos)
     bits += len(plans) * frame_bits(HEARTBEAT_DLC) * period_s * 1000.0 / mon.heartbeat_producer_ms
     if mon.master_heartbeat_ms:
         bits += frame_bits(HEARTBEAT_DLC) * period_s * 1000.0 / mon.master_heartbeat_ms

@@ -45,7 +45,7 @@ def cyclic_bus_load(n_axes: int, cycle_period_s: float, bitrate: int, following_
     per_axis = frame_bits(RPDO_DLC) + frame_bits(TPDO1_DLC)
     if following_error_tpdo:
         per_axis += frame_bits(TPDO2_DLC)
-    bits = frame_bits(SYNC_DLC) + n_axes * per_axis
+    bits: float = frame_bits(SYNC_DLC) + n_axes * per_axis
     if heartbeat_period_s:
         bits += n_axes * frame_bits(HEARTBEAT_DLC) * cycle_period_s / heartbeat_period_s
     return BusLoad(bits, bits / (bitrate * cycle_period_s), n_axes, cycle_period_s, bitrate, following_error_tpdo)

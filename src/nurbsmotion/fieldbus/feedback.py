@@ -51,12 +51,13 @@ class Feedback:
                 self.bad_tpdo[i] += 1
                 self.events.append((EVENT_BAD_TPDO, i, len(data)))
                 return
-            self.status[i], self.pos[i] = unpack(data)
+            status, position = unpack(data)
+            self.status[i], self.pos[i] = status, position
             self.cycle[i] = self.wire_cycle
             self.tpdo_count[i] += 1
             sink = self.sink
             if sink is not None:
-                sink(self.wire_cycle, i, self.status[i], self.pos[i], timestamp)
+                sink(self.wire_cycle, i, status, position, timestamp)
             self.time[i] = timestamp
         return on_tpdo1
 

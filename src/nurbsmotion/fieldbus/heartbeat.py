@@ -89,7 +89,7 @@ class MasterHeartbeat:
             task.end_time = time.perf_counter() + self._lease_s
             if task.thread is None or not task.thread.is_alive():
                 task.start()
-        else:
+        elif isinstance(task, can.broadcastmanager.RestartableCyclicTaskABC):
             task.start()  # SocketCAN: TX_SETUP again, count = lease / period
         self.renewals += 1
 

@@ -123,8 +123,10 @@ class IoNode:
         self._sdo("set heartbeat producer", lambda: setattr(self.node.sdo[c.PRODUCER_HEARTBEAT_TIME], "raw",
                                                              heartbeat_producer_ms))
         self.node.tpdo[1].add_callback(self._on_tpdo)
-        groups = bytes(self._sdo("read inputs", lambda n=n: self.node.sdo[READ_INPUT_8][n].raw)
-                       for n in range(1, self.io.input_groups + 1))
+        def read_group(n: int) -> int:
+            return int(self._sdo("read inputs", lambda: self.node.sdo[READ_INPUT_8][n].raw))
+
+        groups = bytes(read_group(n) for n in range(1, self.io.input_groups + 1))
         with self._lock:
             self._inputs = input_states(groups, self.io.inputs)
         self.node.nmt.send_command(c.NmtCommand.START)

@@ -54,7 +54,7 @@ def _as_float_array(values: ArrayLike, field: str, ndim: int) -> NDArray[np.floa
     if array.ndim != ndim:
         shape = "a list of numbers" if ndim == 1 else "a list of points of equal dimension"
         raise CurveError(field, f"must be {shape}")
-    bad = np.flatnonzero(~np.isfinite(array).reshape(len(array), -1).all(axis=1)) if len(array) else []
+    bad = np.flatnonzero(~np.isfinite(array).reshape(len(array), -1).all(axis=1)) if len(array) else np.empty(0, np.intp)
     if len(bad):
         raise CurveError(field, f"value {int(bad[0]) + 1} is not a finite number", int(bad[0]))
     return array

@@ -41,7 +41,7 @@ def line_curve(start: ArrayLike, end: ArrayLike) -> NurbsCurve:
     segment per G1 line (15 000 in a CAM file)."""
     points = np.array([start, end], dtype=np.float64)
     if points.ndim != 2 or not np.isfinite(points).all():
-        return NurbsCurve.create(1, [start, end], [1.0, 1.0], [0.0, 0.0, 1.0, 1.0])
+        return NurbsCurve.create(1, points, [1.0, 1.0], [0.0, 0.0, 1.0, 1.0])  # create names the problem
     points.setflags(write=False)
     return NurbsCurve(1, points, _LINE_WEIGHTS, _LINE_KNOTS)
 

@@ -29,8 +29,9 @@ class PlanLimits:
     rapid_feed_mm_s: float = 200.0
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
-    axis_max_velocity_mm_s: tuple[float, ...] | None = None
-    axis_max_accel_mm_s2: tuple[float, ...] | None = None
+    # Per-axis X, Y, Z limits; a None entry is an axis the configuration gives no limit for.
+    axis_max_velocity_mm_s: tuple[float | None, ...] | None = None
+    axis_max_accel_mm_s2: tuple[float | None, ...] | None = None
 
     def __post_init__(self) -> None:
         for f in fields(self):

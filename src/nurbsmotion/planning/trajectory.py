@@ -33,7 +33,7 @@ class Trajectory:
 
     @property
     def t_s(self) -> NDArray[np.float64]:
-        return np.arange(len(self.u)) * self.period_s
+        return np.arange(len(self.u), dtype=np.float64) * self.period_s
 
     @property
     def duration_s(self) -> float:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+from numpy.typing import NDArray
 
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.geometry import CurveError, NurbsCurve
@@ -135,7 +136,7 @@ def zero_speed_problems(curve: NurbsCurve) -> list[CurveProblem]:
                                            f"point {index + 1}; split the curve there", index)]
 
 
-def build_curve(degree: int, points: Sequence[Sequence[float]], weights: Sequence[float], knots: Sequence[float],
+def build_curve(degree: int, points: Sequence[Sequence[float] | NDArray[np.float64]], weights: Sequence[float], knots: Sequence[float],
                 locate: Callable[[CurveProblem], str], *, min_degree: int = 1, max_degree: int = 9,
                 degree_name: str = "degree", zero_length_mm: float = 1e-9) -> NurbsCurve:
     """Validate everything, then build the curve; raise InputErrors listing every problem.

@@ -124,8 +124,10 @@ def cleared(state: MachineState, name: str) -> MachineState:
     c = state.coordinates
     if canonical == "G92":
         c = replace(c, g92_mm=(0.0, 0.0, 0.0), g92_applied=False)
-    elif canonical in ("G28", "G30"):
-        c = replace(c, **{f"{canonical.lower()}_mm": (0.0, 0.0, 0.0)})
+    elif canonical == "G28":
+        c = replace(c, g28_mm=(0.0, 0.0, 0.0))
+    elif canonical == "G30":
+        c = replace(c, g30_mm=(0.0, 0.0, 0.0))
     elif canonical in SYSTEM_NAMES:
         c = c.with_work_offset(SYSTEM_NAMES.index(canonical) + 1, (0.0, 0.0, 0.0))
     else:

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, Mode, State
 from nurbsmotion.log import kv
+from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim.eds import STANDARD_MODES
 from nurbsmotion.sim.recording import SetpointRecorder, SetpointSource, SyncRecorder
 from nurbsmotion.sim.servo import ServoModel
@@ -23,7 +24,7 @@ from nurbsmotion.sim.timing import MissingSetpoint, SyncTiming
 
 log = logging.getLogger("nurbsmotion.sim.drive")
 
-CYCLIC_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION))
+CYCLIC_MODES = (int(Mode.INTERPOLATED_POSITION), int(Mode.CYCLIC_SYNC_POSITION), velocity.MODE_CYCLIC_SYNC_VELOCITY)
 SW_SYNCHRONIZED = 1 << 8  # manufacturer specific in CiA 402; sync status as Nanotec's
 EMCY_PARAMETER_ERROR = 0x6320  # CiA 301 'parameter error': IP/CSP enabled without a cycle period
 EMCY_SYNC_LOSS = 0x8700  # CiA 402 'sync controller'
@@ -51,6 +52,8 @@ class AxisParameters:
     limit_max_counts: int = 0  # 0x607D sub 2
     modes: frozenset[int] = STANDARD_MODES  # 0x6502: what 0x6060 accepts
     missing_setpoint: MissingSetpoint = MissingSetpoint.HOLD
+    velocity_profile: velocity.VelocityProfile = velocity.VelocityProfile(0.0, 0.0, 0.0, 0.0)  # 0x6083/4, 0x606D/E
+    homing_period_s: float = 1e-3  # 0x1006 (else the SYNC interval): the drive's own cycle in homing mode
 
 
 def error_register_bits(code: int) -> int:
@@ -97,6 +100,9 @@ class Cia402Axis:
         self.params = AxisParameters()
         self._emit_emcy = emit_emcy
         self.name = name
+        self.home_sensors = homing.HomeSensors()
+        self.homing_setup: Callable[[], homing.HomingSetup] = lambda: homing.HomingSetup(0, 0.0, 0.0, 0.0, 0)
+        self.home_shift = 0.0  # position actual = raw + home_shift (kept across resets: the motor stays)
         self.reset(mode)
 
     def reset(self, mode: int) -> None:
@@ -108,12 +114,15 @@ class Cia402Axis:
         self.mode = self.mode_display = mode
         self.target_position = 0
         self.ip_setpoint = 0
+        self.target_velocity = 0
+        self._in_window_s = 0.0
         self.error_code = 0
         self.error_register = 0
         self.error_history: list[int] = []
         self._fe_flag = False
         self._fresh_target = self._fresh_ip = False
         self._hold_position()
+        self._homing = homing.idle(self.servo.actual, self.home_shift)
         self.position_actual = int(round(self.servo.actual))
         self._update_statusword()
 
@@ -132,6 +141,7 @@ class Cia402Axis:
             raise UnsupportedMode(mode)
         if mode != self.mode_display:
             self._hold_position()
+            self._reset_homing()
             log.info(kv("sim.mode", node=self.name, mode=mode))
         self.mode = self.mode_display = mode
         self.refuse_cyclic_without_period()
@@ -153,6 +163,15 @@ class Cia402Axis:
         self.target_position = value
         self._fresh_target = True
 
+    def set_target_velocity(self, value: int) -> None:
+        """0x60FF, the PV target / CSV set-point (counts/s)."""
+        self.target_velocity = value
+
+    @property
+    def velocity_actual(self) -> int:
+        """0x606C, counts/s."""
+        return int(round(self.servo.velocity_counts_s))
+
     def set_ip_setpoint(self, value: int) -> None:
         """0x60C1 sub 1, the IP set-point."""
         self.ip_setpoint = value
@@ -163,6 +182,8 @@ class Cia402Axis:
         old = self.state
         self.state = new_state
         self.transitions.extend(taken)
+        if old is State.OPERATION_ENABLED or new_state is State.OPERATION_ENABLED:
+            self._reset_homing()  # leaving OPERATION ENABLED ends homing; entering needs a new edge
         if new_state is State.OPERATION_ENABLED and old is not State.OPERATION_ENABLED:
             self._hold_position()
         elif new_state is State.QUICK_STOP_ACTIVE and self.params.quick_stop_option == 0:
@@ -187,12 +208,22 @@ class Cia402Axis:
         self.following_error = 0
         self._fe_cycles = 0
 
+    def _reset_homing(self) -> None:
+        """Homing back to 'not started' where the motor is; bit 4 as it is now (only a rising
+        edge while OPERATION ENABLED in mode 6 starts homing, CiA 402-2)."""
+        self._homing = replace(homing.idle(self.servo.actual, self.home_shift),
+                               start_bit=bool(self.controlword & homing.CW_START_HOMING))
+
+    @property
+    def homing_state(self) -> homing.HomingState:
+        return self._homing
+
     def setpoint_active(self) -> bool:
         """Statusword bit 12: CSP 'target used' / IP 'interpolation active'."""
         if self.state is not State.OPERATION_ENABLED:
             return False
-        if self.mode_display == Mode.CYCLIC_SYNC_POSITION:
-            return True
+        if self.mode_display in (Mode.CYCLIC_SYNC_POSITION, velocity.MODE_CYCLIC_SYNC_VELOCITY):
+            return True  # CSV: 'target velocity used'
         return self.mode_display == Mode.INTERPOLATED_POSITION and bool(self.controlword & c.CW_ENABLE_IP)
 
     # ------------------------------------------------------------------ per SYNC
@@ -232,6 +263,17 @@ class Cia402Axis:
         each set-point step over its cycle, however late the next SYNC comes); returns where
         its set-point came from and the demand it followed (counts)."""
         inactive = SetpointSource.INACTIVE
+        if self.state is State.OPERATION_ENABLED and self.mode_display == homing.MODE_HOMING:
+            self.stats.setpoints_ignored += fresh
+            self._homing_cycle()
+            return inactive, int(round(self._demand))
+        if self.state is State.OPERATION_ENABLED and self.mode_display in velocity.VELOCITY_MODES:
+            self.stats.setpoints_ignored += fresh
+            if self.cycle_period_missing():
+                self.raise_fault(EMCY_PARAMETER_ERROR)
+            else:
+                self._velocity_cycle()
+            return inactive, int(round(self._demand))
         if self.state is State.OPERATION_ENABLED:
             if self.cycle_period_missing():
                 self.raise_fault(EMCY_PARAMETER_ERROR)
@@ -264,6 +306,34 @@ class Cia402Axis:
         else:
             self.stats.setpoints_ignored += fresh
         return inactive, int(round(self._demand))
+
+    def _velocity_cycle(self) -> None:
+        """One cycle of profile velocity (3) or cyclic synchronous velocity (9), ``sim.velocity``."""
+        state = velocity.VelocityState(self.servo.actual, self.servo.velocity_counts_s, self._in_window_s)
+        if self.mode_display == velocity.MODE_PROFILE_VELOCITY:
+            state = velocity.profile_velocity_tick(state, self.target_velocity, bool(self.controlword & c.CW_HALT),
+                                                   self.params.velocity_profile, self._cycle_s())
+        else:
+            state = velocity.cyclic_velocity_tick(state, self.target_velocity, self._cycle_s())
+        self._in_window_s = state.in_window_s
+        self.servo.hold(state.position)
+        self.servo.velocity_counts_s = state.velocity_counts_s
+        self._demand = self.servo.actual
+        self.following_error = 0
+        self.position_actual = int(round(self.servo.actual))
+
+    def _homing_cycle(self) -> None:
+        """One drive cycle of homing mode (``sim.homing.homing_tick``): the motor stands where
+        homing puts it (no lag, following error 0), at the homing speed for a quick stop."""
+        self._homing = homing.homing_tick(self._homing, self.homing_setup(), self.home_sensors,
+                                          bool(self.controlword & homing.CW_START_HOMING),
+                                          self.params.homing_period_s)
+        self.home_shift = self._homing.shift
+        self.servo.hold(self._homing.position)
+        self.servo.velocity_counts_s = self._homing.speed_counts_s
+        self._demand = self.servo.actual
+        self.following_error = 0
+        self.position_actual = int(round(self.servo.actual))
 
     def _cycle_demand(self, fresh: bool) -> tuple[SetpointSource, float]:
         """The new set-point, else the last one held or its step continued (drive setting)."""
@@ -310,6 +380,11 @@ class Cia402Axis:
             word |= c.SW_VOLTAGE_ENABLED
         if self.setpoint_active():
             word |= c.SW_IP_ACTIVE
+        if self.state is State.OPERATION_ENABLED and self.mode_display == homing.MODE_HOMING:
+            word |= self._homing.statusword_bits  # bits 10, 12, 13: CiA 402-2 homing table
+        if self.state is State.OPERATION_ENABLED and self.mode_display == velocity.MODE_PROFILE_VELOCITY:
+            state = velocity.VelocityState(self.servo.actual, self.servo.velocity_counts_s, self._in_window_s)
+            word |= c.SW_TARGET_REACHED if state.target_reached(self.params.velocity_profile) else 0
         if self._fe_flag:
             word |= c.SW_FOLLOWING_ERROR
         if self.sync_locked:
@@ -330,6 +405,7 @@ class Cia402Axis:
             self.state = State.FAULT
             self.transitions.extend([13, 14])
             self._hold_position()
+            self._reset_homing()
             self.following_error = error_at_fault  # 0x60F4 keeps the error that caused the fault
         self._update_statusword()
         self._emit_emcy(code, self.error_register)

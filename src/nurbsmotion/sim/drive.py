@@ -26,14 +26,16 @@ from typing import Any
 
 import can
 import canopen
-from canopen.objectdictionary import ODArray, ObjectDictionary
+from canopen.objectdictionary import ODArray, ObjectDictionary, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
 from nurbsmotion.sim import eds as eds_rules
+from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
+from nurbsmotion.sim import axis as axis_module
 from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
 from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
@@ -50,6 +52,7 @@ EMCY_STRUCT = struct.Struct("<HB5x")
 ABORT_NO_SUBINDEX = 0x06090011
 ABORT_WRITE_ONLY = 0x06010001
 ABORT_PARAMETER_INCOMPATIBLE = 0x06040043
+ABORT_VALUE_RANGE = 0x06090030  # CiA 301: value range of parameter exceeded
 IP_LINEAR = 0  # 0x60C0 sub-mode
 SYNC_WINDOW_LENGTH = 0x1007  # µs after SYNC in which synchronous RPDOs count (0 = no window)
 SYNC_COUNTER_OVERFLOW = 0x1019  # 0 = SYNC without counter, 2..240 = counter 1..value
@@ -61,6 +64,11 @@ FE_WINDOW_DISABLED = 0xFFFF_FFFF  # no 0x6065: no following-error monitor
 DEFAULT_QUICK_STOP_OPTION = 2  # no 0x605A: CiA 402 default (quick-stop ramp, then disabled)
 DEFAULT_QUICK_STOP_DECEL = math.inf  # no 0x6085: the drive stops at once
 _FOREVER = math.inf
+
+
+def _subindices(entry: ODArray | ODRecord | ODVariable) -> list[int]:
+    """The sub-indices of a record or array entry (none for a plain variable)."""
+    return list(entry.subindices) if isinstance(entry, (ODArray, ODRecord)) else []
 
 
 @dataclass
@@ -140,6 +148,9 @@ class SimDrive:
     ``clock`` (seconds, monotonic) is the drive's time: without one the drive uses the
     frames' receive timestamps (kernel timestamps on SocketCAN) and ``time.monotonic``; with
     one, every event is stamped by calling it, so a test decides exactly when a SYNC came.
+    ``home_sensors`` (:class:`sim.homing.HomeSensors`, raw counts at power-on) are the limit
+    switches and index pulses homing mode (6) finds; mode 6 exists if
+    0x6502 allows it; a homing object the EDS lacks reads 0 (no speed: the homing never ends).
     """
 
     def __init__(
@@ -155,6 +166,7 @@ class SimDrive:
         name: str | None = None,
         sync: SyncSettings | None = None,
         clock: Callable[[], float] | None = None,
+        home_sensors: homing.HomeSensors | None = None,
     ) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} outside 1..127")
@@ -174,6 +186,12 @@ class SimDrive:
         self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode(),
                                self.timeline)
         self.axis.params.missing_setpoint = (sync or SyncSettings()).missing_setpoint
+        self.axis.home_sensors = home_sensors or homing.HomeSensors()
+        # a velocity mode runs only with its objects in the EDS (0x6502 alone is not enough)
+        self._velocity_modes_missing = frozenset(
+            mode for mode, objects in velocity.REQUIRED_OBJECTS.items()
+            if any(find_variable(self.od, index, 0) is None for index in objects))
+        self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self._od_value_or(index, sub, 0))
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
         self.silent = False  # power loss: nothing in, nothing out
@@ -211,6 +229,8 @@ class SimDrive:
             (c.FOLLOWING_ERROR_ACTUAL, 0): lambda: axis.following_error,
             (c.TARGET_POSITION, 0): lambda: axis.target_position,
             (c.IP_DATA_RECORD, 1): lambda: axis.ip_setpoint,
+            (velocity.TARGET_VELOCITY, 0): lambda: axis.target_velocity,
+            (velocity.VELOCITY_ACTUAL, 0): lambda: axis.velocity_actual,
             (c.ERROR_CODE, 0): lambda: axis.error_code,
             (c.ERROR_REGISTER, 0): lambda: axis.error_register,
             (c.PREDEFINED_ERROR_FIELD, 0): lambda: len(axis.error_history),
@@ -220,6 +240,7 @@ class SimDrive:
             (c.MODES_OF_OPERATION, 0): self._set_mode,
             (c.TARGET_POSITION, 0): axis.set_target_position,
             (c.IP_DATA_RECORD, 1): axis.set_ip_setpoint,
+            (velocity.TARGET_VELOCITY, 0): axis.set_target_velocity,
         }
 
     # ------------------------------------------------------------------ public API
@@ -482,7 +503,7 @@ class SimDrive:
         """The 0x1016 entries (none if the EDS has no 0x1016)."""
         if c.CONSUMER_HEARTBEAT_TIME not in self.od:
             return []
-        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0]
+        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0]
         return [self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in subs]
 
     def _configure_heartbeat_consumer(self) -> None:
@@ -565,7 +586,11 @@ class SimDrive:
         params.limit_min_counts = value(c.SOFTWARE_POSITION_LIMIT, 1, 0)
         params.limit_max_counts = value(c.SOFTWARE_POSITION_LIMIT, 2, 0)
         params.modes = eds_rules.supported_modes(value(c.SUPPORTED_DRIVE_MODES, 0, 0),
-                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0))
+                                                 find_variable(self.od, c.MODES_OF_OPERATION, 0)) - self._velocity_modes_missing
+        params.velocity_profile = velocity.VelocityProfile(
+            float(value(velocity.PROFILE_ACCELERATION, 0, 0)),
+            float(value(velocity.PROFILE_DECELERATION, 0, value(velocity.PROFILE_ACCELERATION, 0, 0))),
+            float(value(velocity.VELOCITY_WINDOW, 0, 0)), float(value(velocity.VELOCITY_WINDOW_TIME, 0, 0)))
         self._sync_window_s = value(SYNC_WINDOW_LENGTH, 0, 0) * 1e-6
         self._sync_counter_overflow = value(SYNC_COUNTER_OVERFLOW, 0, None)
         self._emcy_cob = value(c.EMCY_COB_ID, 0, pdo_layout.COB_ID_INVALID_BIT)
@@ -576,6 +601,22 @@ class SimDrive:
                 self._unsubscribe(self._sync_cob, self._on_sync)
             self._subscribe(sync_cob, self._on_sync)
             self._sync_cob = sync_cob
+
+    def _homing_method_accepted(self, method: int) -> bool:
+        """0x6098 takes the methods ``sim.homing`` implements and the drive's own default
+        (a drive takes back what it reports; starting an unimplemented one is a homing error)."""
+        var = find_variable(self.od, homing.HOMING_OBJECTS[0][0], 0)
+        default = var.value if var is not None and var.value is not None else (var.default if var is not None else None)
+        return homing.supported(method) or method == default
+
+    def _homing_period_s(self) -> float:
+        """The drive's own cycle in homing mode: 0x1006, else the measured SYNC interval,
+        else 1 ms."""
+        period_us = self._od_value_or(c.COMM_CYCLE_PERIOD, 0, 0)
+        if period_us > 0:
+            return period_us * 1e-6
+        measured = self._sync_monitor.measured_period_s
+        return measured if measured > 0 else axis_module.DEFAULT_CYCLE_S
 
     def _set_mode(self, mode: int) -> None:
         try:
@@ -617,6 +658,8 @@ class SimDrive:
             raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
         elif index == c.IP_SUB_MODE and value != IP_LINEAR:
             raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)  # only linear interpolation
+        elif index == homing.HOMING_OBJECTS[0][0] and not self._homing_method_accepted(value):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)  # a method this drive does not have (as Elmo beyond 35)
         setter = self._live_write.get((index, subindex))
         if setter is not None:
             setter(value)
@@ -637,7 +680,7 @@ class SimDrive:
         producer = (value >> 16) & 0xFF
         if producer == 0 or value & 0xFFFF == 0:
             return
-        subs = [n for n in self.od[c.CONSUMER_HEARTBEAT_TIME].subindices if n > 0 and n != subindex]
+        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0 and n != subindex]
         for n in subs:
             other = self._od_value(c.CONSUMER_HEARTBEAT_TIME, n)
             if (other >> 16) & 0xFF == producer and other & 0xFFFF:
@@ -788,6 +831,8 @@ class SimDrive:
             self.stats.syncs_late += 1
             self.stats.ticks_missed += timing.missed_ticks
         self.axis.sync_locked = self._sync_monitor.locked
+        if self.axis.mode_display == homing.MODE_HOMING:
+            self.axis.params.homing_period_s = self._homing_period_s()
         self.axis.run_missed_cycles(timing)  # they ran before this SYNC: with the old RPDO data
         if self._pending:
             for setters, values in self._pending.values():
@@ -837,7 +882,8 @@ class SimDrive:
                     continue
                 slot.last_data = bytes(data)
             with network.send_lock:
-                network.bus.send(slot.message)
+                if network.bus is not None:
+                    network.bus.send(slot.message)
             self.stats.tpdos_sent += 1
 
     # ------------------------------------------------------------------ fault injection

@@ -59,7 +59,7 @@ def initial_data(var: ODVariable) -> bytes:
     else 0 (the nearest limit if the EDS's own LowLimit/HighLimit exclude 0: EPOS2 0x2212:01
     >= 16). Strings and domains without a value read as one NUL byte (an SDO upload cannot
     carry 0 bytes; a real drive never answers 'no data' for its name)."""
-    value = var.value if var.value is not None else var.default
+    value: int | float | str | bytes | None = var.value if var.value is not None else var.default
     if var.data_type not in var.STRUCT_TYPES:
         data = var.encode_raw(value) if value is not None else b""
         return data or b"\x00"
@@ -72,6 +72,8 @@ def initial_data(var: ODVariable) -> bytes:
             value = high
         if var.data_type in (od_types.REAL32, od_types.REAL64):
             value = float(value)
+    if not isinstance(value, (int, float)):  # a numeric type holds a number (canopen parsed the EDS)
+        raise TypeError(f"0x{var.index:04X}:{var.subindex:02X}: {value!r} is not a number")
     return var.encode_raw(_as_signed(var, value))
 
 

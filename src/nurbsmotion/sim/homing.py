@@ -34,6 +34,7 @@ SW_HOMING_ATTAINED = 1 << 12
 SW_HOMING_ERROR = 1 << 13
 SUPPORTED_METHODS = (1, 2, 17, 18, 33, 34, 35, 37)
 MODE_HOMING = 6  # 0x6060 value
+CW_START_HOMING = 1 << 4  # controlword bit 4 in homing mode: homing operation start
 SUPPORTED_MODE_BIT = 5  # 0x6502 bit for homing mode
 # The homing objects a drive's EDS must list (index, subindex, CiA 301 data type).
 HOMING_OBJECTS = ((0x6098, 0, "INTEGER8"), (0x6099, 1, "UNSIGNED32"), (0x6099, 2, "UNSIGNED32"),
@@ -188,6 +189,8 @@ def homing_tick(state: HomingState, setup: HomingSetup, sensors: HomeSensors, st
         return _start(state, setup, sensors) if rising else state
     if not start_bit and state.phase in SEARCHING:
         state = replace(state, phase=Phase.STOPPING_INTERRUPTED)
+    elif setup.method not in METHODS and state.phase in SEARCHING:  # 0x6098 rewritten while homing
+        state = replace(state, phase=Phase.STOPPING_ERROR)
     target = _target_speed(state, setup)
     speed = _approach(state.speed_counts_s, target, setup.accel_counts_s2 * period_s)
     raw = state.raw + (state.speed_counts_s + speed) * period_s / 2.0
@@ -210,7 +213,7 @@ def _start(state: HomingState, setup: HomingSetup, sensors: HomeSensors) -> Homi
 
 
 def _target_speed(state: HomingState, setup: HomingSetup) -> float:
-    spec = METHODS[setup.method]
+    spec = METHODS.get(setup.method)
     if state.phase not in SEARCHING or spec is None:
         return 0.0
     if state.phase is Phase.SEARCH_SWITCH:

@@ -245,7 +245,7 @@ class SimIoNode:
         period_ms = self._value(c.PRODUCER_HEARTBEAT_TIME)
         if period_ms and self.network is not None:
             self._heartbeat_task = self.network.send_periodic(
-                c.COB_HEARTBEAT + self.node_id, [int(self.nmt_state)], period_ms / 1000.0)
+                c.COB_HEARTBEAT + self.node_id, bytes([int(self.nmt_state)]), period_ms / 1000.0)
 
     def _stop_heartbeat(self) -> None:
         if self._heartbeat_task is not None:

@@ -7,6 +7,7 @@ import logging
 import math
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,8 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
+from nurbsmotion.sim.homing import HomeSensors
+from nurbsmotion.sim.io_node import SimIoNode
 from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
@@ -36,10 +39,34 @@ class DriveSetupError(ValueError):
         self.message = message
 
 
-class SimNetwork:
-    """Any number of :class:`SimDrive` on one bus (``interface``/``channel`` as python-can).
+@dataclass(frozen=True)
+class IoInput:
+    """A named input of a simulated I/O node: its bit and whether its wire reads 0 when active."""
 
-    Use as a context manager or call :meth:`start` / :meth:`stop`. Drives added after start
+    node_id: int
+    bit: int
+    active_low: bool = False
+
+
+@dataclass(frozen=True)
+class SpindleSim:
+    """A spindle drive to simulate: the packaged CiA-402 drive (or ``eds``) at ``node_id``,
+    used in profile velocity (3) or cyclic synchronous velocity (9) mode."""
+
+    node_id: int
+    counts_per_rev: float
+    eds: str | Path | None = None
+
+    def rpm(self, velocity_counts_s: float) -> float:
+        """rev/min = counts/s · 60 / counts_per_rev."""
+        return velocity_counts_s * 60.0 / self.counts_per_rev
+
+
+class SimNetwork:
+    """Any number of :class:`SimDrive` and :class:`SimIoNode` on one bus
+    (``interface``/``channel`` as python-can).
+
+    Use as a context manager or call :meth:`start` / :meth:`stop`. Nodes added after start
     boot at once.
     """
 
@@ -49,6 +76,9 @@ class SimNetwork:
         self.bitrate = bitrate
         self.bus_kwargs = bus_kwargs
         self.drives: dict[int, SimDrive] = {}
+        self.io_nodes: dict[int, SimIoNode] = {}
+        self.io_inputs: dict[str, IoInput] = {}  # named inputs (from a machine's io section)
+        self.spindle: SpindleSim | None = None
         self.network: canopen.Network | None = None
         self._stop = threading.Event()
         self._wake = threading.Event()
@@ -57,8 +87,7 @@ class SimNetwork:
 
     def add_drive(self, node_id: int, eds: str | Path | None = None, **drive_kwargs: Any) -> SimDrive:
         """Create drive ``node_id`` (keyword arguments as :class:`SimDrive`)."""
-        if node_id in self.drives:
-            raise ValueError(f"node {node_id} is already simulated")
+        self._check_free(node_id)
         drive = SimDrive(node_id, eds, **drive_kwargs)
         self.drives[node_id] = drive
         if self.network is not None:
@@ -66,20 +95,51 @@ class SimNetwork:
             self._wake.set()
         return drive
 
+    def add_io_node(self, node_id: int, input_groups: int = 1, output_groups: int = 1) -> SimIoNode:
+        """Create CiA-401 node ``node_id`` (8 inputs / outputs per group)."""
+        self._check_free(node_id)
+        node = SimIoNode(node_id, input_groups, output_groups)
+        self.io_nodes[node_id] = node
+        if self.network is not None:
+            node.attach(self.network)
+            self._wake.set()
+        return node
+
+    def set_io_input(self, name: str, active: bool) -> None:
+        """Press / release the named input (e.g. ``estop``): the wire reads ``active`` XOR
+        ``active_low``; the node sends its TPDO as it is configured to."""
+        signal = self.io_inputs.get(name)
+        if signal is None:
+            raise InputError(f"input {name!r}", f"no such simulated input (have {sorted(self.io_inputs)})")
+        self.io_nodes[signal.node_id].set_input(signal.bit, active != signal.active_low)
+
+    def _check_free(self, node_id: int) -> None:
+        if node_id in self.drives or node_id in self.io_nodes:
+            raise ValueError(f"node {node_id} is already simulated")
+
     @classmethod
     def for_machine(
         cls, machine: Any, *, lag_cycles: int = 1, max_velocity_counts_s: float | None = None, record: bool = True,
-        sync: SyncSettings | None = None,
+        sync: SyncSettings | None = None, home_sensors: dict[int, HomeSensors] | None = None,
+        spindle: SpindleSim | None = None,
     ) -> "SimNetwork":
         """One drive per axis of a ``nurbsmotion.config.MachineConfig`` (read by attribute:
-        bus.interface/channel/bitrate, axes[].name/node_id/eds/identity).
+        bus.interface/channel/bitrate, axes[].name/node_id/eds/identity), and the CiA-401 node
+        of its ``io`` section if it has one (io.node_id, io.inputs[].name/bit/active_low,
+        input_groups, output_groups), every input inactive at start.
 
         Each drive is its EDS straight out of the box (plus the axis identity in 0x1018):
         mode, cycle period and everything else are what the master writes, so a missing
-        write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive.
+        write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive;
+        ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds;
+        ``spindle`` adds a spindle drive (its node id must be free).
         """
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
+        sensors = home_sensors or {}
+        unknown = sorted(set(sensors) - {axis.node_id for axis in machine.axes})
+        if unknown:
+            raise InputError("home sensors", f"node {unknown[0]} is not an axis of the configuration")
         for axis_index, axis in enumerate(machine.axes):
             identity = (axis.identity.vendor_id, axis.identity.product_code) if axis.identity else None
             try:
@@ -92,10 +152,34 @@ class SimNetwork:
                     record=record,
                     name=f"{axis.name}/node{axis.node_id}",
                     sync=sync,
+                    home_sensors=sensors.get(axis.node_id),
                 )
             except Exception as err:  # noqa: BLE001 - canopen raises many kinds for a bad EDS
                 raise DriveSetupError(axis_index, f"cannot simulate axis {axis.name}: {type(err).__name__}: {err}") from err
+        io = getattr(machine, "io", None)
+        if io is not None:
+            net._add_machine_io(io)
+        if spindle is not None:
+            net.add_spindle(spindle, record=record, sync=sync)
         return net
+
+    def add_spindle(self, spindle: SpindleSim, **drive_kwargs: Any) -> SimDrive:
+        """Create the spindle drive (keyword arguments as :class:`SimDrive`)."""
+        if not spindle.counts_per_rev > 0:
+            raise InputError("spindle", f"counts_per_rev must be > 0, got {spindle.counts_per_rev}")
+        if spindle.node_id in self.drives or spindle.node_id in self.io_nodes:
+            raise InputError("spindle", f"node {spindle.node_id} is already simulated (an axis or the io node)")
+        drive = self.add_drive(spindle.node_id, spindle.eds, name=f"spindle/node{spindle.node_id}", **drive_kwargs)
+        self.spindle = spindle
+        return drive
+
+    def _add_machine_io(self, io: Any) -> None:
+        """The io section's node, with its named inputs all inactive (active-low wires at 1)."""
+        node = self.add_io_node(io.node_id, io.input_groups, io.output_groups)
+        for signal in io.inputs:
+            self.io_inputs[signal.name] = IoInput(io.node_id, signal.bit, signal.active_low)
+            if signal.active_low:
+                node.set_input(signal.bit, True)
 
     def __getitem__(self, node_id: int) -> SimDrive:
         return self.drives[node_id]
@@ -112,10 +196,13 @@ class SimNetwork:
         self.started_at = time.monotonic()
         for drive in self.drives.values():
             drive.attach(network)
+        for io_node in self.io_nodes.values():
+            io_node.attach(network)
         self._stop.clear()
         self._ticker = threading.Thread(target=self._tick_loop, name="sim-ticker", daemon=True)
         self._ticker.start()
-        log.info(kv("sim.start", interface=self.interface, channel=self.channel, nodes=sorted(self.drives)))
+        log.info(kv("sim.start", interface=self.interface, channel=self.channel, nodes=sorted(self.drives),
+                    io_nodes=sorted(self.io_nodes)))
         return self
 
     def stop(self) -> None:
@@ -127,6 +214,8 @@ class SimNetwork:
             self._ticker = None
         for drive in self.drives.values():
             drive.detach()
+        for io_node in self.io_nodes.values():
+            io_node.detach()
         if self.network is not None:
             self.network.disconnect()
             self.network = None
@@ -166,5 +255,11 @@ class SimNetwork:
                     wait_s = min(wait_s, drive.tick() - drive.now())  # each drive on its own clock
                 except Exception:  # noqa: BLE001 - one drive's error must not stop the others' heartbeat
                     log.exception("sim ticker: node %d", drive.node_id)
+            for io_node in list(self.io_nodes.values()):
+                try:
+                    now = time.monotonic()
+                    wait_s = min(wait_s, io_node.tick(now) - now)
+                except Exception:  # noqa: BLE001 - as for drives
+                    log.exception("sim ticker: I/O node %d", io_node.node_id)
             self._wake.wait(max(wait_s, 0.0))
             self._wake.clear()

@@ -12,7 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from canopen import objectdictionary as od_types
-from canopen.objectdictionary import ObjectDictionary
+from canopen.objectdictionary import ObjectDictionary, ODArray, ODRecord
 from canopen.sdo import SdoAbortedError
 
 from nurbsmotion.sim.eds import ABORT_VALUE_INVALID, find_variable
@@ -145,7 +145,8 @@ def is_pdo_parameter(index: int) -> bool:
 
 def declared_entries(od: ObjectDictionary, map_index: int) -> int:
     """How many mapping entries the drive's EDS declares for a PDO (IDM: 1, most: 8)."""
-    return sum(1 for sub in od[map_index].subindices if sub > 0)
+    entry = od[map_index]
+    return sum(1 for sub in entry.subindices if sub > 0) if isinstance(entry, (ODRecord, ODArray)) else 0
 
 
 def check_parameter_write(od: ObjectDictionary, read: Reader, index: int, subindex: int, value: int) -> None:

@@ -48,8 +48,8 @@ def assert_within_limits(m: Measurements, limits: PlanLimits) -> None:
     if limits.max_jerk_mm_s3 is not None:
         assert m.max_jerk_mm_s3 <= limits.max_jerk_mm_s3 * ok
     if limits.axis_max_velocity_mm_s is not None:
-        assert all(v <= lim * ok for v, lim in zip(m.axis_max_velocity_mm_s, limits.axis_max_velocity_mm_s))
+        assert all(lim is None or v <= lim * ok for v, lim in zip(m.axis_max_velocity_mm_s, limits.axis_max_velocity_mm_s))
     if limits.axis_max_accel_mm_s2 is not None:
-        assert all(a <= lim * ok for a, lim in zip(m.axis_max_accel_mm_s2, limits.axis_max_accel_mm_s2))
+        assert all(lim is None or a <= lim * ok for a, lim in zip(m.axis_max_accel_mm_s2, limits.axis_max_accel_mm_s2))
     assert m.start_error_mm == 0.0
     assert m.end_error_mm == 0.0

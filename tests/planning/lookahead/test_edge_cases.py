@@ -28,3 +28,16 @@ def test_edge_program_holds_every_limit(name, limits):
     trajectory = plan_lookahead(program, limits)
     assert_within_limits(measure(trajectory, program), limits)
     assert trajectory.duration_s < 5.0  # a short program is not planned as a crawl
+
+
+@pytest.mark.parametrize("axis_v, axis_a", [((150.0, None, None), None), (None, (1500.0, None, 800.0))],
+                         ids=["velocity on X only", "acceleration on X and Z"])
+def test_limits_on_some_axes_hold_on_those_axes(axis_v, axis_a):
+    """A configuration may give max_velocity_mm_s / max_accel_mm_s2 for some axes only
+    (limits.axis_limits: None for the others): the given ones hold, the others are free."""
+    program = polyline([(0, 0, 0), (50, 0, 0), (50, 50, 0), (0, 50, 10)])
+    limits = replace(WANG_LIMITS, axis_max_velocity_mm_s=axis_v, axis_max_accel_mm_s2=axis_a)
+    m = measure(plan_lookahead(program, limits), program)
+    assert_within_limits(m, limits)
+    if axis_v is not None:
+        assert m.axis_max_velocity_mm_s[1] > axis_v[0]  # Y is free: it runs faster than X may

@@ -104,8 +104,8 @@ def prepend_history(history: RawProfile, raw: RawProfile) -> RawProfile:
 
 def history_before(raw: RawProfile, t_cut: float, span_s: float) -> RawProfile:
     """The pieces of ``raw`` covering [t_cut - span_s, t_cut], cut exactly at t_cut."""
-    k_end, tau = raw.locate(np.array([t_cut]))
-    k_end, tau = int(k_end[0]), float(tau[0])
+    k_at_cut, tau_at_cut = raw.locate(np.array([t_cut]))
+    k_end, tau = int(k_at_cut[0]), float(tau_at_cut[0])
     k_start = int(np.clip(np.searchsorted(raw.t, t_cut - span_s, side="right") - 1, 0, k_end))
     s_cut = float(raw.position(np.array([t_cut]))[0])
     v_cut = float(raw.v[k_end] + raw.a[k_end] * tau)
@@ -123,7 +123,7 @@ def cycle_times(duration_s: float, period_s: float) -> NDArray[np.float64]:
     n = ceil(D / T) cycles, t_i = i T D / (n T), so the last sample is the end (at rest).
     Scaling time by k = nT/D >= 1 divides v by k, a by k^2 and j by k^3: every limit still holds."""
     cycles = max(int(np.ceil(duration_s / period_s - 1e-9)), 1)
-    return np.arange(cycles + 1) * (duration_s / cycles)
+    return np.arange(cycles + 1, dtype=np.float64) * (duration_s / cycles)
 
 
 def warped_cycle_times(duration_s: float, period_s: float) -> NDArray[np.float64]:

@@ -126,13 +126,13 @@ def _speed_fit() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     powers = np.arange(SPEED_DEGREE + 1)
 
     def value(r: float) -> NDArray[np.float64]:
-        return r ** powers
+        return np.asarray(r ** powers, dtype=np.float64)
 
     def slope(r: float) -> NDArray[np.float64]:
         return np.where(powers > 0, powers * r ** np.maximum(powers - 1, 0), 0.0)
 
     rows = [value(0.0), slope(0.0), *[value(r) for r in nodes], value(1.0), slope(1.0)]
-    return np.linalg.inv(np.array(rows)), 1.0 / (powers + 1.0)
+    return np.linalg.inv(np.array(rows)), np.asarray(1.0 / (powers + 1.0), dtype=np.float64)
 
 
 SPEED_FIT, SPEED_INTEGRAL = _speed_fit()

@@ -65,13 +65,21 @@ class PlanningError(InputError):
 
 
 
+def axis_limit_array(values: tuple[float | None, ...] | None, scale: float = 1.0) -> NDArray[np.float64] | None:
+    """Per-axis X, Y, Z limits times ``scale``; an axis without a limit (None, or not given)
+    is unlimited (inf). A None must not become NaN: NaN would drop every axis's cap (min and
+    comparisons with NaN), so the given limits would not hold either."""
+    if values is None:
+        return None
+    given = [np.inf if v is None else v for v in values[:3]]
+    out = np.full(3, np.inf)
+    out[: len(given)] = np.asarray(given, dtype=np.float64) * scale
+    return out
+
+
 def caps_for(limits: PlanLimits) -> Caps:
-    def axis(values: tuple[float, ...] | None) -> NDArray[np.float64] | None:
-        if values is None:
-            return None
-        out = np.full(3, np.inf)
-        out[: len(values)] = np.asarray(values[:3], dtype=float) * MARGIN
-        return out
+    def axis(values: tuple[float | None, ...] | None) -> NDArray[np.float64] | None:
+        return axis_limit_array(values, MARGIN)
 
     return Caps(period_s=limits.period_s, chord_error_mm=MARGIN * limits.chord_error_mm,
                 accel_mm_s2=MARGIN * limits.max_accel_mm_s2,
@@ -80,20 +88,16 @@ def caps_for(limits: PlanLimits) -> Caps:
 
 
 def machine_for(limits: PlanLimits) -> MachineLimits:
-    def axis(values: tuple[float, ...] | None) -> NDArray[np.float64] | None:
-        if values is None:
-            return None
-        out = np.full(3, np.inf)
-        out[: len(values)] = np.asarray(values[:3], dtype=float)
-        return out
-
     return MachineLimits(limits.period_s, limits.chord_error_mm, limits.max_accel_mm_s2, limits.max_jerk_mm_s3,
-                         axis(limits.axis_max_velocity_mm_s), axis(limits.axis_max_accel_mm_s2))
+                         axis_limit_array(limits.axis_max_velocity_mm_s), axis_limit_array(limits.axis_max_accel_mm_s2))
 
 
 def averaging_time_s(limits: PlanLimits) -> float:
     """tau_f = A / J of the jerk filter (0 without a jerk limit)."""
     return 0.0 if limits.max_jerk_mm_s3 is None else limits.max_accel_mm_s2 / limits.max_jerk_mm_s3
+
+
+Carry = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]  # run s, speed caps, accel scales
 
 
 @dataclass
@@ -109,7 +113,7 @@ class Cursor:
     previous: Samples | None = None
     at_rest: bool = True  # the run starts here: sample t = 0 too
     run_s_mm: float = 0.0  # arc length along the run at the cursor
-    carry: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] | None = None  # repairs so far
+    carry: Carry | None = None  # repairs so far
 
 
 @dataclass(eq=False)
@@ -127,6 +131,18 @@ class WindowPlan:
     start_piece: int = 0  # index into the run's pieces of the window's first piece
     early_stop: bool = False  # a stop before the run's end (the planner's fallback)
     fallback: str = ""  # set on the first plan of a run the fallback made: FALLBACK_STOP/_SPLIT/_SLOWER
+
+    def next_cursor(self) -> Cursor:
+        """Where the next window starts: every non-final window has one."""
+        if self.cursor is None:
+            raise ValueError("a final window has no next cursor")
+        return self.cursor
+
+    def verified_stop(self) -> WindowPlan:
+        """The set-points to the window's verified stop: every non-final window has them."""
+        if self.stop is None:
+            raise ValueError("a final window has no separate stop")
+        return self.stop
 
 
 @dataclass
@@ -245,7 +261,7 @@ def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, fin
     if final:
         times = jp.cycle_times(duration, period) if cursor.at_rest else jp.warped_cycle_times(duration, period)
     else:
-        times = np.arange(int(np.floor(duration / period)) + 1) * period
+        times = np.arange(int(np.floor(duration / period)) + 1, dtype=np.float64) * period
     return times if cursor.at_rest else times[1:]
 
 
@@ -326,7 +342,9 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         stop = WindowPlan(samples, s, planned_ds, result, repairs, True, None, blocks, start_piece=cursor.piece_index,
                           early_stop=True)
         keep = times <= commit_t
-        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep], samples.arc_residual_mm[keep])
+        residual = samples.arc_residual_mm
+        samples = Samples(samples.piece[keep], samples.u[keep], samples.position_mm[keep],
+                          None if residual is None else residual[keep])
         s, planned_ds, times, blocks = s[keep], planned_ds[keep], times[keep], blocks[keep]
     next_cursor = None
     if not reaches_end:
@@ -478,10 +496,10 @@ def short_run_plan(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: 
     return best
 
 
-def merge_carry(a: tuple | None, b: tuple | None) -> tuple | None:
+def merge_carry(a: Carry | None, b: Carry) -> Carry:
     """Repairs of two windows on one run-coordinate grid (the tighter of both everywhere)."""
-    if a is None or b is None:
-        return a if b is None else b
+    if a is None:
+        return b
     s = np.union1d(a[0], b[0])
     caps = np.minimum(np.interp(s, a[0], a[1], left=NO_CAP, right=NO_CAP),
                       np.interp(s, b[0], b[1], left=NO_CAP, right=NO_CAP))
@@ -568,10 +586,11 @@ def run_windows(run: Run, settings: PlanSettings, before: NDArray[np.float64], c
                     if pending.final:
                         yield pending
                         return
-                    cursor = pending.cursor
+                    cursor = pending.next_cursor()
                     continue
-            yield pending.stop
-            followup.runs.extend((rest, None, FALLBACK_STOP) for rest in rest_after_stop(run, pending.stop))
+            stop = pending.verified_stop()
+            yield stop
+            followup.runs.extend((rest, None, FALLBACK_STOP) for rest in rest_after_stop(run, stop))
             return
         backtracks = 0
         if pending is not None:
@@ -580,7 +599,7 @@ def run_windows(run: Run, settings: PlanSettings, before: NDArray[np.float64], c
             yield plan
             return
         pending, pending_cursor = plan, cursor
-        cursor = plan.cursor
+        cursor = plan.next_cursor()
         length = settings.window_mm
 
 

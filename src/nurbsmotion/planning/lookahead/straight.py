@@ -95,6 +95,6 @@ def cycle_positions(profile: SCurve, distance_mm: float, period_s: float) -> NDA
     the last exactly ``distance_mm``."""
     duration = profile.duration_s
     cycles = max(int(math.ceil(duration / period_s - 1e-9)), 1)
-    s = positions(profile, np.arange(cycles + 1) * (duration / cycles))
+    s = positions(profile, np.arange(cycles + 1, dtype=np.float64) * (duration / cycles))
     s[0], s[-1] = 0.0, distance_mm
     return np.minimum(np.maximum.accumulate(s), distance_mm)

@@ -164,7 +164,7 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
     junction: junction_chord_error."""
     piece, u, p = samples.piece, samples.u, samples.position_mm
     start = previous is not None and len(previous.u) > 0
-    if start:
+    if start and previous is not None:
         piece = np.concatenate([previous.piece[-1:], piece])
         u = np.concatenate([previous.u[-1:], u])
         p = np.concatenate([previous.position_mm[-1:], p])
@@ -235,6 +235,8 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
     moving = planned > MIN_STEP_FOR_FLUCTUATION_MM
     safe = np.where(moving, planned, 1.0)
     residual = samples.arc_residual_mm
+    if residual is None:
+        raise ValueError("check() needs samples with arc residuals (sample_path sets them)")
     residual_before = np.concatenate([[0.0 if previous is None or previous.arc_residual_mm is None
                                        else previous.arc_residual_mm[-1]], residual[:-1]])
     arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
