@@ -17,3 +17,10 @@ def test_an_unfinished_outcome_names_the_line_reached():
                                                        "line_reached": {"where": "part.nc:7"}}}
     assert describe_outcome(info).splitlines()[0] == \
         "job ab12 stopped: 80/459 set-points in 1.00 s, reached part.nc:7; stopped on request"
+
+
+def test_the_progress_line_says_held_and_why():
+    held = {**STATUS, "state": "held", "job": {**STATUS["job"], "paused": "M6 tool change to T3 at part.nc:20"}}
+    assert progress_text(held).endswith("[held: M6 tool change to T3 at part.nc:20 (resume to continue)]")
+    by_request = {**STATUS, "state": "held", "job": {**STATUS["job"], "paused": None}}
+    assert progress_text(by_request).endswith("[held]")

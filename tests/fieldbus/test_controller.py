@@ -137,3 +137,97 @@ def test_rate_request_changes_the_playback_speed(rate):
     for k in range(4, 400):
         ctl.step(k, fb)
     assert job.playback.r == pytest.approx(rate)
+
+
+# ---------------------------------------------------------------- hold / resume / program pauses
+def line_job(n=400, pauses=()):
+    arr = np.column_stack([np.arange(n) * 50, np.arange(n) * -20]).astype(np.int64)
+    steps = np.abs(np.diff(arr, axis=0)).max(axis=0).astype(float).tolist()
+    job = FakeJob(arr)
+    job.playback = Playback(memoryview(arr), ramp_slope(arr, np.array([2e5, 2e5]), 0.004), 1.0, steps, [0.0, 0.0],
+                            pauses)
+    return job, arr
+
+
+def run(ctl, fb, k, requests_at, until):
+    """Step from cycle k while ``until(ctl)`` is false; requests_at: {cycle: [requests]}."""
+    sent = []
+    while not until(ctl) and k < 100000:
+        cw, sp = ctl.step(k, fb, requests_at.get(k, []))
+        sent.append(list(sp))
+        k += 1
+    return sent, k
+
+
+def test_hold_ramps_to_rest_on_the_path_keeps_the_job_and_resume_finishes_it():
+    from nurbsmotion.service.verify import on_planned_path
+
+    ctl, fb = holding_controller()
+    job, arr = line_job()
+    sent, k = run(ctl, fb, 2, {2: [("job", job)], 60: [("hold", job)]}, lambda c: c.phase is Phase.HELD)
+    assert ctl.phase is Phase.HELD and ctl.job is job and job.outcome == ""
+    assert sent[:58] == arr[:58].tolist()  # exact rows until the hold
+    assert 60 < k - 2 < 60 + 4 / job.playback.ramp_dr + 2  # the ramp took ~1/dr cycles
+    held = sent[-1]
+    still = [list(ctl.step(k + i, fb)[1]) for i in range(20)]
+    assert still == [held] * 20 and ctl.phase is Phase.HELD  # at rest, nothing moves until resume
+    k += 20
+    rest, k = run(ctl, fb, k, {k: [("resume", job)]}, lambda c: c.phase is Phase.HOLDING)
+    assert job.outcome == "done" and rest[-1] == arr[-1].tolist()
+    played = np.array(sent + still + rest)
+    assert on_planned_path(played, arr)
+    # the resume ramp goes back to r = 1: the end of the job is exact planned rows again
+    tail = 100
+    assert rest[-tail:] == arr[-tail:].tolist()
+
+
+def test_stop_and_abort_work_while_held():
+    ctl, fb = holding_controller()
+    job, arr = line_job()
+    run(ctl, fb, 2, {2: [("job", job)], 30: [("hold", job)]}, lambda c: c.phase is Phase.HELD)
+    ctl.step(500, fb, [("stop", job)])
+    assert ctl.phase is Phase.HOLDING and job.outcome == "stopped" and job.finish_cycle == 500
+    ctl2, fb2 = holding_controller()
+    job2, _ = line_job()
+    run(ctl2, fb2, 2, {2: [("job", job2)], 30: [("hold", job2)]}, lambda c: c.phase is Phase.HELD)
+    ctl2.step(500, fb2, [("abort", job2)])
+    assert ctl2.phase is Phase.QUICK_STOP and job2.outcome == "aborted"
+
+
+def test_stop_during_the_hold_ramp_continues_the_same_ramp_and_ends_the_job():
+    ctl, fb = holding_controller()
+    job, _ = line_job()
+    run(ctl, fb, 2, {2: [("job", job)], 60: [("hold", job)]}, lambda c: c.phase is Phase.PAUSING)
+    ctl.step(61, fb, [("stop", job)])
+    assert ctl.phase is Phase.STOPPING and job.outcome == "stopped"
+    run(ctl, fb, 62, {}, lambda c: c.phase is Phase.HOLDING)
+    assert job.finish_cycle > 61
+
+
+def test_program_pause_rows_hold_exactly_there_and_resume_plays_every_row_once():
+    from nurbsmotion.service.verify import plan_with_holds
+
+    ctl, fb = holding_controller()
+    job, arr = line_job(200, pauses=(50, 120))
+    sent, k = run(ctl, fb, 2, {2: [("job", job)]}, lambda c: c.phase is Phase.HELD)
+    assert sent[-1] == arr[50].tolist() and job.playback.index == 50
+    wait = [list(ctl.step(k + i, fb)[1]) for i in range(10)]
+    k += 10
+    more, k = run(ctl, fb, k, {k: [("resume", job)]}, lambda c: c.phase is Phase.HELD and c.job.playback.index == 120)
+    assert more[-1] == arr[120].tolist()
+    rest, k = run(ctl, fb, k, {k: [("resume", job)]}, lambda c: c.phase is Phase.HOLDING)
+    assert job.outcome == "done"
+    assert plan_with_holds(np.array(sent + wait + more + rest), arr)
+    assert not plan_with_holds(np.array(sent + wait + more + rest)[::2], arr)
+
+
+def test_hold_and_pause_state_survives_a_rewind():
+    ctl, fb = holding_controller()
+    job, arr = line_job(200, pauses=(50,))
+    run(ctl, fb, 2, {2: [("job", job)]}, lambda c: c.phase is Phase.HELD)
+    snap = ctl.snapshot()
+    ctl.step(1000, fb, [("resume", job)])
+    ctl.step(1001, fb)
+    assert ctl.phase is Phase.STREAMING and job.playback.pause_i == 1
+    ctl.restore(snap)
+    assert ctl.phase is Phase.HELD and job.playback.pause_i == 0 and job.playback.at_pause()

@@ -381,3 +381,58 @@ def test_half_playback_rate_plays_every_row_and_the_midpoints_between():
         expected[0::2], expected[1::2] = rows, between
         _, setpoints = recorded(sim, 1)
         assert find_run(setpoints, expected.astype(int).tolist()) >= 0
+
+
+def recorded_rows(sim: SimNetwork, n_axes: int) -> np.ndarray:
+    columns = [recorded(sim, n)[1] for n in range(1, n_axes + 1)]
+    n = min(len(c) for c in columns)
+    return np.array([c[:n] for c in columns]).T
+
+
+def test_hold_rests_on_the_path_and_resume_finishes_the_same_job():
+    from nurbsmotion.service.verify import on_planned_path
+
+    counts = sine_counts(n=1500, n_axes=2)
+    with rig(n_axes=2) as (master, sim, _):
+        job = master.stream(counts)
+        wait_for(lambda: (master.status().job_index or 0) > 300)
+        job.hold()
+        wait_for(lambda: master.status().phase == "held")
+        held_at = master.status().job_index
+        cycle = master.status().cycle
+        wait_for(lambda: master.status().cycle > cycle + 30)
+        status = master.status()
+        assert status.phase == "held" and not job.done() and status.job_index == held_at
+        assert held_at < len(counts) - 1
+        positions = [a.position_counts for a in status.axes]
+        wait_for(lambda: master.status().cycle > status.cycle + 10)
+        assert [a.position_counts for a in master.status().axes] == positions  # at rest
+        job.resume()
+        result = job.wait(WAIT_S)
+        assert result is not None and result.outcome == "done" and result.sent == len(counts)
+        wait_for(lambda: recorded_rows(sim, 2)[-1].tolist() == counts[-1].tolist())
+        rows = recorded_rows(sim, 2)
+        start = next(i for i in range(len(rows)) if rows[i].tolist() != rows[0].tolist()) - 1
+        assert on_planned_path(rows[start:], counts)
+        assert find_run(rows[:, 0].tolist(), counts[-200:, 0].tolist()) >= 0  # exact rows again after the resume
+
+
+def test_pause_rows_hold_there_until_resume_and_every_row_is_applied_once():
+    from nurbsmotion.service.verify import plan_with_holds
+
+    counts = sine_counts(n=300, n_axes=2)
+    counts[100:110] = counts[100]  # at rest around the pause rows, as the planner's exact stop gives
+    counts[200:210] = counts[200]
+    with rig(n_axes=2) as (master, sim, _):
+        job = master.stream(counts, pauses=(105, 205))
+        for row in (105, 205):
+            wait_for(lambda: master.status().phase == "held" and master.status().job_index == row)
+            cycle = master.status().cycle
+            wait_for(lambda: master.status().cycle > cycle + 20)
+            assert master.status().job_index == row and not job.done()
+            job.resume()
+            wait_for(lambda: master.status().phase != "held" or job.done())
+        result = job.wait(WAIT_S)
+        assert result is not None and result.outcome == "done"
+        wait_for(lambda: recorded_rows(sim, 2)[-1].tolist() == counts[-1].tolist())
+        assert plan_with_holds(recorded_rows(sim, 2), counts)

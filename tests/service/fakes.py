@@ -54,7 +54,8 @@ class FakeLink:
     def bring_up(self) -> None:
         self.phase = "holding"
 
-    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> FakeJob:
+    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None,
+               pauses: tuple[int, ...] = ()) -> FakeJob:
         if self.phase != "holding" or self.job is not None:
             raise FieldbusError(f"stream: the axes are not holding (phase {self.phase})")
         if np.any(counts[0] != self.held):

@@ -74,10 +74,11 @@ def test_offsets_are_set_cleared_and_selected_between_jobs_only(controller):
 
 def test_the_switches_of_the_submission_reach_the_reader(controller):
     program = "G21 G90\n/G1 X5 F3000\nG1 X1 F3000\nM1\nG1 X2\n"
-    with pytest.raises(InputError, match=r"part.nc:4: M1 optional stop"):
-        controller.submit("part.nc", program)
+    job = controller.submit("part.nc", program)["job"]
+    assert [p["reason"] for p in job["summary"]["pauses"]] == ["M1 at part.nc:4"] and job["summary"]["blocks"] == 2
+    _wait_idle(controller)
     job = controller.submit("part.nc", program, block_delete=False, optional_stop=False)["job"]
-    assert job["summary"]["blocks"] == 3  # the '/' line ran too
+    assert job["summary"]["blocks"] == 3 and job["summary"]["pauses"] == []  # the '/' line ran too, M1 is nothing
     _wait_idle(controller)
 
 

@@ -1,4 +1,4 @@
-"""What the machine lacks refuses the program at its line: spindle, coolant, holds."""
+"""What the machine lacks refuses the program at its line: spindle, coolant; holds pass as pause rows."""
 
 import dataclasses
 from pathlib import Path
@@ -56,13 +56,17 @@ def test_coolant_needs_an_output_of_that_kind_and_is_refused_until_outputs_are_d
             f"(io.outputs in {CONFIG.source})"]
 
 
-def test_holds_are_refused_until_the_daemon_can_pause():
-    errors = _errors("G21 G90\nG1 X1 F600\nT1 M6\nM0\nG1 X2\nM01\nG1 X3\n")
-    assert errors == ["part.nc:3: M6 tool change to T1: the daemon cannot pause a job yet (hold/resume is not built)",
-                      "part.nc:4: M0 program pause: the daemon cannot pause a job yet (hold/resume is not built)",
-                      "part.nc:6: M01 optional stop (submit with the optional stop switch off to skip it): the daemon "
-                      "cannot pause a job yet (hold/resume is not built)"]
-    assert _errors("G21 G90\nG1 X1 F600\nM1\nG1 X2\n", optional_stop=False) == []
+def test_holds_pass_the_gate_and_become_pause_rows_at_rest():
+    text = "G21 G90\nG1 X1 F600\nT1 M6\nM0\nG1 X2\nM01\nG1 X3\n"
+    assert _errors(text) == []
+    job = plan_job("part.nc", text, CONFIG)
+    assert [p.reason for p in job.pauses] == ["M6 tool change to T1 at part.nc:3", "M0 at part.nc:4",
+                                              "M01 at part.nc:6"]
+    assert [p.tool for p in job.pauses] == [1, None, None]
+    for pause in job.pauses:  # the axes are at rest there: the row before holds the same position
+        assert (job.counts[pause.row] == job.counts[pause.row - 1]).all()
+    assert [p.row for p in plan_job("part.nc", text, CONFIG, options=ReadOptions(optional_stop=False)).pauses] \
+        == [p.row for p in job.pauses[:2]]
 
 
 def test_plan_job_applies_the_gate_before_planning():

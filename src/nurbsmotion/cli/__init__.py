@@ -6,7 +6,7 @@ command name is the module name with ``_`` -> ``-``. Modules whose name starts w
 are helpers, not commands. Only the CLI and the service put the layers together.
 
 Exit codes: 0 success, 1 the job failed (fault, stop), 2 bad input (one line per error on
-stderr), 3 no daemon answers on the control socket (run, status, stop, abort, reset,
+stderr), 3 no daemon answers on the control socket (run, status, stop, abort, hold, resume, reset,
 override, offsets), 70 internal error.
 """
 

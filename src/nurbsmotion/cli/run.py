@@ -46,7 +46,14 @@ def progress_text(status: dict[str, Any]) -> str:
     job = status["job"]
     positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
     return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
-            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{status['state']}]")
+            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
+
+
+def _state_text(status: dict[str, Any]) -> str:
+    """'running', 'held', or 'held: M6 tool change to T3 at part.nc:20 (resume to continue)'."""
+    paused = (status.get("job") or {}).get("paused")
+    return f"{status['state']}: {paused} (resume to continue)" if status["state"] == "held" and paused else \
+        status["state"]
 
 
 class _Plain:
@@ -81,7 +88,7 @@ class _Rich:
         positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
         self.progress.update(self.task, total=job["total"], completed=job["cycle"],
                              info=f"{job['feed_mm_s']:6.1f} mm/s ovr {job['override_percent']:g} % "
-                                  f"{job.get('line') or '-'} {positions} {status['state']}")
+                                  f"{job.get('line') or '-'} {positions} {_state_text(status)}")
 
     def close(self) -> None:
         self.progress.stop()
@@ -156,6 +163,28 @@ def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict
         return None
 
 
+def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: str, fields: dict[str, Any]) -> int:
+    """Send ``cmd`` (submit, mdi), follow the job it started with a progress display, print
+    its outcome; the exit code (0 completed, 1 not, 2 rejected)."""
+    response = client.request(cmd, **fields)
+    if not response.get("ok"):
+        for line in response.get("errors") or [response.get("error", "rejected")]:
+            error_line(args, line)
+        return EXIT_REFUSED
+    job = response["job"]
+    display = _display(title, args.no_progress)
+    try:
+        info = follow_to_the_end(client, job, display)
+    finally:
+        if display is not None:
+            display.close()
+    if info is None:
+        error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
+        return 1
+    print(describe_outcome(info))
+    return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+
+
 def run(args: argparse.Namespace) -> int:
     text = read_program(args.program)
 
@@ -163,22 +192,7 @@ def run(args: argparse.Namespace) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
         fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
                                                 ("optional_stop", args.no_optional_stop)) if off})
-        response = client.request("submit", name=Path(args.program).name, program=text, **fields)
-        if not response.get("ok"):
-            for line in response.get("errors") or [response.get("error", "rejected")]:
-                error_line(args, line)
-            return EXIT_REFUSED
-        job = response["job"]
-        display = _display(Path(args.program).name, args.no_progress)
-        try:
-            info = follow_to_the_end(client, job, display)
-        finally:
-            if display is not None:
-                display.close()
-        if info is None:
-            error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
-            return 1
-        print(describe_outcome(info))
-        return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+        name = Path(args.program).name
+        return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **fields})
 
     return with_client(args, body)

@@ -10,7 +10,9 @@ transitions are one table (:data:`TRANSITIONS`), as in sim/statemachine.py:
 enabling (CiA-402 state machine towards OPERATION ENABLED, target = actual position) ->
 holding (re-send the held position) <-> streaming (the job's rows at the playback rate) ->
 stopping (controlled stop on the path) / quick_stop (quick-stop controlword) -> disabled;
-disabling at shutdown.
+disabling at shutdown. A job can be held: streaming -> pausing (the stop ramp) -> held (the
+job stays, the position is re-sent) -> streaming on resume; a program pause row goes from
+streaming to held directly (the plan is at rest there).
 """
 
 from __future__ import annotations
@@ -37,10 +39,12 @@ class Phase(enum.Enum):
     QUICK_STOP = "quick_stop"
     DISABLED = "disabled"
     DISABLING = "disabling"
+    PAUSING = "pausing"  # a hold's stop ramp; the job stays
+    HELD = "held"  # a job held (hold request or program pause), waiting for resume
 
 
-RUNNING_PHASES = frozenset((Phase.HOLDING, Phase.STREAMING, Phase.STOPPING))
-MOVING_PHASES = frozenset((Phase.STREAMING, Phase.STOPPING))
+RUNNING_PHASES = frozenset((Phase.HOLDING, Phase.STREAMING, Phase.STOPPING, Phase.PAUSING, Phase.HELD))
+MOVING_PHASES = frozenset((Phase.STREAMING, Phase.STOPPING, Phase.PAUSING))
 
 
 class Event(enum.Enum):
@@ -54,6 +58,9 @@ class Event(enum.Enum):
     QUICK_STOP = "quick stop"  # abort, or a fault the drives may not follow through
     DRIVES_STOPPED = "drives stopped"  # every axis left OPERATION ENABLED / QUICK STOP ACTIVE
     DISABLE = "disable"  # shutdown
+    HOLD = "hold"  # hold the job: ramp to rest on the path, keep it
+    PAUSE_ROW = "pause row"  # a program pause row (M0/M1/M6) handed out
+    RESUME = "resume"
 
 
 P, E = Phase, Event
@@ -68,6 +75,12 @@ TRANSITIONS: dict[tuple[Phase, Event], Phase] = {
     (P.STREAMING, E.STOP): P.STOPPING,
     (P.STREAMING, E.AT_REST): P.HOLDING,
     (P.STOPPING, E.AT_REST): P.HOLDING,
+    (P.STREAMING, E.HOLD): P.PAUSING,
+    (P.STREAMING, E.PAUSE_ROW): P.HELD,
+    (P.PAUSING, E.AT_REST): P.HELD,
+    (P.PAUSING, E.STOP): P.STOPPING,
+    (P.HELD, E.RESUME): P.STREAMING,
+    (P.HELD, E.STOP): P.HOLDING,
     **{(p, E.QUICK_STOP): P.QUICK_STOP for p in RUNNING_PHASES},
     (P.QUICK_STOP, E.DRIVES_STOPPED): P.DISABLED,
     **{(p, E.DISABLE): P.DISABLING for p in _ANY_ONLINE},
@@ -138,15 +151,19 @@ class CycleController:
                 self.hold[:] = sp
                 job.outcome, job.finish_cycle = "done", k + 1
                 self._set_phase(Event.LAST_ROW, k)
-        elif phase is Phase.HOLDING:
+            elif job.playback.at_pause():
+                self.hold[:] = sp
+                self._set_phase(Event.PAUSE_ROW, k)
+        elif phase is Phase.HOLDING or phase is Phase.HELD:
             sp[:] = self.hold
             cw[:] = self.run_cw
-        elif phase is Phase.STOPPING:
+        elif phase is Phase.STOPPING or phase is Phase.PAUSING:
             job = self.job
             cw[:] = self.run_cw
             if not job.playback.stop_step(sp):
                 self.hold[:] = sp
-                job.finish_cycle = k + 1
+                if phase is Phase.STOPPING:
+                    job.finish_cycle = k + 1
                 self._set_phase(Event.AT_REST, k)
         elif phase is Phase.ENABLING:
             self._enabling(k, fb)
@@ -167,7 +184,7 @@ class CycleController:
         return cw, sp
 
     def handle(self, what: str, arg: Any, k: int, fb: Feedback) -> None:
-        """One request: job, stop, abort, quick_stop, fault_stop, rate, enable, disable."""
+        """One request: job, stop, abort, quick_stop, fault_stop, rate, hold, resume, enable, disable."""
         phase = self.phase
         if what == "job":
             if phase is Phase.HOLDING and self.job is None:
@@ -176,8 +193,28 @@ class CycleController:
             else:
                 self.notices.append(("refused", arg))
         elif what in ("stop", "fault_stop"):
-            if phase is Phase.STREAMING and (what == "fault_stop" or self.job is arg):
-                self._controlled_stop(k, "stopped" if what == "stop" else "faulted")
+            if self.job is None or not (what == "fault_stop" or self.job is arg):
+                return
+            outcome = "stopped" if what == "stop" else "faulted"
+            if phase is Phase.STREAMING:
+                self._controlled_stop(k, outcome)
+            elif phase is Phase.PAUSING:  # the hold's ramp becomes the stop's
+                self.job.outcome = outcome
+                self._set_phase(Event.STOP, k)
+            elif phase is Phase.HELD:  # at rest already: the job ends here
+                self.job.outcome, self.job.finish_cycle = outcome, k
+                self._set_phase(Event.STOP, k)
+        elif what == "hold":
+            if phase is Phase.STREAMING and self.job is arg:
+                if self.job.playback.index < 0:  # nothing sent yet: held before the first row
+                    self._set_phase(Event.PAUSE_ROW, k)
+                else:
+                    self.job.playback.start_stop(self.accel_limits, self.period_s)
+                    self._set_phase(Event.HOLD, k)
+        elif what == "resume":
+            if phase is Phase.HELD and self.job is arg:
+                self.job.playback.resume(self.rate)
+                self._set_phase(Event.RESUME, k)
         elif what == "abort":
             if self.job is arg and phase in RUNNING_PHASES:
                 self._quick_stop(k, "aborted")

@@ -58,7 +58,7 @@ from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime
 
 log = logging.getLogger(__name__)
 
-RUNNING_PHASES = ("holding", "streaming", "stopping")
+RUNNING_PHASES = ("holding", "streaming", "stopping", "pausing", "held")
 HISTORY_CYCLES = 512  # cycles of commands kept: the kernel queue (<= 256) plus the following-error search
 SYNC_SOURCES = ("auto", "loop", "kernel")
 FeedbackSink = Callable[[int, int, int, int, float], None]  # see Master.record_feedback
@@ -103,6 +103,15 @@ class Job:
     def request_stop(self) -> None:
         """Controlled stop: decelerate along the path within a_max, then hold."""
         self._master._request("stop", self)
+
+    def hold(self) -> None:
+        """Hold: decelerate along the path with the stop ramp, then wait (phase 'held') with
+        the job alive; ignored unless streaming."""
+        self._master._request("hold", self)
+
+    def resume(self) -> None:
+        """Continue a held job (or one paused at a pause row) from exactly where it rests."""
+        self._master._request("resume", self)
 
     def abort(self) -> None:
         """Quick stop controlword to every axis (drives stop on their own ramp and disable)."""
@@ -434,12 +443,15 @@ class Master:
         ``start_cycle``), ``timestamp`` the frame's receive time."""
         self._fb.sink = sink
 
-    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None) -> Job:
+    def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None,
+               pauses: tuple[int, ...] = ()) -> Job:
         """Start streaming an (N, n_axes) int32 array of set-points, one row per cycle.
 
         The first row must be within each axis' following-error window of the held
         position (no jump at the start). ``on_progress(sent, length)`` is called from the
-        cycle loop every ~50 ms and must return quickly.
+        cycle loop every ~50 ms and must return quickly. ``pauses``: rows (sorted) where the
+        playback stops and holds (phase 'held') until :meth:`Job.resume`; the axes must be at
+        rest there (the planner's exact stop before M0/M1/M6).
         """
         arr = np.asarray(counts)
         if arr.ndim != 2 or arr.shape[1] != self._n or arr.shape[0] < 1:
@@ -471,7 +483,8 @@ class Master:
         planned_accel = (np.abs(np.diff(as_int64, n=2, axis=0)).max(axis=0) if len(arr) > 2
                          else np.zeros(self._n)) / self._period_s**2
         playback = Playback(rows, ramp_slope(arr, self._accel_counts_s2, self._period_s), self._rate_target,
-                            max_step.astype(float).tolist(), planned_accel.astype(float).tolist())
+                            max_step.astype(float).tolist(), planned_accel.astype(float).tolist(),
+                            tuple(sorted(int(p) for p in pauses)))
         job = Job(self, rows, playback, on_progress, self._progress_every)
         self._gc.quiet()
         self._request("job", job)
@@ -495,8 +508,11 @@ class Master:
         timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
                             stats.percentile_s(0.99), stats.max_s, writer.send_errors if writer is not None else 0)
         job = self._job
+        ctl_job = self._ctl.job
+        pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
+            and ctl_job.playback.at_pause() else None
         return MasterStatus(self._phase, k, tuple(axes), timing, self._wire_index(job) if job else None,
-                            job.length if job else None, tuple(self._faults))
+                            job.length if job else None, tuple(self._faults), pause)
 
     def faults(self) -> list[FaultReport]:
         return list(self._faults)
@@ -706,7 +722,8 @@ class Master:
                 self._no_rewind_before = cycle  # a rewind never undoes a phase change (bring-up, job start...)
                 if phase is Phase.STREAMING:
                     self._job = self._ctl.job
-                    self._job.start_cycle = cycle  # the step that starts streaming computes row 0
+                    if self._job.start_cycle < 0:  # not on resume
+                        self._job.start_cycle = cycle  # the step that starts streaming computes row 0
             elif what == "ready":
                 self._ready.set()
             elif what == "enable_failed":

@@ -54,13 +54,14 @@ class CycleStats:
 class MasterStatus:
     """Snapshot of the master for the daemon (safe to take from any thread)."""
 
-    phase: str  # 'offline' | 'enabling' | 'holding' | 'streaming' | 'stopping' | 'quick_stop' | 'disabled'
+    phase: str  # 'offline' | 'enabling' | 'holding' | 'streaming' | 'stopping' | 'pausing' | 'held' | 'quick_stop' | 'disabled'
     cycle: int
     axes: tuple[AxisStatus, ...]
     timing: CycleStats
     job_index: int | None  # index of the last set-point sent of the running job
     job_length: int | None
     faults: tuple[FaultReport, ...] = field(default=())
+    pause: int | None = None  # phase 'held' at a pause row: its index in the job's pauses (None: a hold request)
 
 
 @dataclass(frozen=True)

@@ -213,7 +213,7 @@ class Supervisor:
         if phase not in RUNNING_PHASES:
             return
         if kind in ("emcy", "heartbeat") and self._drives_follow(k):
-            if phase is Phase.STREAMING:
+            if phase in (Phase.STREAMING, Phase.PAUSING, Phase.HELD):  # a held job ends too
                 reactions.append(("fault_stop", None))
             return
         reactions.append(("quick_stop", "faulted"))

@@ -2,7 +2,9 @@
 status. Requests arrive from the control server's threads; one lock guards the job state.
 
 States: ``idle`` (drives holding, ready for a job), ``running``, ``stopping`` (controlled
-stop along the path in progress), ``fault`` (a fault not yet acknowledged by ``reset``).
+stop along the path in progress), ``pausing`` (a hold's ramp to rest on the path), ``held``
+(the job waits for ``resume``: a hold request or a program pause M0/M1/M6), ``fault`` (a
+fault not yet acknowledged by ``reset``).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from nurbsmotion.program import ReadOptions
 from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
-from nurbsmotion.service.planner import PlannedJob
+from nurbsmotion.service.planner import MDI_NAME, PlannedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
@@ -116,7 +118,7 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
-                job.handle = self.link.stream(plan.counts)
+                job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
             except (InputError, FieldbusError) as err:
                 self._stop_traffic()
                 self._stop_feedback(job)
@@ -135,12 +137,45 @@ class Controller:
                     folder=record.folder))
         return {"ok": True, "job": {"id": record.job_id, "folder": str(record.folder), "summary": plan.summary}}
 
+    def mdi(self, text: str) -> dict[str, Any]:
+        """Run G-code lines typed by the operator as a job named ``<mdi>``: from where the axes
+        hold (the reader's start is the commanded position, in the active work coordinates
+        from the persisted offsets), with the same parsing, gate, planning and soft-limit
+        checks as a program, recorded like one; the feed override is kept."""
+        if not text.strip():
+            raise InputError("field 'text'", "no G-code to run")
+        try:
+            return self.submit(MDI_NAME, text if text.endswith("\n") else text + "\n", keep_override=True)
+        except Refused as err:
+            raise Refused("mdi", err.message) from None
+
     def stop(self) -> dict[str, Any]:
         job = self._running_job("stop")
         job.stop_requested = job.stop_requested or "stop"
         assert job.handle is not None
         job.handle.request_stop()
         return {"ok": True, "job": job.record.job_id, "state": "stopping"}
+
+    def hold(self) -> dict[str, Any]:
+        """Decelerate the running job to rest on its path (the stop's ramp) and keep it."""
+        job = self._running_job("hold")
+        if job.stop_requested:
+            raise Refused("hold", f"job {job.record.job_id} is stopping")
+        assert job.handle is not None
+        job.handle.hold()
+        log.info(kv("job_hold", job=job.record.job_id))
+        return {"ok": True, "job": job.record.job_id, "state": "pausing"}
+
+    def resume(self) -> dict[str, Any]:
+        """Continue a held or paused job from where it rests."""
+        job = self._running_job("resume")
+        status = self.link.status()
+        if status.phase != "held":
+            raise Refused("resume", f"job {job.record.job_id} is not held (state {self.state(status)})")
+        assert job.handle is not None
+        job.handle.resume()
+        log.info(kv("job_resume", job=job.record.job_id, pause=self._pause_reason(job, status) or "hold"))
+        return {"ok": True, "job": job.record.job_id, "state": "running"}
 
     def abort(self) -> dict[str, Any]:
         job = self._running_job("abort")
@@ -234,6 +269,8 @@ class Controller:
             return "idle"
         if job.stop_requested or status.phase == "stopping":
             return "stopping"
+        if status.phase in ("pausing", "held"):
+            return status.phase
         return "running"
 
     def status(self) -> dict[str, Any]:
@@ -270,11 +307,16 @@ class Controller:
         cycle = max(index + 1, 0)
         feed = float(job.plan.trajectory.feed_mm_s[min(max(index, 0), total - 1)]) * self._effective(job)
         reached = self._line_reached(job, index)
-        return {"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
+        pause = job.plan.pauses[status.pause] if status.pause is not None else None
+        return {"paused": pause.reason if pause else None, "tool": pause.tool if pause else None,"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
                 "total": total, "percent": round(100.0 * cycle / total, 2), "feed_mm_s": round(feed, 3),
                 "override_percent": round(self._effective(job) * 100.0, 3),
                 "line": reached["where"] if reached else None, "started_at": job.started_at,
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
+
+    @staticmethod
+    def _pause_reason(job: ActiveJob, status: MasterStatus) -> str | None:
+        return job.plan.pauses[status.pause].reason if status.pause is not None else None
 
     def _override_status(self, job: ActiveJob | None) -> dict[str, Any]:
         out: dict[str, Any] = {"requested_percent": round(self._override * 100.0, 3),

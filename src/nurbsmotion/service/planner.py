@@ -29,6 +29,33 @@ from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
 
+@dataclass(frozen=True)
+class JobPause:
+    """A planned set-point row where the job holds until ``resume`` (M0, M1, M6)."""
+
+    row: int  # the first row of the block the event comes before: at rest (the planner's exact stop)
+    reason: str  # 'M0 at part.nc:12', 'M6 tool change to T3 at part.nc:20'
+    tool: int | None = None  # the tool asked for (M6)
+
+
+def pause_rows(program: Program, trajectory: Trajectory) -> tuple[JobPause, ...]:
+    """The rows where the program's holding events (``event.holds``) happen. An event after the
+    last move is left out: the job ends there anyway."""
+    pauses = []
+    for event in program.events:
+        if not event.holds:
+            continue
+        row = int(np.searchsorted(trajectory.block, event.before_block, side="left"))
+        if row >= len(trajectory) - 1:
+            continue
+        if event.tool is not None and event.kind.value == "tool_change":
+            reason, tool = f"{event.code} tool change to T{event.tool} at {event.source}", event.tool
+        else:
+            reason, tool = f"{event.code} at {event.source}", None
+        pauses.append(JobPause(row, reason, tool))
+    return tuple(pauses)
+
+
 @dataclass(eq=False)
 class PlannedJob:
     trajectory: Trajectory
@@ -37,6 +64,7 @@ class PlannedJob:
     max_rate: float  # highest playback rate (feed override) within the axis limits
     program: Program | None = field(default=None, repr=False)
     measurements: Measurements | None = field(default=None, repr=False)
+    pauses: tuple[JobPause, ...] = ()  # rows where the job holds until resume (M0/M1/M6)
 
     def write_trace(self, path: Path) -> None:
         """The same CSV as ``nurbsmotion plan --trace`` (planning.trace)."""
@@ -92,13 +120,16 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
+MDI_NAME = "<mdi>"  # the program name of MDI lines (G-code, errors read '<mdi>:1: ...')
+
+
 def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | None = None) -> Program:
     """The program readers, chosen by the name's suffix as ``read_program`` does for files;
     a G-code program starts at ``start_mm`` (where the axes hold) with ``options``."""
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, name)
-    if suffix in GCODE_SUFFIXES:
+    if suffix in GCODE_SUFFIXES or name == MDI_NAME:
         return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
@@ -138,7 +169,9 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
                     [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
     summary = plan_summary(name, program, trajectory, config, v_peak, a_peak, rate, planning_s)
     summary["measured"] = measured.summary()
-    return PlannedJob(trajectory, counts, summary, rate, program, measured)
+    pauses = pause_rows(program, trajectory)
+    summary["pauses"] = [{"row": p.row, "reason": p.reason} for p in pauses]
+    return PlannedJob(trajectory, counts, summary, rate, program, measured, pauses)
 
 
 def plan_summary(name: str, program: Program, trajectory: Trajectory, config: MachineConfig, v_peak: np.ndarray,

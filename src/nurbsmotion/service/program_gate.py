@@ -6,8 +6,8 @@
   ``coolant``, or ``mist``/``coolant_mist`` for M7, ``flood``/``coolant_flood`` for M8), and
   for now with one too: the daemon does not switch io outputs yet, and a program must not run
   with its coolant silently off.
-- M0, M1 (with the optional-stop switch on) and M6 hold the job until ``resume``; the daemon
-  cannot hold a job yet, so such a program is refused rather than run through its pauses.
+- M0, M1 (with the optional-stop switch on) and M6 pass: the job holds there until
+  ``resume`` (service.planner.pause_rows, the master's pause rows).
 
 M5, M9 and S with the spindle off are no requirement and pass.
 """
@@ -20,7 +20,6 @@ from nurbsmotion.program import CoolantMode, EventKind, Program, ProgramEvent, S
 
 COOLANT_OUTPUTS = {CoolantMode.MIST: ("coolant", "mist", "coolant_mist"),
                    CoolantMode.FLOOD: ("coolant", "flood", "coolant_flood")}
-NO_HOLD = "the daemon cannot pause a job yet (hold/resume is not built)"
 NO_OUTPUTS = "the daemon does not switch io outputs yet (io: is read but not driven)"
 
 
@@ -43,21 +42,7 @@ def event_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
         wanted = f"{', '.join(names[:-1])} or {names[-1]}"
         return (f"{event.code} needs {event.coolant.value} coolant, and this machine has no output named "
                 f"{wanted} (io.outputs in {config.source})")
-    if event.kind is EventKind.TOOL_CHANGE:
-        return f"{event.code} tool change to T{event.tool}: {NO_HOLD}"
-    if event.kind is EventKind.PAUSE:
-        what = "optional stop (submit with the optional stop switch off to skip it)" if _m_number(event.code) == 1 \
-            else "program pause"
-        return f"{event.code} {what}: {NO_HOLD}"
     return None
-
-
-def _m_number(code: str) -> float | None:
-    """'M01' -> 1.0; None when ``code`` is not an M word."""
-    try:
-        return float(code.strip().upper().removeprefix("M")) if code.strip().upper().startswith("M") else None
-    except ValueError:
-        return None
 
 
 def check_machine_can_run(program: Program, config: MachineConfig) -> None:

@@ -48,6 +48,38 @@ def held_plan_held(recorded: np.ndarray, plan: np.ndarray) -> bool:
     return False
 
 
+def plan_with_holds(recorded: np.ndarray, plan: np.ndarray) -> bool:
+    """recorded is the plan with some rows repeated in place (holding before, during a pause
+    or hold at rest, and after): every planned set-point applied once, in order, nothing else."""
+    i, n = 0, len(plan)
+    for row in recorded:
+        if i < n and np.array_equal(row, plan[i]):
+            i += 1
+        elif not np.array_equal(row, plan[max(i - 1, 0)]):
+            return False
+    return i == n
+
+
+def on_planned_path(recorded: np.ndarray, plan: np.ndarray, tolerance_counts: float = 1.0) -> bool:
+    """Every recorded row lies on the planned polyline (within ``tolerance_counts`` per axis,
+    the rounding of an interpolated set-point), never moving backwards along it, ending on
+    the last planned row: what a hold's stop ramp and resume ramp may send."""
+    plan = np.asarray(plan, dtype=float)
+    seg, frac = 0, 0.0
+    for row in np.asarray(recorded, dtype=float):
+        for j in range(seg, len(plan) - 1):
+            a, d = plan[j], plan[j + 1] - plan[j]
+            dd = float(d @ d)
+            f = float(np.clip((row - a) @ d / dd, 0.0, 1.0)) if dd else 0.0
+            if np.abs(a + f * d - row).max() <= tolerance_counts and (j > seg or f >= frac - 1e-9):
+                seg, frac = j, f
+                break
+        else:
+            if not (len(plan) == 1 and np.abs(plan[0] - row).max() <= tolerance_counts):
+                return False
+    return bool(np.abs(np.asarray(recorded, dtype=float)[-1] - plan[-1]).max() <= tolerance_counts)
+
+
 @dataclass(frozen=True)
 class DriveReport:
     planned: int  # planned set-points
