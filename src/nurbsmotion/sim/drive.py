@@ -26,7 +26,7 @@ from typing import Any
 
 import can
 import canopen
-from canopen.objectdictionary import ODArray, ObjectDictionary, ODRecord, ODVariable
+from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
 from nurbsmotion import cia402 as c
@@ -42,6 +42,7 @@ from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, F
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 from nurbsmotion.sim.recording import SetpointRecorder, SyncRecorder
 from nurbsmotion.sim.rpdo_timers import RpdoTimers
+from nurbsmotion.sim.slave import GatedLocalNode
 from nurbsmotion.sim.servo import ServoModel
 from nurbsmotion.sim.stats import DriveStats
 from nurbsmotion.sim.timing import SyncMonitor, SyncSettings
@@ -86,15 +87,9 @@ class _RpdoSlot:
     setters: list[Callable[[Any], None]]
 
 
-class _DriveNode(canopen.LocalNode):
-    """LocalNode whose SDO writes go through the drive (validation before, effects after)."""
-
-    def __init__(self, node_id: int, od: ObjectDictionary, drive: SimDrive) -> None:
-        super().__init__(node_id, od)
-        self._drive = drive
-        self._write_callbacks.clear()  # LocalNode's NmtSlave heartbeat is replaced by the drive's
-        self.add_write_callback(drive._before_sdo_write)
-        self.add_read_callback(drive._on_sdo_read)
+class _DriveNode(GatedLocalNode):
+    """The drive's gated LocalNode (sim.slave): SDO writes validated before and applied after
+    by the drive; an entry never written reads as its EDS value."""
 
     def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
         """As LocalNode, but an entry never written holds its EDS value, or 0 if the EDS gives
@@ -108,31 +103,6 @@ class _DriveNode(canopen.LocalNode):
                 return obj.encode_raw(result)
         stored = self.data_store.get(index, {}).get(subindex)
         return stored if stored is not None else eds_rules.initial_data(obj)
-
-    def set_data(self, index: int, subindex: int, data: bytes, check_writable: bool = False) -> None:
-        super().set_data(index, subindex, data, check_writable)
-        if check_writable:  # an SDO write from the bus
-            self._drive._after_sdo_write(index, subindex)
-
-    def _find_object(self, index: int, subindex: int) -> Any:
-        """As LocalNode, but an ARRAY has only the sub-indices the EDS declares."""
-        obj = super()._find_object(index, subindex)
-        parent = self.object_dictionary[index]
-        if isinstance(parent, ODArray) and subindex not in parent.subindices:
-            raise SdoAbortedError(ABORT_NO_SUBINDEX)
-        return obj
-
-    def associate_network(self, network: canopen.Network) -> None:
-        """Join without LocalNode's own SDO and NMT handlers (the drive gates them)."""
-        super().associate_network(network)
-        network.unsubscribe(self.sdo.rx_cobid, self.sdo.on_request)
-        network.unsubscribe(0, self.nmt.on_command)
-
-    def remove_network(self) -> None:
-        if self.has_network():  # LocalNode.remove_network unsubscribes what it subscribed
-            self.network.subscribe(self.sdo.rx_cobid, self.sdo.on_request)
-            self.network.subscribe(0, self.nmt.on_command)
-        super().remove_network()
 
 
 class SimDrive:
