@@ -147,7 +147,7 @@ class MachineConfig:
     master: MasterConfig = MasterConfig()
     tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
     tool_table: Any = field(default=None, compare=False, repr=False)
-    spindle: str | None = None  # 'none' or absent: no spindle drive
+    spindle: Any = None  # 'none' or absent: no spindle drive; else a spindle_config.SpindleConfig
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -496,8 +496,9 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
     cfg = _with_descriptions(cfg, base_dir, errors)
     if errors:
         raise InputErrors(errors)
+    from nurbsmotion.spindle_config import load_spindle_description
     from nurbsmotion.tooling_config import load_tool_file
-    return load_tool_file(cfg, base_dir)
+    return load_spindle_description(load_tool_file(cfg, base_dir), base_dir)
 
 
 def default_eds_path() -> str:
