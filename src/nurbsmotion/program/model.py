@@ -115,8 +115,13 @@ class ProgramEvent:
         return self.kind in HOLDING_EVENTS
 
     @property
+    def waits_for_spindle(self) -> bool:
+        """M3/M4, or S while the spindle turns: the next move waits for the spindle at speed."""
+        return self.kind is EventKind.SPINDLE and self.spindle is not SpindleDirection.OFF
+
+    @property
     def stops_motion(self) -> bool:
-        return self.kind in STOPPING_EVENTS
+        return self.kind in STOPPING_EVENTS or self.waits_for_spindle
 
 
 @dataclass(frozen=True, eq=False)
