@@ -256,6 +256,11 @@ class Master:
         self._extra_receive_ids += [c.COB_EMCY + node_id, c.COB_SDO_TX + node_id, c.COB_HEARTBEAT + node_id, *cob_ids]
         self._filter_received()
 
+    def quick_stop(self, reason: str) -> None:
+        """Quick stop every axis now, with or without a job (then disabled, as an abort):
+        the machine I/O's e-stop input (service.machine_io)."""
+        self._request("quick_stop", reason)
+
     # ------------------------------------------------------------------ connection
     def connect(self) -> None:
         """Open the bus (if not given), start canopen's notifier and the feedback callbacks."""

@@ -38,7 +38,7 @@ from nurbsmotion.spindle_config import (PROFILE_ACCELERATION, PROFILE_DECELERATI
 
 log = logging.getLogger(__name__)
 
-POLL_S = 0.02  # monitor period: 0x6041 / 0x606C reads, csv ramp steps
+POLL_S = 0.05  # monitor period: 0x6041 / 0x606C reads, csv ramp steps
 CSV_WINDOW = 0.02  # csv 'at speed': within 2 % of the target (or 1 count/s)
 SDO_TIMEOUT_S = 0.5
 ENABLE_TIMEOUT_S = 2.0

@@ -24,7 +24,10 @@ from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
+from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.feedback import FeedbackLog
+from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
+from nurbsmotion.service.machine_io import SafetyTrip
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
@@ -56,6 +59,8 @@ class ActiveJob:
     watcher: threading.Thread | None = None
     feedback: FeedbackLog | None = None
     overrides: list[dict[str, Any]] = field(default_factory=list)  # the override history of the job
+    events: JobEvents | None = None  # spindle / coolant events at their rows (service.job_events)
+    machine_fault: str = ""  # e-stop, limit input, spindle: the job's one-line reason
 
     @property
     def start_cycle(self) -> int:
@@ -65,8 +70,13 @@ class ActiveJob:
 
 class Controller:
     def __init__(self, config: MachineConfig, link: MotionLink, planner: Planner, records: JobRecords,
-                 simulation: Simulation | None = None, machine_state: MachineState | None = None) -> None:
+                 simulation: Simulation | None = None, machine_state: MachineState | None = None,
+                 devices: MachineDevices | None = None) -> None:
         self.config = config
+        self.devices = devices  # spindle and I/O node (service.devices); their trips come to machine_trip
+        if devices is not None:
+            devices.on_trip = self.machine_trip
+            devices.on_spindle_fault = self.spindle_fault
         self.machine_state = machine_state or MachineState()  # offsets and tool: persisted after each completed job
         self.link = link
         self.planner = planner
@@ -105,6 +115,9 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
+            wait_rows: frozenset[int] = frozenset()
+            if self.devices is not None:
+                plan, wait_rows = with_spindle_waits(plan)
             record = self._record(name, text, plan)
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
@@ -118,7 +131,10 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
+                if self.devices is not None:
+                    self.devices.ready_for_job()
                 job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
+                self._start_events(job, wait_rows)
             except (InputError, FieldbusError) as err:
                 self._stop_traffic()
                 self._stop_feedback(job)
@@ -188,6 +204,8 @@ class Controller:
         with self._lock:
             if self._job is not None or self._planning:
                 raise Refused("reset", "a job is running; stop or abort it first")
+        if self.devices is not None and self.devices.io is not None and self.devices.io.estop_active():
+            raise Refused("reset", self.devices.io.start_refusal() or "the e-stop input is active")
         try:
             self.link.reset_faults()
         except FieldbusError as err:
@@ -297,7 +315,8 @@ class Controller:
                                               self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None,
-                "coordinates": self.machine_state.status()}
+                "coordinates": self.machine_state.status(),
+                **(self.devices.status() if self.devices is not None else {})}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
@@ -333,6 +352,9 @@ class Controller:
         if self._job is not None or self._planning:
             busy = self._job.record.job_id if self._job is not None else "another submission"
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
+        refusal = self.devices.start_refusal() if self.devices is not None else None
+        if refusal is not None:
+            raise Refused("submit", refusal)
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
 
@@ -434,6 +456,7 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
+        self._end_events(job, result)
         status, settled = self._settled_status()
         self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
         outcome = self._outcome(job, result, status, settled)
@@ -495,7 +518,9 @@ class Controller:
         if result.faults:
             outcome = "fault"
         faults = [self._fault_record(f, status, job.start_cycle) for f in result.faults]
-        reason = faults[0]["message"] if faults else {
+        if job.machine_fault:
+            outcome = "fault"
+        reason = job.machine_fault or faults[0]["message"] if job.machine_fault or faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
             "abort": "aborted on request (quick stop)"}.get(job.stop_requested, "")
         return {"outcome": outcome, "job": job.record.job_id, "name": job.name, "reason": reason,
@@ -503,7 +528,7 @@ class Controller:
                 "sent": result.sent, "planned": result.length,
                 "line_reached": self._line_reached(job, result.sent - 1),
                 "final_position": self._positions_mm(status), "settled": settled,
-                "overrides": job.overrides,
+                "overrides": job.overrides, "machine_events": job.events.done if job.events is not None else [],
                 "feedback_rows": job.feedback.rows if job.feedback is not None else None,
                 "motion_time_s": round(time.monotonic() - job.started_s, 3),
                 "missed_cycles": result.missed_cycles - job.missed_before,
@@ -536,6 +561,59 @@ class Controller:
         return fault_record(fault, start_cycle, mm_per_count, axis.last_emcy_code if axis else None,
                             axis.statusword if axis else None)
 
+    # ------------------------------------------------------------------ spindle and machine I/O (service.devices)
+    def _start_events(self, job: ActiveJob, wait_rows: frozenset[int]) -> None:
+        if self.devices is None or job.handle is None:
+            return
+        handle = job.handle
+        job.events = JobEvents(job.plan, wait_rows, self.devices, job.record.folder, self.link.status, handle.resume,
+                               lambda reason: self._machine_stop(job, reason, abort=False))
+        job.events.start()
+
+    def _end_events(self, job: ActiveJob, result: JobResult) -> None:
+        """Job end: the spindle ramps down (completed, stopped) or quick-stops and is disabled
+        (abort, fault); coolant off. One line each in the log and events.log."""
+        if self.devices is None:
+            return
+        if job.events is not None:
+            job.events.finish()
+        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ("done", "stopped")
+        try:
+            self.devices.all_off(hard)
+        except FieldbusError as err:
+            log.error(kv("devices_not_stopped", job=job.record.job_id, error=err))
+        if job.events is not None:
+            job.events.record("devices_off", {"spindle": "quick stop, disabled" if hard else "ramped to 0",
+                                              "coolant": "off"})
+
+    def _machine_stop(self, job: ActiveJob, reason: str, abort: bool) -> None:
+        """End ``job`` for a machine reason (one line, the job's outcome reason)."""
+        if job.machine_fault or job.handle is None:
+            return
+        job.machine_fault = reason
+        job.stop_requested = job.stop_requested or ("abort" if abort else "stop")
+        log.warning(kv("job_machine_fault", job=job.record.job_id, reason=reason))
+        job.handle.abort() if abort else job.handle.request_stop()
+
+    def machine_trip(self, trip: SafetyTrip) -> None:
+        """An e-stop or limit input became active (receive thread: requests only, no waiting)."""
+        job = self._job
+        log.warning(kv("io.trip", input=trip.input, axis=trip.axis or "-", reason=trip.message))
+        if job is not None:
+            self._machine_stop(job, trip.message, abort=True)
+        if trip.axis is None:  # e-stop: every axis, with or without a job, then the spindle
+            quick_stop = getattr(self.link, "quick_stop", None)
+            if quick_stop is not None:
+                quick_stop(trip.message)
+            if self.devices is not None:
+                threading.Thread(target=self.devices.all_off, args=(True,), name="estop-devices", daemon=True).start()
+
+    def spindle_fault(self, message: str) -> None:
+        """The spindle left OPERATION ENABLED on its own: the running job is aborted."""
+        job = self._job
+        if job is not None and self.devices is not None and self.devices.spindle is not None:
+            self._machine_stop(job, f"spindle node {self.devices.spindle.config.node_id}: {message}", abort=True)
+
     # ------------------------------------------------------------------ shutdown
     def shutdown(self, timeout_s: float = 10.0) -> None:
         """Controlled stop of the running job (outcome 'stopped'), then disable the drives."""
@@ -545,6 +623,8 @@ class Controller:
             job.handle.request_stop()
             if job.watcher is not None:
                 job.watcher.join(timeout_s)
+        if self.devices is not None:
+            self.devices.close()
         self.link.shutdown(timeout_s)
 
 
@@ -557,8 +637,11 @@ def check_program_name(name: str) -> None:
 def config_dict(config: MachineConfig) -> dict[str, Any]:
     """The configuration a job ran with, every default filled in (config.json of a record)."""
     plain_axes = tuple(dataclasses.replace(a, od=None) for a in config.axes)  # the EDS as read: not a value
-    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes))
+    spindle = dataclasses.replace(config.spindle, od=None) if hasattr(config.spindle, "od") else config.spindle
+    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
     out.pop("lines", None)
+    if isinstance(out["spindle"], dict):
+        out["spindle"].pop("od", None)
     for axis in out["axes"]:
         axis.pop("od", None)
     return out

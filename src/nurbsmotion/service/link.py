@@ -29,8 +29,13 @@ class SimulatedDrives:
 
     def __init__(self, config: MachineConfig) -> None:
         from nurbsmotion.sim import SimNetwork
+        from nurbsmotion.sim.network import SpindleSim
+        from nurbsmotion.spindle_config import SpindleConfig
 
-        self.network = SimNetwork.for_machine(config)
+        spindle = config.spindle
+        sim_spindle = SpindleSim(spindle.node_id, spindle.counts_per_rev, spindle.eds) \
+            if isinstance(spindle, SpindleConfig) else None
+        self.network = SimNetwork.for_machine(config, spindle=sim_spindle)
         self._lock = threading.Lock()
         self._recording = False
         self._stop = threading.Event()
