@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from nurbsmotion.cli.status import format_status
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.daemon import Daemon
@@ -58,6 +59,10 @@ def wait_job(daemon: Daemon, job_id: str, timeout_s: float = 30.0) -> dict:
 def test_a_mill_program_waits_for_the_spindle_switches_coolant_and_stops_both_at_the_end(machine):
     controller = machine.controller
     assert controller.status()["spindle"]["commanded_rpm"] == 0
+    wait_until(lambda: controller.status()["spindle"]["actual_rpm"] is not None, 2.0, "first 0x606C read")
+    lines = format_status(controller.status())
+    assert "spindle node 5: OPERATION ENABLED, commanded 0 rpm, actual 0 rpm, at speed" in lines
+    assert "io node 10: inputs active none, outputs on none" in lines
     job = controller.submit("mill.nc", MILL)["job"]["id"]
     status = wait_until(lambda: (s := controller.status())["job"] and s["job"]["paused"] and s, 10.0, "spindle wait")
     assert "S6000 M3" in status["job"]["paused"] or "M3 at mill.nc:2" in status["job"]["paused"]

@@ -29,13 +29,8 @@ class SimulatedDrives:
 
     def __init__(self, config: MachineConfig) -> None:
         from nurbsmotion.sim import SimNetwork
-        from nurbsmotion.sim.network import SpindleSim
-        from nurbsmotion.spindle_config import SpindleConfig
 
-        spindle = config.spindle
-        sim_spindle = SpindleSim(spindle.node_id, spindle.counts_per_rev, spindle.eds) \
-            if isinstance(spindle, SpindleConfig) else None
-        self.network = SimNetwork.for_machine(config, spindle=sim_spindle)
+        self.network = SimNetwork.for_machine(config)
         self._lock = threading.Lock()
         self._recording = False
         self._stop = threading.Event()
