@@ -26,8 +26,8 @@ from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.feedback import FeedbackLog
-from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
-from nurbsmotion.service.machine_io import SafetyTrip
+from nurbsmotion.service.job_events import JobEvents
+from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
@@ -73,10 +73,7 @@ class Controller:
                  simulation: Simulation | None = None, machine_state: MachineState | None = None,
                  devices: MachineDevices | None = None) -> None:
         self.config = config
-        self.devices = devices  # spindle and I/O node (service.devices); their trips come to machine_trip
-        if devices is not None:
-            devices.on_trip = self.machine_trip
-            devices.on_spindle_fault = self.spindle_fault
+        self.machine = MachineJobs(devices, link, lambda: self._job)  # spindle and machine I/O hooks
         self.machine_state = machine_state or MachineState()  # offsets and tool: persisted after each completed job
         self.link = link
         self.planner = planner
@@ -115,9 +112,7 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
-            wait_rows: frozenset[int] = frozenset()
-            if self.devices is not None:
-                plan, wait_rows = with_spindle_waits(plan)
+            plan, wait_rows = self.machine.prepare(plan)
             record = self._record(name, text, plan)
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
@@ -131,10 +126,9 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
-                if self.devices is not None:
-                    self.devices.ready_for_job()
+                self.machine.ready()
                 job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
-                self._start_events(job, wait_rows)
+                self.machine.start(job, wait_rows)
             except (InputError, FieldbusError) as err:
                 self._stop_traffic()
                 self._stop_feedback(job)
@@ -204,8 +198,8 @@ class Controller:
         with self._lock:
             if self._job is not None or self._planning:
                 raise Refused("reset", "a job is running; stop or abort it first")
-        if self.devices is not None and self.devices.io is not None and self.devices.io.estop_active():
-            raise Refused("reset", self.devices.io.start_refusal() or "the e-stop input is active")
+        if (refusal := self.machine.reset_refusal()) is not None:
+            raise Refused("reset", refusal)
         try:
             self.link.reset_faults()
         except FieldbusError as err:
@@ -316,7 +310,7 @@ class Controller:
                            for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None,
                 "coordinates": self.machine_state.status(),
-                **(self.devices.status() if self.devices is not None else {})}
+                **self.machine.status()}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
@@ -352,8 +346,7 @@ class Controller:
         if self._job is not None or self._planning:
             busy = self._job.record.job_id if self._job is not None else "another submission"
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
-        refusal = self.devices.start_refusal() if self.devices is not None else None
-        if refusal is not None:
+        if (refusal := self.machine.start_refusal()) is not None:
             raise Refused("submit", refusal)
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
@@ -456,7 +449,7 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
-        self._end_events(job, result)
+        self.machine.end(job, result)
         status, settled = self._settled_status()
         self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
         outcome = self._outcome(job, result, status, settled)
@@ -561,59 +554,6 @@ class Controller:
         return fault_record(fault, start_cycle, mm_per_count, axis.last_emcy_code if axis else None,
                             axis.statusword if axis else None)
 
-    # ------------------------------------------------------------------ spindle and machine I/O (service.devices)
-    def _start_events(self, job: ActiveJob, wait_rows: frozenset[int]) -> None:
-        if self.devices is None or job.handle is None:
-            return
-        handle = job.handle
-        job.events = JobEvents(job.plan, wait_rows, self.devices, job.record.folder, self.link.status, handle.resume,
-                               lambda reason: self._machine_stop(job, reason, abort=False))
-        job.events.start()
-
-    def _end_events(self, job: ActiveJob, result: JobResult) -> None:
-        """Job end: the spindle ramps down (completed, stopped) or quick-stops and is disabled
-        (abort, fault); coolant off. One line each in the log and events.log."""
-        if self.devices is None:
-            return
-        if job.events is not None:
-            job.events.finish()
-        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ("done", "stopped")
-        try:
-            self.devices.all_off(hard)
-        except FieldbusError as err:
-            log.error(kv("devices_not_stopped", job=job.record.job_id, error=err))
-        if job.events is not None:
-            job.events.record("devices_off", {"spindle": "quick stop, disabled" if hard else "ramped to 0",
-                                              "coolant": "off"})
-
-    def _machine_stop(self, job: ActiveJob, reason: str, abort: bool) -> None:
-        """End ``job`` for a machine reason (one line, the job's outcome reason)."""
-        if job.machine_fault or job.handle is None:
-            return
-        job.machine_fault = reason
-        job.stop_requested = job.stop_requested or ("abort" if abort else "stop")
-        log.warning(kv("job_machine_fault", job=job.record.job_id, reason=reason))
-        job.handle.abort() if abort else job.handle.request_stop()
-
-    def machine_trip(self, trip: SafetyTrip) -> None:
-        """An e-stop or limit input became active (receive thread: requests only, no waiting)."""
-        job = self._job
-        log.warning(kv("io.trip", input=trip.input, axis=trip.axis or "-", reason=trip.message))
-        if job is not None:
-            self._machine_stop(job, trip.message, abort=True)
-        if trip.axis is None:  # e-stop: every axis, with or without a job, then the spindle
-            quick_stop = getattr(self.link, "quick_stop", None)
-            if quick_stop is not None:
-                quick_stop(trip.message)
-            if self.devices is not None:
-                threading.Thread(target=self.devices.all_off, args=(True,), name="estop-devices", daemon=True).start()
-
-    def spindle_fault(self, message: str) -> None:
-        """The spindle left OPERATION ENABLED on its own: the running job is aborted."""
-        job = self._job
-        if job is not None and self.devices is not None and self.devices.spindle is not None:
-            self._machine_stop(job, f"spindle node {self.devices.spindle.config.node_id}: {message}", abort=True)
-
     # ------------------------------------------------------------------ shutdown
     def shutdown(self, timeout_s: float = 10.0) -> None:
         """Controlled stop of the running job (outcome 'stopped'), then disable the drives."""
@@ -623,8 +563,7 @@ class Controller:
             job.handle.request_stop()
             if job.watcher is not None:
                 job.watcher.join(timeout_s)
-        if self.devices is not None:
-            self.devices.close()
+        self.machine.close()
         self.link.shutdown(timeout_s)
 
 

@@ -64,8 +64,8 @@ class SpindleSim:
 
 def machine_spindle(machine: Any) -> SpindleSim | None:
     """The spindle drive of a configuration's ``spindle`` section (None: 'none' or absent)."""
-    spindle = getattr(machine, "spindle", None)
-    if not hasattr(spindle, "node_id"):
+    spindle: Any = getattr(machine, "spindle", None)
+    if spindle is None or not hasattr(spindle, "node_id"):
         return None
     return SpindleSim(spindle.node_id, spindle.counts_per_rev, spindle.eds)
 
