@@ -23,7 +23,7 @@ spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, 
 io:
   node_id: 10
   inputs: {estop: {bit: 0, active_low: true}, limit_x_max: 1}
-  outputs: {coolant_flood: 0, coolant_mist: 1}
+  outputs: {coolant_flood: 0, coolant_mist: 1, clamp: 4}
 """
 MILL = "G21 G90\nS6000 M3\nM8\nG01 X5 F3000\nS9000\nG01 X10\nM5 M9\nG01 X0\nM30\n"
 
@@ -85,6 +85,17 @@ def test_the_flood_output_is_on_between_m8_and_m9(machine):
     wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x01", 5.0, "flood on")
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert sim(machine).io_nodes[10].outputs == b"\x00"
+
+
+def test_m64_and_m65_switch_the_output_at_bit_p_at_their_row(machine):
+    controller = machine.controller
+    job = controller.submit("o.nc", "G21 G90\nM64 P4\nG01 X20 F600\nM65 P4\nG01 X0\n")["job"]["id"]
+    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x10", 5.0, "clamp on")
+    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x00", 10.0, "clamp off at M65's row")
+    events = wait_job(machine, job)["outcome"]["machine_events"]
+    assert [(e.get("code"), e.get("outputs")) for e in events][:2] == [("M64", {"clamp": True}),
+                                                                       ("M65", {"clamp": False})]
+    assert events[1]["row"] > 100  # after the first move (G01 X20 at 10 mm/s: ~2 s)
 
 
 def test_abort_quick_stops_and_disables_the_spindle_and_the_next_job_enables_it(machine):

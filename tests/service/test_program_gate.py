@@ -93,3 +93,25 @@ def test_holds_pass_the_gate_and_become_pause_rows_at_rest():
 def test_plan_job_applies_the_gate_before_planning():
     with pytest.raises(InputError, match=r"^part.nc:2: M3 needs a spindle"):
         plan_job("part.nc", "G21 G90\nM3 S8000\nG1 X1 F600\n", CONFIG)
+
+
+def test_digital_outputs_m62_to_m65_are_events_with_their_output_number():
+    program = parse_gcode("G21 G90\nM62 P3\nG1 X1 F600\nM65 P3\nM64 P0\nM63 P0\n", "part.nc")
+    assert [(e.code, e.output, e.output_on, e.output_synchronized) for e in program.events] == [
+        ("M62", 3, True, True), ("M65", 3, False, False), ("M64", 0, True, False), ("M63", 0, False, True)]
+    for text, message in (("M62\n", "part.nc:1: M62: needs P: the output number"),
+                          ("M64 P1.5\n", "part.nc:1: P1.5: an output number is a whole number >= 0, got 1.5"),
+                          ("G4 M62 P1\n", "part.nc:1: M62: takes P, and so does the G4 on this line: write them on "
+                                          "two lines")):
+        with pytest.raises(InputError) as err:
+            parse_gcode(text, "part.nc")
+        assert str(err.value) == message
+
+
+def test_a_digital_output_needs_an_io_output_at_that_bit():
+    io = IoConfig(10, outputs=(IoSignal("clamp", 3),))
+    assert _errors("M62 P3\nG1 X1 F600\n", dataclasses.replace(CONFIG, io=io)) == []
+    assert _errors("M64 P4\n", dataclasses.replace(CONFIG, io=io)) == [
+        f"part.nc:1: M64 P4: this machine has no digital output 4 (io.outputs in {CONFIG.source})"]
+    assert _errors("M65 P0\n") == [f"part.nc:1: M65 P0: this machine has no digital output 0 (no io: node in "
+                                   f"{CONFIG.source})"]

@@ -1,4 +1,4 @@
-"""A job's spindle and coolant events, done at their set-point rows while the job runs.
+"""A job's spindle, coolant and digital output events, done at their set-point rows while the job runs.
 
 Each program event (M3/M4/M5/S, M7/M8/M9) gets the row of the block it comes before (the
 first row of that block, as service.planner.pause_rows). M3/M4 and S while the spindle turns
@@ -48,7 +48,7 @@ def event_rows(plan: PlannedJob) -> tuple[RowEvent, ...]:
     program = plan.program
     if program is None:
         return ()
-    kinds = (EventKind.SPINDLE, EventKind.COOLANT)
+    kinds = (EventKind.SPINDLE, EventKind.COOLANT, EventKind.OUTPUT)
     return tuple(RowEvent(int(np.searchsorted(plan.trajectory.block, e.before_block, side="left")), e)
                  for e in program.events if e.kind in kinds)
 
@@ -143,6 +143,8 @@ class JobEvents:
                               f"{'; ' + fault if fault else ''})")
         elif event.kind is EventKind.COOLANT and self.devices.io is not None and event.coolant is not None:
             fields["outputs"] = self.devices.io.set_coolant(event.coolant)
+        elif event.kind is EventKind.OUTPUT and self.devices.io is not None and event.output is not None:
+            fields["outputs"] = self.devices.io.set_output_bit(event.output, bool(event.output_on))
         self.record(f"{event.kind.value}_event", fields)
         return ok or self._finished.is_set()
 

@@ -7,6 +7,8 @@
 - ``limit_<axis>_min`` / ``limit_<axis>_max`` / ``limit_<axis>`` (axis name in lower case,
   e.g. ``limit_x_min``): active while a job runs -> that job is aborted with one line naming
   the input and axis; no job starts while one is active.
+- M62-M65 P switch the output at bit P (0x6200) when playback reaches their row (M62/M63,
+  'with the next motion' in LinuxCNC, and M64/M65, 'at once', alike: the program's order);
 - M7 / M8 / M9 switch the coolant output(s) named in service.program_gate.COOLANT_OUTPUTS;
   job end, abort and faults switch every coolant output off.
 
@@ -110,6 +112,12 @@ class MachineIo:
             states = {name: True}
         self.node.set_outputs(states)
         return states
+
+    def set_output_bit(self, bit: int, on: bool) -> dict[str, bool]:
+        """M62-M65 P: the output at ``bit`` on or off (the gate checked it exists)."""
+        name = next(s.name for s in self.config.io.outputs if s.bit == bit)  # type: ignore[union-attr]
+        self.node.set_outputs({name: on})
+        return {name: on}
 
     def coolant_off(self) -> None:
         """Job end, abort, fault: every coolant output off (logged only if one was on)."""

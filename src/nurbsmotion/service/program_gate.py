@@ -8,6 +8,7 @@
   ``coolant``, or ``mist``/``coolant_mist`` for M7, ``flood``/``coolant_flood`` for M8): a
   program must not run with its coolant silently off. With one, the daemon switches it
   (service.machine_io).
+- M62-M65 P (LinuxCNC digital outputs) without an ``io.outputs`` entry at bit P.
 - M0, M1 (with the optional-stop switch on) and M6 pass: the job holds there until
   ``resume`` (service.planner.pause_rows, the master's pause rows).
 
@@ -45,8 +46,16 @@ def spindle_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
     return None
 
 
+def output_at_bit(config: MachineConfig, bit: int) -> str | None:
+    """The name of the io output at ``bit`` (M62-M65 P), or None."""
+    return next((s.name for s in config.io.outputs if s.bit == bit), None) if config.io is not None else None
+
+
 def event_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
     """Why this machine cannot run ``event`` (None: it can)."""
+    if event.kind is EventKind.OUTPUT and event.output is not None and output_at_bit(config, event.output) is None:
+        where = f"io.outputs in {config.source}" if config.io is not None else f"no io: node in {config.source}"
+        return f"{event.code} P{event.output}: this machine has no digital output {event.output} ({where})"
     if event.kind is EventKind.SPINDLE and event.spindle is not SpindleDirection.OFF:
         return spindle_refusal(event, config)
     if event.kind is EventKind.COOLANT and event.coolant is not None and event.coolant is not CoolantMode.OFF:
