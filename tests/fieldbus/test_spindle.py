@@ -121,3 +121,13 @@ def test_no_answer_names_node_and_step():
         spindle = SpindleDrive(master, replace(CONFIG, node_id=9, od=drive_od.load_description(default_eds_path(), 9)))
         with pytest.raises(FieldbusError, match=r"node 9: spindle step 'read 0x6502': no SDO answer"):
             spindle.bring_up()
+
+
+def test_the_drive_is_told_to_watch_the_masters_heartbeat():
+    with spindle_bus(CONFIG) as (master, sim):
+        spindle = SpindleDrive(master, CONFIG, master_heartbeat=(127, 500))
+        spindle.bring_up()
+        try:
+            assert master[NODE].sdo[0x1016][1].raw == 127 << 16 | 500
+        finally:
+            spindle.close()

@@ -13,7 +13,8 @@ the ramp has ended and |0x606C - 0x60FF| <= ``CSV_WINDOW`` of the target (bit 10
 meaning in csv). A drive that insists on a set-point each SYNC needs an RPDO: not done.
 
 Bring-up (NMT pre-operational): 0x6502 has the mode's bit (when the drive has 0x6502),
-0x6060 = mode, 0x6083/0x6084 = accel (counts/s²), 0x60FF = 0, NMT start, fault reset if
+0x6060 = mode, 0x6083/0x6084 = accel (counts/s²), 0x60FF = 0, 0x1016:01 = the master's
+heartbeat (as for the axes: a dead daemon stops the spindle), NMT start, fault reset if
 in FAULT, then SHUTDOWN, SWITCH ON, ENABLE OPERATION until 0x6041 says OPERATION ENABLED.
 """
 
@@ -73,9 +74,12 @@ class SpindleDrive:
     """
 
     def __init__(self, network: canopen.Network, config: SpindleConfig,
-                 on_fault: Callable[[str], None] | None = None) -> None:
+                 on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None) -> None:
+        """``master_heartbeat``: (master node id, consumer time ms) for 0x1016:01, so the drive
+        stops on its own when the daemon dies (as the axes do); None writes nothing."""
         assert config.od is not None  # loaded with the configuration
         self.config = config
+        self.master_heartbeat = master_heartbeat
         self.on_fault = on_fault
         self.node = canopen.RemoteNode(config.node_id, config.od)
         self.node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
@@ -107,6 +111,10 @@ class SpindleDrive:
             if drive_od.find(cfg.od, PROFILE_DECELERATION) is not None:  # type: ignore[arg-type]
                 self._write("set deceleration 0x6084", PROFILE_DECELERATION, cfg.accel_counts_s2)
         self._write("zero target velocity", TARGET_VELOCITY, 0)
+        if self.master_heartbeat is not None and drive_od.find(cfg.od, c.CONSUMER_HEARTBEAT_TIME, 1) is not None:  # type: ignore[arg-type]
+            master, consumer_ms = self.master_heartbeat
+            self._sdo("watch the master's heartbeat",  # 0x1016:01 = node << 16 | ms (CiA 301 §7.5.2.29)
+                      lambda: setattr(self.node.sdo[c.CONSUMER_HEARTBEAT_TIME][1], "raw", master << 16 | consumer_ms))
         self.node.nmt.send_command(c.NmtCommand.START)
         self._enable()
         self._stop.clear()

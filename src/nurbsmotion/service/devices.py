@@ -37,7 +37,11 @@ class MachineDevices:
         self.io: MachineIo | None = None
         if isinstance(config.spindle, SpindleConfig):
             link.receive_from(config.spindle.node_id)
-            self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m))
+            mon = config.monitoring
+            watch = (config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple) \
+                if mon.master_heartbeat_ms else None
+            self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
+                                        master_heartbeat=watch)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io)
