@@ -42,6 +42,7 @@ log = logging.getLogger(__name__)
 POLL_S = 0.05  # monitor period: 0x6041 / 0x606C reads, csv ramp steps
 CSV_WINDOW = 0.02  # csv 'at speed': within 2 % of the target (or 1 count/s)
 SDO_TIMEOUT_S = 0.5
+LOST_AFTER = 3  # monitor polls in a row without an SDO answer before the spindle counts as lost
 ENABLE_TIMEOUT_S = 2.0
 
 
@@ -223,13 +224,19 @@ class SpindleDrive:
 
     # ------------------------------------------------------------------ monitor thread
     def _watch(self) -> None:
+        """Poll 0x6041 / 0x606C; LOST_AFTER unanswered polls in a row (a late answer is not a
+        lost drive: a drive process inside UML lags by hundreds of ms) report the spindle lost."""
+        missed = 0
         while not self._stop.wait(POLL_S):
             try:
                 sw = int(self._sdo("monitor", lambda: self.node.sdo[c.STATUSWORD].raw))
                 actual = int(self._sdo("monitor", lambda: self.node.sdo[VELOCITY_ACTUAL].raw))
             except FieldbusError as err:
-                self._lost(f"no answer from the spindle drive ({err})")
+                missed += 1
+                if missed >= LOST_AFTER:
+                    self._lost(f"no answer from the spindle drive in {missed} polls ({err})")
                 continue
+            missed = 0
             with self._lock:
                 self._statusword, self._actual_counts_s = sw, actual
             state = c.state_of_statusword(sw)
