@@ -157,5 +157,6 @@ def test_a_limit_input_faults_the_job_with_one_line_naming_the_axis(machine):
     outcome = wait_job(machine, job)["outcome"]
     assert outcome["outcome"] == "fault"
     assert outcome["reason"] == "limit input limit_x_max (io node 10 bit 1) is active: axis X"
+    assert [e["event"] for e in outcome["machine_events"]] == ["job_machine_fault", "devices_off"]
     with pytest.raises(InputError, match="limit input limit_x_max .* axis X is on its limit switch"):
         controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")

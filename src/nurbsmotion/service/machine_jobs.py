@@ -84,7 +84,10 @@ class MachineJobs:
             return
         job.machine_fault = reason
         job.stop_requested = job.stop_requested or ("abort" if abort else "stop")
-        log.warning(kv("job_machine_fault", job=job.record.job_id, reason=reason))
+        if job.events is not None:  # the job's events.log and outcome: one line (logged there too)
+            job.events.record("job_machine_fault", {"job": job.record.job_id, "reason": reason})
+        else:
+            log.warning(kv("job_machine_fault", job=job.record.job_id, reason=reason))
         if abort:
             job.handle.abort()
         else:
