@@ -436,8 +436,9 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
     if cfg.io is not None:
-        from nurbsmotion.io_config import check_io_node
+        from nurbsmotion.io_config import check_io_limits, check_io_node
         check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
+        check_io_limits(cfg.io, cfg.axis_names(), fail)
     mon = cfg.monitoring
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "

@@ -5,7 +5,7 @@
   ends in 'disabled'); a running job ends aborted; no job, MDI or reset starts while it is
   active. Hardware safety stays the STO chain's job: this is the controller's reaction.
 - ``limit_<axis>_min`` / ``limit_<axis>_max`` / ``limit_<axis>`` (axis name in lower case,
-  e.g. ``limit_x_min``): active while a job runs -> that job is aborted with one line naming
+  e.g. ``limit_x_min``), or any input with ``limit: AXIS`` in YAML: active while a job runs -> that job is aborted with one line naming
   the input and axis; no job starts while one is active.
 - M62-M65 P switch the output at bit P (0x6200) when playback reaches their row (M62/M63,
   'with the next motion' in LinuxCNC, and M64/M65, 'at once', alike: the program's order);
@@ -39,7 +39,7 @@ def limit_inputs(config: MachineConfig) -> dict[str, str]:
     if config.io is None:
         return {}
     by_name = {f"limit_{a.name.lower()}{end}": a.name for a in config.axes for end in ("", "_min", "_max")}
-    return {s.name: by_name[s.name] for s in config.io.inputs if s.name in by_name}
+    return {s.name: s.limit or by_name[s.name] for s in config.io.inputs if s.limit or s.name in by_name}
 
 
 def coolant_outputs(config: MachineConfig) -> tuple[str, ...]:
