@@ -196,9 +196,10 @@ def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[Blo
 
 
 def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[float, ...],
-               speed_cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:
-    """x = v^2 cap of every grid point from all constraints, dips widened for the jerk filter."""
-    v = np.minimum(static_speed_limit(grid, settings.caps, np.ones(len(grid))), speed_cap)
+               speed_cap: NDArray[np.float64], bounds: AccelBounds, static_mm_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x = v^2 cap of every grid point from all constraints (``static_mm_s``: the grid's
+    static_speed_limit), dips widened for the jerk filter."""
+    v = np.minimum(static_mm_s, speed_cap)
     ends = np.flatnonzero(grid.junction)
     for i, vj in zip(ends, junction_speeds):
         v[i] = min(v[i], vj)
@@ -286,7 +287,8 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     grid = build_grid(pieces, settings.spacing_mm)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
-    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm)
+    static = static_speed_limit(grid, settings.caps)
+    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, None, static)
     idx = scan_grid(grid, cursor.raw_offset_mm)
     if len(idx) < 2:  # a running start whose filter memory already reaches past the run's end
         raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
@@ -294,13 +296,15 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     period = settings.limits.period_s
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
-        x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
+        x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
         s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):  # the share at the planned speeds
             speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
-            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds)
+            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
+                                               static)
             bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
-            x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
+            if bounds.speed_depends_on_scale:
+                x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
             s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)

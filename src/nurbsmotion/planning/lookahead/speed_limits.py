@@ -138,18 +138,20 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
 
 
 def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: float,
-                          speed_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+                          speed_mm_s: NDArray[np.float64] | None = None,
+                          static_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Share of A for the raw tangential acceleration, per grid point, so that the filter's
     tangential jerk (share x J) and the path's normal jerk N = 3 |c| v A + |c'_n| v^3 (v the
     point's speed cap: feed, chord, jerk terms and A / |c|, or ``speed_mm_s`` where lower: the
     speeds a scan planned) add up to at most J: sqrt(1 - (N/J)^2), at least
     MIN_TANGENTIAL_SHARE; the smallest within the filter's reach (v tau_f + ``reach_mm``)
-    either side. All ones without a jerk limit."""
+    either side. All ones without a jerk limit. ``static_mm_s``: static_speed_limit of the
+    grid when the caller has it already."""
     if caps.jerk_mm_s3 is None or tau_f <= 0:
         return np.ones(len(grid))
     kappa = row_norms(grid.curv)
-    v = np.minimum(static_speed_limit(grid, caps, np.ones(len(grid))),
-                   np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
+    static = static_speed_limit(grid, caps) if static_mm_s is None else static_mm_s
+    v = np.minimum(static, np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
     if speed_mm_s is not None:
         v = np.minimum(v, speed_mm_s)
     along = np.einsum("ij,ij->i", grid.dcurv, grid.tangent)
@@ -201,6 +203,12 @@ class AccelBounds:
                 hi = np.where(moving, np.minimum(hi, np.maximum(b1, b2)), hi)
         return lo, hi
 
+    @property
+    def speed_depends_on_scale(self) -> bool:
+        """Whether max_speed_squared depends on the tangential cap: only through the axis
+        acceleration limits (without them a_t = 0 decides, whatever the cap)."""
+        return self.caps.axis_accel_mm_s2 is not None and bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
+
     def max_speed_squared(self, x_cap: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest x <= x_cap at which some a_t is admissible (feasible x form [0, x_max]).
 
@@ -208,7 +216,7 @@ class AccelBounds:
         tangential and jerk caps are positive), so x_max = min(x_cap, A / |c|); with them,
         bisection."""
         x = np.array(x_cap, dtype=float)
-        if self.caps.axis_accel_mm_s2 is None or not np.isfinite(self.caps.axis_accel_mm_s2).any():
+        if not self.speed_depends_on_scale:
             with np.errstate(divide="ignore"):
                 return np.minimum(x, self.caps.accel_mm_s2 / self.kappa)
         lo, hi = self.at(x)
@@ -257,13 +265,13 @@ def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64
     return v
 
 
-def static_speed_limit(grid: PathGrid, caps: Caps, feed_scale: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s)."""
+def static_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s): the path's
+    geometry and the caps only, so a window computes it once."""
     v = np.minimum(grid.feed_mm_s, chord_speed_limit(grid, caps))
     v = np.minimum(v, axis_velocity_limit(grid, caps))
     v = np.minimum(v, jerk_speed_limit(grid, caps))
-    v = np.minimum(v, curvature_jump_speed_limit(grid, caps))
-    return v * feed_scale
+    return np.minimum(v, curvature_jump_speed_limit(grid, caps))
 
 
 DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
