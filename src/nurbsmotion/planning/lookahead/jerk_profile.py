@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from nurbsmotion.planning.lookahead.speed_limits import range_min
+
 MIN_SPEED = 1e-9  # mm/s, keeps the time of an interval between two stops finite
 
 
@@ -259,14 +261,17 @@ def valleys_around(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> tuple[NDA
     return left_stop[peaks], right_stop[peaks]
 
 
-def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float,
-                      jerk: float) -> NDArray[np.float64] | None:
+def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float, jerk: float,
+                      curvature_sq: NDArray[np.float64] | None = None) -> NDArray[np.float64] | None:
     """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
 
     A peak is sharp when the filtered jerk across it, (a(t_p - tau/2) - a(t_p + tau/2)) / tau,
-    exceeds J. Its plateau level v is the highest at which the stretch with speed >= v is at
-    least v tau long (so the raw motion holds that speed for tau): found by bisection. None when
-    no peak is sharp."""
+    plus the path's own tangential jerk there exceeds J: on a curve the set-points' jerk along
+    the tangent is j_t - |c|^2 v^3 (d/dt of the normal acceleration |c| v^2 turns the
+    curvature vector), which adds to the braking side of the peak; ``curvature_sq`` is |c|^2
+    at every point of ``s`` (the largest within v tau_f of the peak counts). Its plateau level
+    v is the highest at which the stretch with speed >= v is at least v tau long (so the raw
+    motion holds that speed for tau): plateau_levels. None when no peak is sharp."""
     inner = np.flatnonzero((x[1:-1] >= x[:-2]) & (x[1:-1] > x[2:]) & (x[1:-1] > 0)) + 1
     if len(inner) == 0:
         return None
@@ -274,7 +279,13 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     t_peak = 0.5 * (np.interp(s[top_starts(x, inner)], raw.s, raw.t) + np.interp(s[inner], raw.s, raw.t))
     k_before, _ = raw.locate(t_peak - tau_f / 2.0)
     k_after, _ = raw.locate(t_peak + tau_f / 2.0)
-    sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > jerk]
+    budget = np.full(len(inner), jerk)
+    if curvature_sq is not None:
+        v_peak = np.sqrt(x[inner])
+        lo = np.searchsorted(s, s[inner] - v_peak * tau_f, side="left")
+        hi = np.maximum(np.searchsorted(s, s[inner] + v_peak * tau_f, side="right") - 1, lo)
+        budget -= -range_min(-curvature_sq, lo, hi) * v_peak**3
+    sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > budget]
     if len(sharp) == 0:
         return None
     spacing = float(np.diff(s).max())  # the cap only acts on grid points: allow one interval each side

@@ -248,7 +248,7 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
         cap[-1] = 0.0
     x = speed_profile(s, cap, sub)
     if tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
-        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3)
+        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2)
         if plateaus is not None:
             x = speed_profile(s, np.minimum(cap, plateaus), sub)
     return s, x
