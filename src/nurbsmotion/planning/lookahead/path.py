@@ -28,6 +28,7 @@ chord (verify.py), which is what the chord-error limit plans and checks.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,6 +87,17 @@ class PathGrid:
     def junction(self) -> NDArray[np.bool_]:
         """(N-1,) True for the zero-length intervals between two pieces."""
         return self.piece[1:] != self.piece[:-1]
+
+    @cached_property
+    def kappa(self) -> NDArray[np.float64]:
+        """(N,) |x_ss|, the curvature (computed once per grid: every planning round reads it)."""
+        return row_norms(self.curv)
+
+    @cached_property
+    def dcurv_normal(self) -> NDArray[np.float64]:
+        """(N,) |x_sss less its tangent part|: the path's own normal jerk is this x v^3."""
+        along = np.einsum("ij,ij->i", self.dcurv, self.tangent)
+        return row_norms(self.dcurv - along[:, None] * self.tangent)
 
 
 def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:

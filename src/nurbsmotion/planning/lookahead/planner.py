@@ -228,9 +228,9 @@ def braking_ramp(s: NDArray[np.float64], x0: float, bounds: AccelBounds, share: 
 
 
 def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], bounds: AccelBounds,
-            cursor: Cursor, end_free: bool, tau_f: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            cursor: Cursor, end_free: bool, tau_f: float, plateaus: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
-    with the jerk filter, sharp speed peaks are flattened (jp.peak_plateau_caps)."""
+    with the jerk filter (and ``plateaus``), sharp speed peaks are flattened (jp.peak_plateau_caps)."""
     s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
     cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
     if s[1] - s[0] <= 1e-12:  # start on a grid point
@@ -247,10 +247,10 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     if not end_free:
         cap[-1] = 0.0
     x = speed_profile(s, cap, sub)
-    if tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
-        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2)
-        if plateaus is not None:
-            x = speed_profile(s, np.minimum(cap, plateaus), sub)
+    if plateaus and tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
+        peak_caps = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2)
+        if peak_caps is not None:
+            x = speed_profile(s, np.minimum(cap, peak_caps), sub)
     return s, x
 
 
@@ -297,15 +297,17 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
-        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
-        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):  # the share at the planned speeds
+        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):
+            # the share at the speeds a scan plans with it (a fixed point, approached as in
+            # scan.speed_profile); the peaks' plateaus only matter to the last scan
+            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f, plateaus=False)
             speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
             jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
                                                static)
             bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
             if bounds.speed_depends_on_scale:
                 x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
-            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
+        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)
         if not reaches_end:

@@ -56,21 +56,20 @@ class Caps:
 
 
 def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
-    """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per query)."""
-    table = [values]
-    width = 1
-    while 2 * width <= len(values):
-        prev = table[-1]
-        table.append(np.minimum(prev[:-width], prev[width:]))
-        width *= 2
+    """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per
+    query): row j of the table holds the minima of 2^j consecutive values, padded with +inf,
+    so every query is two gathers from it."""
+    n = len(values)
     span = np.maximum(hi - lo + 1, 1)
+    levels = int(np.floor(np.log2(max(int(span.max(initial=1)), 1)))) + 1
+    table = np.full((levels, n), np.inf)
+    table[0] = values
+    width = 1
+    for j in range(1, levels):
+        np.minimum(table[j - 1, : n - width], table[j - 1, width:], out=table[j, : n - width])
+        width *= 2
     level = np.floor(np.log2(span)).astype(np.intp)
-    out = np.empty(len(lo))
-    for k in np.unique(level):
-        sel = level == k
-        row = table[k]
-        out[sel] = np.minimum(row[lo[sel]], row[hi[sel] - (1 << k) + 1])
-    return out
+    return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
 
 
 SHORT_SPAN = 8  # windows of at most this many points: a direct minimum over the offsets
@@ -106,7 +105,7 @@ def point_curvature_max(grid: PathGrid) -> NDArray[np.float64]:
     """Largest |x_ss| on the grid intervals either side of each point."""
     k = grid.kappa_max
     if len(k) == 0:
-        return row_norms(grid.curv)
+        return grid.kappa
     return np.maximum(np.concatenate([k[:1], k]), np.concatenate([k, k[-1:]]))
 
 
@@ -149,13 +148,12 @@ def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: fl
     grid when the caller has it already."""
     if caps.jerk_mm_s3 is None or tau_f <= 0:
         return np.ones(len(grid))
-    kappa = row_norms(grid.curv)
+    kappa = grid.kappa
     static = static_speed_limit(grid, caps) if static_mm_s is None else static_mm_s
     v = np.minimum(static, np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
     if speed_mm_s is not None:
         v = np.minimum(v, speed_mm_s)
-    along = np.einsum("ij,ij->i", grid.dcurv, grid.tangent)
-    normal = 3.0 * kappa * v * caps.accel_mm_s2 + row_norms(grid.dcurv - along[:, None] * grid.tangent) * v**3
+    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * v**3
     share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
     return sliding_min(grid.s, share, v * tau_f + reach_mm)
 
@@ -172,7 +170,7 @@ class AccelBounds:
 
     @classmethod
     def for_grid(cls, grid: PathGrid, caps: Caps, scale: NDArray[np.float64]) -> "AccelBounds":
-        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, row_norms(grid.curv))
+        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, grid.kappa)
 
     def subset(self, idx: NDArray[np.intp]) -> "AccelBounds":
         """The bounds of the points ``idx``."""
