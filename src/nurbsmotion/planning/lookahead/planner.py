@@ -236,7 +236,7 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     if s[1] - s[0] <= 1e-12:  # start on a grid point
         s, cap = s[1:], cap[1:]
         cap[0] = cursor.raw_speed_mm_s**2
-        sub = bounds.subset(idx)
+        sub = bounds.subset(slice(int(idx[0]), int(idx[-1]) + 1))  # scan_grid: consecutive points
     else:
         take = np.concatenate([idx[:1], idx])
         sub = bounds.subset(take)

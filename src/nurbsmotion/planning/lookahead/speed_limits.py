@@ -30,6 +30,7 @@ admissible form an interval [0, x_max]: found by vectorised bisection.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -172,23 +173,35 @@ class AccelBounds:
     def for_grid(cls, grid: PathGrid, caps: Caps, scale: NDArray[np.float64]) -> "AccelBounds":
         return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, grid.kappa)
 
-    def subset(self, idx: NDArray[np.intp]) -> "AccelBounds":
-        """The bounds of the points ``idx``."""
+    def subset(self, idx: slice | NDArray[np.intp]) -> "AccelBounds":
+        """The bounds of the points ``idx`` (a slice gives views, no copies)."""
         return AccelBounds(self.tangent[idx], self.curv[idx], self.caps, self.tangential_cap[idx], self.kappa[idx])
+
+    @cached_property
+    def jerk_accel_numerator(self) -> NDArray[np.float64]:
+        """JERK_SHARE J / (3 |c|) (inf on straight parts): 3 |c| v |a_t| <= JERK_SHARE J gives
+        |a_t| <= this / v."""
+        if self.caps.jerk_mm_s3 is None:
+            return np.full(len(self.kappa), np.inf)
+        with np.errstate(divide="ignore"):
+            return JERK_SHARE * self.caps.jerk_mm_s3 / (3.0 * self.kappa)
+
+    @cached_property
+    def symmetric(self) -> bool:
+        """lo = -hi at every speed: no axis acceleration limit shifts the admissible a_t."""
+        return self.caps.axis_accel_mm_s2 is None or not bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
 
     def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
         t, c = self.tangent[idx], self.curv[idx]
-        kappa = self.kappa[idx]
+        kappa_x = self.kappa[idx] * x
         a = self.caps.accel_mm_s2
-        hi = np.minimum(np.sqrt(np.maximum(a * a - (kappa * x) ** 2, 0.0)), self.tangential_cap[idx])
-        hi = np.where(kappa * x > a, -np.inf, hi)
-        lo = -hi
+        hi = np.minimum(np.sqrt(np.maximum(a * a - kappa_x * kappa_x, 0.0)), self.tangential_cap[idx])
         if self.caps.jerk_mm_s3 is not None:
-            with np.errstate(divide="ignore"):
-                cap = JERK_SHARE * self.caps.jerk_mm_s3 / (3.0 * kappa * np.sqrt(x))
-            hi = np.minimum(hi, cap)
-            lo = np.maximum(lo, -cap)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                hi = np.minimum(hi, self.jerk_accel_numerator[idx] / np.sqrt(x))
+        hi[kappa_x > a] = -np.inf
+        lo = -hi
         if self.caps.axis_accel_mm_s2 is not None:
             for i, amax in enumerate(self.caps.axis_accel_mm_s2):
                 if not np.isfinite(amax):
@@ -205,7 +218,7 @@ class AccelBounds:
     def speed_depends_on_scale(self) -> bool:
         """Whether max_speed_squared depends on the tangential cap: only through the axis
         acceleration limits (without them a_t = 0 decides, whatever the cap)."""
-        return self.caps.axis_accel_mm_s2 is not None and bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
+        return not self.symmetric
 
     def max_speed_squared(self, x_cap: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest x <= x_cap at which some a_t is admissible (feasible x form [0, x_max]).
