@@ -105,3 +105,28 @@ def test_wangs_curve_at_1_ms_with_a_jerk_limit_needs_no_repair_round(wang_progra
     trajectory = plan_lookahead(wang_program, limits)
     assert trajectory.notes["repairs"] == 0
     assert_within_limits(measure(trajectory, wang_program), limits)
+
+
+def test_widened_dips_spread_each_limit_over_its_bands_half_width():
+    """widen_dips against the definition: every inner limit v_j spreads over
+    +-DIP_WIDTH_FACTOR L_j tau, L_j the level of its band (the first level >= v_j)."""
+    from nurbsmotion.planning.lookahead.speed_limits import DIP_WIDTH_FACTOR, dip_levels, widen_dips
+
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        n = int(rng.integers(3, 200))
+        s = np.concatenate([[0.0], np.cumsum(rng.uniform(0.0, 0.5, n - 1))])
+        v = rng.uniform(1.0, 200.0, n)
+        v[rng.random(n) < 0.2] = np.inf
+        tau = float(rng.uniform(0.001, 0.1))
+        inner = v.copy()
+        inner[0] = inner[-1] = np.inf
+        expected = v.copy()
+        if np.isfinite(inner).any():
+            levels = dip_levels(inner)
+            for j in np.flatnonzero(np.isfinite(inner)):
+                level = levels[min(np.searchsorted(levels, inner[j]), len(levels) - 1)]
+                near = np.abs(s - s[j]) <= DIP_WIDTH_FACTOR * level * tau
+                near[0] = near[-1] = False
+                expected[near] = np.minimum(expected[near], inner[j])
+        np.testing.assert_array_equal(widen_dips(s, v, tau), expected)

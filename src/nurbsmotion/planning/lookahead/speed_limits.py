@@ -289,42 +289,64 @@ DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
 DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
 
 
-def spread_min(s: NDArray[np.float64], members: NDArray[np.intp], values: NDArray[np.float64],
-               half_width_mm: float) -> NDArray[np.float64]:
-    """At every grid point, the smallest of ``values`` (at grid points ``members``, in order)
-    within +-half_width_mm in s (inf where none): sliding_min of a signal that is inf
-    elsewhere, with the search over the members only."""
-    at = s[members]
-    lo = np.searchsorted(at, s - half_width_mm, side="left")
-    hi = np.searchsorted(at, s + half_width_mm, side="right") - 1
-    out = np.full(len(s), np.inf)
-    near = hi >= lo
-    if near.any():
-        out[near] = window_min(values, lo[near], hi[near])
-    return out
+def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
+                     values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """out[i] = min of values[k] over every k with lo_k <= i <= hi_k (inf where none): the
+    sparse table of range_min run backwards. Each range is two blocks of 2^j points (j =
+    floor(log2 of its length)); the blocks' minima are pushed down from the widest level,
+    each block of 2^j into its two halves."""
+    span = np.maximum(hi - lo + 1, 1)
+    level = np.floor(np.log2(span)).astype(np.intp)
+    levels = int(level.max(initial=0)) + 1
+    table = np.full((levels, n), np.inf)
+    flat = table.reshape(-1)
+    np.minimum.at(flat, level * n + lo, values)
+    np.minimum.at(flat, level * n + hi - (1 << level) + 1, values)
+    for j in range(levels - 1, 0, -1):
+        half = 1 << (j - 1)
+        width = n - (1 << j) + 1  # blocks of 2^j that fit
+        if width <= 0:
+            continue
+        np.minimum(table[j - 1, :width], table[j, :width], out=table[j - 1, :width])
+        np.minimum(table[j - 1, half:half + width], table[j, :width], out=table[j - 1, half:half + width])
+    return table[0]
+
+
+DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
+DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
+
+
+def dip_levels(inner: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The geometric speed levels of widen_dips: from the lowest finite limit (at least 1e-3
+    of the highest) up by DIP_LEVEL_RATIO, the last one the highest."""
+    finite = inner[np.isfinite(inner)]
+    top = float(finite.max())
+    level = max(float(finite.min()), 1e-3 * top, 1e-9)
+    levels = [level]
+    while level < top:
+        level = min(level * DIP_LEVEL_RATIO, top)
+        levels.append(level)
+    return np.array(levels)
 
 
 def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
     """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
     moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
 
-    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels): the limits in a band
-    spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
-    side). The two ends (the run's start and end states) are not dips and do not spread."""
+    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels, dip_levels): the limits in
+    a band spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
+    side); all bands at once by range_min_update. The two ends (the run's start and end states)
+    are not dips and do not spread."""
     inner = v.copy()
     inner[0] = inner[-1] = np.inf
-    finite = inner[np.isfinite(inner)]
-    if averaging_s <= 0 or len(finite) == 0:
+    members = np.flatnonzero(np.isfinite(inner))
+    if averaging_s <= 0 or len(members) == 0:
         return v
-    top = float(finite.max())
-    level = max(float(finite.min()), 1e-3 * top, 1e-9)
-    out = v.copy()
-    floor = -np.inf
-    while True:
-        members = np.flatnonzero((inner <= level) & (inner > floor))
-        if len(members):
-            out = np.minimum(out, spread_min(s, members, inner[members], DIP_WIDTH_FACTOR * level * averaging_s))
-        if level >= top:
-            out[0], out[-1] = v[0], v[-1]
-            return out
-        floor, level = level, min(level * DIP_LEVEL_RATIO, top)
+    levels = dip_levels(inner)
+    band_level = levels[np.minimum(np.searchsorted(levels, inner[members], side="left"), len(levels) - 1)]
+    half_width = DIP_WIDTH_FACTOR * band_level * averaging_s
+    lo = np.searchsorted(s, s[members] - half_width, side="left")
+    hi = np.searchsorted(s, s[members] + half_width, side="right") - 1
+    out = np.minimum(v, range_min_update(len(s), lo, hi, inner[members]))
+    out[0], out[-1] = v[0], v[-1]
+    return out
