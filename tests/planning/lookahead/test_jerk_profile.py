@@ -130,3 +130,20 @@ def test_widened_dips_spread_each_limit_over_its_bands_half_width():
                 near[0] = near[-1] = False
                 expected[near] = np.minimum(expected[near], inner[j])
         np.testing.assert_array_equal(widen_dips(s, v, tau), expected)
+
+
+def test_last_below_and_flat_top_starts_match_a_walk():
+    from nurbsmotion.planning.lookahead.speed_limits import last_below
+
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        n = int(rng.integers(1, 120))
+        values = np.round(rng.uniform(0.0, 10.0, n))
+        ends = rng.integers(0, n + 1, 20)
+        levels = rng.uniform(0.0, 11.0, 20)
+        expected = [max([j for j in range(e) if values[j] < lv], default=-1) for e, lv in zip(ends, levels)]
+        assert list(last_below(values, ends, levels)) == expected
+        peaks = np.flatnonzero((values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:])) + 1
+        for peak, start in zip(peaks, jp.top_starts(values, peaks)):
+            assert values[start:peak + 1].min() >= values[peak] * (1 - 1e-12)
+            assert start == 0 or values[start - 1] < values[peak] * (1 - 1e-12)

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.speed_limits import range_min
+from nurbsmotion.planning.lookahead.speed_limits import last_below, range_min
 
 MIN_SPEED = 1e-9  # mm/s, keeps the time of an interval between two stops finite
 
@@ -239,15 +239,9 @@ def plateau_levels(s: NDArray[np.float64], x: NDArray[np.float64], peaks: NDArra
 
 
 def top_starts(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> NDArray[np.intp]:
-    """First grid point of the flat top that ends at each peak (the peak itself when it is sharp)."""
-    starts = peaks.copy()
-    flat = np.flatnonzero(x[np.maximum(peaks - 1, 0)] >= x[peaks] * (1.0 - 1e-12))
-    for n in flat:
-        peak = peaks[n]
-        level = x[peak] * (1.0 - 1e-12)
-        below = np.flatnonzero(x[:peak] < level)
-        starts[n] = below[-1] + 1 if len(below) else 0
-    return starts
+    """First grid point of the flat top that ends at each peak (the peak itself when it is
+    sharp): one past the last point before it below x[peak] (1 - 1e-12)."""
+    return last_below(x, peaks, x[peaks] * (1.0 - 1e-12)) + 1
 
 
 def valleys_around(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:

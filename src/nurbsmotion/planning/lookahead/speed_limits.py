@@ -56,21 +56,46 @@ class Caps:
     axis_accel_mm_s2: NDArray[np.float64] | None
 
 
-def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
-    """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per
-    query): row j of the table holds the minima of 2^j consecutive values, padded with +inf,
-    so every query is two gathers from it."""
+def min_table(values: NDArray[np.float64], levels: int) -> NDArray[np.float64]:
+    """Sparse table of minima: row j holds min(values[i : i + 2^j]) at i, padded with +inf."""
     n = len(values)
-    span = np.maximum(hi - lo + 1, 1)
-    levels = int(np.floor(np.log2(max(int(span.max(initial=1)), 1)))) + 1
-    table = np.full((levels, n), np.inf)
+    table = np.full((max(levels, 1), n), np.inf)
     table[0] = values
     width = 1
     for j in range(1, levels):
         np.minimum(table[j - 1, : n - width], table[j - 1, width:], out=table[j, : n - width])
         width *= 2
-    level = np.floor(np.log2(span)).astype(np.intp)
+    return table
+
+
+def table_min(table: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers."""
+    level = np.floor(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.intp)
     return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
+
+
+def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+    """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per query)."""
+    span = int(np.max(hi - lo + 1, initial=1))
+    return table_min(min_table(values, int(np.floor(np.log2(max(span, 1)))) + 1), lo, hi)
+
+
+def last_below(values: NDArray[np.float64], ends: NDArray[np.intp], levels: NDArray[np.float64]) -> NDArray[np.intp]:
+    """For every k the largest j < ends[k] with values[j] < levels[k] (-1 where none): a
+    binary search on the length of the stretch before ends[k], whose minimum falls as it grows."""
+    n = len(values)
+    table = min_table(values, int(np.floor(np.log2(max(n, 1)))) + 1)
+    short, long = np.zeros(len(ends), dtype=np.intp), ends.astype(np.intp)  # min over the last `long` is < level, if any is
+    found = (long > 0) & (table_min(table, np.maximum(ends - long, 0), np.maximum(ends - 1, 0)) < levels)
+    while True:
+        open_ = found & (long - short > 1)
+        if not open_.any():
+            break
+        mid = (short + long) // 2
+        below = table_min(table, np.maximum(ends - mid, 0), np.maximum(ends - 1, 0)) < levels
+        long = np.where(open_ & below, mid, long)
+        short = np.where(open_ & ~below, mid, short)
+    return np.where(found, ends - long, -1)
 
 
 SHORT_SPAN = 8  # windows of at most this many points: a direct minimum over the offsets
@@ -263,17 +288,16 @@ def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64
     by |dc| v^2 T^2, shared between the two cycles around the step that crosses the jump:
     third difference / T^3 ~ |dc| v^2 / (2 T) <= J, applied within one step (F T) of the
     jump (the verify-and-repair loop checks what this estimate misses)."""
-    v = np.full(len(grid), np.inf)
     if caps.jerk_mm_s3 is None:
-        return v
+        return np.full(len(grid), np.inf)
     s_jump, dc = curvature_jumps(grid)
     big = dc > TINY
-    for s0, jump in zip(s_jump[big], dc[big]):
-        limit = np.sqrt(caps.jerk_mm_s3 * caps.period_s / jump)
-        reach = float(grid.feed_mm_s.max()) * caps.period_s
-        lo, hi = np.searchsorted(grid.s, [s0 - reach, s0 + reach])
-        v[lo:hi] = np.minimum(v[lo:hi], limit)
-    return v
+    s_jump, dc = s_jump[big], dc[big]
+    reach = float(grid.feed_mm_s.max()) * caps.period_s
+    lo = np.searchsorted(grid.s, s_jump - reach)
+    hi = np.searchsorted(grid.s, s_jump + reach) - 1  # the points in [s0 - reach, s0 + reach)
+    near = hi >= lo
+    return range_min_update(len(grid), lo[near], hi[near], np.sqrt(caps.jerk_mm_s3 * caps.period_s / dc[near]))
 
 
 def static_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
