@@ -85,14 +85,19 @@ def last_below(values: NDArray[np.float64], ends: NDArray[np.intp], levels: NDAr
     binary search on the length of the stretch before ends[k], whose minimum falls as it grows."""
     n = len(values)
     table = min_table(values, int(np.floor(np.log2(max(n, 1)))) + 1)
-    short, long = np.zeros(len(ends), dtype=np.intp), ends.astype(np.intp)  # min over the last `long` is < level, if any is
-    found = (long > 0) & (table_min(table, np.maximum(ends - long, 0), np.maximum(ends - 1, 0)) < levels)
+    last = np.maximum(ends - 1, 0)
+
+    def below_in_last(length: NDArray[np.intp]) -> NDArray[np.bool_]:
+        return table_min(table, np.clip(ends - length, 0, last), last) < levels
+
+    short, long = np.zeros(len(ends), dtype=np.intp), ends.astype(np.intp)  # the last `long` points hold one below
+    found = (long > 0) & below_in_last(long)
     while True:
         open_ = found & (long - short > 1)
         if not open_.any():
             break
         mid = (short + long) // 2
-        below = table_min(table, np.maximum(ends - mid, 0), np.maximum(ends - 1, 0)) < levels
+        below = below_in_last(mid)
         long = np.where(open_ & below, mid, long)
         short = np.where(open_ & ~below, mid, short)
     return np.where(found, ends - long, -1)
