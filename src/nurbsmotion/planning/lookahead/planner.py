@@ -34,7 +34,7 @@ from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGI
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
-SHARE_ROUNDS = 3  # re-evaluations of the tangential jerk share at the planned speeds (first round)
+SHARE_ROUNDS = 2  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
@@ -297,11 +297,14 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
+        speeds = None
         for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):
-            # the share at the speeds a scan plans with it (a fixed point, approached as in
-            # scan.speed_profile); the peaks' plateaus only matter to the last scan
+            # the share at the speeds a scan plans with it: a fixed point, from below and above
+            # in turn (as in scan.speed_profile), damped by evaluating at the mean of the last
+            # two scans' speeds; the peaks' plateaus only matter to the last scan
             s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f, plateaus=False)
-            speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            planned = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            speeds = planned if speeds is None else 0.5 * (speeds + planned)
             jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
                                                static)
             bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
