@@ -240,8 +240,17 @@ def plateau_levels(s: NDArray[np.float64], x: NDArray[np.float64], peaks: NDArra
 
 def top_starts(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> NDArray[np.intp]:
     """First grid point of the flat top that ends at each peak (the peak itself when it is
-    sharp): one past the last point before it below x[peak] (1 - 1e-12)."""
-    return last_below(x, peaks, x[peaks] * (1.0 - 1e-12)) + 1
+    sharp): one past the last point before it below x[peak] (1 - 1e-12). Usually the start
+    of the run of values equal to x[peak] (a capped top); searched (last_below) only where
+    the point before that run is not below the level."""
+    level = x[peaks] * (1.0 - 1e-12)
+    changes = np.concatenate([[True], x[1:] != x[:-1]])
+    run_start = np.maximum.accumulate(np.where(changes, np.arange(len(x)), 0))
+    starts = run_start[peaks]
+    other = np.flatnonzero((starts > 0) & (x[np.maximum(starts - 1, 0)] >= level))
+    if len(other):
+        starts[other] = last_below(x, peaks[other], level[other]) + 1
+    return starts
 
 
 def valleys_around(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:

@@ -81,26 +81,17 @@ def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.
 
 
 def last_below(values: NDArray[np.float64], ends: NDArray[np.intp], levels: NDArray[np.float64]) -> NDArray[np.intp]:
-    """For every k the largest j < ends[k] with values[j] < levels[k] (-1 where none): a
-    binary search on the length of the stretch before ends[k], whose minimum falls as it grows."""
-    n = len(values)
-    table = min_table(values, int(np.floor(np.log2(max(n, 1)))) + 1)
-    last = np.maximum(ends - 1, 0)
-
-    def below_in_last(length: NDArray[np.intp]) -> NDArray[np.bool_]:
-        return table_min(table, np.clip(ends - length, 0, last), last) < levels
-
-    short, long = np.zeros(len(ends), dtype=np.intp), ends.astype(np.intp)  # the last `long` points hold one below
-    found = (long > 0) & below_in_last(long)
-    while True:
-        open_ = found & (long - short > 1)
-        if not open_.any():
-            break
-        mid = (short + long) // 2
-        below = below_in_last(mid)
-        long = np.where(open_ & below, mid, long)
-        short = np.where(open_ & ~below, mid, short)
-    return np.where(found, ends - long, -1)
+    """For every k the largest j < ends[k] with values[j] < levels[k] (-1 where none), by
+    binary lifting on a sparse table of minima: from ends[k], step back over every block of
+    2^j points (largest first) whose minimum is not below the level."""
+    depth = int(np.floor(np.log2(max(len(values), 1)))) + 1
+    table = min_table(values, depth)
+    start = ends.astype(np.intp)
+    for j in range(depth - 1, -1, -1):
+        back = start - (1 << j)
+        clear = (back >= 0) & (table[j, np.maximum(back, 0)] >= levels)
+        start = np.where(clear, back, start)
+    return start - 1
 
 
 SHORT_SPAN = 8  # windows of at most this many points: a direct minimum over the offsets
