@@ -228,17 +228,19 @@ def interval_curvature_max(s: NDArray[np.float64], curv: NDArray[np.float64], dc
     through (x_ss, x_sss) at its start and the left limits at its end: c(r) = A + B r + C r^2 +
     D r^3 on r in [0, 1]; the largest |c| at r = 0, 1/4, ..., 1 plus half the sample spacing
     times a bound of |c'(r)| (|B| + 2|C| + 3|D|)."""
-    h = np.diff(s)[:, None]
-    a, c1 = curv[:-1], curv_left[1:]
-    b, d1 = h * dcurv[:-1], h * dcurv_left[1:]
+    h = np.diff(s)
+    a, c1 = curv[:-1].T, curv_left[1:].T  # coordinate-major (3, N - 1): rows are contiguous
+    b, d1 = h * dcurv[:-1].T, h * dcurv_left[1:].T
     c = 3.0 * (c1 - a) - 2.0 * b - d1
     d = 2.0 * (a - c1) + b + d1
-    best = np.maximum(np.einsum("ij,ij->i", a, a), np.einsum("ij,ij->i", c1, c1))
+
+    def squared(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+
+    best = np.maximum(squared(a), squared(c1))
     for r in CURVATURE_SAMPLES[1:-1]:
-        v = ((d * r + c) * r + b) * r + a
-        best = np.maximum(best, np.einsum("ij,ij->i", v, v))
-    slope = (np.sqrt(np.einsum("ij,ij->i", b, b)) + 2.0 * np.sqrt(np.einsum("ij,ij->i", c, c))
-             + 3.0 * np.sqrt(np.einsum("ij,ij->i", d, d)))
+        best = np.maximum(best, squared(((d * r + c) * r + b) * r + a))
+    slope = np.sqrt(squared(b)) + 2.0 * np.sqrt(squared(c)) + 3.0 * np.sqrt(squared(d))
     return np.sqrt(best) + 0.5 * (CURVATURE_SAMPLES[1] - CURVATURE_SAMPLES[0]) * slope
 
 
