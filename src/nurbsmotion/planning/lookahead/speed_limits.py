@@ -137,7 +137,10 @@ def chord_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     step = np.minimum(chord_step_mm(kappa, caps.chord_error_mm), grid.feed_mm_s * caps.period_s)
     for _ in range(3):  # the window depends on the step it limits: fixed-point passes
         kappa_max = -sliding_min(grid.s, -kappa, step)
-        step = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
+        shorter = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
+        if np.array_equal(shorter, step):  # a fixed point: further passes change nothing
+            break
+        step = shorter
     return step / caps.period_s
 
 
