@@ -125,3 +125,30 @@ def test_random_short_line_programs_plan_within_every_limit(steps, period_ms, je
     stream = PlanStream(program, limits, chunk_cycles=500)
     trajectory = Trajectory.concatenate(list(stream))
     assert_within_limits(measure(trajectory, program), limits)
+
+
+def test_a_repair_that_does_not_lower_the_worst_violation_gives_up_early(monkeypatch):
+    """Repairs that change nothing: each window stops after MAX_STALLED_REPAIRS rounds without
+    progress (not MAX_REPAIR_ROUNDS), and the fallbacks still give a plan within every limit."""
+    checks: list[int] = []
+    original_check = lookahead_planner.check
+
+    def counting_check(*args, **kwargs):
+        checks.append(1)
+        return original_check(*args, **kwargs)
+
+    windows: list[int] = []
+    original_window = lookahead_planner.plan_window
+
+    def counting_window(*args, **kwargs):
+        windows.append(1)
+        return original_window(*args, **kwargs)
+
+    monkeypatch.setattr(lookahead_planner, "repair", lambda *args, **kwargs: None)
+    monkeypatch.setattr(lookahead_planner, "check", counting_check)
+    monkeypatch.setattr(lookahead_planner, "plan_window", counting_window)
+    program = read_program(WANG_NC)
+    trajectory = plan_lookahead(program, WANG_LIMITS)
+    assert trajectory.notes["fallback_stops"] + trajectory.notes["fallback_slower_blocks"] >= 1
+    assert len(checks) <= len(windows) * (lookahead_planner.MAX_STALLED_REPAIRS + 1)
+    assert_within_limits(measure(trajectory, program), WANG_LIMITS)

@@ -34,6 +34,7 @@ from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGI
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
+MAX_STALLED_REPAIRS = 4  # repair rounds in a row that do not lower the worst violation: the repair diverges
 SHARE_ROUNDS = 2  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
@@ -294,6 +295,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
                             "from this state; keep the current plan", pieces[-1].block)
     period = settings.limits.period_s
+    best_worst, stalled = np.inf, 0  # the smallest worst violation ratio so far, rounds since it fell
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
         x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
@@ -342,8 +344,11 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         bad = result.violations()
         if not bad:
             break
-        if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
-            raise _violation_error(pieces, samples, result, bad)
+        worst = max(float(getattr(result, name).max()) for name in bad if name != "fluctuation") \
+            if set(bad) != {"fluctuation"} else np.inf
+        best_worst, stalled = (worst, 0) if worst < best_worst else (best_worst, stalled + 1)
+        if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"} or stalled >= MAX_STALLED_REPAIRS:
+            raise _violation_error(pieces, samples, result, bad, repairs)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
     blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
     stop = None
@@ -369,13 +374,14 @@ class _WindowTooShort(Exception):
     pass
 
 
-def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: Check, bad: dict) -> PlanningError:
+def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: Check, bad: dict,
+                     repairs: int) -> PlanningError:
     name, rows = next(iter(bad.items()))
     row = int(rows[0])
     block = pieces[int(samples.piece[row])].block
     value = float(getattr(result, name if name != "fluctuation" else "arc_fluctuation")[row])
     return PlanningError(f"block {block + 1}", f"lookahead cannot hold the {name} limit here "
-                         f"(figure {value:.6g} x the limit after {MAX_REPAIR_ROUNDS} repairs)", block)
+                         f"(figure {value:.6g} x the limit after {repairs} repairs)", block)
 
 
 def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDArray[np.float64],
