@@ -123,11 +123,12 @@ def test_no_answer_names_node_and_step():
             spindle.bring_up()
 
 
-def test_the_drive_is_told_to_watch_the_masters_heartbeat():
+def test_the_drive_is_told_to_watch_the_masters_heartbeat_and_the_cycle_period():
     with spindle_bus(CONFIG) as (master, sim):
-        spindle = SpindleDrive(master, CONFIG, master_heartbeat=(127, 500))
+        spindle = SpindleDrive(master, CONFIG, master_heartbeat=(127, 500), cycle_period_s=SYNC_S)
         spindle.bring_up()
         try:
             assert master[NODE].sdo[0x1016][1].raw == 127 << 16 | 500
+            assert sim[NODE].period_s == pytest.approx(SYNC_S)  # 0x60C2: the ramp steps by the SYNC period
         finally:
             spindle.close()

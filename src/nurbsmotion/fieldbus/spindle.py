@@ -13,7 +13,8 @@ the ramp has ended and |0x606C - 0x60FF| <= ``CSV_WINDOW`` of the target (bit 10
 meaning in csv). A drive that insists on a set-point each SYNC needs an RPDO: not done.
 
 Bring-up (NMT pre-operational): 0x6502 has the mode's bit (when the drive has 0x6502),
-0x6060 = mode, 0x6083/0x6084 = accel (counts/s²), 0x60FF = 0, 0x1016:01 = the master's
+0x6060 = mode, 0x6083/0x6084 = accel (counts/s²), 0x60FF = 0, 0x60C2 / 0x1006 = the cycle
+period (where the drive has them), 0x1016:01 = the master's
 heartbeat (as for the axes: a dead daemon stops the spindle), NMT start, fault reset if
 in FAULT, then SHUTDOWN, SWITCH ON, ENABLE OPERATION until 0x6041 says OPERATION ENABLED.
 """
@@ -33,6 +34,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from nurbsmotion import cia402 as c
 from nurbsmotion import drive_od
 from nurbsmotion.errors import FieldbusError
+from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
 from nurbsmotion.spindle_config import (PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
                                         TARGET_VELOCITY, VELOCITY_ACTUAL, SpindleConfig, SpindleMode)
@@ -75,11 +77,15 @@ class SpindleDrive:
     """
 
     def __init__(self, network: canopen.Network, config: SpindleConfig,
-                 on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None) -> None:
+                 on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None,
+                 cycle_period_s: float | None = None) -> None:
         """``master_heartbeat``: (master node id, consumer time ms) for 0x1016:01, so the drive
-        stops on its own when the daemon dies (as the axes do); None writes nothing."""
+        stops on its own when the daemon dies (as the axes do); None writes nothing.
+        ``cycle_period_s``: the SYNC period, written to 0x60C2 and 0x1006 where the drive has
+        them (a csv drive steps by it; a drive that takes 0x60C2's default would ramp wrong)."""
         assert config.od is not None  # loaded with the configuration
         self.config = config
+        self.cycle_period_s = cycle_period_s
         self.master_heartbeat = master_heartbeat
         self.on_fault = on_fault
         self.node = canopen.RemoteNode(config.node_id, config.od)
@@ -112,6 +118,8 @@ class SpindleDrive:
             if drive_od.find(cfg.od, PROFILE_DECELERATION) is not None:  # type: ignore[arg-type]
                 self._write("set deceleration 0x6084", PROFILE_DECELERATION, cfg.accel_counts_s2)
         self._write("zero target velocity", TARGET_VELOCITY, 0)
+        if self.cycle_period_s:
+            self._write_cycle_period(self.cycle_period_s)
         if self.master_heartbeat is not None and drive_od.find(cfg.od, c.CONSUMER_HEARTBEAT_TIME, 1) is not None:  # type: ignore[arg-type]
             master, consumer_ms = self.master_heartbeat
             self._sdo("watch the master's heartbeat",  # 0x1016:01 = node << 16 | ms (CiA 301 §7.5.2.29)
@@ -122,6 +130,18 @@ class SpindleDrive:
         self._monitor = threading.Thread(target=self._watch, name=f"spindle-node{cfg.node_id}", daemon=True)
         self._monitor.start()
         log.info(kv("spindle.ready", node=cfg.node_id, mode=cfg.mode.value, accel_counts_s2=cfg.accel_counts_s2))
+
+    def _write_cycle_period(self, period_s: float) -> None:
+        """0x60C2:01/02 = period as value·10^exponent s (the axes' scaling), 0x1006 = period µs."""
+        od = self.config.od
+        exponent_var = drive_od.find(od, c.IP_TIME_PERIOD, 2)  # type: ignore[arg-type]
+        if exponent_var is not None:
+            value, exponent = interpolation_period(period_s, None if exponent_var.writable else exponent_var.default)
+            self._write("set cycle period 0x60C2", c.IP_TIME_PERIOD, value, 1)
+            if exponent_var.writable:
+                self._write("set cycle period 0x60C2", c.IP_TIME_PERIOD, exponent, 2)
+        if drive_od.find(od, c.COMM_CYCLE_PERIOD) is not None:  # type: ignore[arg-type]
+            self._write("set cycle period 0x1006", c.COMM_CYCLE_PERIOD, round(period_s * 1e6))
 
     def _enable(self) -> None:
         """Fault reset if needed, then SHUTDOWN -> SWITCH ON -> ENABLE OPERATION (CiA 402 state machine)."""
@@ -278,8 +298,11 @@ class SpindleDrive:
         except FieldbusError:
             return None
 
-    def _write(self, step: str, index: int, value: int) -> None:
-        self._sdo(step, lambda: setattr(self.node.sdo[index], "raw", value))
+    def _write(self, step: str, index: int, value: int, subindex: int | None = None) -> None:
+        if subindex is None:
+            self._sdo(step, lambda: setattr(self.node.sdo[index], "raw", value))
+        else:
+            self._sdo(step, lambda: setattr(self.node.sdo[index][subindex], "raw", value))
 
     def _write_quietly(self, index: int, value: int) -> None:
         """A write on the way down (stop, disable): a failure is logged, not raised."""

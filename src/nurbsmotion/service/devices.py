@@ -41,7 +41,7 @@ class MachineDevices:
             watch = (config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple) \
                 if mon.master_heartbeat_ms else None
             self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
-                                        master_heartbeat=watch)
+                                        master_heartbeat=watch, cycle_period_s=config.cycle_period_s)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io)
