@@ -288,6 +288,13 @@ class HomingProcedure:
     def done(self) -> bool:
         return self.phase in (Phase.HOMED, Phase.FAILED)
 
+    def snapshot(self) -> tuple[Phase, int, int, int, HomingOutcome | None]:
+        """The state after a step, for a master that computes cycles ahead and may redo them."""
+        return (self.phase, self.cycles, self._started_at, self._controlword, self.outcome)
+
+    def restore(self, state: tuple[Phase, int, int, int, HomingOutcome | None]) -> None:
+        self.phase, self.cycles, self._started_at, self._controlword, self.outcome = state
+
     def step(self, statusword: int | None) -> HomingStep:
         """The controlword for this cycle given the latest statusword; ends with an outcome."""
         if self.done:
