@@ -93,12 +93,14 @@ def jog_target_mm(request: JogRequest, axis: AxisConfig, held_mm: float) -> floa
     if request.continuous:
         if limits is None:
             raise InputError(where, f"axis {axis.name} has no soft_limits_mm: a continuous jog needs an end")
-        target = limits[1] if request.direction > 0 else limits[0]
-        if (target - held_mm) * request.direction <= 1e-9:
-            raise InputError(where, f"axis {axis.name} is at its soft limit {target:g} mm already")
-        return target
-    target = request.position_mm if request.absolute else held_mm + float(request.distance_mm or 0.0)
-    assert target is not None
+        end = limits[1] if request.direction > 0 else limits[0]
+        if (end - held_mm) * request.direction <= 1e-9:
+            raise InputError(where, f"axis {axis.name} is at its soft limit {end:g} mm already")
+        return end
+    if request.position_mm is not None:
+        target = float(request.position_mm)
+    else:
+        target = held_mm + float(request.distance_mm or 0.0)
     if limits is not None and not limits[0] <= target <= limits[1]:
         raise InputError(where, f"axis {axis.name} would reach {target:.6g} mm, beyond the soft limit "
                          f"{limits[1] if target > limits[1] else limits[0]:g} mm")
