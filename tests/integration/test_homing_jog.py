@@ -216,3 +216,20 @@ def test_the_cli_homes_jogs_and_a_killed_continuous_jog_client_stops_the_axis(ma
     bad = _cli(socket, "jog", "X+1+")
     out, err = bad.communicate(timeout=30)
     assert bad.returncode == 2 and err.decode().startswith("nurbsmotion jog: error: 'X+1+': expected")
+
+
+def test_status_command_shows_homed_and_the_homing_error(machine, capsys):
+    from nurbsmotion.cli import main
+
+    daemon, client = machine
+    socket = daemon.config.control.socket
+    daemon.simulation.network[3].axis.home_sensors = HomeSensors(positive_limit_counts=5000)  # Z (first) fails
+    _home(client)
+    assert main(["status", "--socket", socket]) == 0
+    out = capsys.readouterr().out
+    assert "axis X node 1 (not homed): OPERATION ENABLED" in out
+    assert "homing failed: axis Z: node 3: homing method 34: the drive reports a homing error" in out
+    _home(client, "Y")
+    assert main(["status", "--socket", socket]) == 0
+    out = capsys.readouterr().out
+    assert "axis Y node 2 (homed): OPERATION ENABLED" in out and "homing failed" not in out
