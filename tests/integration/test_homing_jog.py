@@ -233,3 +233,25 @@ def test_status_command_shows_homed_and_the_homing_error(machine, capsys):
     assert main(["status", "--socket", socket]) == 0
     out = capsys.readouterr().out
     assert "axis Y node 2 (homed): OPERATION ENABLED" in out and "homing failed" not in out
+
+
+def test_stop_ends_a_homing_search_and_abort_quick_stops(machine):
+    daemon, client = machine
+    daemon.simulation.network[1].axis.home_sensors = HomeSensors()  # X searches without ever finding a switch
+    assert client.call("home", axes="X")["axes"] == ["X"]
+    wait_until(lambda: abs(_axes(client.call("status"))["X"][1]) > 1.0, 20.0, "X to search")
+    assert client.call("stop") == {"ok": True, "job": None, "state": "homing"}
+    wait_until(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
+    status = client.call("status")
+    assert status["homing"]["error"].startswith("axis X: node 1: homing method 17: stopped on request (statusword")
+    assert status["state"] == "idle" and status["homing"]["axes"]["X"] == "not homed"
+    x = _axes(status)["X"]
+    assert x[0] == x[1] < -1.0  # at rest where the search stopped, holding there
+
+    assert client.call("home", axes="X")["ok"]
+    wait_until(lambda: client.call("status")["homing"]["axes"]["X"] == "homing", 20.0, "the homing to start")
+    assert client.call("abort") == {"ok": True, "job": None}
+    wait_until(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
+    assert client.call("status")["state"] == "fault"
+    client.call("reset")
+    assert client.call("status")["state"] == "idle"

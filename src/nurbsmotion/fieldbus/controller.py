@@ -223,7 +223,7 @@ class CycleController:
 
     def handle(self, what: str, arg: Any, k: int, fb: Feedback) -> None:
         """One request: job, stop, abort, quick_stop, fault_stop, rate, hold, resume, enable, disable,
-        home / home_start / home_hold / home_end (one axis' homing, see HomingSlot)."""
+        home / home_start / home_cancel / home_hold / home_end (one axis' homing, see HomingSlot)."""
         phase = self.phase
         if what.startswith("home"):
             self._handle_homing(what, arg, k)
@@ -384,6 +384,9 @@ class CycleController:
             return  # the homing ended meanwhile (fault, quick stop, reset): the master sees the phase
         elif what == "home_start":
             slot.procedure = arg
+        elif what == "home_cancel":
+            if slot.procedure is not None:
+                slot.procedure.cancel()
         elif what == "home_hold":
             slot.procedure, slot.hold_counts = None, int(arg)
         elif what == "home_end":

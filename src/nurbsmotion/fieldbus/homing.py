@@ -223,6 +223,7 @@ class Event(enum.Enum):
     INTERRUPTED = "interrupted"
     HOMING_ERROR = "homing error"
     TIMEOUT = "timeout"
+    CANCELLED = "cancelled"  # the operator stopped the homing (cancel())
 
 
 P, E = Phase, Event
@@ -289,18 +290,23 @@ class HomingProcedure:
         self.cycles = 0
         self._started_at = -1
         self._controlword = 0
+        self.cancelled = False
         self.outcome: HomingOutcome | None = None
 
     @property
     def done(self) -> bool:
         return self.phase in (Phase.HOMED, Phase.FAILED)
 
-    def snapshot(self) -> tuple[Phase, int, int, int, HomingOutcome | None]:
+    def snapshot(self) -> tuple[Phase, int, int, int, bool, HomingOutcome | None]:
         """The state after a step, for a master that computes cycles ahead and may redo them."""
-        return (self.phase, self.cycles, self._started_at, self._controlword, self.outcome)
+        return (self.phase, self.cycles, self._started_at, self._controlword, self.cancelled, self.outcome)
 
-    def restore(self, state: tuple[Phase, int, int, int, HomingOutcome | None]) -> None:
-        self.phase, self.cycles, self._started_at, self._controlword, self.outcome = state
+    def restore(self, state: tuple[Phase, int, int, int, bool, HomingOutcome | None]) -> None:
+        self.phase, self.cycles, self._started_at, self._controlword, self.cancelled, self.outcome = state
+
+    def cancel(self) -> None:
+        """Stop the homing at the next step (bit 4 low: the drive stops its search)."""
+        self.cancelled = True
 
     def step(self, statusword: int | None) -> HomingStep:
         """The controlword for this cycle given the latest statusword; ends with an outcome."""
@@ -309,6 +315,8 @@ class HomingProcedure:
         self.cycles += 1
         acknowledged = self._started_at >= 0 and self.cycles - self._started_at > self.ack_cycles
         event = E.TIMEOUT if self.cycles > self.timeout_cycles else classify(statusword, acknowledged)
+        if self.cancelled:
+            event = E.CANCELLED
         if event is E.INTERRUPTED and self.phase is Phase.STARTED and self.cycles - self._started_at <= self.start_cycles:
             event = E.ACK_PENDING  # not started yet, or a statusword older than the start (START_S)
         previous = self.phase
@@ -340,6 +348,8 @@ class HomingProcedure:
         where = f"node {self.node_id}: homing method {self.method}"
         if event is E.TIMEOUT:
             return f"{where}: not completed within {self.timeout_s:g} s ({word})"
+        if event is E.CANCELLED:
+            return f"{where}: stopped on request ({word})"
         if event is E.HOMING_ERROR:
             return f"{where}: the drive reports a homing error ({word}, bit 13)"
         if event is E.INTERRUPTED:

@@ -453,6 +453,11 @@ class Master:
             self._supervisor.homing_axis = -1
             self._homing_run = None
 
+    def stop_homing(self, quick: bool = False) -> None:
+        """Stop a homing under way: its procedure ends (bit 4 low, the drive stops its search,
+        then the streaming mode is restored), or with ``quick`` every axis is quick-stopped."""
+        self._request(*(("quick_stop", "aborted") if quick else ("home_cancel", None)))
+
     def record_feedback(self, sink: FeedbackSink | None) -> None:
         """Hand every valid TPDO1 to ``sink(cycle, axis_index, statusword, position_counts,
         timestamp)`` (None: stop). Read-only: called on canopen's receive thread right after

@@ -157,6 +157,9 @@ class Controller:
             raise Refused("mdi", err.message) from None
 
     def stop(self, reason: str = "stop") -> dict[str, Any]:
+        if self._job is None and self.homing.busy:  # stop the homing axis' search, restore its mode
+            self.link.stop_homing()
+            return {"ok": True, "job": None, "state": "homing"}
         job = self._running_job("stop")
         job.stop_requested = job.stop_requested or reason
         assert job.handle is not None
@@ -185,6 +188,9 @@ class Controller:
         return {"ok": True, "job": job.record.job_id, "state": "running"}
 
     def abort(self) -> dict[str, Any]:
+        if self._job is None and self.homing.busy:  # quick stop of every axis
+            self.link.stop_homing(quick=True)
+            return {"ok": True, "job": None}
         job = self._running_job("abort")
         job.stop_requested = "abort"
         assert job.handle is not None
@@ -195,6 +201,8 @@ class Controller:
         with self._lock:
             if self._job is not None or self._planning:
                 raise Refused("reset", "a job is running; stop or abort it first")
+            if self.homing.busy:
+                raise Refused("reset", "homing is under way; stop or abort it first")
         try:
             self.link.reset_faults()
         except FieldbusError as err:
