@@ -189,7 +189,12 @@ class Jogging:
                 if expired:
                     self._job_id = None
             if expired:
+                from nurbsmotion.service.controller import Refused
+
                 log.warning(kv("jog_lease_expired", job=job_id, lease_s=LEASE_S))
-                self.controller.stop(reason="jog_lease")
+                try:
+                    self.controller.stop(reason="jog_lease")
+                except Refused:
+                    pass  # the jog ended by itself meanwhile
                 return
 
