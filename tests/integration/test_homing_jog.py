@@ -144,6 +144,8 @@ def test_jogs_incremental_absolute_and_their_checks(machine):
     record = _wait_job(client, job["job"]["id"])
     assert record["outcome"]["outcome"] == "completed" and record["plan"]["program"] == "<jog>"
     assert record["plan"]["max_feed_mm_s"] <= 20.0 + 1e-9
+    measured = record["plan"]["measured"]  # jerk-limited by the look-ahead planner, within the limits
+    assert measured["max_jerk_mm_s3"] <= 50000 and measured["max_accel_mm_s2"] <= 1000
     assert _axes(client.call("status"))["X"][0] == round(start + 10, 6)
     job = client.call("jog", axis="x", position=-20.0, speed=50.0)
     _wait_job(client, job["job"]["id"])
