@@ -65,10 +65,10 @@ def test_home_then_jog_on_vcan(machine):
     axes = _axes(daemon)
     assert abs(axes["X"][0] - (-4.99)) <= 0.009 and abs(axes["Z"][0] - 0.01) <= 0.009
     assert axes["Y"][0] == 3.0
-    assert not daemon.request("status")["faults"]
+    assert not daemon.request("status")["faults"], daemon.log()[-4000:]
 
     job = daemon.request("jog", axis="X", distance=5.0, speed=20.0)
-    assert job["ok"], job
+    assert job["ok"], (job, daemon.log()[-4000:])
     record = daemon.wait_job_end(job["job"]["id"], JOB_TIMEOUT_S)
     assert record["outcome"]["outcome"] == "completed", record["outcome"]
     assert _axes(daemon)["X"][0] == round(axes["X"][0] + 5.0, 6)
