@@ -92,3 +92,16 @@ def test_timeout_interrupts_and_restores():
         assert time.monotonic() - t0 < 10
         assert master.status().phase == "holding"
         assert not master.faults()
+
+
+def test_a_method_the_drive_refuses_is_one_line_and_the_axes_keep_holding():
+    from nurbsmotion.errors import FieldbusError
+
+    with homing_rig("csp") as (master, sim):
+        with pytest.raises(FieldbusError) as err:
+            _home(master, 19, 0.0)  # the simulated drive implements 1, 2, 17, 18, 33, 34, 35, 37
+        assert str(err.value).startswith("axis X: node 1: homing method 19: step 'homing configuration': SDO abort "
+                                         "0x06090030")
+        assert "\n" not in str(err.value)
+        assert master.status().phase == "holding" and not master.faults()
+        assert sim[1].axis.mode_display == 8  # never left CSP

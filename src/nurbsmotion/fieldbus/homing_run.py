@@ -100,9 +100,9 @@ class HomingRun:
                 bringup._write(self.trail, write)  # type: ignore[arg-type]  # ObjectWrite has Write's fields
             bringup._read_back(self.trail, ReadBack("set homing mode", c.MODES_OF_OPERATION_DISPLAY, 0,
                                                     self.plan.mode_check))
-        except FieldbusError:
+        except FieldbusError as err:
             self._restore(where)
-            raise
+            raise FieldbusError(f"{where}: {_sdo_step(err)}") from None
         self._done.clear()
         self._request("home_start", self.procedure)
         outcome = self._wait_for_outcome(where)
@@ -165,8 +165,8 @@ class HomingRun:
         except FieldbusError as err:
             self._request("quick_stop", "faulted")
             log.error(kv("homing_restore_failed", axis=self.name, error=err))
-            raise FieldbusError(f"{where}: the streaming mode could not be restored ({err}); the axes were "
-                                f"quick-stopped: send reset") from None
+            raise FieldbusError(f"{where}: the streaming mode could not be restored ({_sdo_step(err)}); the axes "
+                                f"were quick-stopped: send reset") from None
         self._request("home_end", None)
         self._wait_for_phase(Phase.HOLDING, where)
         self._settle()
@@ -178,3 +178,10 @@ class HomingRun:
                                     f"(statusword {'none' if word is None else f'0x{word:04X}'})")
             time.sleep(self._period_s)
         log.info(kv("homing_restored", axis=self.name, node=self.trail.node_id, position_counts=position))
+
+
+def _sdo_step(err: FieldbusError) -> str:
+    """A bring-up helper's SDO error without its "node N: bring-up step" prefix (the homing
+    error names axis, node and method already): "step 'set homing mode': SDO abort ..."."""
+    text = str(err)
+    return text.split(": bring-up ", 1)[1] if ": bring-up step " in text else text
