@@ -140,13 +140,14 @@ class HomingRun:
         return self._outcome
 
     def _read_position(self) -> int:
-        """0x6064 by SDO; read again once when the answer was a late one to an earlier request
-        that timed out (canopen: "Node returned a value for 0x6061:00 instead")."""
+        """0x6064 by SDO; read again once when the answer was a stray one meant for an earlier
+        request (canopen: "Node returned a value for 0x6061:00 instead", "Unexpected response
+        0x60"): seen on vcan0 inside User-Mode Linux after a homing, cause not found."""
         step = "homing: read position actual"
         try:
             return bringup.read(self.trail, step, c.POSITION_ACTUAL)
         except FieldbusError as err:
-            if "instead" not in str(err):
+            if "instead" not in str(err) and "Unexpected response" not in str(err):
                 raise
             log.warning(kv("homing_sdo_stale_answer", axis=self.name, node=self.trail.node_id, error=err))
             return bringup.read(self.trail, step, c.POSITION_ACTUAL)
