@@ -28,6 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+import can
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
@@ -323,3 +324,5 @@ class SpindleDrive:
                               ) from None
         except SdoCommunicationError as err:
             raise self._error(step, f"no SDO answer ({err})") from None
+        except (can.CanError, OSError) as err:  # the bus is closed or refuses the frame
+            raise self._error(step, f"cannot send ({err})") from None
