@@ -62,6 +62,14 @@ class SpindleSim:
         return velocity_counts_s * 60.0 / self.counts_per_rev
 
 
+def machine_spindle(machine: Any) -> SpindleSim | None:
+    """The spindle drive of a configuration's ``spindle`` section (None: 'none' or absent)."""
+    spindle: Any = getattr(machine, "spindle", None)
+    if spindle is None or not hasattr(spindle, "node_id"):
+        return None
+    return SpindleSim(spindle.node_id, spindle.counts_per_rev, spindle.eds)
+
+
 class SimNetwork:
     """Any number of :class:`SimDrive` and :class:`SimIoNode` on one bus
     (``interface``/``channel`` as python-can).
@@ -132,7 +140,8 @@ class SimNetwork:
         mode, cycle period and everything else are what the master writes, so a missing
         write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive;
         ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds;
-        ``spindle`` adds a spindle drive (its node id must be free).
+        ``spindle`` adds a spindle drive (its node id must be free); without it, the machine's
+        own ``spindle`` section if it describes a drive (node_id, counts_per_rev, eds).
         """
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
@@ -159,6 +168,7 @@ class SimNetwork:
         io = getattr(machine, "io", None)
         if io is not None:
             net._add_machine_io(io)
+        spindle = spindle or machine_spindle(machine)
         if spindle is not None:
             net.add_spindle(spindle, record=record, sync=sync)
         return net
