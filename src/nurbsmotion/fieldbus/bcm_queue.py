@@ -1,9 +1,15 @@
 """Kernel-timed stream on SocketCAN: the frames of the coming cycles queued in the kernel.
 
-One broadcast-manager (BCM) TX operation holds a ring of whole cycles (SYNC, then the RPDO
-of each axis; at most 256 frames, e.g. 64 cycles for 3 axes) and sends one frame every
-T/(1 + n_axes): SYNC at the start of each cycle, the RPDOs spread over it, all before the
-next SYNC. Python only keeps the ring ahead of the kernel:
+One broadcast-manager (BCM) TX operation per frame of the cycle: the SYNC op and one op
+per RPDO COB-ID, each holding a ring of the same cycles (one frame per cycle; the ring is
+as deep as one op of 256 frames holding whole cycles of 1 + n frames would be, 64 cycles
+for 3 axes) and sending one frame every T. Created in that order, their timers expire
+together: each cycle leaves as one burst, SYNC then the RPDOs, all in one timer interrupt
+of the kernel. (One op holding whole cycles sends one frame per expiry, every T/(1 + n):
+four timer expiries per 3-axis cycle, each exposed to the timer's lateness, and every
+reader on the bus woken four times per cycle; the BCM has no flag to send several frames
+per expiry. Measured inside User-Mode Linux, docs/benchmarks.md.) Python only keeps the
+rings ahead of the kernel:
 
 - **Where the wire is.** A raw socket that receives only SYNC counts the SYNCs the kernel
   sent (with their kernel timestamps): cycle c. The cycle thread drains it without blocking.
@@ -11,17 +17,25 @@ next SYNC. Python only keeps the ring ahead of the kernel:
   may be copying them: before Linux 6.15's "extend bcm_tx_lock usage" the copy takes no
   lock). Each TX_SETUP carries the whole ring, so those slots are rewritten with identical
   bytes. Stop, feed override and abort act from c + guard + 1 on: latency (guard + 1)·T.
-- **The lease.** Each renewal sets the op's ``count`` to (L - c)·(1 + n) frames, with
+- **The lease.** Each renewal sets every op's ``count`` to L - c frames, with
   L = c + cycles - 1 - pad (SETTIMER without STARTTIMER keeps the phase). If Python stops
   renewing, the kernel sends into cycle L and stops by itself: SYNC
   stops, drives notice. The planner keeps the cycles after its horizon a controlled stop
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
-- **The period.** The BCM re-arms each frame at now + ival, so the wire runs slow by the
-  timer latency of every frame (about 6 % inside User-Mode Linux), and a held-up timer
+- **The period.** The BCM re-arms each op at now + ival, so the wire runs slow by the
+  timer latency of every cycle (about 2 % inside User-Mode Linux), and a held-up timer
   shifts it for good. The median of the last 64 echoed SYNC intervals trims the frequency;
   the phase against t0 + k·T is caught up at most 4 % of T per cycle (a frozen guest's
   lag of more than 4 T is accepted, not caught up).
+- **The order inside a cycle.** An RPDO op's timer expires just after the SYNC op's (it
+  was armed a few µs later at the start and re-arms after it in the same interrupt), so
+  the kernel handles them together, in that order, and the gap snaps back to those µs
+  whenever both are due. A renewal changes every op's interval with one TX_SETUP each;
+  should a timer fire between two of them, the ops already renewed run one cycle on the
+  new interval and the others on the old one. The renewal order makes that only ever
+  delay the RPDOs behind their SYNC, never move them before it: the RPDO ops first when
+  the interval grows, the SYNC op first when it shrinks.
 
 Why the BCM and not ETF + SO_TXTIME: queued SO_TXTIME frames cannot be revised (a stop or
 an override would wait for the whole queue, or the queue must be short), and an ETF root
@@ -65,6 +79,35 @@ TRIM_LIMIT = 0.3  # share of T the frequency correction may reach (a starved gue
 PHASE_GAIN = 0.1  # share of the SYNC phase error caught up per renewal
 PHASE_LIMIT = 0.04  # at most this share of T faster or slower per cycle to catch up the phase
 RE_ANCHOR_CYCLES = 4  # a phase error beyond this many periods moves the reference
+
+
+class QueueHeadroom:
+    """Cycles still queued beyond the wire when the cycle thread wakes while moving (h - c
+    before it commits): how close a stall came to the queue's planned end. A histogram over
+    0..cycles (negative: the kernel went past the horizon into the tail, counted as 0)."""
+
+    def __init__(self, cycles: int) -> None:
+        self.counts = [0] * (cycles + 1)
+        self.samples = 0
+        self.min = cycles
+        self.into_tail = 0  # wake-ups that found the wire past the horizon (the tail was sent)
+
+    def add(self, headroom_cycles: int) -> None:
+        if headroom_cycles < 0:
+            self.into_tail += 1
+        h = max(0, min(headroom_cycles, len(self.counts) - 1))
+        self.counts[h] += 1
+        self.samples += 1
+        self.min = min(self.min, h)
+
+    def percentile(self, share: float) -> int:
+        """Smallest headroom h with at least ``share`` of the samples at or below it."""
+        need, seen = share * self.samples, 0
+        for h, n in enumerate(self.counts):
+            seen += n
+            if seen >= need and seen:
+                return h
+        return 0
 
 
 def ring_cycles(frames_per_cycle: int) -> int:
@@ -122,7 +165,9 @@ class BcmQueueWriter:
         self.pad = GUARD_CYCLES
         self.stats = LatenessStats(late_threshold_s)
         self.send_errors = 0
-        self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
+        self.bufs = [bytearray(self.cycles * FRAME_BYTES) for _ in range(self.fpc)]  # [SYNC op, RPDO ops...]
+        self.op_ids = [frames.sync_id] + [can_id for can_id, _, _, _ in frames.rpdos]
+        self.ival_us = 0  # the ops' interval at the last renewal
         self.scratch = [bytearray(dlc) for _, dlc, _, _ in frames.rpdos]
         self._init_frames()
         self.bcm_sock: socket.socket | None = None
@@ -144,14 +189,15 @@ class BcmQueueWriter:
         self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
         self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
         self.expired = 0  # lease expiries seen
+        self.headroom = QueueHeadroom(self.cycles)  # while moving (at rest the horizon is a few cycles)
+        self.moving = False
 
     def _init_frames(self) -> None:
         """SYNC frames and the RPDO frame heads of every slot (their data is packed per cycle)."""
         for slot in range(self.cycles):
-            base = slot * self.fpc * FRAME_BYTES
-            CAN_FRAME_HEAD.pack_into(self.buf, base, self.frames.sync_id, 0)
+            CAN_FRAME_HEAD.pack_into(self.bufs[0], slot * FRAME_BYTES, self.frames.sync_id, 0)
             for j, (can_id, dlc, _, _) in enumerate(self.frames.rpdos):
-                CAN_FRAME_HEAD.pack_into(self.buf, base + (1 + j) * FRAME_BYTES, can_id, dlc)
+                CAN_FRAME_HEAD.pack_into(self.bufs[1 + j], slot * FRAME_BYTES, can_id, dlc)
 
     # ------------------------------------------------------------------ CycleWriter
     def start(self) -> None:
@@ -162,11 +208,13 @@ class BcmQueueWriter:
     def next_cycle(self) -> int:
         """Sleep until the next wake-up (every WAKE_PERIOD_S, whole cycles), then count the
         SYNCs the kernel sent meanwhile: the wire cycle."""
-        woke = wait_until(self.grid.next_s, 60e-6)
+        woke = wait_until(self.grid.next_s, 0.0)  # no spin: the kernel keeps the time, not this wake-up
         lateness, missed = self.grid.advance(woke)
         self.stats.add(lateness, missed)
         assert self.echo is not None
         self.echo.drain(self._on_sync)
+        if self.running and self.moving:
+            self.headroom.add(self.h - self.c)
         return self.c
 
     def _on_sync(self, stamp: float) -> None:
@@ -181,6 +229,7 @@ class BcmQueueWriter:
         """Deepest cycle to plan: moving, as deep as the stop after it still ends before the
         lease; else a few cycles (the drives' state machine answers the feedback)."""
         least = c + self.guard + 1
+        self.moving = moving
         if moving:
             deepest = c + self.cycles - 1 - self.pad - stop_cycles
             target = (deepest // BATCH_CYCLES) * BATCH_CYCLES
@@ -210,32 +259,39 @@ class BcmQueueWriter:
         self._renew(c)
 
     def _pack(self, x: int, cw: list[int], sp: list[int]) -> None:
-        """The RPDO data of cycle x into its ring slot (each frame packed into its scratch buffer)."""
-        base = ((x - self.op_base) % self.cycles) * self.fpc * FRAME_BYTES + FRAME_BYTES + 8
-        buf = self.buf
+        """The RPDO data of cycle x into its slot of each RPDO op's ring (packed into a scratch buffer)."""
+        offset = ((x - self.op_base) % self.cycles) * FRAME_BYTES + 8
+        bufs = self.bufs
         for j, (_, dlc, i, pack) in enumerate(self.frames.rpdos):
             data = self.scratch[j]
             pack(data, cw[i], sp[i])
-            offset = base + j * FRAME_BYTES
-            buf[offset:offset + dlc] = data
+            bufs[1 + j][offset:offset + dlc] = data
 
     def _renew(self, c: int) -> None:
-        """TX_SETUP with the whole ring, count = frames up to the lease end, trimmed ival."""
+        """TX_SETUP of every op with its whole ring, count = cycles up to the lease end, the
+        trimmed interval; at the start SYNC op first (STARTTIMER sends slot 0 at once), on a
+        renewal in the order that cannot move an RPDO before its SYNC (module docstring)."""
         self.lease_end = lease_end = c + self.cycles - 1 - self.pad
-        count = (lease_end - c) * self.fpc
+        count = lease_end - c
         flags = bcm.SETTIMER
+        ops = list(range(self.fpc))
+        ival_us = round((self.period_s - self._trim()) * 1e6)
         if not self.running:
             flags |= bcm.STARTTIMER
-            count = (lease_end - self.op_base + 1) * self.fpc
-        ival_us = round((self.period_s - self._trim()) / self.fpc * 1e6)
-        head = build_bcm_header(bcm.CAN_BCM_TX_SETUP, flags, count, 0, ival_us, 0, 0, self.frames.sync_id,
-                                self.cycles * self.fpc)
+            count = lease_end - self.op_base + 1
+        elif ival_us > self.ival_us:
+            ops.reverse()  # slower: the RPDO ops first
         assert self.bcm_sock is not None
-        try:
-            self.bcm_sock.sendmsg([head, self.buf])
-        except OSError as err:
-            self.send_errors += 1
-            raise can.CanOperationError(f"kernel queue: TX_SETUP failed: {err}") from err
+        for op in ops:
+            head = build_bcm_header(bcm.CAN_BCM_TX_SETUP, flags, count, 0, ival_us, 0, 0, self.op_ids[op],
+                                    self.cycles)
+            try:
+                self.bcm_sock.sendmsg([head, self.bufs[op]])
+            except OSError as err:
+                self.send_errors += 1
+                raise can.CanOperationError(f"kernel queue: TX_SETUP of COB-ID 0x{self.op_ids[op]:X} failed: {err}") \
+                    from err
+        self.ival_us = ival_us
         self.running = True
 
     def _trim(self) -> float:
@@ -278,7 +334,7 @@ class BcmQueueWriter:
 
     def stalled(self) -> bool:
         """The lease ran out: the kernel sent the SYNC of its last cycle (L) and stops within
-        it (count = (L - c)·(1 + n) frames from a renewal inside cycle c ends inside cycle L),
+        it (count = L - c frames per op from a renewal inside cycle c ends with cycle L),
         and a count that reached 0 cannot be renewed (the op's timer is not re-armed)."""
         return self.running and self.c >= self.lease_end
 
@@ -296,14 +352,19 @@ class BcmQueueWriter:
         self.intervals.clear()
 
     def _delete(self) -> None:
+        """TX_DELETE of every op (the SYNC op first: no SYNC without its RPDOs)."""
         if self.bcm_sock is not None and self.running:
-            try:
-                send_bcm(self.bcm_sock, build_bcm_header(bcm.CAN_BCM_TX_DELETE, 0, 0, 0, 0, 0, 0,
-                                                         self.frames.sync_id, 1))
-            except can.CanError:
-                pass
+            for can_id in self.op_ids:
+                try:
+                    send_bcm(self.bcm_sock, build_bcm_header(bcm.CAN_BCM_TX_DELETE, 0, 0, 0, 0, 0, 0, can_id, 1))
+                except can.CanError:
+                    pass
 
     def close(self) -> None:
+        if self.headroom.samples:
+            log.info(kv("kernel_queue_summary", wakes=self.headroom.samples, headroom_min=self.headroom.min,
+                        headroom_p1=self.headroom.percentile(0.01), headroom_p50=self.headroom.percentile(0.5),
+                        into_tail=self.headroom.into_tail, lease_expiries=self.expired, ring_cycles=self.cycles))
         self._delete()
         self.running = False
         if self.bcm_sock is not None:
