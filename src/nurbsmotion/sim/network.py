@@ -19,7 +19,7 @@ from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
 from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
-from nurbsmotion.sim.socketcan_bus import BatchedSocketcanBus
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus
 from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
@@ -85,7 +85,7 @@ class SimNetwork:
         self._wake = threading.Event()
         self._ticker: threading.Thread | None = None
         self.started_at = time.monotonic()
-        self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (sim/socketcan_bus.py)
+        self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (nurbsmotion/socketcan_batch.py)
 
     def add_drive(self, node_id: int, eds: str | Path | None = None, **drive_kwargs: Any) -> SimDrive:
         """Create drive ``node_id`` (keyword arguments as :class:`SimDrive`)."""
@@ -193,7 +193,7 @@ class SimNetwork:
             return self
         network = canopen.Network()
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        if self.interface == "socketcan":  # one system call per frame (sim/socketcan_bus.py)
+        if self.interface == "socketcan":  # one system call per frame (nurbsmotion/socketcan_batch.py)
             network.bus = BatchedSocketcanBus(channel=self.channel, batch=self.rx_batch, **self.bus_kwargs)
         network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
         self.network = network
