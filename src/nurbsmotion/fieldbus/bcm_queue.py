@@ -1,15 +1,16 @@
 """Kernel-timed stream on SocketCAN: the frames of the coming cycles queued in the kernel.
 
-One broadcast-manager (BCM) TX operation per frame of the cycle: the SYNC op and one op
-per RPDO COB-ID, each holding a ring of the same cycles (one frame per cycle; the ring is
-as deep as one op of 256 frames holding whole cycles of 1 + n frames would be, 64 cycles
-for 3 axes) and sending one frame every T. Created in that order, their timers expire
-together: each cycle leaves as one burst, SYNC then the RPDOs, all in one timer interrupt
-of the kernel. (One op holding whole cycles sends one frame per expiry, every T/(1 + n):
-four timer expiries per 3-axis cycle, each exposed to the timer's lateness, and every
-reader on the bus woken four times per cycle; the BCM has no flag to send several frames
-per expiry. Measured inside User-Mode Linux, docs/benchmarks.md.) Python only keeps the
-rings ahead of the kernel:
+One broadcast-manager (BCM) TX operation holds a ring of whole cycles (SYNC, then the RPDO
+of each axis; at most 256 frames, e.g. 64 cycles for 3 axes) and sends one frame every
+T/(1 + n_axes): SYNC at the start of each cycle, the RPDOs spread over it, all before the
+next SYNC. (Several ops, one per frame of the cycle, all at T, would send each cycle as one
+burst from one timer interrupt; measured, that halves the SYNC jitter inside User-Mode Linux
+and wakes every reader once per cycle instead of 1 + n times, but the kernel orders frames
+of different ops only by their timers: a delay of about T between two ops' handlers (a
+starved guest) can put an RPDO behind the next SYNC for good, and the drive then applies
+every set-point one cycle late: seen once in about 15 runs inside User-Mode Linux (node 3,
+the last 318 cycles of a job). One ring keeps the order by construction. docs/benchmarks.md, "Kernel-timed stream".) Python only keeps
+the ring ahead of the kernel:
 
 - **Where the wire is.** A raw socket that receives only SYNC counts the SYNCs the kernel
   sent (with their kernel timestamps): cycle c. The cycle thread drains it without blocking.
@@ -17,25 +18,24 @@ rings ahead of the kernel:
   may be copying them: before Linux 6.15's "extend bcm_tx_lock usage" the copy takes no
   lock). Each TX_SETUP carries the whole ring, so those slots are rewritten with identical
   bytes. Stop, feed override and abort act from c + guard + 1 on: latency (guard + 1)·T.
-- **The lease.** Each renewal sets every op's ``count`` to L - c frames, with
+- **The lease.** Each renewal sets the op's ``count`` to (L - c)·(1 + n) frames, with
   L = c + cycles - 1 - pad (SETTIMER without STARTTIMER keeps the phase). If Python stops
   renewing, the kernel sends into cycle L and stops by itself: SYNC
   stops, drives notice. The planner keeps the cycles after its horizon a controlled stop
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
-- **The period.** The BCM re-arms each op at now + ival, so the wire runs slow by the
-  timer latency of every cycle (about 2 % inside User-Mode Linux), and a held-up timer
+- **At rest, a longer lease.** While every queued cycle carries the same frames (holding:
+  the same set-points and controlwords in every slot), sending the ring round more than once
+  sends exactly what Python would have written, so the lease covers REST_LEASE_S (1 s;
+  the ring alone is 64 ms at T = 1 ms) instead of one lap: a daemon held up while the axes
+  stand still does not fault the machine; a hung one still stops SYNC within REST_LEASE_S.
+  The first renewal that writes anything else (a job, a controlword) cuts the lease back to
+  the ring in the same TX_SETUP.
+- **The period.** The BCM re-arms each frame at now + ival, so the wire runs slow by the
+  timer latency of every frame (about 6 % inside User-Mode Linux), and a held-up timer
   shifts it for good. The median of the last 64 echoed SYNC intervals trims the frequency;
   the phase against t0 + k·T is caught up at most 4 % of T per cycle (a frozen guest's
   lag of more than 4 T is accepted, not caught up).
-- **The order inside a cycle.** An RPDO op's timer expires just after the SYNC op's (it
-  was armed a few µs later at the start and re-arms after it in the same interrupt), so
-  the kernel handles them together, in that order, and the gap snaps back to those µs
-  whenever both are due. A renewal changes every op's interval with one TX_SETUP each;
-  should a timer fire between two of them, the ops already renewed run one cycle on the
-  new interval and the others on the old one. The renewal order makes that only ever
-  delay the RPDOs behind their SYNC, never move them before it: the RPDO ops first when
-  the interval grows, the SYNC op first when it shrinks.
 
 Why the BCM and not ETF + SO_TXTIME: queued SO_TXTIME frames cannot be revised (a stop or
 an override would wait for the whole queue, or the queue must be short), and an ETF root
@@ -79,6 +79,7 @@ TRIM_LIMIT = 0.3  # share of T the frequency correction may reach (a starved gue
 PHASE_GAIN = 0.1  # share of the SYNC phase error caught up per renewal
 PHASE_LIMIT = 0.04  # at most this share of T faster or slower per cycle to catch up the phase
 RE_ANCHOR_CYCLES = 4  # a phase error beyond this many periods moves the reference
+REST_LEASE_S = 1.0  # lease while every queued cycle is the same (axes at rest; module docstring)
 
 
 class QueueHeadroom:
@@ -163,11 +164,10 @@ class BcmQueueWriter:
         if self.cycles < 2 * GUARD_CYCLES + BATCH_CYCLES + 4:
             raise ValueError(f"kernel queue: {self.fpc} frames per cycle leave only {self.cycles} cycles of 256 frames")
         self.pad = GUARD_CYCLES
+        self.rest_cycles = max(self.cycles, round(REST_LEASE_S / period_s))
         self.stats = LatenessStats(late_threshold_s)
         self.send_errors = 0
-        self.bufs = [bytearray(self.cycles * FRAME_BYTES) for _ in range(self.fpc)]  # [SYNC op, RPDO ops...]
-        self.op_ids = [frames.sync_id] + [can_id for can_id, _, _, _ in frames.rpdos]
-        self.ival_us = 0  # the ops' interval at the last renewal
+        self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
         self.scratch = [bytearray(dlc) for _, dlc, _, _ in frames.rpdos]
         self._init_frames()
         self.bcm_sock: socket.socket | None = None
@@ -195,9 +195,10 @@ class BcmQueueWriter:
     def _init_frames(self) -> None:
         """SYNC frames and the RPDO frame heads of every slot (their data is packed per cycle)."""
         for slot in range(self.cycles):
-            CAN_FRAME_HEAD.pack_into(self.bufs[0], slot * FRAME_BYTES, self.frames.sync_id, 0)
+            base = slot * self.fpc * FRAME_BYTES
+            CAN_FRAME_HEAD.pack_into(self.buf, base, self.frames.sync_id, 0)
             for j, (can_id, dlc, _, _) in enumerate(self.frames.rpdos):
-                CAN_FRAME_HEAD.pack_into(self.bufs[1 + j], slot * FRAME_BYTES, can_id, dlc)
+                CAN_FRAME_HEAD.pack_into(self.buf, base + (1 + j) * FRAME_BYTES, can_id, dlc)
 
     # ------------------------------------------------------------------ CycleWriter
     def start(self) -> None:
@@ -259,40 +260,39 @@ class BcmQueueWriter:
         self._renew(c)
 
     def _pack(self, x: int, cw: list[int], sp: list[int]) -> None:
-        """The RPDO data of cycle x into its slot of each RPDO op's ring (packed into a scratch buffer)."""
-        offset = ((x - self.op_base) % self.cycles) * FRAME_BYTES + 8
-        bufs = self.bufs
+        """The RPDO data of cycle x into its ring slot (each frame packed into its scratch buffer)."""
+        base = ((x - self.op_base) % self.cycles) * self.fpc * FRAME_BYTES + FRAME_BYTES + 8
+        buf = self.buf
         for j, (_, dlc, i, pack) in enumerate(self.frames.rpdos):
             data = self.scratch[j]
             pack(data, cw[i], sp[i])
-            bufs[1 + j][offset:offset + dlc] = data
+            offset = base + j * FRAME_BYTES
+            buf[offset:offset + dlc] = data
 
     def _renew(self, c: int) -> None:
-        """TX_SETUP of every op with its whole ring, count = cycles up to the lease end, the
-        trimmed interval; at the start SYNC op first (STARTTIMER sends slot 0 at once), on a
-        renewal in the order that cannot move an RPDO before its SYNC (module docstring)."""
-        self.lease_end = lease_end = c + self.cycles - 1 - self.pad
-        count = lease_end - c
+        """TX_SETUP with the whole ring, count = frames up to the lease end, trimmed ival."""
+        span = self.rest_cycles if self.ring_uniform() else self.cycles
+        self.lease_end = lease_end = c + span - 1 - self.pad
+        count = (lease_end - c) * self.fpc
         flags = bcm.SETTIMER
-        ops = list(range(self.fpc))
-        ival_us = round((self.period_s - self._trim()) * 1e6)
         if not self.running:
             flags |= bcm.STARTTIMER
-            count = lease_end - self.op_base + 1
-        elif ival_us > self.ival_us:
-            ops.reverse()  # slower: the RPDO ops first
+            count = (lease_end - self.op_base + 1) * self.fpc
+        ival_us = round((self.period_s - self._trim()) / self.fpc * 1e6)
+        head = build_bcm_header(bcm.CAN_BCM_TX_SETUP, flags, count, 0, ival_us, 0, 0, self.frames.sync_id,
+                                self.cycles * self.fpc)
         assert self.bcm_sock is not None
-        for op in ops:
-            head = build_bcm_header(bcm.CAN_BCM_TX_SETUP, flags, count, 0, ival_us, 0, 0, self.op_ids[op],
-                                    self.cycles)
-            try:
-                self.bcm_sock.sendmsg([head, self.bufs[op]])
-            except OSError as err:
-                self.send_errors += 1
-                raise can.CanOperationError(f"kernel queue: TX_SETUP of COB-ID 0x{self.op_ids[op]:X} failed: {err}") \
-                    from err
-        self.ival_us = ival_us
+        try:
+            self.bcm_sock.sendmsg([head, self.buf])
+        except OSError as err:
+            self.send_errors += 1
+            raise can.CanOperationError(f"kernel queue: TX_SETUP failed: {err}") from err
         self.running = True
+
+    def ring_uniform(self) -> bool:
+        """Every slot of the ring holds the same frames (the kernel may send it round again)."""
+        slot = self.fpc * FRAME_BYTES
+        return self.buf == bytes(self.buf[:slot]) * self.cycles
 
     def _trim(self) -> float:
         """Period correction (s per cycle), two terms. Frequency: the median of the last
@@ -334,7 +334,7 @@ class BcmQueueWriter:
 
     def stalled(self) -> bool:
         """The lease ran out: the kernel sent the SYNC of its last cycle (L) and stops within
-        it (count = L - c frames per op from a renewal inside cycle c ends with cycle L),
+        it (count = (L - c)·(1 + n) frames from a renewal inside cycle c ends inside cycle L),
         and a count that reached 0 cannot be renewed (the op's timer is not re-armed)."""
         return self.running and self.c >= self.lease_end
 
@@ -352,13 +352,12 @@ class BcmQueueWriter:
         self.intervals.clear()
 
     def _delete(self) -> None:
-        """TX_DELETE of every op (the SYNC op first: no SYNC without its RPDOs)."""
         if self.bcm_sock is not None and self.running:
-            for can_id in self.op_ids:
-                try:
-                    send_bcm(self.bcm_sock, build_bcm_header(bcm.CAN_BCM_TX_DELETE, 0, 0, 0, 0, 0, 0, can_id, 1))
-                except can.CanError:
-                    pass
+            try:
+                send_bcm(self.bcm_sock, build_bcm_header(bcm.CAN_BCM_TX_DELETE, 0, 0, 0, 0, 0, 0,
+                                                         self.frames.sync_id, 1))
+            except can.CanError:
+                pass
 
     def close(self) -> None:
         if self.headroom.samples:
