@@ -9,8 +9,8 @@ and wakes every reader once per cycle instead of 1 + n times, but the kernel ord
 of different ops only by their timers: a delay of about T between two ops' handlers (a
 starved guest) can put an RPDO behind the next SYNC for good, and the drive then applies
 every set-point one cycle late: seen once in about 15 runs inside User-Mode Linux (node 3,
-the last 318 cycles of a job). One ring keeps the order by construction. docs/benchmarks.md, "Kernel-timed stream".) Python only keeps
-the ring ahead of the kernel:
+the last 318 cycles of a job). One ring keeps the order by construction; docs/benchmarks.md,
+"Kernel-timed stream".) Python only keeps the ring ahead of the kernel:
 
 - **Where the wire is.** A raw socket that receives only SYNC counts the SYNCs the kernel
   sent (with their kernel timestamps): cycle c. The cycle thread drains it without blocking.
