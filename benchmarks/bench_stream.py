@@ -7,14 +7,23 @@ the given time (0 = no stall). An independent listener records every SYNC and RP
 its timestamp (kernel timestamps on vcan0; send timestamps on the virtual bus) and gives:
 SYNC interval min/p50/p99/max, drift in ppm (mean interval against T), share of intervals
 outside ±5 % of T, the smallest RPDO-to-next-SYNC margin, per drive the set-points of the
-job lost and repeated on the wire, and the job's outcome.
+job lost and repeated on the wire, the job's outcome, and (vcan0, kernel queue) the queue's
+headroom while moving and its lease expiries (the writer's ``kernel_queue_summary`` line).
+
+Then, on vcan0, one job per ``--requests`` entry (stop, override to 50 %, abort), requested
+40 % into the job without a stall: the time from the request (wall clock in the master's
+process) to the first RPDO on the wire that differs from the plan (a set-point other than
+the planned row of its cycle; for abort the quick-stop controlword), against the claim
+(guard + 1)·T and the bound (guard + 1)·T + one wake-up of the cycle thread.
 
 - ``--bus vcan`` (run inside scripts/with-vcan): drives and master are two child processes,
   the master on socketcan with ``--sync kernel`` (the BCM queue) or ``--sync loop``.
 - ``--bus virtual``: drives, master (loop writer: the virtual bus has no kernel queue) and
   listener in this process; a helper process freezes this whole process.
 
-    scripts/with-vcan --timeout 900 .venv/bin/python benchmarks/bench_stream.py --bus vcan
+    scripts/with-vcan --timeout 900 .venv/bin/python benchmarks/bench_stream.py --bus vcan --periods 4
+    scripts/with-vcan --timeout 900 .venv/bin/python benchmarks/bench_stream.py --bus vcan --periods 4 \
+        --stalls "" --requests stop,stop,stop,override,override,override,abort,abort,abort
     PYTHONPATH=src python benchmarks/bench_stream.py --bus virtual
 """
 
