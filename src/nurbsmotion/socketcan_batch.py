@@ -23,7 +23,8 @@ and the drives' process fell behind the wire by seconds.
   with one ``sendmmsg`` before the thread waits again (a simulated drive answers after the
   whole burst it received, within the cycle); frames from other threads (the master's
   cycle thread, heartbeats and EMCY from the drives' ticker) leave at once with one
-  ``send``, python-can's polling send only when the kernel refuses the frame.
+  ``send``, after the receive thread's waiting frames (the order of sends across threads
+  is kept), python-can's polling send only when the kernel refuses the frame.
 
 canopen's ``Network`` takes it as its bus (``canopen.Network(bus)``, or ``network.bus``
 set before ``connect``), so the receive thread, the Notifier and the dispatch stay
@@ -157,6 +158,7 @@ class BatchedSocketcanBus(SocketcanBus):
         self._tx = FrameVector(BATCH_FRAMES, control=False)
         self._received: collections.deque[can.Message] = collections.deque()
         self._pending: list[bytes] = []  # frames the receive thread sent during the batch
+        self._send_lock = threading.Lock()  # pending frames leave before any later send
         self._rx_thread = 0
         self.lag = ReceiveLag()
 
@@ -192,14 +194,17 @@ class BatchedSocketcanBus(SocketcanBus):
                 return
 
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        """From the receive thread: kept for the batch's sendmmsg; else one ``send``."""
+        """From the receive thread: kept for the batch's sendmmsg; else one ``send``, after
+        the frames the receive thread keeps (a frame never overtakes one sent before it)."""
         data = build_can_frame(msg)
-        if self.batch and threading.get_ident() == self._rx_thread:
-            if len(self._pending) == BATCH_FRAMES:
-                self._flush()
-            self._pending.append(data)
-            return
-        self._send_now(data, msg, timeout)
+        with self._send_lock:
+            if self.batch and threading.get_ident() == self._rx_thread:
+                if len(self._pending) == BATCH_FRAMES:
+                    self._flush_locked()
+                self._pending.append(data)
+                return
+            self._flush_locked()
+            self._send_now(data, msg, timeout)
 
     def _send_now(self, data: bytes, msg: can.Message | None, timeout: float | None) -> None:
         try:
@@ -213,6 +218,10 @@ class BatchedSocketcanBus(SocketcanBus):
             super().send(msg, SEND_WAIT_S if timeout is None else timeout)
 
     def _flush(self) -> None:
+        with self._send_lock:
+            self._flush_locked()
+
+    def _flush_locked(self) -> None:
         """The receive thread's frames of the last batch, in order, with one sendmmsg."""
         pending = self._pending
         if not pending:
@@ -228,6 +237,5 @@ class BatchedSocketcanBus(SocketcanBus):
             self._send_now(data, None, None)
 
     def shutdown(self) -> None:
-        if self._pending and threading.get_ident() == self._rx_thread:
-            self._flush()
+        self._flush()
         super().shutdown()

@@ -1,6 +1,7 @@
-"""The drives' batched SocketCAN bus (nurbsmotion/socketcan_batch.py) on a real vcan0: every frame
+"""The batched SocketCAN bus (nurbsmotion/socketcan_batch.py) on a real vcan0: every frame
 received once, in order, with its kernel timestamp, however many wait in the socket; frames
-the receive thread sends leave after its batch, in order; other threads' frames at once."""
+the receive thread sends leave after its batch, in order; another thread's frame leaves at
+once, but never before a frame the receive thread sent earlier."""
 
 from __future__ import annotations
 
@@ -76,16 +77,31 @@ def test_a_backlog_larger_than_one_recvmmsg_is_read_whole(vcan0):
     assert bus.lag.wakeups == 1, "one wake-up reads the whole backlog"
 
 
-def test_a_frame_sent_from_another_thread_leaves_at_once(vcan0, open_bus):
-    peer = open_bus(0x77F)
+def test_another_threads_frame_leaves_at_once_after_the_receive_threads_earlier_ones(vcan0, open_bus):
+    peer = open_bus(0x181, 0x77F)
     bus = BatchedSocketcanBus(channel=vcan0)
+    sender = can.Bus(interface="socketcan", channel=vcan0)
+    answered, release = threading.Event(), threading.Event()
+
+    def read() -> None:  # answers the one frame, then stays in its callback
+        msg = bus.recv(2.0)
+        assert msg is not None
+        bus.send(can.Message(arbitration_id=0x181, data=b"\x01", is_extended_id=False))
+        answered.set()
+        release.wait(5.0)
+
+    reader = threading.Thread(target=read)
+    reader.start()
     try:
-        bus.recv(0.01)  # this thread is now the receive thread
-        other = threading.Thread(target=lambda: bus.send(can.Message(arbitration_id=0x77F, data=b"\x05",
-                                                                     is_extended_id=False)))
-        other.start()
-        other.join()
-        msg = peer.recv(1.0)
+        time.sleep(0.2)  # the reader waits in recv
+        sender.send(can.Message(arbitration_id=0x201, data=b"\x00", is_extended_id=False))
+        assert answered.wait(5.0)
+        assert peer.recv(0.3) is None, "the receive thread's answer left before its batch was handled"
+        bus.send(can.Message(arbitration_id=0x77F, data=b"\x05", is_extended_id=False))  # as a heartbeat
+        got = [peer.recv(1.0), peer.recv(1.0)]
     finally:
+        release.set()
+        reader.join(5.0)
+        sender.shutdown()
         bus.shutdown()
-    assert msg is not None and bytes(msg.data) == b"\x05"
+    assert [(m.arbitration_id, bytes(m.data)) for m in got if m is not None] == [(0x181, b"\x01"), (0x77F, b"\x05")]
