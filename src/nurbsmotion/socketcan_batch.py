@@ -36,6 +36,7 @@ from __future__ import annotations
 import collections
 import ctypes
 import errno
+import select
 import socket
 import struct
 import threading
@@ -174,6 +175,15 @@ class BatchedSocketcanBus(SocketcanBus):
                 self._receive_all()
             self.lag.add(time.time() - msg.timestamp, len(self._received))
         return self._received.popleft(), self._is_filtered
+
+    def frames_waiting(self) -> bool:
+        """Frames received but not yet handed out, or waiting in the socket (any thread)."""
+        if self._received:
+            return True
+        try:
+            return bool(select.select([self._fd], [], [], 0)[0])
+        except (OSError, ValueError):  # closed while stopping
+            return False
 
     def _receive_all(self) -> None:
         """Every frame the socket still holds, BATCH_FRAMES per recvmmsg, without waiting."""

@@ -105,3 +105,26 @@ def test_another_threads_frame_leaves_at_once_after_the_receive_threads_earlier_
         sender.shutdown()
         bus.shutdown()
     assert [(m.arbitration_id, bytes(m.data)) for m in got if m is not None] == [(0x181, b"\x01"), (0x77F, b"\x05")]
+
+
+def test_frames_read_but_not_handed_out_count_as_waiting(vcan0):
+    """The drives' arrival clock (sim/arrival_clock.py) asks the bus whether frames wait: the
+    frames of a batch already read into the bus are invisible to select() but still wait."""
+    from nurbsmotion.sim.arrival_clock import socket_pending
+
+    bus = BatchedSocketcanBus(channel=vcan0)
+    sender = can.Bus(interface="socketcan", channel=vcan0)
+    try:
+        pending = socket_pending(bus)
+        assert pending() is False
+        for k in range(3):
+            sender.send(can.Message(arbitration_id=0x300, data=bytes([k]), is_extended_id=False))
+        time.sleep(0.1)
+        assert pending() is True  # in the socket
+        assert bus.recv(1.0) is not None  # one wake-up reads all three, hands out one
+        assert pending() is True  # two read, not handed out
+        assert bus.recv(1.0) is not None and bus.recv(1.0) is not None
+        assert pending() is False
+    finally:
+        sender.shutdown()
+        bus.shutdown()
