@@ -45,6 +45,10 @@ class BusConfig:
     bitrate: int = 1_000_000
     sync_source: str = "auto"
     sync_window_us: int = 0  # 0x1007 written on every drive that has it; 0 = no window
+    # CiA-402 bring-up: how long a drive may take to answer one state-machine step (a real
+    # drive: milliseconds); drives emulated by processes inside User-Mode Linux need seconds
+    drive_step_timeout_ms: int = 500
+    sdo_timeout_ms: int = 500  # an SDO answer (CiA 301 client time-out) from any node
 
 
 @dataclass(frozen=True)
@@ -405,7 +409,11 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                                  "sync_window_us": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
                                                               "maximum": 2**32 - 1}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
-                                                       "maximum": 1_000_000})}), {}),
+                                                       "maximum": 1_000_000}),
+                                 "drive_step_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                                                     "exclusive_min": False, "maximum": 60_000}),
+                                 "sdo_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                                              "exclusive_min": False, "maximum": 60_000})}), {}),
     "interpolation": (_interpolation, {}),
     "axes": (_axes, {}),
     "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),

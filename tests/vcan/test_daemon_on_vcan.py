@@ -42,9 +42,10 @@ class VcanDaemon(DaemonProcess):
 
 
 def start_daemon(daemon: VcanDaemon) -> VcanDaemon:
-    """Start the daemon; once more if its bring-up timed out: the master's step time-out
-    (0.5 s, not configurable in the daemon) is shorter than what a drive process inside
-    User-Mode Linux on a busy host may need to answer (docs/vcan.md)."""
+    """Start the daemon; once more if its bring-up timed out: config/vcan.yaml gives a drive
+    3 s to answer each bring-up step (bus.drive_step_timeout_ms; a drive process inside
+    User-Mode Linux on a busy host was measured at 0.5-2 s), which a host descheduling the
+    guest can still exceed (docs/vcan.md)."""
     try:
         return daemon.start()
     except AssertionError as first:

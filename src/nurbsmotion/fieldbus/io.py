@@ -93,12 +93,12 @@ class IoNode:
     """
 
     def __init__(self, network: canopen.Network, io: IoConfig,
-                 on_change: Callable[[str, bool], None] | None = None) -> None:
+                 on_change: Callable[[str, bool], None] | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S) -> None:
         self.network = network
         self.io = io
         self.on_change = on_change
         self.node = canopen.RemoteNode(io.node_id, cia401_dictionary(io))
-        self.node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
+        self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
         network.add_node(self.node)
         self._lock = threading.Lock()
         self._inputs: dict[str, bool] | None = None

@@ -47,7 +47,7 @@ from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP, state_name
 from nurbsmotion.fieldbus.feedback import Feedback
 from nurbsmotion.fieldbus.heartbeat import MasterHeartbeat
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
-from nurbsmotion.fieldbus.homing_run import HomingRun
+from nurbsmotion.fieldbus.homing_run import READY_TIMEOUT_S, HomingRun
 from nurbsmotion.fieldbus.pdo import cycles_of_ms
 from nurbsmotion.fieldbus.playback import Playback
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
@@ -166,6 +166,7 @@ class Master:
         self._sync_source = sync_source
         self._bootup_timeout_s = bootup_timeout_s
         self._enable_timeout_s = enable_timeout_s
+        self._stuck_timeout_s = stuck_timeout_s
         self._sdo_timeout_s = sdo_timeout_s
         self._spin_s = spin_s
         self._late_threshold_s = late_threshold_s if late_threshold_s is not None else 0.1 * config.cycle_period_s
@@ -463,7 +464,8 @@ class Master:
         if self._thread is None or self._job is not None or self._homing_run is not None:
             raise FieldbusError(f"home: the axes are not holding (phase {self._phase})")
         run = HomingRun(i, self._names[i], plan, procedure, self._trails[i], self._ip[i], self._request,
-                        lambda: self._cycle, lambda: self._ctl.phase, lambda: self._fb.status[i], self._period_s)
+                        lambda: self._cycle, lambda: self._ctl.phase, lambda: self._fb.status[i], self._period_s,
+                        ready_timeout_s=max(READY_TIMEOUT_S, self._stuck_timeout_s))
         self._homing_run = run
         self._supervisor.homing_axis = i
         try:

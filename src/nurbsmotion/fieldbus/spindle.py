@@ -79,7 +79,7 @@ class SpindleDrive:
 
     def __init__(self, network: canopen.Network, config: SpindleConfig,
                  on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None,
-                 cycle_period_s: float | None = None) -> None:
+                 cycle_period_s: float | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S) -> None:
         """``master_heartbeat``: (master node id, consumer time ms) for 0x1016:01, so the drive
         stops on its own when the daemon dies (as the axes do); None writes nothing.
         ``cycle_period_s``: the SYNC period, written to 0x60C2 and 0x1006 where the drive has
@@ -90,7 +90,7 @@ class SpindleDrive:
         self.master_heartbeat = master_heartbeat
         self.on_fault = on_fault
         self.node = canopen.RemoteNode(config.node_id, config.od)
-        self.node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
+        self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
         network.add_node(self.node)
         self._sdo_lock = threading.Lock()  # one SDO transfer at a time (monitor vs commands)
         self._lock = threading.Lock()

@@ -41,10 +41,11 @@ class MachineDevices:
             watch = (config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple) \
                 if mon.master_heartbeat_ms else None
             self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
-                                        master_heartbeat=watch, cycle_period_s=config.cycle_period_s)
+                                        master_heartbeat=watch, cycle_period_s=config.cycle_period_s,
+                                        sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
-            node = IoNode(network, config.io)
+            node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
             self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip))
 
     def bring_up(self) -> None:
