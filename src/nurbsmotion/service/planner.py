@@ -121,6 +121,7 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
 
 
 MDI_NAME = "<mdi>"  # the program name of MDI lines (G-code, errors read '<mdi>:1: ...')
+JOG_NAME = "<jog>"  # a jog's one G53 line (service.jog)
 
 
 def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | None = None) -> Program:
@@ -129,7 +130,7 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, name)
-    if suffix in GCODE_SUFFIXES or name == MDI_NAME:
+    if suffix in GCODE_SUFFIXES or name in (MDI_NAME, JOG_NAME):
         return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
