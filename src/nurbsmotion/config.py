@@ -147,7 +147,7 @@ class MachineConfig:
     master: MasterConfig = MasterConfig()
     tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
     tool_table: Any = field(default=None, compare=False, repr=False)
-    spindle: str | None = None  # 'none' or absent: no spindle drive
+    spindle: Any = None  # 'none' or absent: no spindle drive; else a spindle_config.SpindleConfig
     require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
@@ -438,8 +438,9 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
     if cfg.io is not None:
-        from nurbsmotion.io_config import check_io_node
+        from nurbsmotion.io_config import check_io_limits, check_io_node
         check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
+        check_io_limits(cfg.io, cfg.axis_names(), fail)
     mon = cfg.monitoring
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
@@ -499,8 +500,9 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
     cfg = _with_descriptions(cfg, base_dir, errors)
     if errors:
         raise InputErrors(errors)
+    from nurbsmotion.spindle_config import load_spindle_description
     from nurbsmotion.tooling_config import load_tool_file
-    return load_tool_file(cfg, base_dir)
+    return load_spindle_description(load_tool_file(cfg, base_dir), base_dir)
 
 
 def default_eds_path() -> str:

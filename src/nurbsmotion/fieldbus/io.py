@@ -161,8 +161,14 @@ class IoNode:
         self._sdo(step, pdo.save)
 
     def close(self) -> None:
-        self.node.tpdo[1].callbacks.clear()
-        self.network.unsubscribe(self.node.tpdo[1].cob_id, self.node.tpdo[1].on_message)
+        """Stop taking its TPDO (nothing to undo when the bring-up did not get that far)."""
+        tpdo = self.node.tpdo[1]
+        tpdo.callbacks.clear()
+        if tpdo.cob_id is not None:
+            try:
+                self.network.unsubscribe(tpdo.cob_id, tpdo.on_message)
+            except (KeyError, ValueError):  # never subscribed: the mapping step failed
+                pass
 
     # ------------------------------------------------------------------ inputs
     @property

@@ -57,6 +57,7 @@ from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import CycleWriter, CyclicFrames, LoopWriter
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # fewer system calls per cycle (its docstring)
 
 log = logging.getLogger(__name__)
 
@@ -171,6 +172,7 @@ class Master:
         self._period_s = config.cycle_period_s
         self._progress_every = cycles_of_ms(progress_period_s * 1000.0, self._period_s)
         self._network: canopen.Network | None = None
+        self._extra_receive_ids: list[int] = []  # receive_from(): the spindle's and I/O node's frames
 
         axes = config.axes
         n = self._n = len(axes)
@@ -247,6 +249,22 @@ class Master:
     def _phase(self) -> str:
         return self._ctl.phase.value
 
+    @property
+    def network(self) -> canopen.Network | None:
+        """The connected canopen Network (after connect()): other nodes (spindle, I/O) join it."""
+        return self._network
+
+    def receive_from(self, node_id: int, cob_ids: tuple[int, ...] = ()) -> None:
+        """Also accept another node's EMCY, SDO answers, heartbeat and ``cob_ids`` (its TPDOs)
+        when the kernel-queue receive filter is on (fieldbus.spindle, fieldbus.io)."""
+        self._extra_receive_ids += [c.COB_EMCY + node_id, c.COB_SDO_TX + node_id, c.COB_HEARTBEAT + node_id, *cob_ids]
+        self._filter_received()
+
+    def quick_stop(self, reason: str) -> None:
+        """Quick stop every axis now, with or without a job (then disabled, as an abort):
+        the machine I/O's e-stop input (service.machine_io)."""
+        self._request("quick_stop", reason)
+
     # ------------------------------------------------------------------ connection
     def connect(self) -> None:
         """Open the bus (if not given), start canopen's notifier and the feedback callbacks."""
@@ -255,7 +273,8 @@ class Master:
         if self._bus is None:
             bus_cfg = self.config.bus
             try:
-                self._bus = can.Bus(interface=bus_cfg.interface, channel=bus_cfg.channel, bitrate=bus_cfg.bitrate)
+                self._bus = BatchedSocketcanBus(channel=bus_cfg.channel) if bus_cfg.interface == "socketcan" else \
+                    can.Bus(interface=bus_cfg.interface, channel=bus_cfg.channel, bitrate=bus_cfg.bitrate)
             except (can.CanError, OSError, ValueError, ImportError) as err:
                 raise FieldbusError(f"bus {bus_cfg.interface}:{bus_cfg.channel}: cannot open ({err})") from None
         network = canopen.Network(self._bus)
@@ -563,7 +582,7 @@ class Master:
             self._bus.set_filters(None)
             return
         ids = [base + node for node in self._node_ids for base in (c.COB_EMCY, c.COB_SDO_TX, c.COB_HEARTBEAT)]
-        ids += [frame.cob_id for plan in self.plans for frame in plan.layout.tpdos]
+        ids += [frame.cob_id for plan in self.plans for frame in plan.layout.tpdos] + self._extra_receive_ids
         self._bus.set_filters([{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in ids])
 
     def shutdown(self, timeout_s: float = 5.0) -> None:

@@ -22,6 +22,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.service.devices import open_devices
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
@@ -84,9 +85,15 @@ class Daemon:
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         link, self.simulation = self._open_motion(self.config)
+        try:
+            devices = open_devices(self.config, link)  # spindle and I/O node, after the axes
+        except BaseException:
+            link.shutdown(2.0)
+            self._stop_simulation()
+            raise
         self.controller = Controller(self.config, link,
                                      lambda name, text, start, options: plan_job(name, text, self.config, start, options),
-                                     self.records, self.simulation, machine_state)
+                                     self.records, self.simulation, machine_state, devices)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()
