@@ -39,3 +39,21 @@ def test_unknown_options_are_refused():
         Master(_config(), sync_source="magic")
     with pytest.raises(InputError, match="gc_mode"):
         Master(_config(), gc_mode="off")
+
+
+def _socketcan_bus_without_socket():
+    """An instance of the master's own SocketCAN bus class, never opened (no AF_CAN here)."""
+    from nurbsmotion.socketcan_batch import BatchedSocketcanBus
+    return BatchedSocketcanBus.__new__(BatchedSocketcanBus)
+
+
+def test_auto_sync_source_queues_in_the_kernel_on_the_masters_own_socketcan_bus():
+    # the daemon's bus on socketcan is the batched subclass: 'auto' once compared the class
+    # name with "SocketcanBus" and sent every daemon on socketcan to the loop writer
+    from nurbsmotion.fieldbus.bcm_queue import BcmQueueWriter
+    from nurbsmotion.fieldbus.writer import LoopWriter
+
+    bus = _socketcan_bus_without_socket()
+    assert isinstance(Master(_config(), bus=bus, sync_source="auto")._make_writer(), BcmQueueWriter)
+    assert isinstance(Master(_config(), bus=bus, sync_source="loop")._make_writer(), LoopWriter)
+    assert isinstance(Master(_config(), bus=object(), sync_source="auto")._make_writer(), LoopWriter)

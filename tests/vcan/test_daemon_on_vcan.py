@@ -86,6 +86,8 @@ def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_a
     sim.stop()
 
     assert job["outcome"]["outcome"] == "completed", job["outcome"]
+    # the daemon queues the cycles in the kernel (sync_source auto on socketcan), not its loop writer
+    assert "cycle_writer sync_source=kernel writer=BcmQueueWriter" in daemon.log()
     plan = planned_counts(Path(job["folder"]), daemon.config)
     assert np.allclose(plan[-1], plan[0], atol=1)  # Wang's curve is closed: back at the origin
     inexact = [axis.name for j, axis in enumerate(daemon.config.axes)

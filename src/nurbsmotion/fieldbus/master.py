@@ -32,6 +32,7 @@ from typing import Any, Callable
 
 import can
 import canopen
+from can.interfaces.socketcan import SocketcanBus
 import numpy as np
 
 from nurbsmotion import cia402 as c
@@ -633,8 +634,11 @@ class Master:
 
     # ------------------------------------------------------------------ the cycle loop
     def _use_kernel_queue(self) -> bool:
+        """'auto': any SocketCAN bus, python-can's or a subclass (the master's own is the
+        batched one, nurbsmotion.socketcan_batch; comparing the class name sent the daemon on
+        socketcan to the loop writer)."""
         if self._sync_source == "auto":
-            return type(self._bus).__name__ == "SocketcanBus"
+            return isinstance(self._bus, SocketcanBus)
         return self._sync_source == "kernel"
 
     def _make_writer(self) -> CycleWriter:
@@ -654,6 +658,8 @@ class Master:
         self._enable_error = None
         if self._writer is None:
             self._writer = self._make_writer()
+            log.info(kv("cycle_writer", sync_source="kernel" if self._use_kernel_queue() else "loop",
+                        writer=type(self._writer).__name__))
         self._filter_received()
         self._supervisor.reset()
         self._ctl.handle("enable", None, 0, self._fb)
