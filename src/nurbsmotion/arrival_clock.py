@@ -28,8 +28,6 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-RETRY_S = 0.002  # while frames wait in the socket, judge again this much later
-
 
 class ArrivalClock:
     """Arrival time of the last handled frame and the judging time derived from it.

@@ -39,3 +39,22 @@ def test_drive_faults_with_emcy_8130_when_the_master_heartbeat_stops(bench: Benc
     wait_until(lambda: bench.frames.of(0x82), what="EMCY after the master went silent")
     assert struct.unpack_from("<H", bench.frames.of(0x82)[0])[0] == 0x8130
     assert drive.state is State.FAULT
+
+
+def test_a_sync_arriving_after_the_deadline_finds_the_loss_before_it_counts(bench: Bench) -> None:
+    """A drive working through a backlog judges at each SYNC's arrival (its ticker does not
+    poll while frames wait): the TPDO answering the first SYNC that arrived more than the
+    consumer time after the last heartbeat already reports FAULT."""
+    drive, node = bench.add(2)
+    node.sdo[0x1016][1].raw = MASTER_ID << 16 | 300
+    bench.operational(2)
+    bench.enable(2)
+    for k in range(3):  # heartbeats that arrived at 0.0, 0.1, 0.2 s
+        bench.send(0x700 + MASTER_ID, b"\x05", at_s=0.1 * k)
+    bench.sync(at_s=0.45)  # within 300 ms of the last heartbeat
+    assert drive.state is State.OPERATION_ENABLED
+    bench.frames.clear()
+    bench.sync(at_s=0.55)  # 350 ms after it: the master fell silent
+    statusword = struct.unpack_from("<H", bench.frames.of(0x182)[0])[0]
+    assert statusword & 0x08, f"statusword 0x{statusword:04X} answers the late SYNC without the fault"
+    assert struct.unpack_from("<H", bench.frames.of(0x82)[0])[0] == 0x8130

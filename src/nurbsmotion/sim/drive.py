@@ -36,7 +36,7 @@ from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim import axis as axis_module
-from nurbsmotion.arrival_clock import RETRY_S, ArrivalClock, socket_pending
+from nurbsmotion.arrival_clock import ArrivalClock, socket_pending
 from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
 from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
@@ -341,9 +341,9 @@ class SimDrive:
                 self._next_heartbeat += self._heartbeat_period_s
                 if self._next_heartbeat <= now:  # fell behind: no burst of catch-up heartbeats
                     self._next_heartbeat = now + self._heartbeat_period_s
+            # while frames wait, the receive thread judges at each SYNC it handles (_handle_sync):
+            # polling here then would only take the guest's CPU from that thread (docs/vcan.md)
             deadline = min(now + TICK_MAX_S, self._judge_timeouts(now))
-            if not self._arrival.caught_up():  # frames wait: judge again once more are read
-                deadline = min(deadline, now + RETRY_S)
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
@@ -354,6 +354,15 @@ class SimDrive:
         """Heartbeat consumer, SYNC loss and RPDO timers at ``now`` seen through the reception
         lag (nurbsmotion.arrival_clock); returns when (drive clock) the next of them falls due."""
         arrival_now = self._arrival.judging_time(now)
+        self._judge_at(arrival_now)
+        due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),
+                  self._rpdo_timers.next_deadline())
+        return due + max(0.0, now - arrival_now)
+
+    def _judge_at(self, arrival_now: float) -> None:
+        """Heartbeat consumer, SYNC loss and RPDO timers at ``arrival_now`` on the arrival
+        timeline: from the ticker (judging_time) and from the receive thread at each SYNC's
+        arrival, before the SYNC counts (a gap before it is judged as a firmware judges it)."""
         for producer in self._heartbeat_consumer.newly_failed(arrival_now):
             if not self.silent:
                 # judged_at_s: the arrival-timeline time of the judgement, as wall-clock time
@@ -362,9 +371,6 @@ class SimDrive:
                                judged_at_s=f"{arrival_now - self._wall_to_clock_s:.3f}"))
                 self.axis.raise_fault(EmcyCode.HEARTBEAT)
         self._watch_sync_and_rpdos(arrival_now)
-        due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),
-                  self._rpdo_timers.next_deadline())
-        return due + max(0.0, now - arrival_now)
 
     def _watch_sync_and_rpdos(self, now: float) -> None:
         """Sync loss (no SYNC for loss_periods, while IP/CSP is running: EMCY 0x8700, fault)
@@ -805,6 +811,8 @@ class SimDrive:
                 self.stats.syncs += 1  # counted once the SYNC's TPDOs are out
 
     def _handle_sync(self, data: bytes, now: float) -> None:
+        if self._frame_times:  # ``now`` is this SYNC's arrival: the bus is known up to here
+            self._judge_at(now)
         self._sync_index += 1
         while self._sync_faults and self._sync_faults[0][0] <= self._sync_index:
             self._apply_injection(self._sync_faults.pop(0)[2])
