@@ -160,3 +160,15 @@ def test_a_limit_input_faults_the_job_with_one_line_naming_the_axis(machine):
     assert [e["event"] for e in outcome["machine_events"]] == ["job_machine_fault", "devices_off"]
     with pytest.raises(InputError, match="limit input limit_x_max .* axis X is on its limit switch"):
         controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")
+
+
+def test_m5_and_m9_after_the_last_move_are_done_and_recorded_before_the_job_end(machine):
+    # the usual end of a CAM program; their row is only reached once playback is over
+    controller = machine.controller
+    job = controller.submit("end.nc", "G21 G90\nS3000 M3\nM8\nG01 X5 F1200\nM5 M9\nM30\n")["job"]["id"]
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "completed", outcome["reason"]
+    events = [(e["event"], e.get("code")) for e in outcome["machine_events"]]
+    assert events[-3:] == [("spindle_event", "M5"), ("coolant_event", "M9"), ("devices_off", None)]
+    m9 = outcome["machine_events"][-2]
+    assert m9["at"] == "end.nc:5" and m9["outputs"]["coolant_flood"] is False

@@ -94,11 +94,17 @@ class JobEvents:
     def start(self) -> None:
         self._thread.start()
 
-    def finish(self) -> None:
-        """The job ended: stop the thread (the controller switches everything off)."""
+    def finish(self, every_row_sent: bool = False) -> None:
+        """The job ended: stop the thread (the controller switches everything off). With
+        ``every_row_sent`` (the job ran to its end) the events not done yet are done now: those
+        after the last move (``M5 M9`` before ``M30``) have their row only once playback is over."""
         self._finished.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(2.0)
+        if every_row_sent and not self._thread.is_alive():
+            while self._next < len(self.events):
+                self._next += 1
+                self._do(self.events[self._next - 1])
 
     def _ready(self, e: RowEvent, index: int, held_row: int | None) -> bool:
         """A wait row is done while the master holds there; any other event once playback is

@@ -68,7 +68,7 @@ class MachineJobs:
         if self.devices is None:
             return
         if job.events is not None:
-            job.events.finish()
+            job.events.finish(every_row_sent=result.outcome == "done" and not job.machine_fault)
         hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
         try:
             self.devices.all_off(hard)
