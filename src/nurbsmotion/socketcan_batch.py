@@ -163,6 +163,16 @@ class BatchedSocketcanBus(SocketcanBus):
         self._rx_thread = 0
         self.lag = ReceiveLag()
 
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        """A frame already read in a batch is handed out at once; python-can's ``recv`` (a clock
+        read per call, a trapped system call inside User-Mode Linux) only to wait for more."""
+        received = self._received
+        while received:
+            msg = received.popleft()
+            if self._is_filtered or self._matches_filters(msg):
+                return msg
+        return super().recv(timeout)
+
     def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
         if not self._received:
             self._rx_thread = threading.get_ident()
