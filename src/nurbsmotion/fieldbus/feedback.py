@@ -9,6 +9,7 @@ loop; a TPDO1 is stamped with it.
 from __future__ import annotations
 
 import collections
+import math
 import time
 from typing import Any, Callable
 
@@ -20,6 +21,7 @@ from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3
 
 Callback = Callable[[int, bytearray, float], None]
+OFFSET_REFRESH_S = 1.0  # ArrivalListener reads the wall clock's offset again after this long
 
 
 def arrival_perf_s(timestamp: float) -> float:
@@ -142,10 +144,20 @@ class Feedback:
 
 class ArrivalListener(can.Listener):
     """python-can listener on the master's notifier: every handled frame moves the arrival
-    clock (after canopen's own listener has dispatched it to the callbacks)."""
+    clock (after canopen's own listener has dispatched it to the callbacks).
+
+    One clock read per frame (arrival_perf_s takes three): the wall-clock to perf_counter
+    offset is read again at most every OFFSET_REFRESH_S. Every frame passes here, and inside
+    User-Mode Linux each clock read is a trapped system call (docs/vcan.md, "The drives' lag")."""
 
     def __init__(self, clock: ArrivalClock) -> None:
         self.clock = clock
+        self._offset_s = 0.0  # time.time() - time.perf_counter()
+        self._offset_read_s = -math.inf
 
     def on_message_received(self, msg: can.Message) -> None:
-        self.clock.arrived(arrival_perf_s(msg.timestamp), time.perf_counter())
+        now = time.perf_counter()
+        if now - self._offset_read_s > OFFSET_REFRESH_S:
+            self._offset_s, self._offset_read_s = time.time() - now, now
+        stamp = msg.timestamp
+        self.clock.arrived(now if stamp <= 0.0 else min(now, stamp - self._offset_s), now)
