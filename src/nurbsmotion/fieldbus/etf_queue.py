@@ -5,7 +5,12 @@ time (CLOCK_TAI) and hands it to the driver within [txtime - delta, txtime]; a f
 send by its txtime (a late qdisc watchdog) is dropped, never sent late, and reported on the
 sending socket's error queue (SOF_TXTIME_REPORT_ERRORS: ``sock_extended_err`` with origin
 SO_EE_ORIGIN_TXTIME, code MISSED; a txtime already past when queued: INVALID_PARAM, and
-sendmsg fails with ENOBUFS). CAN_RAW passes SCM_TXTIME to the skb since Linux 5.19.
+sendmsg fails with ENOBUFS). CAN_RAW passes SCM_TXTIME to the skb since kernel commit
+51a0d5e51178 (present in the 6.1 guest of scripts/with-vcan).
+
+Not the product's stream: measured against the BCM ring (benchmarks/bench_etf.py), it loses
+set-points where the ring only delays them, and a stop would wait for the whole queue;
+docs/fieldbus.md, "ETF or BCM". Kept for that benchmark and for whoever measures again.
 
 What it needs (measured inside User-Mode Linux 6.1, docs/fieldbus.md "ETF or BCM"):
 - CAP_NET_ADMIN for a CLOCK_TAI SO_TXTIME socket, and root for ``tc``;
@@ -15,7 +20,10 @@ What it needs (measured inside User-Mode Linux 6.1, docs/fieldbus.md "ETF or BCM
   drops every frame without a launch time (SDO, NMT: sendmsg fails with ENOBUFS);
 - on vcan, the driver's own echo (``modprobe vcan echo=1``): without it the CAN core loops
   a frame back to local readers when it is *queued*, so readers (and ``nurbsmotion sim``)
-  would see the frames before their launch time. Real CAN drivers echo on transmission.
+  would see the frames before their launch time. Real CAN drivers echo on transmission;
+- a reader on the same host cannot time these frames: the echoed skb keeps the txtime in
+  ``skb->tstamp``, so its SO_TIMESTAMPNS *is* the txtime (every interval exactly T). The driver's
+  software TX stamp (``send_at(..., report_sent=True)``, ``sent_stamps``) is the transmit time.
 
 Queued frames cannot be revised or withdrawn (only deleting the qdisc flushes them): a stop
 reaches the wire after the queued horizon, (H + 1)·T, and H is also the longest stall survived.
@@ -133,7 +141,7 @@ class TxtimeSocket:
     def drain_dropped(self) -> list[DroppedFrame]:
         """Every frame the qdisc dropped since the last call (the socket's error queue); the
         transmit stamps found there go to ``sent_stamps``."""
-        dropped = []
+        dropped: list[DroppedFrame] = []
         while True:
             try:
                 frame, ancdata, _, _ = self.sock.recvmsg(CAN_FRAME.size, ERRQUEUE_CONTROL_BYTES,
