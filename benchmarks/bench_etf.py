@@ -238,14 +238,14 @@ class RunFigures:
         held = "/".join(f"{h:.0f}" for h in self.held_ms) or "-"
         t = self.transmit_ms
         return (f"| {self.variant} | {held} | {self.load} | {np.median(d):.3f} | {np.percentile(d, 99):.3f} | "
-                f"{d.max():.2f} | {self.outside_share * 100:.1f} | {np.percentile(t, 99):.3f} / {t.max():.2f} / "
+                f"{d.max():.2f} | {self.outside_share * 100:.1f} | {t.min():.3f} / {np.percentile(t, 99):.3f} / {t.max():.2f} / "
                 f"{np.mean(np.abs(t - self.period_ms) > 0.05 * self.period_ms) * 100:.1f} | {self.starved} | {self.doubled} | {self.split} | "
                 f"{'/'.join(map(str, self.lost))} | {self.margin_ms:.3f} | {launch} | {queue} | "
                 f"{self.sdo_seen}/{self.sdo_sent}, max {self.sdo_max_ms:.1f} ms |")
 
 
 HEADER = ("| writer | stalls held ms | load guest / host | SYNC p50 ms | p99 ms | max ms | outside ±5 % T % | "
-          "at transmit p99 / max ms / outside % | starved | overwritten | split | lost X/Y/Z | min RPDO→SYNC ms | launch late p50/p99/max ms | "
+          "at transmit min / p99 / max ms / outside % | starved | overwritten | split | lost X/Y/Z | min RPDO→SYNC ms | launch late p50/p99/max ms | "
           "queue | SDO seen/sent |\n" + "|---" * 16 + "|")
 
 
@@ -476,6 +476,7 @@ def main() -> int:
         mine = [f for f in figures if f.variant == variant]
         p99 = [np.percentile(f.intervals_ms, 99) for f in mine]
         print(f"{variant}: p99 {min(p99):.3f}-{max(p99):.3f} ms, max {max(f.intervals_ms.max() for f in mine):.2f} ms, "
+              f"at transmit min {min(f.transmit_ms.min() for f in mine):.3f} ms, "
               f"starved {sum(f.starved for f in mine)}, overwritten {sum(f.doubled for f in mine)}, "
               f"split {sum(f.split for f in mine)}, lost {sum(sum(f.lost) for f in mine)}", flush=True)
     return 0
