@@ -12,8 +12,13 @@ run after run in alternation (A/B interleaved: the host's load changes under oth
 
 The writer runs in its own process (SCHED_FIFO 20, as the master's cycle thread); ``--stalls``
 freezes it with SIGSTOP (the daemon stalled) at 1, 2, 3, ... s. An independent listener
-process records every frame with its kernel timestamp. Per run: SYNC interval p50/p99/max
-over the job, share outside ±5 % T, per drive the SYNC intervals with no RPDO (starved) or
+process records every frame with its kernel timestamp, on vcan1: a reader of vcan0 cannot
+time ETF frames (the echoed skb keeps its txtime as timestamp, so every interval reads T
+exactly), so can-gw forwards every vcan0 frame to vcan1 without its stamp and the copy is
+stamped when vcan0 delivers the original (this adds the guest's receive softirq delay to
+both variants alike). A second column, "at transmit", times SYNC at the driver: a vcan0
+reader's stamps for the BCM (stamped in vcan_tx), the driver's TX software stamps of the ETF
+socket. Per run: SYNC interval p50/p99/max over the job, share outside ±5 % T, per drive the SYNC intervals with no RPDO (starved) or
 with two (one overwritten), RPDOs that came after the next SYNC (a cycle split by a SYNC),
 set-points lost on the wire, frames the qdisc dropped, cycles the ETF writer had to skip
 (stall longer than its queue), the smallest RPDO→next SYNC margin, and SDO frames (0x601,
@@ -22,7 +27,8 @@ the host's /proc/loadavg as a host loop writes it into FILE (visible in the gues
 
 ``--setup`` (root, inside scripts/with-vcan) makes vcan0 echo in the driver (vcan echo=1, so
 listeners see a frame when the qdisc lets it go, as on a real CAN controller) under a prio
-qdisc whose band 0 is ETF (SO_PRIORITY 6) and band 1 a FIFO for everything else:
+qdisc whose band 0 is ETF (SO_PRIORITY 6) and band 1 a FIFO for everything else, and adds
+vcan1 with the can-gw rule; both variants run on that same device:
 
     while :; do cat /proc/loadavg > /tmp/hostload.tmp; mv /tmp/hostload.tmp /tmp/hostload; sleep 1; done &
     scripts/with-vcan --timeout 1200 .venv/bin/python benchmarks/bench_etf.py --setup \
