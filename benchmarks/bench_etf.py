@@ -311,9 +311,24 @@ def setup_device(delta_us: int) -> None:
     load_module("net/can/can-gw")
     for dev in (CHANNEL, LISTEN_CHANNEL):
         sh(f"ip link add dev {dev} type vcan && ip link set dev {dev} txqueuelen 1000 && ip link set up dev {dev}")
+    print(f"ETF as the root qdisc, a frame without a launch time: {plain_send_under_root_etf(delta_us)}", flush=True)
     sh("tc qdisc add dev vcan0 root handle 1: prio bands 2 priomap 1 1 1 1 1 1 0 1 1 1 1 1 1 1 1 1")
     set_delta(delta_us)
     add_can_gateway(CHANNEL, LISTEN_CHANNEL)
+
+
+def plain_send_under_root_etf(delta_us: int) -> str:
+    """What an SDO's send does while ETF is vcan0's root qdisc (then removed again)."""
+    sh(f"tc qdisc add dev vcan0 root etf clockid CLOCK_TAI delta {delta_us * 1000}")
+    with socket.socket(socket.PF_CAN, socket.SOCK_RAW, socket.CAN_RAW) as plain:
+        plain.bind((CHANNEL,))
+        try:
+            plain.send(CAN_FRAME.pack(SDO_ID, 8, bytes(8)))
+            outcome = "sent"
+        except OSError as err:
+            outcome = f"refused, {err.strerror} (errno {err.errno})"
+    sh("tc qdisc del dev vcan0 root")
+    return outcome
 
 
 def add_can_gateway(src: str, dst: str) -> None:
