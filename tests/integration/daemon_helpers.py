@@ -3,6 +3,7 @@ private virtual bus, a private socket and a private data directory."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -49,6 +51,24 @@ def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(poll_s)
+
+
+@contextlib.contextmanager
+def daemon_in_process(data_dir: Path, extra_yaml: str, prefix: str) -> Iterator[Any]:
+    """A started service.daemon.Daemon (this process) on CONFIG + ``extra_yaml``, a private
+    virtual channel and socket; closed at the end."""
+    from nurbsmotion.service.daemon import Daemon
+
+    folder = Path(tempfile.mkdtemp(prefix="nm-"))
+    path = folder / "machine.yaml"
+    path.write_text(CONFIG.format(channel=f"{prefix}-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
+                                  data_dir=data_dir) + extra_yaml)
+    daemon = Daemon(load_config(path))
+    daemon.start()
+    try:
+        yield daemon
+    finally:
+        daemon.close()
 
 
 def subprocess_environment(notify_socket: Path | None = None) -> dict[str, str]:

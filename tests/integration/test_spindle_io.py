@@ -4,19 +4,16 @@ coolant outputs, e-stop and limit inputs, job end and abort stopping everything,
 
 from __future__ import annotations
 
-import tempfile
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from nurbsmotion.cli.status import format_status
-from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import CONFIG, wait_until
+from tests.integration.daemon_helpers import daemon_in_process, wait_until
 
 SPINDLE_IO = """\
 spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, at_speed_timeout_s: 3.0}
@@ -30,16 +27,8 @@ MILL = "G21 G90\nS6000 M3\nM8\nG01 X5 F3000\nS9000\nG01 X10\nM5 M9\nG01 X0\nM30\
 
 @pytest.fixture
 def machine(tmp_path: Path) -> Iterator[Daemon]:
-    folder = Path(tempfile.mkdtemp(prefix="nm-"))
-    path = folder / "machine.yaml"
-    path.write_text(CONFIG.format(channel=f"sp-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
-                                  data_dir=tmp_path / "data") + SPINDLE_IO)
-    daemon = Daemon(load_config(path))
-    daemon.start()
-    try:
+    with daemon_in_process(tmp_path / "data", SPINDLE_IO, "sp") as daemon:
         yield daemon
-    finally:
-        daemon.close()
 
 
 def sim(daemon: Daemon):

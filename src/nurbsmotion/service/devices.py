@@ -17,7 +17,7 @@ from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import IoNode
 from nurbsmotion.fieldbus.spindle import SpindleDrive
 from nurbsmotion.log import kv
-from nurbsmotion.service.machine_io import MachineIo, SafetyTrip
+from nurbsmotion.service.machine_io import AxisMotion, MachineIo, SafetyTrip
 from nurbsmotion.spindle_config import SpindleConfig
 
 log = logging.getLogger(__name__)
@@ -30,6 +30,7 @@ class MachineDevices:
         self.link = link
         self.on_trip: Callable[[SafetyTrip], None] = lambda trip: None
         self.on_spindle_fault: Callable[[str], None] = lambda message: None
+        self.axis_direction: Callable[[str], int] = lambda axis: 0  # the way an axis moves now (+1/-1/0)
         network = getattr(link, "network", None)
         if network is None:
             raise FieldbusError("devices: the master is not connected")
@@ -46,7 +47,8 @@ class MachineDevices:
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
-            self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip))
+            self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip),
+                                moving=lambda axis: self.axis_direction(axis))
 
     def bring_up(self) -> None:
         """I/O node first (an e-stop pressed at start is known before anything turns), then the
@@ -58,9 +60,9 @@ class MachineDevices:
         if self.spindle is not None:
             self.spindle.bring_up()
 
-    def start_refusal(self) -> str | None:
-        """Why motion may not start (e-stop, limit input), else None."""
-        return self.io.start_refusal() if self.io is not None else None
+    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+        """Why motion may not start (e-stop, limit input unless ``jog`` moves off it), else None."""
+        return self.io.start_refusal(jog) if self.io is not None else None
 
     def all_off(self, hard: bool) -> None:
         """Job end (``hard`` False: the spindle decelerates to 0 with its ramp) or abort, fault,

@@ -18,14 +18,17 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
-from nurbsmotion.service.machine_io import SafetyTrip
+from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
 from nurbsmotion.service.planner import PlannedJob
 
 log = logging.getLogger(__name__)
+DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
 ENDED_SOFTLY = ("done", "stopped")  # master JobResult outcomes after which the spindle ramps down
 
 
@@ -37,10 +40,11 @@ class MachineJobs:
         if devices is not None:
             devices.on_trip = self.trip
             devices.on_spindle_fault = self.spindle_fault
+            devices.axis_direction = self.axis_direction
 
     # ------------------------------------------------------------------ before a job
-    def start_refusal(self) -> str | None:
-        return self.devices.start_refusal() if self.devices is not None else None
+    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+        return self.devices.start_refusal(jog) if self.devices is not None else None
 
     def reset_refusal(self) -> str | None:
         """Reset is refused while the e-stop input is active."""
@@ -103,6 +107,19 @@ class MachineJobs:
             self.link.quick_stop(trip.message)
             if self.devices is not None:
                 threading.Thread(target=self.devices.all_off, args=(True,), name="estop-devices", daemon=True).start()
+
+    def axis_direction(self, axis: str) -> int:
+        """+1 / -1: the way the running job moves ``axis`` (machine mm) around the set-point the
+        master sends now (DIRECTION_ROWS either side); 0 without a job or at rest."""
+        job = self.running_job()
+        index = self.link.status().job_index
+        axis_map = self.link.axis_map
+        if job is None or index is None or axis not in axis_map.names:
+            return 0
+        i, rows = axis_map.names.index(axis), job.plan.counts
+        last = len(rows) - 1
+        step = int(rows[min(index + DIRECTION_ROWS, last)][i]) - int(rows[min(max(index - DIRECTION_ROWS, 0), last)][i])
+        return int(np.sign(step * axis_map.sign[i]))
 
     def spindle_fault(self, message: str) -> None:
         """The spindle left OPERATION ENABLED on its own: the running job is aborted."""
