@@ -38,11 +38,8 @@ class MachineDevices:
         self.io: MachineIo | None = None
         if isinstance(config.spindle, SpindleConfig):
             link.receive_from(config.spindle.node_id)
-            mon = config.monitoring
-            watch = (config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple) \
-                if mon.master_heartbeat_ms else None
             self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
-                                        master_heartbeat=watch, cycle_period_s=config.cycle_period_s,
+                                        master_heartbeat=self.master_heartbeat(), cycle_period_s=config.cycle_period_s,
                                         sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
@@ -50,15 +47,40 @@ class MachineDevices:
             self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip),
                                 moving=lambda axis: self.axis_direction(axis))
 
+    def master_heartbeat(self) -> tuple[int, int] | None:
+        """(master node id, consumer ms) for a node's 0x1016:01; None without a master heartbeat."""
+        mon = self.config.monitoring
+        if not mon.master_heartbeat_ms:
+            return None
+        return self.config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple
+
     def bring_up(self) -> None:
         """I/O node first (an e-stop pressed at start is known before anything turns), then the
         spindle; FieldbusError names node and step."""
         if self.io is not None:
-            self.io.node.bring_up(self.config.monitoring.heartbeat_producer_ms)
-            if self.io.estop_active():
-                log.warning(kv("io.estop_active_at_start", node=self.config.io.node_id))  # type: ignore[union-attr]
+            self._bring_up_io()
         if self.spindle is not None:
             self.spindle.bring_up()
+
+    def _bring_up_io(self) -> None:
+        """The io node with the drives' heartbeat times: it produces every heartbeat_producer_ms,
+        the master consumes with heartbeat_consumer_ms, and it consumes the master's."""
+        assert self.io is not None
+        mon = self.config.monitoring
+        self.io.node.bring_up(mon.heartbeat_producer_ms, mon.heartbeat_consumer_ms, self.master_heartbeat())
+        if self.io.estop_active():
+            log.warning(kv("io.estop_active_at_start", node=self.config.io.node_id))  # type: ignore[union-attr]
+
+    def revive_io(self) -> str | None:
+        """``reset`` after the io node was lost: bring it up again; the one line why not, or None."""
+        if self.io is None or self.io.node.lost is None:
+            return None
+        try:
+            self._bring_up_io()
+        except FieldbusError as err:
+            return str(err)
+        log.info(kv("io.revived", node=self.config.io.node_id))  # type: ignore[union-attr]
+        return None
 
     def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
         """Why motion may not start (e-stop, limit input unless ``jog`` moves off it), else None."""

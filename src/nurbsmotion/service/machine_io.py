@@ -17,6 +17,10 @@
 - M7 / M8 / M9 switch the coolant output(s) named in service.program_gate.COOLANT_OUTPUTS;
   job end, abort and faults switch every coolant output off.
 
+The node's heartbeat is watched (fieldbus.node_heartbeat, the drives' consumer time): when
+it is lost, its inputs are unknown, and an e-stop that cannot be read is an e-stop: the
+same reaction, one line naming the node; nothing starts until ``reset`` brought it up again.
+
 Inputs arrive on the network's receive thread (fieldbus.io.IoNode.on_change); the handler
 only sends requests (quick stop, abort), never waits.
 """
@@ -37,6 +41,7 @@ from nurbsmotion.service.program_gate import COOLANT_OUTPUTS
 log = logging.getLogger(__name__)
 
 ESTOP = "estop"
+HEARTBEAT = "heartbeat"  # SafetyTrip.input of a lost I/O node
 
 
 def limit_inputs(config: MachineConfig) -> dict[str, str]:
@@ -113,6 +118,7 @@ class MachineIo:
         self.coolant = coolant_outputs(config)
         self._signals: dict[str, IoSignal] = {s.name: s for s in config.io.inputs}
         node.on_change = self._on_change
+        node.on_lost = self._on_lost
 
     def _describe(self, name: str) -> str:
         signal = self._signals[name]
@@ -134,6 +140,18 @@ class MachineIo:
                 self._tripped_side[name] = self.moving(axis)
             self.on_trip(SafetyTrip(name, axis, f"limit input {name} ({self._describe(name)}) is active: axis {axis}"))
 
+    def _on_lost(self, message: str) -> None:
+        """The node's heartbeat is lost: an e-stop that cannot be read is an e-stop."""
+        self.on_trip(SafetyTrip(HEARTBEAT, None, f"{message}: its inputs are unknown: quick stop, then every "
+                                                 f"drive disabled"))
+
+    def lost_refusal(self) -> str | None:
+        """While the node is lost: why nothing starts (reset brings it up again)."""
+        if self.node.lost is None:
+            return None
+        return f"io node {self.config.io.node_id} lost ({self.node.lost}): its inputs are unknown; " \
+               f"reset brings it up again"  # type: ignore[union-attr]
+
     def has_estop(self) -> bool:
         return ESTOP in self._signals
 
@@ -144,6 +162,8 @@ class MachineIo:
     def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
         """Why no motion may start now, else None: the e-stop is active, or a limit input is
         and the motion is not ``jog``, a jog of that axis away from the switch."""
+        if (lost := self.lost_refusal()) is not None:
+            return lost
         if self.estop_active():
             return f"e-stop input {ESTOP} ({self._describe(ESTOP)}) is active: release it first"
         for name, switch in self.switches.items():
@@ -193,4 +213,5 @@ class MachineIo:
 
     def status(self) -> dict[str, object]:
         return {"node": self.config.io.node_id, "inputs": self.node.inputs,  # type: ignore[union-attr]
-                "outputs": self.node.outputs, "estop_active": self.estop_active() if self.has_estop() else None}
+                "outputs": self.node.outputs, "estop_active": self.estop_active() if self.has_estop() else None,
+                "lost": self.node.lost}

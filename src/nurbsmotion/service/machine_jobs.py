@@ -47,8 +47,13 @@ class MachineJobs:
         return self.devices.start_refusal(jog) if self.devices is not None else None
 
     def reset_refusal(self) -> str | None:
-        """Reset is refused while the e-stop input is active."""
-        io = self.devices.io if self.devices is not None else None
+        """Reset brings a lost io node up again (refused, with its bring-up line, if it cannot)
+        and is refused while the e-stop input is active."""
+        if self.devices is None:
+            return None
+        if (why := self.devices.revive_io()) is not None:
+            return why
+        io = self.devices.io
         return io.start_refusal() if io is not None and io.estop_active() else None
 
     def prepare(self, plan: PlannedJob) -> tuple[PlannedJob, frozenset[int]]:
