@@ -581,7 +581,7 @@ class Controller:
     def _line_reached(self, job: ActiveJob, index: int) -> dict[str, Any] | None:
         """The program line of planned set-point ``index`` (None before the first one)."""
         program, blocks = job.plan.program, job.plan.trajectory.block
-        if program is None or index < 0 or not len(blocks):
+        if program is None or index < 0 or not len(blocks) or not program.blocks:  # no motion: no line reached
             return None
         block = int(blocks[min(index, len(blocks) - 1)])
         source = program.blocks[block].source

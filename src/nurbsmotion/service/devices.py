@@ -98,6 +98,15 @@ class MachineDevices:
         if self.io is not None:
             self.io.coolant_off()
 
+    def kept(self) -> dict[str, Any]:
+        """What stays on after a job that keeps the devices (record line): spindle rpm, outputs on."""
+        out: dict[str, Any] = {}
+        if self.spindle is not None:
+            out["spindle_rpm"] = self.spindle.status().commanded_rpm
+        if self.io is not None:
+            out["outputs_on"] = sorted(n for n, on in self.io.node.outputs.items() if on)
+        return out
+
     def ready_for_job(self) -> None:
         """Enable the spindle again if an abort or fault disabled it (target 0)."""
         if self.spindle is not None and not self.spindle.enabled:

@@ -5,7 +5,8 @@
 - during it: its events at their rows (JobEvents); an e-stop or limit input, or a spindle
   that stops on its own, ends it with one line (``job.machine_fault``, the outcome's reason);
 - at its end: the spindle ramps to 0 (completed, stopped) or gets a quick stop and is
-  disabled (abort, fault); coolant off. An e-stop also quick-stops the axes without a job.
+  disabled (abort, fault); coolant off; a completed MDI and a completed or stopped jog leave
+  the spindle and outputs as they are. An e-stop also quick-stops the axes without a job.
 
 Every method is a no-op without devices, so the controller calls them unconditionally.
 Jobs are the controller's ActiveJob (handle, record, plan, events, machine_fault, stop_requested).
@@ -25,11 +26,12 @@ from nurbsmotion.log import kv
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
 from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
-from nurbsmotion.service.planner import PlannedJob
+from nurbsmotion.service.planner import JOG_NAME, MDI_NAME, PlannedJob
 
 log = logging.getLogger(__name__)
 DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
-ENDED_SOFTLY = ("done", "stopped")  # master JobResult outcomes after which the spindle ramps down
+ENDED_SOFTLY = ("done", "stopped")
+KEEPS_DEVICES = {MDI_NAME: ("done",), JOG_NAME: ("done", "stopped")}  # job name -> outcomes that leave them on  # master JobResult outcomes after which the spindle ramps down
 
 
 class MachineJobs:
@@ -73,12 +75,19 @@ class MachineJobs:
         job.events.start()
 
     def end(self, job: Any, result: Any) -> None:
-        """Spindle ramped down or quick-stopped and disabled, coolant off; one record line."""
+        """Spindle ramped down or quick-stopped and disabled, coolant off; one record line.
+        An MDI that completed, or a jog that completed or was stopped, leaves them as they are
+        (as LinuxCNC does: ``mdi "M3 S1000"`` keeps the spindle turning, ``mdi "M5"`` stops it)."""
         if self.devices is None:
+            return
+        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
+        if not hard and result.outcome in KEEPS_DEVICES.get(job.name, ()):
+            if job.events is not None:
+                job.events.finish(drain=True)
+                job.events.record("devices_kept", self.devices.kept())
             return
         if job.events is not None:
             job.events.finish()
-        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
         try:
             self.devices.all_off(hard)
         except FieldbusError as err:
