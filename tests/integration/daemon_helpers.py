@@ -23,12 +23,14 @@ from nurbsmotion.service.client import Client, DaemonUnavailable
 SRC_DIR = Path(nurbsmotion.__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
 
-CONFIG = """\
+CONFIG_HEAD = """\
 cycle_period_ms: 4
 simulate: true
 bus: {{interface: virtual, channel: {channel}}}
 interpolation: {{algorithm: lookahead, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
                 max_jerk_mm_s3: 50000, acc_time_s: 0.1}}
+"""  # the machine without its axes: CONFIG's, or a test's own
+CONFIG = CONFIG_HEAD + """\
 axes:
   - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
      max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
