@@ -35,6 +35,7 @@ import canopen
 import numpy as np
 
 from nurbsmotion import cia402 as c
+from nurbsmotion.arrival_clock import socket_pending
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
@@ -281,6 +282,7 @@ class Master:
         network = canopen.Network(self._bus)
         self._traffic_log = TrafficLog(self._traffic_path)  # paused without a path
         network.listeners.append(self._traffic_log)
+        network.listeners.append(self._fb.watch_reception(socket_pending(self._bus)))
         self._wrap_network_send(network, self._traffic_log)
         self._traffic = self._traffic_log if self._traffic_path else None
         network.connect()
