@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -25,6 +26,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
+from nurbsmotion.fieldbus.feedback import arrival_perf_s
 from nurbsmotion.fieldbus.node_heartbeat import HeartbeatWatch
 from nurbsmotion.io_config import IoConfig, IoSignal
 from nurbsmotion.log import kv
@@ -98,8 +100,12 @@ class IoNode:
 
     def __init__(self, network: canopen.Network, io: IoConfig,
                  on_change: Callable[[str, bool], None] | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S,
-                 on_lost: Callable[[str], None] | None = None) -> None:
+                 on_lost: Callable[[str], None] | None = None,
+                 judging_time_s: Callable[[], float] = time.perf_counter) -> None:
+        """``judging_time_s``: now on the frames' arrival timeline (the master's
+        ``judging_time_s``; perf_counter based) for the heartbeat watch."""
         self.network = network
+        self.judging_time_s = judging_time_s
         self.io = io
         self.on_change = on_change
         self.on_lost = on_lost  # the heartbeat watch found the node lost: one line naming it
@@ -152,7 +158,8 @@ class IoNode:
             self._inputs = input_states(groups, self.io.inputs)
         self.node.nmt.send_command(c.NmtCommand.START)
         if heartbeat_consumer_ms:
-            self.heartbeat = HeartbeatWatch(self.io.node_id, heartbeat_consumer_ms / 1000.0, self._lost)
+            self.heartbeat = HeartbeatWatch(self.io.node_id, heartbeat_consumer_ms / 1000.0, self._lost,
+                                            clock=self.judging_time_s)
             self.heartbeat.start()
         self._send_outputs()
         log.info(kv("io.ready", node=self.io.node_id, inputs=self.inputs, heartbeat_consumer_ms=heartbeat_consumer_ms))
@@ -169,9 +176,10 @@ class IoNode:
             raise self._error("watch the master's heartbeat", sdo_failure(err)) from None
 
     def _heard(self, state: int) -> None:
+        """canopen's heartbeat callback; its NmtMaster stored the frame's timestamp just before."""
         watch = self.heartbeat
         if watch is not None:
-            watch.heard(state)
+            watch.heard(state, arrival_perf_s(self.node.nmt.timestamp or 0.0))
 
     def _lost(self, reason: str) -> None:
         """The heartbeat watch's verdict (its thread): inputs unknown from now, one line up."""

@@ -262,6 +262,11 @@ class Master:
         self._extra_receive_ids += [c.COB_EMCY + node_id, c.COB_SDO_TX + node_id, c.COB_HEARTBEAT + node_id, *cob_ids]
         self._filter_received()
 
+    def judging_time_s(self) -> float:
+        """Now on the frames' arrival timeline (perf_counter based, nurbsmotion.arrival_clock):
+        what another node's heartbeat consumer judges on (fieldbus.io)."""
+        return self._fb.judging_time_s()
+
     def quick_stop(self, reason: str) -> None:
         """Quick stop every axis now, with or without a job (then disabled, as an abort):
         the machine I/O's e-stop input (service.machine_io)."""

@@ -12,6 +12,11 @@ when :func:`heartbeat_problem` finds one:
   consumer time after the NMT start.
 
 It is armed again by :meth:`start` (after the node was brought up again).
+
+Heartbeats are judged as they arrived (nurbsmotion.arrival_clock, as the axes' supervisor
+does): :meth:`heard` takes the frame's arrival time and ``clock`` is the judging time (the
+master's arrival timeline), so a receive thread held back by load does not turn heartbeats
+that arrived in time into a lost node.
 """
 
 from __future__ import annotations
@@ -69,7 +74,8 @@ class HeartbeatWatch:
     """Consume ``node``'s heartbeat (a canopen RemoteNode) with ``consumer_s``; see module doc."""
 
     def __init__(self, node_id: int, consumer_s: float, on_lost: Callable[[str], None],
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        """``clock``: the judging time, on the same timeline as the arrival times given to heard()."""
         self.node_id = node_id
         self.consumer_s = consumer_s
         self.on_lost = on_lost
@@ -80,14 +86,15 @@ class HeartbeatWatch:
         self._thread: threading.Thread | None = None
         self.lost: str | None = None  # the reason, once lost (until start())
 
-    def heard(self, state: int) -> None:
-        """canopen's heartbeat callback (receive thread): ``state`` with the toggle bit masked."""
-        now = self._clock()
+    def heard(self, state: int, arrival_s: float | None = None) -> None:
+        """A heartbeat (receive thread): ``state`` with the toggle bit masked, arrived at
+        ``arrival_s`` (default: now)."""
+        now = self._clock() if arrival_s is None else arrival_s
         with self._lock:
             seen = self._seen
             if seen is None:
                 return
-            seen.last_s, seen.state = now, state
+            seen.last_s, seen.state = max(seen.last_s, now), state
             seen.operational_seen |= state == c.NmtState.OPERATIONAL
             seen.bootup_seen |= state == c.NmtState.BOOTUP
 

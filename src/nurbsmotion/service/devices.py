@@ -9,6 +9,7 @@ must act on (an e-stop or limit input, a spindle that stops on its own) go to
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -43,7 +44,8 @@ class MachineDevices:
                                         sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
-            node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
+            node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
+                          judging_time_s=getattr(link, "judging_time_s", time.perf_counter))
             self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip),
                                 moving=lambda axis: self.axis_direction(axis))
 
