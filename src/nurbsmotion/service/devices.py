@@ -40,8 +40,10 @@ class MachineDevices:
         if isinstance(config.spindle, SpindleConfig):
             link.receive_from(config.spindle.node_id)
             self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
-                                        master_heartbeat=self.master_heartbeat(), cycle_period_s=config.cycle_period_s,
-                                        sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
+                                        master_heartbeat=self.master_heartbeat(),
+                                        cycle_period_s=config.cycle_period_s,
+                                        sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
+                                        cyclic=getattr(link, "cyclic_velocity", None))
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
