@@ -113,7 +113,6 @@ class MachineIo:
         self.on_trip = on_trip
         self.moving = moving
         self.switches = limit_switches(config)
-        self.limits = {name: switch.axis for name, switch in self.switches.items()}
         self._tripped_side: dict[str, int] = {}  # a switch whose end is not said: the way its axis moved
         self.coolant = coolant_outputs(config)
         self._signals: dict[str, IoSignal] = {s.name: s for s in config.io.inputs}
@@ -149,8 +148,7 @@ class MachineIo:
         """While the node is lost: why nothing starts (reset brings it up again)."""
         if self.node.lost is None:
             return None
-        return f"io node {self.config.io.node_id} lost ({self.node.lost}): its inputs are unknown; " \
-               f"reset brings it up again"  # type: ignore[union-attr]
+        return f"io node {self.node.io.node_id} lost ({self.node.lost}): its inputs are unknown; reset brings it up again"
 
     def has_estop(self) -> bool:
         return ESTOP in self._signals

@@ -30,8 +30,8 @@ from nurbsmotion.service.planner import JOG_NAME, MDI_NAME, PlannedJob
 
 log = logging.getLogger(__name__)
 DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
-ENDED_SOFTLY = ("done", "stopped")
-KEEPS_DEVICES = {MDI_NAME: ("done",), JOG_NAME: ("done", "stopped")}  # job name -> outcomes that leave them on  # master JobResult outcomes after which the spindle ramps down
+ENDED_SOFTLY = ("done", "stopped")  # master JobResult outcomes after which the spindle ramps down
+KEEPS_DEVICES = {MDI_NAME: ("done",), JOG_NAME: ("done", "stopped")}  # job name -> outcomes that leave them on
 
 
 class MachineJobs:
