@@ -129,3 +129,22 @@ def test_runnable_drive_is_brought_up_and_runs_a_short_program(eds, mode):
         master.shutdown()
         bus.shutdown()
         sim.stop()
+
+
+def test_a_drive_that_cannot_watch_the_master_is_named_at_bring_up(caplog):
+    """The Technosoft iPOS has no 0x1016: if the daemon dies, it keeps its last set-point
+    (the CiA 301 consumer is the drive's only way to notice): one warning names it."""
+    channel = "corpus-" + uuid.uuid4().hex
+    config = machine("technosoft_iPOS.eds", "ip", channel)
+    sim = started_sim(pytest.importorskip("nurbsmotion.sim"), config)
+    bus = can.Bus(interface="virtual", channel=channel)
+    master = Master(config, bus, bootup_timeout_s=1.0)
+    try:
+        with caplog.at_level("WARNING", logger="nurbsmotion.fieldbus.master"):
+            master.bring_up()
+    finally:
+        master.shutdown()
+        bus.shutdown()
+        sim.stop()
+    lines = [r.getMessage() for r in caplog.records if "master_heartbeat_unwatched" in r.getMessage()]
+    assert len(lines) == 1 and "node=1 axis=X" in lines[0] and "does not notice a dead master" in lines[0], lines

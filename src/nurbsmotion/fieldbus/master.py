@@ -422,6 +422,11 @@ class Master:
                         rpdos=len(plan.layout.rpdos), tpdos=len(plan.layout.tpdos),
                         skipped=",".join(s.what for s in plan.skipped), position=self._fb_pos[i],
                         statusword=f"0x{self._fb_status[i]:04X}"))
+            unwatched = next((s for s in plan.skipped if s.what == "0x1016:01"
+                              and self.config.monitoring.master_heartbeat_ms), None)
+            if unwatched is not None:  # an operator must know which drive keeps moving if the daemon dies
+                log.warning(kv("master_heartbeat_unwatched", node=axis.node_id, axis=axis.name,
+                               reason=unwatched.reason))
         twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
         if twin is not None:
             raise twin
