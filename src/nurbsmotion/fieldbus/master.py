@@ -734,7 +734,8 @@ class Master:
         if self._horizon < first - 1:
             self._adopt_tail(k, first - 1)
         velocity = any(what == "cyclic_velocity" for what, _ in requests)  # a new 0x60FF target: not the axes'
-        requests = [r for r in requests if r[0] != "cyclic_velocity"]
+        if velocity:
+            requests = [r for r in requests if r[0] != "cyclic_velocity"]
         if (requests or velocity) and self._horizon >= first:
             back = max(first - 1, self._no_rewind_before)
             snap = snaps[back % HISTORY_CYCLES]
