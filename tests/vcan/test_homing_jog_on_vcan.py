@@ -18,7 +18,7 @@ from tests.vcan.two_processes import SimProcess
 # Quarantined (docs/vcan.md, Still to do): inside User-Mode Linux the drives' process lags the
 # wire by seconds once daemon and drives saturate the guest's CPU; then its SDO answers come
 # later than 5 s and its statusword (0x0237: Z without bit 12 after the homing) is seconds old.
-# Passed 3 of 5 runs at host load 2-3 after the fixes of 2026-11-24 (0 of 5 before).
+# After the fixes of 2026-11-24: 3 of 5 runs passed at host load 2-3, 2 of 5 at 1.2-1.5 (0 of 5 before).
 pytestmark = [pytest.mark.vcan, pytest.mark.quarantine]
 
 HOMING_TIMEOUT_S = 90.0  # inside UML on a busy host the drives' process lags the wire by seconds
