@@ -27,7 +27,7 @@ from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
-from nurbsmotion.service.planner import plan_job
+from nurbsmotion.service.planner import prepare_job
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
@@ -81,7 +81,7 @@ class Daemon:
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         link, self.simulation = self._open_motion(self.config)
         self.controller = Controller(self.config, link,
-                                     lambda name, text, start, options: plan_job(name, text, self.config, start, options),
+                                     lambda name, text, start, options: prepare_job(name, text, self.config, start, options),
                                      self.records, self.simulation, machine_state)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:

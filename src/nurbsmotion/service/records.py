@@ -79,6 +79,10 @@ class JobRecord:
         os.replace(tmp, self.folder / TRACE_FILE)
         write_json(self.folder / PLAN_FILE, summary)
 
+    def write_plan_summary(self, summary: dict[str, Any]) -> None:
+        """plan.json alone (a streamed job: written before motion, then again at its end)."""
+        write_json(self.folder / PLAN_FILE, summary)
+
     def write_config(self, config: dict[str, Any]) -> None:
         write_json(self.folder / CONFIG_FILE, config)
 
