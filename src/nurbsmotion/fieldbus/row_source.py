@@ -14,8 +14,8 @@ the cycle thread (after :meth:`RowFeed.take_first` on the thread that starts the
 queue is a deque (atomic append/popleft) with a semaphore bounding the chunks ahead.
 
 Memory: the window keeps ``keep_rows`` rows behind the playback (the master may rewind its
-queued cycles, fieldbus.master HISTORY_CYCLES) plus the newest chunk and its tail; at most
-``max_chunks`` chunks wait in the queue. Nothing grows with the job's length except the
+queued cycles, fieldbus.master HISTORY_CYCLES) and up to ``ahead_rows`` planned rows ahead of
+it plus the newest chunk and its tail; at most ``max_chunks`` chunks wait in the queue. Nothing grows with the job's length except the
 pause rows (one int per program pause).
 """
 
@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 KEEP_ROWS = 2048  # rows kept behind the playback: > HISTORY_CYCLES (512) x the highest rate (1.5)
+AHEAD_ROWS = 4000  # a chunk joins the window once fewer planned rows than this lie ahead of the playback
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,9 +55,11 @@ def chunk_figures(rows: np.ndarray, before: np.ndarray, period_s: float) -> tupl
 class RowFeed:
     """A job's rows arriving over time (see the module docstring)."""
 
-    def __init__(self, n_axes: int, max_chunks: int = 4, keep_rows: int = KEEP_ROWS) -> None:
+    def __init__(self, n_axes: int, max_chunks: int = 4, keep_rows: int = KEEP_ROWS,
+                 ahead_rows: int = AHEAD_ROWS) -> None:
         self.n_axes = n_axes
         self.keep_rows = keep_rows
+        self.ahead_rows = ahead_rows
         self._queue: collections.deque[RowChunk] = collections.deque()
         self._space = threading.Semaphore(max_chunks)
         self._closed = False  # the producer sent its last chunk (or gave up)
@@ -117,6 +120,8 @@ class RowFeed:
             return None
         if position > self.planned_end - 1 and self.end > self.planned_end:
             return None  # on the stop tail: too late, it runs to rest
+        if self.planned_end - position > self.ahead_rows:
+            return None  # enough planned rows ahead: the chunk waits in the queue (bounded memory)
         chunk = self._queue.popleft()
         self._space.release()
         index = int(position)

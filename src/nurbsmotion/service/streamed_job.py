@@ -106,7 +106,7 @@ class StreamedJob:
         self.limits = limits_from_config(config)
         self.stream = PlanStream(program, self.limits, chunk_cycles)
         self.max_rate = streamed_max_rate(program, self.limits, config, columns)
-        self.feed = RowFeed(len(config.axes), max_chunks)
+        self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
         self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
         self.error: InputError | None = None  # planning failed part-way (the program line)
         self.planned = 0  # rows planned so far
@@ -315,7 +315,7 @@ class StreamedJob:
 
 
 def prepare_streamed_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
-                         options: ReadOptions | None = None) -> StreamedJob:
+                         options: ReadOptions | None = None, chunk_cycles: int = CHUNK_CYCLES) -> StreamedJob:
     """Parse and check ``text`` completely, start planning it, and return once the first chunk
     is planned (InputError naming file:line for anything refused; nothing moves)."""
     from nurbsmotion.service.planner import axis_columns, parse
@@ -327,6 +327,6 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, start_mm: 
         start_xyz[columns] = start_mm
     program = parse(name, text, start_xyz, options or ReadOptions(tool_table=config.tool_table))
     check_before_motion(name, program, config, columns, axis_map)
-    job = StreamedJob(name, program, config, columns)
+    job = StreamedJob(name, program, config, columns, chunk_cycles)
     job.begin()
     return job
