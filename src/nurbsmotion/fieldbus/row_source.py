@@ -66,7 +66,7 @@ class RowFeed:
         self.cancelled = threading.Event()  # the job ended: the producer stops
         # the window (cycle thread)
         self.buf = np.zeros((0, n_axes), np.int64)
-        self.view = memoryview(self.buf)
+        self.view = self.buf.data
         self.base = 0  # global row of buf[0]
         self.planned_end = 0  # one past the last planned row received
         self.end = 0  # one past the last row of the window (planned rows + the newest stop tail)
@@ -128,7 +128,7 @@ class RowFeed:
         keep_from = max(self.base, index - self.keep_rows) if position >= 0 else self.base
         kept = self.buf[keep_from - self.base: self.planned_end - self.base]
         self.buf = np.concatenate([kept, chunk.rows, chunk.stop_tail]).astype(np.int64, copy=False)
-        self.view = memoryview(self.buf)
+        self.view = self.buf.data
         self.base = keep_from
         self.planned_end += len(chunk.rows)
         self.end = self.planned_end + len(chunk.stop_tail)
@@ -140,7 +140,7 @@ class RowFeed:
     def __getitem__(self, ij: tuple[int, int]) -> int:
         """Row i (global), axis j: the window read as the playback reads a memoryview."""
         i, j = ij
-        return self.view[i - self.base, j]  # type: ignore[no-any-return]
+        return int(self.view[i - self.base, j])
 
     @property
     def shape(self) -> tuple[int, int]:

@@ -18,7 +18,10 @@ from nurbsmotion.fieldbus.row_source import RowFeed
 
 class JobHandle(Protocol):
     start_cycle: int  # master cycle that sends the job's first set-point (-1 until it started)
-    fell_behind_row: int  # a streamed job that ran onto its stop tail: its last planned row (-1: did not)
+
+    @property
+    def fell_behind_row(self) -> int: ...  # a streamed job that ran onto its stop tail: its last planned row (-1: did not)
+
 
     def wait(self, timeout: float | None = None) -> JobResult | None: ...
     def request_stop(self) -> None: ...

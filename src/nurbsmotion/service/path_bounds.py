@@ -25,6 +25,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.geometry.nurbs import NurbsCurve
 from nurbsmotion.program import Program
+from nurbsmotion.program.model import SourceRef
 
 BRACKET_MM = 1e-6  # extremes known to this; far below one count of any real axis
 SAMPLES_PER_SPAN = 16
@@ -103,10 +104,11 @@ def soft_limit_violation(program: Program, config: MachineConfig, columns: list[
     return None
 
 
-def _violation(source, name: str, reached: float, limit: float) -> InputError:
+def _violation(source: SourceRef, name: str, reached: float, limit: float) -> InputError:
     word = re.search(rf"(?<![A-Za-z]){name}\s*([-+]?(\d+\.?\d*|\.\d+))", source.text, re.IGNORECASE)
-    named = word is not None and abs(float(word.group(1)) - reached) < 1e-6  # the word is the cause (not a bulge)
-    where = f"{source}: {word.group(0).replace(' ', '')}" if named else str(source)
+    where = str(source)
+    if word is not None and abs(float(word.group(1)) - reached) < 1e-6:  # the word is the cause (not a bulge)
+        where = f"{source}: {word.group(0).replace(' ', '')}"
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
