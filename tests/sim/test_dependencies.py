@@ -10,7 +10,7 @@ import nurbsmotion.sim
 
 ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log"}
 ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
-                     "logging", "math", "numpy", "pathlib", "struct", "threading", "time", "typing"}
+                     "logging", "math", "numpy", "pathlib", "select", "struct", "threading", "time", "typing"}
 
 
 def imported_modules(path: Path) -> set[str]:

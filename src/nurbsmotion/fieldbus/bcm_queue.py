@@ -17,6 +17,13 @@ next SYNC. Python only keeps the ring ahead of the kernel:
   stops, drives notice. The planner keeps the cycles after its horizon a controlled stop
   along the path that reaches rest before L, so a stall longer than the queue ends with
   the axes at rest; the master then reports a ``stall`` fault.
+- **At rest, a longer lease.** While every queued cycle carries the same frames (holding:
+  the same set-points and controlwords in every slot), sending the ring round more than once
+  sends exactly what Python would have written, so the lease covers REST_LEASE_S (1 s;
+  the ring alone is 64 ms at T = 1 ms) instead of one lap: a daemon held up while the axes
+  stand still does not fault the machine; a hung one still stops SYNC within REST_LEASE_S.
+  The first renewal that writes anything else (a job, a controlword) cuts the lease back to
+  the ring in the same TX_SETUP.
 - **The period.** The BCM re-arms each frame at now + ival, so the wire runs slow by the
   timer latency of every frame (about 6 % inside User-Mode Linux), and a held-up timer
   shifts it for good. The median of the last 64 echoed SYNC intervals trims the frequency;
@@ -65,6 +72,7 @@ TRIM_LIMIT = 0.3  # share of T the frequency correction may reach (a starved gue
 PHASE_GAIN = 0.1  # share of the SYNC phase error caught up per renewal
 PHASE_LIMIT = 0.04  # at most this share of T faster or slower per cycle to catch up the phase
 RE_ANCHOR_CYCLES = 4  # a phase error beyond this many periods moves the reference
+REST_LEASE_S = 1.0  # lease while every queued cycle is the same (axes at rest; module docstring)
 
 
 def ring_cycles(frames_per_cycle: int) -> int:
@@ -120,6 +128,7 @@ class BcmQueueWriter:
         if self.cycles < 2 * GUARD_CYCLES + BATCH_CYCLES + 4:
             raise ValueError(f"kernel queue: {self.fpc} frames per cycle leave only {self.cycles} cycles of 256 frames")
         self.pad = GUARD_CYCLES
+        self.rest_cycles = max(self.cycles, round(REST_LEASE_S / period_s))
         self.stats = LatenessStats(late_threshold_s)
         self.send_errors = 0
         self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
@@ -221,7 +230,8 @@ class BcmQueueWriter:
 
     def _renew(self, c: int) -> None:
         """TX_SETUP with the whole ring, count = frames up to the lease end, trimmed ival."""
-        self.lease_end = lease_end = c + self.cycles - 1 - self.pad
+        span = self.rest_cycles if self.ring_uniform() else self.cycles
+        self.lease_end = lease_end = c + span - 1 - self.pad
         count = (lease_end - c) * self.fpc
         flags = bcm.SETTIMER
         if not self.running:
@@ -237,6 +247,11 @@ class BcmQueueWriter:
             self.send_errors += 1
             raise can.CanOperationError(f"kernel queue: TX_SETUP failed: {err}") from err
         self.running = True
+
+    def ring_uniform(self) -> bool:
+        """Every slot of the ring holds the same frames (the kernel may send it round again)."""
+        slot = self.fpc * FRAME_BYTES
+        return self.buf == bytes(self.buf[:slot]) * self.cycles
 
     def _trim(self) -> float:
         """Period correction (s per cycle), two terms. Frequency: the median of the last

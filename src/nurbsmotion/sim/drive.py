@@ -36,6 +36,7 @@ from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim import axis as axis_module
+from nurbsmotion.sim.arrival_clock import RETRY_S, ArrivalClock, socket_pending
 from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
 from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
@@ -167,7 +168,9 @@ class SimDrive:
         self.silent = False  # power loss: nothing in, nothing out
         self._clock = clock if clock is not None else time.monotonic
         self._heartbeat_rx_lag_s: dict[int, float] = {}  # producer -> reception lag of its last heartbeat
-        self._frame_times = clock is None  # stamp SYNC/RPDO with the frames' receive time
+        self._frame_times = clock is None  # stamp SYNC/RPDO/heartbeats with the frames' receive time
+        # the monitors (0x1016, SYNC loss, RPDO timers) judge on the frames' arrival timeline
+        self._arrival = ArrivalClock(lambda: False)
         self._wall_to_clock_s = time.monotonic() - time.time()
         self._t0 = self._clock()
         self._sync_monitor = SyncMonitor(sync or SyncSettings())
@@ -273,6 +276,7 @@ class SimDrive:
             if self.network is not None:
                 raise RuntimeError(f"{self.name} is already attached")
             self.network = network
+            self._arrival = ArrivalClock(socket_pending(network.bus) if self._frame_times else lambda: False)
             self.node.associate_network(network)
             self._subscribe(c.COB_NMT, self._on_nmt)
             self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
@@ -337,19 +341,28 @@ class SimDrive:
                 self._next_heartbeat += self._heartbeat_period_s
                 if self._next_heartbeat <= now:  # fell behind: no burst of catch-up heartbeats
                     self._next_heartbeat = now + self._heartbeat_period_s
-            for producer in self._heartbeat_consumer.newly_failed(now):
-                if not self.silent:
-                    log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer,
-                                   rx_lag_s=round(self._heartbeat_rx_lag_s.get(producer, 0.0), 3)))
-                    self.axis.raise_fault(EmcyCode.HEARTBEAT)
-            self._watch_sync_and_rpdos(now)
-            deadline = min(now + TICK_MAX_S, self._heartbeat_consumer.next_deadline(),
-                           self._sync_monitor.loss_deadline(self.period_s), self._rpdo_timers.next_deadline())
+            deadline = min(now + TICK_MAX_S, self._judge_timeouts(now))
+            if not self._arrival.caught_up():  # frames wait: judge again once more are read
+                deadline = min(deadline, now + RETRY_S)
             if self._heartbeat_period_s > 0:
                 deadline = min(deadline, self._next_heartbeat)
             if self._time_faults:
                 deadline = min(deadline, self._t0 + self._time_faults[0][0])
             return deadline
+
+    def _judge_timeouts(self, now: float) -> float:
+        """Heartbeat consumer, SYNC loss and RPDO timers at ``now`` seen through the reception
+        lag (sim.arrival_clock); returns when (drive clock) the next of them falls due."""
+        arrival_now = self._arrival.judging_time(now)
+        for producer in self._heartbeat_consumer.newly_failed(arrival_now):
+            if not self.silent:
+                log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer,
+                               rx_lag_s=round(self._heartbeat_rx_lag_s.get(producer, 0.0), 3)))
+                self.axis.raise_fault(EmcyCode.HEARTBEAT)
+        self._watch_sync_and_rpdos(arrival_now)
+        due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),
+                  self._rpdo_timers.next_deadline())
+        return due + max(0.0, now - arrival_now)
 
     def _watch_sync_and_rpdos(self, now: float) -> None:
         """Sync loss (no SYNC for loss_periods, while IP/CSP is running: EMCY 0x8700, fault)
@@ -491,7 +504,7 @@ class SimDrive:
     def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:
             producer = can_id - c.COB_HEARTBEAT
-            self._heartbeat_consumer.seen(producer, self._clock())
+            self._heartbeat_consumer.seen(producer, self._frame_time(timestamp))
             # how late this process handles the frame after the kernel received it (SocketCAN
             # stamps frames with wall-clock time; a process inside a starved guest lags by seconds)
             self._heartbeat_rx_lag_s[producer] = time.time() - timestamp if timestamp > 1e9 else 0.0
@@ -536,7 +549,7 @@ class SimDrive:
         """When a frame arrived, on the drive's clock: its receive timestamp (wall clock,
         kernel time on SocketCAN) unless a clock was injected."""
         if self._frame_times and timestamp > 0:
-            return timestamp + self._wall_to_clock_s
+            return self._arrival.arrived(timestamp + self._wall_to_clock_s, self._clock())
         return self._clock()
 
     def _cycle_period_s(self) -> float:

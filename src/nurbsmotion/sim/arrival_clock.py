@@ -1,0 +1,80 @@
+"""The simulated drive's time on the frames' arrival timeline.
+
+A drive firmware stamps each frame as it arrives (an interrupt) and judges its timeouts
+(CiA 301 heartbeat consumer 0x1016, SYNC loss, RPDO event timers 0x14xx:05) against those
+stamps, in real time. A simulated drive is a Python process that handles frames after they
+arrive: inside a starved guest (User-Mode Linux on a busy host) by up to seconds, and the
+lag changes as the process is descheduled. Judged against the process's own clock, a backlog
+of frames that all arrived in time reads as a loss.
+
+So the drive judges on the arrival timeline, never more leniently than the frames show:
+
+- each frame's arrival time is its receive timestamp (kernel time on SocketCAN);
+- while frames wait in the socket, the judging time is the arrival of the last frame handled:
+  the bus is known up to there, and a heartbeat missing between stamped frames is found just
+  as a firmware finds it;
+- once nothing waits, the judging time runs on from there in real time (``last arrival +
+  (now - last handled)``): a bus gone silent is found the timeout after the last arrival,
+  seen through the process's lag.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+RETRY_S = 0.002  # while frames wait in the socket, judge again this much later
+
+
+class ArrivalClock:
+    """Arrival time of the last handled frame and the judging time derived from it."""
+
+    __slots__ = ("arrival_s", "handled_s", "_pending")
+
+    def __init__(self, pending: Callable[[], bool]) -> None:
+        """``pending()``: frames are waiting in the receive socket (False when unknowable,
+        e.g. python-can's in-process virtual bus, where handling follows sending at once)."""
+        self.arrival_s: float | None = None
+        self.handled_s = 0.0
+        self._pending = pending
+
+    @property
+    def lag_s(self) -> float:
+        """How late the last frame was handled after it arrived."""
+        return 0.0 if self.arrival_s is None else max(0.0, self.handled_s - self.arrival_s)
+
+    def arrived(self, arrival_s: float, handled_s: float) -> float:
+        """A frame that arrived at ``arrival_s`` is handled at ``handled_s`` (drive clock)."""
+        self.arrival_s, self.handled_s = arrival_s, handled_s
+        return arrival_s
+
+    def caught_up(self) -> bool:
+        """Nothing waits in the socket."""
+        return not self._pending()
+
+    def judging_time(self, now_s: float) -> float:
+        """``now_s`` on the arrival timeline (module docstring)."""
+        if self.arrival_s is None:
+            return now_s
+        if not self.caught_up():
+            return self.arrival_s
+        return self.arrival_s + max(0.0, now_s - self.handled_s)
+
+
+def socket_pending(bus: object) -> Callable[[], bool]:
+    """``pending()`` for a python-can bus: select() on its file descriptor when it has one
+    (SocketCAN), else always False."""
+    import select
+
+    try:
+        fileno = bus.fileno()  # type: ignore[attr-defined]
+    except (AttributeError, NotImplementedError, OSError):
+        return lambda: False
+    if not isinstance(fileno, int) or fileno < 0:
+        return lambda: False
+
+    def pending() -> bool:
+        try:
+            return bool(select.select([fileno], [], [], 0)[0])
+        except (OSError, ValueError):  # closed while stopping
+            return False
+    return pending

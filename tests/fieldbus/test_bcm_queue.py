@@ -1,0 +1,83 @@
+"""The kernel queue's lease (fieldbus.bcm_queue), without a bus: what each TX_SETUP asks
+the kernel to send. One lap of the ring while the queued cycles differ; REST_LEASE_S while
+every slot carries the same frames (sending the ring round again changes nothing)."""
+
+from __future__ import annotations
+
+import struct
+
+from nurbsmotion.fieldbus.bcm_queue import REST_LEASE_S, BcmQueueWriter
+from nurbsmotion.fieldbus.supervisor import CycleHistory
+from nurbsmotion.fieldbus.writer import CyclicFrames
+
+PERIOD_S = 0.004
+N_AXES = 3
+
+
+def pack(data: bytearray, controlword: int, setpoint: int) -> None:
+    struct.pack_into("<Hi", data, 0, controlword, setpoint)
+
+
+class FakeBcmSocket:
+    """Keeps the count (frames the kernel may still send) of each TX_SETUP."""
+
+    def __init__(self) -> None:
+        self.counts: list[int] = []
+
+    def sendmsg(self, parts: list[bytes]) -> None:
+        head = parts[0]
+        self.counts.append(struct.unpack_from("@III", head, 0)[2])  # opcode, flags, count (bcm_msg_head)
+
+
+def writer() -> tuple[BcmQueueWriter, CycleHistory, FakeBcmSocket]:
+    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)])
+    history = CycleHistory(4096, N_AXES)
+    queue = BcmQueueWriter("vcan-test", frames, history, PERIOD_S, 0.5 * PERIOD_S, bus=None)  # type: ignore[arg-type]
+    fake = FakeBcmSocket()
+    queue.bcm_sock = fake  # type: ignore[assignment]
+    return queue, history, fake
+
+
+def hold_tail(controlword: int, setpoint: list[int]) -> object:
+    def tail(sp: list[list[int]], cw: list[list[int]]) -> int:
+        for row in range(len(sp)):
+            sp[row][:] = setpoint
+            cw[row][:] = [controlword] * N_AXES
+        return 0
+    return tail
+
+
+def test_at_rest_the_lease_covers_rest_lease_s_and_a_job_cuts_it_back_to_the_ring() -> None:
+    queue, history, fake = writer()
+    hold = [100, 200, 300]
+    for k in range(history.size):
+        history.store(k, [0x0F] * N_AXES, hold)
+    queue.commit(0, queue.horizon(0, 0, moving=False), 1, hold_tail(0x0F, hold))
+    # the first TX_SETUP: the slot of cycle 64 (ring slot 63) is not written yet (it would be
+    # sent only in the second lap): one lap
+    assert not queue.ring_uniform()
+    assert queue.lease_end == queue.cycles - 1 - queue.pad
+    queue.c = 1
+    queue.commit(1, queue.horizon(1, 0, moving=False), 2, hold_tail(0x0F, hold))
+    assert queue.ring_uniform()
+    rest_cycles = round(REST_LEASE_S / PERIOD_S)
+    assert queue.lease_end == 1 + rest_cycles - 1 - queue.pad
+    assert fake.counts[-1] == (queue.lease_end - 1) * queue.frames.per_cycle
+    # a job: the next cycles move; the same renewal brings the lease back within one lap
+    for k in range(12, 20):
+        history.store(k, [0x0F] * N_AXES, [h + k for h in hold])
+    queue.c = 10
+    queue.commit(10, 19, 12, hold_tail(0x0F, [h + 19 for h in hold]))
+    assert not queue.ring_uniform()
+    assert queue.lease_end == 10 + queue.cycles - 1 - queue.pad
+    assert fake.counts[-1] == (queue.lease_end - 10) * queue.frames.per_cycle
+    assert queue.lease_end - 10 < queue.cycles  # never a second lap of frames that differ
+
+
+def test_a_controlword_change_alone_is_not_uniform() -> None:
+    queue, history, _ = writer()
+    for k in range(history.size):
+        history.store(k, [0x07] * N_AXES, [0, 0, 0])
+    queue.commit(0, queue.horizon(0, 0, moving=False), 1, hold_tail(0x0F, [0, 0, 0]))  # enabling: 0x07 then 0x0F
+    assert not queue.ring_uniform()
+    assert queue.lease_end == queue.cycles - 1 - queue.pad

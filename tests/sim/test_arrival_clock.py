@@ -1,0 +1,54 @@
+"""The simulated drive judges its timeouts on the frames' arrival timeline (sim.arrival_clock):
+a backlog of frames that arrived in time is not a loss; a silent bus is."""
+
+from __future__ import annotations
+
+import can
+import pytest
+
+from nurbsmotion.sim.arrival_clock import ArrivalClock, socket_pending
+from nurbsmotion.sim.heartbeat import HeartbeatConsumer
+
+MASTER = 0x7F
+
+
+def test_before_any_frame_the_judging_time_is_now() -> None:
+    assert ArrivalClock(lambda: False).judging_time(5.0) == 5.0
+
+
+def test_while_frames_wait_the_judging_time_is_the_last_arrival_handled() -> None:
+    waiting = [True]
+    clock = ArrivalClock(lambda: waiting[0])
+    clock.arrived(arrival_s=10.0, handled_s=10.8)  # handled 0.8 s late, more behind it
+    assert clock.lag_s == pytest.approx(0.8)
+    assert clock.judging_time(11.5) == 10.0  # the bus is known up to 10.0, no further
+    waiting[0] = False
+    assert clock.judging_time(11.5) == pytest.approx(10.7)  # caught up: runs on from there, through the lag
+
+
+def test_a_backlog_of_heartbeats_that_arrived_in_time_is_not_a_loss() -> None:
+    """Heartbeats every 100 ms, consumer 300 ms; the process stops handling for 1 s (frames
+    pile up in the socket) and then handles the backlog: judged on processing time this was
+    a loss, judged on arrival times it is not; after the last one the loss is found."""
+    consumer = HeartbeatConsumer()
+    consumer.configure([MASTER << 16 | 300])
+    waiting = [False]
+    clock = ArrivalClock(lambda: waiting[0])
+    for k in range(5):  # handled in time
+        consumer.seen(MASTER, clock.arrived(0.1 * k, 0.1 * k + 0.001))
+        assert consumer.newly_failed(clock.judging_time(0.1 * k + 0.002)) == []
+    waiting[0] = True  # 0.5 .. 1.4 arrive while the process is away
+    assert consumer.newly_failed(clock.judging_time(1.45)) == []  # the ticker runs before the backlog
+    for k in range(5, 15):
+        consumer.seen(MASTER, clock.arrived(0.1 * k, 1.45 + 0.01 * (k - 5)))
+        assert consumer.newly_failed(clock.judging_time(1.46 + 0.01 * (k - 5))) == []
+    waiting[0] = False  # caught up; the master then falls silent after its heartbeat at 1.4
+    last_handled = 1.45 + 0.01 * 9
+    lag = last_handled - 1.4
+    assert consumer.newly_failed(clock.judging_time(1.4 + 0.29 + lag)) == []
+    assert consumer.newly_failed(clock.judging_time(1.4 + 0.31 + lag)) == [MASTER]
+
+
+def test_socket_pending_on_a_bus_without_a_file_descriptor_is_false() -> None:
+    with can.Bus(interface="virtual", channel="arrival-clock-test") as bus:
+        assert socket_pending(bus)() is False
