@@ -17,3 +17,14 @@ WANG_LENGTH_MM = 1028.1  # reference §1: "about 1028.1 mm"
 @pytest.fixture(scope="session")
 def wang_curve() -> NurbsCurve:
     return NurbsCurve.create(2, WANG_POINTS, WANG_WEIGHTS, WANG_KNOTS)
+
+
+@pytest.fixture(scope="session")
+def planner_worker():
+    """One planner worker process (service.planner_worker) for the streamed jobs of the session."""
+    from nurbsmotion.service.planner_worker import PlannerWorker
+
+    worker = PlannerWorker()
+    worker.start()
+    yield worker
+    worker.close()

@@ -13,7 +13,6 @@ import pytest
 
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.service import streamed_job
 from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.link import open_link
@@ -29,11 +28,11 @@ WITH_M0 = "G21 G90\nG01 X40 Y20 F1200\nG01 X30 Y10\nM0\nG01 X-20 Y20\nG01 X0 Y0\
 
 
 @pytest.fixture()
-def machine(tmp_path):
+def machine(tmp_path, planner_worker):
     text = CONFIG.format(channel=f"st-{uuid.uuid4().hex}", socket=tmp_path / "ctl.sock", data_dir=tmp_path / "var")
     config = parse_config(text, str(tmp_path / "machine.yaml"))
     link, simulation = open_link(config)
-    controller = Controller(config, link, lambda n, t, s, o: prepare_streamed_job(n, t, config, s, o, CHUNK),
+    controller = Controller(config, link, lambda n, t, s, o: prepare_streamed_job(n, t, config, planner_worker, s, o, CHUNK),
                             JobRecords(config.data_dir), simulation)
     yield controller
     controller.shutdown(5.0)
@@ -169,14 +168,14 @@ def test_mdi_runs_as_a_streamed_job(machine):
 
 
 def test_planning_that_falls_behind_stops_on_the_verified_tail_and_names_the_line(machine, monkeypatch):
-    class SlowAfterThree(PlanStream):
-        def chunks(self):
-            for k, item in enumerate(super().chunks()):
-                if k == 3:
-                    time.sleep(4.0)  # the axes play three chunks (1.2 s) meanwhile
-                yield item
+    take = streamed_job.StreamedJob._take
 
-    monkeypatch.setattr(streamed_job, "PlanStream", SlowAfterThree)
+    def slow_after_three(self, chunk):
+        if chunk.first_row > 0 and self.feed.chunks_taken + self.feed.waiting == 3:
+            time.sleep(4.0)  # the fourth chunk arrives late: the axes play three chunks (1.2 s) meanwhile
+        take(self, chunk)
+
+    monkeypatch.setattr(streamed_job.StreamedJob, "_take", slow_after_three)
     job = ended(machine, submit(machine, LONG), 40.0)
     outcome = job["outcome"]
     assert outcome["outcome"] == "stopped"

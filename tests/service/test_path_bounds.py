@@ -46,23 +46,23 @@ def test_wang_curve_extremes_bound_every_point():
                 assert extreme.bound >= dense - 1e-9 and extreme.bound - extreme.reached <= BRACKET_MM
 
 
-def test_a_streamed_job_is_refused_at_the_line_of_an_arc_bulging_past_a_soft_limit(config):
+def test_a_streamed_job_is_refused_at_the_line_of_an_arc_bulging_past_a_soft_limit(config, planner_worker):
     program = "G21 G90 G17\nG01 X170 Y-50 F3000\nG03 X170 Y50 I0 J50\n"
     with pytest.raises(InputError) as info:
-        prepare_streamed_job("arc.nc", program, config, np.zeros(3))
+        prepare_streamed_job("arc.nc", program, config, planner_worker, np.zeros(3))
     message = str(info.value)
     assert message.startswith("arc.nc:3: axis X would reach ") and message.endswith(", beyond the soft limit 200 mm")
     assert float(message.split("reach ")[1].split(" mm")[0]) == pytest.approx(220.0, abs=1e-6)
 
 
-def test_a_line_beyond_the_limit_names_its_word_before_planning(config):
+def test_a_line_beyond_the_limit_names_its_word_before_planning(config, planner_worker):
     program = "G21 G90\nG01 X10 F3000\nG01 Y-20\n(comment)\nG01 X250 Y-20\nG01 X0\n"
     with pytest.raises(InputError) as info:
-        prepare_streamed_job("part.nc", program, config, np.zeros(3))
+        prepare_streamed_job("part.nc", program, config, planner_worker, np.zeros(3))
     assert str(info.value) == "part.nc:5: X250: axis X would reach 250 mm, beyond the soft limit 200 mm"
 
 
-def test_an_arc_just_inside_the_limit_is_accepted(config):
+def test_an_arc_just_inside_the_limit_is_accepted(config, planner_worker):
     program = "G21 G90 G17\nG01 X149.9999 Y-50 F3000\nG03 X149.9999 Y50 I0 J50\n"  # bulge to 199.9999
-    job = prepare_streamed_job("arc.nc", program, config, np.zeros(3))
+    job = prepare_streamed_job("arc.nc", program, config, planner_worker, np.zeros(3))
     job.cancel()

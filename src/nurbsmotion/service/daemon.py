@@ -18,8 +18,11 @@ import signal
 import threading
 from typing import Any, Callable
 
+import numpy as np
+
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
+from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.link import open_link
@@ -27,7 +30,8 @@ from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
-from nurbsmotion.service.planner import prepare_job
+from nurbsmotion.service.planner import needs_planner_worker, prepare_job
+from nurbsmotion.service.planner_worker import PlannerWorker
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
@@ -72,6 +76,7 @@ class Daemon:
         self.simulation: Simulation | None = None
         self._closing = False
         self.ownership = BusOwnership(config)
+        self.planner_worker: PlannerWorker | None = None  # plans streamed jobs in its own process
 
     def start(self) -> None:
         self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
@@ -79,10 +84,15 @@ class Daemon:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
-        link, self.simulation = self._open_motion(self.config)
-        self.controller = Controller(self.config, link,
-                                     lambda name, text, start, options: prepare_job(name, text, self.config, start, options),
-                                     self.records, self.simulation, machine_state)
+        if needs_planner_worker(self.config):  # before the cycle thread: it imports the planner meanwhile
+            self.planner_worker = PlannerWorker()
+            self.planner_worker.start()
+        try:
+            link, self.simulation = self._open_motion(self.config)
+        except BaseException:
+            self._stop_planner_worker()
+            raise
+        self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()
@@ -91,6 +101,9 @@ class Daemon:
             raise
         sd_notify("READY=1")
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
+
+    def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
+        return prepare_job(name, text, self.config, start, options, self.planner_worker)
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller
@@ -109,6 +122,7 @@ class Daemon:
         served = self.controller is not None
         self.controller = None
         self._stop_simulation()
+        self._stop_planner_worker()
         if served:  # a start-up that failed has said so in its error already
             log.info(kv("daemon_stopped"))
         self.ownership.release()
@@ -118,6 +132,12 @@ class Daemon:
             self.controller.shutdown()
             self.controller = None
         self._stop_simulation()
+        self._stop_planner_worker()
+
+    def _stop_planner_worker(self) -> None:
+        if self.planner_worker is not None:
+            self.planner_worker.close()
+            self.planner_worker = None
 
     def _stop_simulation(self) -> None:
         if self.simulation is not None:

@@ -29,6 +29,7 @@ from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
 if TYPE_CHECKING:
+    from nurbsmotion.service.planner_worker import PlannerWorker
     from nurbsmotion.service.streamed_job import StreamedJob
 
 
@@ -171,14 +172,20 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
 
 
 def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
-                options: ReadOptions | None = None) -> "PlannedJob | StreamedJob":
-    """The daemon's planner: the lookahead planner streams the job while it runs
-    (service.streamed_job, checked completely first); the papers' methods plan it whole."""
-    if config.interpolation.algorithm == "lookahead":
+                options: ReadOptions | None = None, worker: "PlannerWorker | None" = None) -> "PlannedJob | StreamedJob":
+    """The daemon's planner: the lookahead planner streams the job while it runs in the
+    planner worker (service.streamed_job, checked completely first); the papers' methods
+    plan it whole."""
+    if config.interpolation.algorithm == "lookahead" and worker is not None:
         from nurbsmotion.service.streamed_job import prepare_streamed_job
 
-        return prepare_streamed_job(name, text, config, start_mm, options)
+        return prepare_streamed_job(name, text, config, worker, start_mm, options)
     return plan_job(name, text, config, start_mm, options)
+
+
+def needs_planner_worker(config: MachineConfig) -> bool:
+    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker)."""
+    return config.interpolation.algorithm == "lookahead"
 
 
 def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,

@@ -1,16 +1,20 @@
-"""A job planned while it runs: the program is checked completely up front, then a producer
-thread plans it chunk by chunk (planning.lookahead PlanStream) and feeds the master
-(fieldbus.row_source.RowFeed) while the axes move.
+"""A job planned while it runs: the program is checked completely up front, then the planner
+worker (service.planner_worker: a separate process) plans it chunk by chunk while the axes
+move, and a receiver thread here feeds the chunks to the master (fieldbus.row_source.RowFeed).
 
 Before any motion (prepare_streamed_job): syntax and geometry (the readers), the program
 gate (service.program_gate), the machine's axes (a program axis without a machine axis must
 not move), the soft limits from the path's verified bounding box (service.path_bounds: the
-set-points lie on the path) and the int32 count range, then the first chunk is planned: a
-program the planner refuses at its start is refused with that line. Later the producer runs
-ahead of the axes by at most ``MAX_CHUNKS_AHEAD`` chunks (bounded memory); the trace and the
-plan record are written as it goes (service.records). If planning fails part-way (it should
-not: the planner has no give-ups) or falls behind, the axes stop on the verified stop tail
-of the last chunk and the outcome names the program line.
+set-points lie on the path) and the int32 count range, then the first chunk is planned (a
+short window, PlanStream's first_chunk_cycles): a program the planner refuses at its start is
+refused with that line. Later the worker runs ahead of the axes by at most ``MAX_CHUNKS_AHEAD``
+chunks (bounded memory: sending blocks while the queue is full) and writes the trace into the
+record as it goes; plan.json is written before motion and at the end (a killed daemon's is
+completed from the trace by the next daemon, service.records). If planning fails part-way, the
+worker dies or planning falls behind, the axes stop on the verified stop tail of the last
+chunk and the outcome names the program line (or the worker's end).
+
+The daemon's process only receives, copies and indexes rows: the planner never holds its GIL.
 """
 
 from __future__ import annotations
@@ -19,7 +23,6 @@ import collections
 import logging
 import threading
 import time
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -27,24 +30,23 @@ import numpy as np
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
-from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed, chunk_figures
+from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
 from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
-from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
-from nurbsmotion.planning.measure import MeasureStream, RowFigures
-from nurbsmotion.planning.trace import TraceWriter
-from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.service.path_bounds import hull_box, moving_unconfigured_axis, soft_limit_violation
+from nurbsmotion.service.planner_worker import CancelPlan, PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, TracePath
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
 log = logging.getLogger(__name__)
 
-CHUNK_CYCLES = 2000  # set-points per planned chunk (2 s at 1 ms): the first motion waits for one
+CHUNK_CYCLES = 2000  # set-points per planned chunk after the first (2 s at 1 ms)
+FIRST_CHUNK_CYCLES = 200  # the first chunk's window: first motion waits for it only
 MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s at 1 ms)
 FIRST_CHUNK_TIMEOUT_S = 60.0
+END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
 FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
 
 
@@ -87,82 +89,96 @@ def check_before_motion(name: str, program: Program, config: MachineConfig, colu
 
 
 class StreamedJob:
-    """One streamed job: its checks passed, its producer planning ahead (see module docstring).
+    """One streamed job: its checks passed, the worker planning ahead (see module docstring).
 
     The controller uses the same members as service.planner.PlannedJob: ``summary``,
     ``max_rate``, ``program``, ``pauses``, ``total_cycles``, ``block_at``, ``feed_at``,
     ``write_records``, ``start``, ``finish_records``, ``cancel``, ``end_reason``."""
 
     def __init__(self, name: str, program: Program, config: MachineConfig, columns: list[int],
-                 chunk_cycles: int = CHUNK_CYCLES, max_chunks: int = MAX_CHUNKS_AHEAD) -> None:
-        from nurbsmotion.service.planner import JobPause  # the shared pause record
-
-        self._pause_type = JobPause
+                 worker: PlannerWorker, chunk_cycles: int = CHUNK_CYCLES, max_chunks: int = MAX_CHUNKS_AHEAD,
+                 first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
         self.name = name
         self.program = program
         self.config = config
         self.columns = columns
-        self.axis_map = AxisMap.from_config(config)
+        self.worker = worker
+        self.chunk_cycles = chunk_cycles
+        self.first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
         self.limits = limits_from_config(config)
-        self.stream = PlanStream(program, self.limits, chunk_cycles)
         self.max_rate = streamed_max_rate(program, self.limits, config, columns)
         self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
         self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
-        self.error: InputError | None = None  # planning failed part-way (the program line)
+        self.error: InputError | None = None  # planning failed part-way (the program line) or the worker died
         self.planned = 0  # rows planned so far
         self.finished = False  # every row planned
         self.submitted_s = time.monotonic()
         self.first_chunk_s = float("nan")
+        self.end: PlanEnd | None = None  # the worker's last word on this job
         self._block_rows: list[int] = []  # first row of each block reached, in order
         self._block_ids: list[int] = []
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
         self._length_before = np.concatenate([[0.0], np.cumsum([b.length_mm for b in program.blocks])])
-        self._events = sorted((e for e in program.events if e.holds), key=lambda e: e.before_block)
-        self._trace_path: Path | None = None
-        self._trace: TraceWriter | None = None
-        self._pending: list[RowFigures] = []
-        self._trace_lock = threading.Lock()  # the producer writes the trace; write_records may finish it
-        self._produced = False  # the producer ended (its trace rows are all pending or written)
-        self._measure = MeasureStream(program)
+        self._commands: Any = None
+        self._results: Any = None
+        self._cancel_sent = False
+        self._send_lock = threading.Lock()
         self._first = threading.Event()
-        self._thread = threading.Thread(target=self._produce, name="job-planner", daemon=True)
+        self._ended = threading.Event()
+        self._thread = threading.Thread(target=self._receive, name="job-receiver", daemon=True)
         start = program.blocks[0].start
         self.summary: dict[str, Any] = {
             "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
             "algorithm": "lookahead", "streamed": True, "period_s": config.cycle_period_s,
-            "chunk_cycles": chunk_cycles, "cycles": None, "duration_s": None,
+            "chunk_cycles": chunk_cycles, "first_chunk_cycles": self.first_chunk_cycles,
+            "cycles": None, "duration_s": None,
             "axes": [{"name": a.name, "node": a.node_id} for a in config.axes],
             "start_mm": [round(float(x), 6) for x in start], "end_mm": [round(float(x), 6) for x in program.end_position],
             "max_override_percent": round(max(1.0, self.max_rate) * 100.0, 3), "pauses": []}
 
     # ------------------------------------------------------------------ before motion
-    def begin(self, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> None:
-        """Start the producer and wait for the first chunk; InputError if it cannot plan it."""
+    def begin(self, text: str, start_xyz: np.ndarray, options: ReadOptions,
+              timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> None:
+        """Hand the job to the worker and wait for the first chunk; InputError if it cannot plan it."""
+        request = PlanRequest(self.config, self.name, text, start_xyz, options, self.columns, self.chunk_cycles,
+                              self.first_chunk_cycles)
+        self._commands, self._results = self.worker.connect(request)
         self._thread.start()
         if not self._first.wait(timeout_s):
             self.cancel()
-            raise InputError(self.name, f"planning the first {self.stream.chunk_cycles} set-points took more "
+            raise InputError(self.name, f"planning the first {self.first_chunk_cycles} set-points took more "
                              f"than {timeout_s:g} s")
         if self.error is not None and self.planned == 0:
             self.cancel()
+            self._ended.wait(END_TIMEOUT_S)
             raise self.error
         self.summary["first_chunk_s"] = round(self.first_chunk_s, 6)
 
     def write_records(self, record: Any) -> None:
-        """plan.json now (what is known before motion); the trace follows as it is planned."""
+        """plan.json now (what is known before motion); the worker writes the trace as it plans."""
         record.write_plan_summary(self.summary)
-        with self._trace_lock:
-            self._trace_path = record.folder / "trace.csv"
-            if self._produced:  # planned completely before the record existed
-                self._write_pending(close=True)
+        self._send(TracePath(record.folder / "trace.csv"))
 
     def start(self, link: Any) -> Any:
         """Hand the feed to the master (the first chunk is queued): the job's handle."""
         return link.stream_feed(self.feed)
 
     def cancel(self) -> None:
-        """The job ended or never started: the producer stops at its next chunk."""
+        """The job ended or never started: the worker stops after the chunk it plans."""
         self.feed.cancel()
+        with self._send_lock:
+            if self._cancel_sent or self._ended.is_set():
+                return
+            self._cancel_sent = True
+        self._send(CancelPlan())
+
+    def _send(self, command: Any) -> None:
+        if self._commands is None or self._ended.is_set():
+            return
+        try:
+            self._commands.send(command)
+        except OSError:
+            pass  # the worker is gone: the receiver says so
 
     # ------------------------------------------------------------------ while it runs
     @property
@@ -206,116 +222,76 @@ class StreamedJob:
         return ""
 
     def finish_records(self, record: Any) -> None:
-        """After the job: the producer stopped, the trace closed, plan.json with the figures of
-        the rows planned."""
+        """After the job: the worker stopped and closed the trace; plan.json with the figures
+        of the rows planned."""
         self.cancel()
-        self._thread.join(10.0)
-        measured = self._measure.measurements()
+        if not self._ended.wait(END_TIMEOUT_S):
+            log.warning(kv("planner_worker_silent", program=self.name, waited_s=END_TIMEOUT_S))
+        end = self.end or PlanEnd(self.planned, False)
         self.summary.update({
-            "cycles": self.planned, "planned_all": self.finished,
+            "cycles": end.trace_rows if self.end is not None else self.planned, "planned_all": self.finished,
             "duration_s": round(max(self.planned - 1, 0) * self.config.cycle_period_s, 6),
-            "planning_time_s": round(self.stream.planning_time_s, 6),
-            "first_chunk_s": round(self.first_chunk_s, 6), "notes": dict(self.stream.notes),
-            "measured": measured.summary(), "pauses": [{"row": p.row, "reason": p.reason} for p in self.pauses]})
+            "planning_time_s": round(end.planning_time_s, 6),
+            "first_chunk_s": round(self.first_chunk_s, 6), "notes": end.notes,
+            "measured": end.measured, "pauses": [{"row": p.row, "reason": p.reason} for p in self.pauses]})
         if self.error is not None:
             self.summary["error"] = str(self.error)
         record.write_plan_summary(self.summary)
 
-    # ------------------------------------------------------------------ the producer thread
-    def _produce(self) -> None:
-        before = np.zeros((0, len(self.columns)), np.int64)
+    # ------------------------------------------------------------------ the receiver thread
+    def _receive(self) -> None:
+        """Chunks from the worker into the feed until its PlanEnd (or its death)."""
         try:
-            for chunk, resume in self.stream.chunks():
-                counts = self._counts(chunk)
-                tail = self._counts(resume.stop) if resume is not None and resume.stop is not None \
-                    else np.zeros((0, counts.shape[1]), np.int64)
-                pauses = self._pause_rows(chunk)
-                step, accel = chunk_figures(np.concatenate([counts, tail]), before, self.config.cycle_period_s)
-                self._index(chunk)
-                if not self.feed.put(RowChunk(counts, tail, pauses, step, accel)):
-                    return  # the job ended
-                if self.planned == 0:
-                    self.first_chunk_s = time.monotonic() - self.submitted_s
-                self.planned += len(counts)
-                before = counts[-2:]
-                self._first.set()
-                self._trace_rows(self._measure.add(chunk))
-            self._trace_rows(self._measure.finish())
-            self.finished = True
-        except InputError as err:
-            self.error = err if err.where.startswith(self.name) else InputError(
-                f"{self.name}: {err.where}" if err.where else self.name, err.message)
-            log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
-        except Exception as err:  # a bug: the job must still stop on its tail, with a line saying why
-            log.exception("job planner failed")
-            self.error = InputError(self.name, f"planning failed after {self.planned} set-points: {err!r}")
+            while True:
+                message = self._results.recv()
+                if isinstance(message, PlannedChunk):
+                    self._take(message)
+                elif isinstance(message, PlanEnd):
+                    self._finish(message)
+                    return
+        except (EOFError, OSError):
+            self.error = InputError(self.name, f"the planner worker ended unexpectedly "
+                                    f"({self.worker.exit_description()}) after {self.planned} set-points")
+            log.error(kv("planner_worker_died", program=self.name, row=self.planned, error=self.error))
         finally:
             self.feed.close()
+            self._ended.set()
             self._first.set()
-            self._close_trace()
+            self.worker.job_ended()
 
-    def _counts(self, rows: Trajectory) -> np.ndarray:
-        return self.axis_map.to_counts(rows.position_mm[:, self.columns]).astype(np.int64)
+    def _take(self, chunk: PlannedChunk) -> None:
+        """Index the chunk (lines, pauses, feed) before the master can reach it, then queue it
+        (blocks while the queue is full; dropped once the job ended)."""
+        if self.feed.cancelled.is_set():
+            return
+        from nurbsmotion.service.planner import JobPause  # the shared pause record
 
-    def _pause_rows(self, chunk: Trajectory) -> tuple[int, ...]:
-        """Rows of this chunk where a holding event (M0/M1/M6) happens: the first row of the
-        block it comes before (the planner's exact stop there)."""
-        rows = []
-        while self._events and len(chunk.block) and int(chunk.block[-1]) >= self._events[0].before_block:
-            event = self._events.pop(0)
-            row = self.planned + int(np.searchsorted(chunk.block, event.before_block, side="left"))
-            if event.tool is not None and event.kind.value == "tool_change":
-                reason, tool = f"{event.code} tool change to T{event.tool} at {event.source}", event.tool
-            else:
-                reason, tool = f"{event.code} at {event.source}", None
-            self.pauses.append(self._pause_type(row, reason, tool))
-            rows.append(row)
-        return tuple(rows)
+        self.pauses.extend(JobPause(row, reason, tool) for row, reason, tool in chunk.pauses)
+        for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
+            if not self._block_ids or self._block_ids[-1] != block:
+                self._block_rows.append(row)
+                self._block_ids.append(block)
+        self._feeds.append((chunk.first_row, chunk.feed_mm_s))
+        rows = RowChunk(chunk.counts.astype(np.int64), chunk.stop_tail.astype(np.int64),
+                        tuple(row for row, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
+        if not self.feed.put(rows):
+            return  # the job ended
+        if self.planned == 0:
+            self.first_chunk_s = time.monotonic() - self.submitted_s
+        self.planned += len(chunk.counts)
+        self._first.set()
 
-    def _index(self, chunk: Trajectory) -> None:
-        """Remember where each block starts (line reached) and the chunk's feed (status)."""
-        blocks = np.asarray(chunk.block)
-        if len(blocks):
-            changes = np.flatnonzero(np.diff(blocks)) + 1
-            starts = np.concatenate([[0], changes])
-            for s in starts:
-                if not self._block_ids or self._block_ids[-1] != int(blocks[s]):
-                    self._block_rows.append(self.planned + int(s))
-                    self._block_ids.append(int(blocks[s]))
-        self._feeds.append((self.planned, np.asarray(chunk.feed_mm_s, float)))
-
-    def _trace_rows(self, figures: RowFigures | None) -> None:
-        """Write measured rows to the trace once the record exists (kept until then: at most
-        the chunks planned ahead before the job started)."""
-        with self._trace_lock:
-            if figures is not None:
-                self._pending.append(figures)
-            self._write_pending(close=False)
-
-    def _write_pending(self, close: bool) -> None:
-        try:
-            if self._trace is None and self._trace_path is not None:
-                self._trace = TraceWriter(self._trace_path)
-            if self._trace is not None:
-                for f in self._pending:
-                    self._trace.write(f)
-                self._pending.clear()
-                if close:
-                    self._trace.close()
-        except InputError as err:
-            log.warning(kv("trace_not_written", program=self.name, error=err))
-            self._trace_path = None
-            self._trace = None
-
-    def _close_trace(self) -> None:
-        with self._trace_lock:
-            self._produced = True
-            if self._trace_path is not None:
-                self._write_pending(close=True)
+    def _finish(self, end: PlanEnd) -> None:
+        self.end = end
+        self.finished = end.finished
+        if end.error is not None:
+            self.error = InputError(*end.error)
+            log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
 
 
-def prepare_streamed_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
-                         options: ReadOptions | None = None, chunk_cycles: int = CHUNK_CYCLES) -> StreamedJob:
+def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
+                         start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
+                         chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> StreamedJob:
     """Parse and check ``text`` completely, start planning it, and return once the first chunk
     is planned (InputError naming file:line for anything refused; nothing moves)."""
     from nurbsmotion.service.planner import axis_columns, parse
@@ -325,8 +301,9 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, start_mm: 
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
         start_xyz[columns] = start_mm
-    program = parse(name, text, start_xyz, options or ReadOptions(tool_table=config.tool_table))
+    options = options or ReadOptions(tool_table=config.tool_table)
+    program = parse(name, text, start_xyz, options)
     check_before_motion(name, program, config, columns, axis_map)
-    job = StreamedJob(name, program, config, columns, chunk_cycles)
-    job.begin()
+    job = StreamedJob(name, program, config, columns, worker, chunk_cycles, first_chunk_cycles=first_chunk_cycles)
+    job.begin(text, start_xyz, options)
     return job
