@@ -4,6 +4,8 @@ every request lands in a job made of many chunks, mid-chunk or at a boundary."""
 
 from __future__ import annotations
 
+import os
+import signal
 import time
 import uuid
 from pathlib import Path
@@ -200,3 +202,19 @@ def test_a_soft_limit_beyond_the_path_is_refused_before_any_motion(machine):
     assert str(info.value).startswith("arc.nc:3: axis X would reach 120")
     assert machine.status()["state"] == "idle" and machine.status()["job"] is None
     assert machine.status()["cycles"]["count"] >= before
+
+
+def test_a_planner_worker_killed_mid_job_stops_it_on_its_tail_and_the_next_job_gets_a_new_worker(machine, planner_worker):
+    longer = "G21 G90\n" + "G01 X40 Y20 F1200\nG01 X0 Y0\n" * 6  # ~27 s: more chunks than the pipe and queue hold
+    job_id = submit(machine, longer)
+    running_at(machine, 2 * CHUNK)
+    os.kill(planner_worker.pid, signal.SIGKILL)
+    job = ended(machine, job_id)
+    outcome = job["outcome"]
+    assert outcome["outcome"] == "stopped"
+    assert outcome["reason"].startswith("long.nc: the planner worker ended unexpectedly (signal 9) after ")
+    assert outcome["settled"] and outcome["sent"] < 60 * CHUNK
+    plan = planned_counts(Path(job["folder"]), machine.config)
+    assert at_rest_on_path(job, plan)
+    again = ended(machine, machine.mdi("G01 X0 Y0 F3000")["job"]["id"])  # a new worker plans it
+    assert again["outcome"]["outcome"] == "completed" and planner_worker.alive

@@ -325,6 +325,21 @@ class PlannerWorker:
             self._idle.clear()
             return self._commands, self._results
 
+    def abandon(self, timeout_s: float = IDLE_TIMEOUT_S) -> None:
+        """The job just sent is refused before any chunk was used: cancel it and read the
+        worker's answers up to its PlanEnd (ended and restarted if it does not answer)."""
+        try:
+            self._commands.send(CancelPlan())
+            deadline = time.monotonic() + timeout_s
+            while self._results.poll(max(deadline - time.monotonic(), 0.0)):
+                if isinstance(self._results.recv(), PlanEnd):
+                    self.job_ended()
+                    return
+        except (EOFError, OSError):
+            pass
+        with self._lock:
+            self._end_process()  # silent or gone: the next job starts a new worker
+
     def job_ended(self) -> None:
         """The job's receiver read its PlanEnd (or the worker's death): the next job may start."""
         self._idle.set()

@@ -104,15 +104,23 @@ class JobRecord:
             return None
         if not plan.get("streamed") or plan.get("cycles") is not None:
             return None
-        part = self.folder / f"{TRACE_FILE}.part"
-        trace = part if part.exists() else self.folder / TRACE_FILE
-        rows = whole_rows(trace) if trace.exists() else 0
-        if trace == part:
-            os.replace(part, self.folder / TRACE_FILE)
+        rows = self.adopt_trace_part()
         plan.update({"cycles": rows, "planned_all": False,
                      "duration_s": round(max(rows - 1, 0) * float(plan.get("period_s", 0.0)), 6),
                      "cycles_note": "the trace rows planned before the daemon ended"})
         write_json(plan_path, plan)
+        return rows
+
+    def adopt_trace_part(self) -> int:
+        """The trace its writer left unfinished (``trace.csv.part``: killed) cut to whole rows
+        and named trace.csv; the trace's data rows (0 when there is none)."""
+        part = self.folder / f"{TRACE_FILE}.part"
+        trace = part if part.exists() else self.folder / TRACE_FILE
+        if not trace.exists():
+            return 0
+        rows = whole_rows(trace)
+        if trace == part:
+            os.replace(part, self.folder / TRACE_FILE)
         return rows
 
     def write_config(self, config: dict[str, Any]) -> None:

@@ -2,7 +2,8 @@
 worker (service.planner_worker: a separate process) plans it chunk by chunk while the axes
 move, and a receiver thread here feeds the chunks to the master (fieldbus.row_source.RowFeed).
 
-Before any motion (prepare_streamed_job): syntax and geometry (the readers), the program
+Before any motion (prepare_streamed_job, while the worker parses and plans the first chunk
+in parallel): syntax and geometry (the readers), the program
 gate (service.program_gate), the machine's axes (a program axis without a machine axis must
 not move), the soft limits from the path's verified bounding box (service.path_bounds: the
 set-points lie on the path) and the int32 count range, then the first chunk is planned (a
@@ -96,8 +97,8 @@ class StreamedJob:
     ``write_records``, ``start``, ``finish_records``, ``cancel``, ``end_reason``."""
 
     def __init__(self, name: str, program: Program, config: MachineConfig, columns: list[int],
-                 worker: PlannerWorker, chunk_cycles: int = CHUNK_CYCLES, max_chunks: int = MAX_CHUNKS_AHEAD,
-                 first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
+                 worker: PlannerWorker, connection: tuple[Any, Any], chunk_cycles: int = CHUNK_CYCLES,
+                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
         self.name = name
         self.program = program
         self.config = config
@@ -119,8 +120,7 @@ class StreamedJob:
         self._block_ids: list[int] = []
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
         self._length_before = np.concatenate([[0.0], np.cumsum([b.length_mm for b in program.blocks])])
-        self._commands: Any = None
-        self._results: Any = None
+        self._commands, self._results = connection  # the worker got this job's PlanRequest
         self._cancel_sent = False
         self._send_lock = threading.Lock()
         self._first = threading.Event()
@@ -137,12 +137,8 @@ class StreamedJob:
             "max_override_percent": round(max(1.0, self.max_rate) * 100.0, 3), "pauses": []}
 
     # ------------------------------------------------------------------ before motion
-    def begin(self, text: str, start_xyz: np.ndarray, options: ReadOptions,
-              timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> None:
-        """Hand the job to the worker and wait for the first chunk; InputError if it cannot plan it."""
-        request = PlanRequest(self.config, self.name, text, start_xyz, options, self.columns, self.chunk_cycles,
-                              self.first_chunk_cycles)
-        self._commands, self._results = self.worker.connect(request)
+    def begin(self, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> None:
+        """Receive the worker's chunks and wait for the first; InputError if it cannot plan it."""
         self._thread.start()
         if not self._first.wait(timeout_s):
             self.cancel()
@@ -227,9 +223,9 @@ class StreamedJob:
         self.cancel()
         if not self._ended.wait(END_TIMEOUT_S):
             log.warning(kv("planner_worker_silent", program=self.name, waited_s=END_TIMEOUT_S))
-        end = self.end or PlanEnd(self.planned, False)
+        end = self.end or PlanEnd(self.planned, False, trace_rows=record.adopt_trace_part())  # the worker died
         self.summary.update({
-            "cycles": end.trace_rows if self.end is not None else self.planned, "planned_all": self.finished,
+            "cycles": end.trace_rows, "planned_all": self.finished,
             "duration_s": round(max(self.planned - 1, 0) * self.config.cycle_period_s, 6),
             "planning_time_s": round(end.planning_time_s, 6),
             "first_chunk_s": round(self.first_chunk_s, 6), "notes": end.notes,
@@ -302,8 +298,17 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     if start_mm is not None:
         start_xyz[columns] = start_mm
     options = options or ReadOptions(tool_table=config.tool_table)
-    program = parse(name, text, start_xyz, options)
-    check_before_motion(name, program, config, columns, axis_map)
-    job = StreamedJob(name, program, config, columns, worker, chunk_cycles, first_chunk_cycles=first_chunk_cycles)
-    job.begin(text, start_xyz, options)
+    first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
+    # the worker parses and plans while this process parses and checks (2 cores: first motion sooner)
+    connection = worker.connect(PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
+                                            first_chunk_cycles))
+    try:
+        program = parse(name, text, start_xyz, options)
+        check_before_motion(name, program, config, columns, axis_map)
+    except BaseException:
+        worker.abandon()
+        raise
+    job = StreamedJob(name, program, config, columns, worker, connection, chunk_cycles,
+                      first_chunk_cycles=first_chunk_cycles)
+    job.begin()
     return job
