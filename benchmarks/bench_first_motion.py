@@ -11,6 +11,8 @@ feedback.csv and the trace are written into the job record as usual.
 
 - time to first motion: from the submit request to the first cycle whose set-point leaves
   the held position (the master's cycle counter and the job's start cycle, fieldbus.Master);
+  the submission waits until the daemon's planner worker has started (its imports: a
+  submission in the first second after the daemon's start waits for them as well);
 - peak RSS: the process' VmHWM at the job's end (everything: interpreter, numpy, drives);
   the planner worker (service.planner_worker, a separate process) reported apart: its
   VmHWM sampled once a second while the job runs.
@@ -96,6 +98,9 @@ def one_run(copies: int) -> dict:
     text = wang_copies(copies)
     daemon = Daemon(config, open_motion)
     daemon.start()
+    worker = getattr(daemon, "planner_worker", None)  # None: a daemon that plans in its own process
+    if worker is not None:
+        worker.wait_ready()  # a user's submission comes later than this one: the worker has imported the planner
     rss_idle_mb = status_kb("VmRSS") / 1024.0
     try:
         with Client(config.control.socket) as client:
@@ -110,7 +115,6 @@ def one_run(copies: int) -> dict:
                 job = master._job
             first_motion_s = time.perf_counter() - started
             samples = []
-            worker = getattr(daemon, "planner_worker", None)  # None: a daemon that plans in its own process
             worker_pid = worker.pid if worker is not None else None
             worker_peak_mb = float("nan")
             while True:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import multiprocessing.connection
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -46,6 +47,7 @@ log = logging.getLogger(__name__)
 
 READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under heavy load) is an error
 QUIT_TIMEOUT_S = 5.0
+WORKER_NICE = 10  # the worker's niceness (the daemon's cycle thread is SCHED_FIFO where allowed; the drives' threads are not)
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 
 
@@ -113,6 +115,10 @@ class WorkerGone(Exception):
 def serve(commands: multiprocessing.connection.Connection,
           results: multiprocessing.connection.Connection) -> None:
     """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone."""
+    try:
+        os.nice(WORKER_NICE)  # it plans ahead of the axes: the daemon's threads (and drives) come first for the CPU
+    except OSError:
+        pass
     results.send("ready")
     try:
         while True:
@@ -343,6 +349,12 @@ class PlannerWorker:
     def job_ended(self) -> None:
         """The job's receiver read its PlanEnd (or the worker's death): the next job may start."""
         self._idle.set()
+
+    def wait_ready(self) -> None:
+        """Block until the worker has started (its imports done): InputError if it cannot."""
+        with self._lock:
+            if not self._ready:
+                self._wait_ready()
 
     def _wait_ready(self) -> None:
         try:
