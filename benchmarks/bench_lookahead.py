@@ -11,8 +11,9 @@ Targets (issue 4):
   the gap, a bare library call (glibc's default allocator);
 - a one-hour program at T = 1 ms planned and streamed in chunks with < 500 MB.
 
-Run: python benchmarks/bench_lookahead.py [--repeat R] [--hour-minutes M] (M = 0 skips the
-one-hour run, which takes a few minutes)
+Run: python benchmarks/bench_lookahead.py [--repeat R] [--hour-minutes M] [--previous-src DIR]
+(M = 0 skips the one-hour run, which takes a few minutes; DIR: another checkout's src/, whose
+throughput is measured alongside)
 """
 
 from __future__ import annotations
@@ -174,48 +175,64 @@ def ruckig_comparison(period_s: float) -> str:
 
 # ---- throughput -------------------------------------------------------------------------------------
 THROUGHPUT_SCRIPT = r"""
-import json, resource, sys, time
-sys.path.insert(0, {src!r}); sys.path.insert(0, {root!r})
+import json, resource, statistics, sys, time
+sys.path.insert(0, sys.argv[4])  # the version measured: only its nurbsmotion is imported
 if sys.argv[2] == "keep":
     from nurbsmotion.runtime import keep_freed_memory
     keep_freed_memory()
-from dataclasses import replace
-from benchmarks.bench_lookahead import WANG_LIMITS, wang_program
+from nurbsmotion.geometry import NurbsCurve
+from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import plan_lookahead
+from nurbsmotion.program import Block, BlockKind, Program, SourceRef
+points, weights, knots = json.loads(sys.argv[5])
 jerk = None if sys.argv[3] == "none" else float(sys.argv[3])
-limits = replace(WANG_LIMITS, period_s=0.001, max_jerk_mm_s3=jerk)
-best, count, faults = float("inf"), 0, 0
+limits = PlanLimits(period_s=0.001, chord_error_mm={chord!r}, max_accel_mm_s2={accel!r}, feed_mm_s={feed!r},
+                    max_jerk_mm_s3=jerk)
+best, count, faults, times = float("inf"), 0, 0, []
 for _ in range(int(sys.argv[1])):
-    program = wang_program()  # a fresh curve: its tables are built inside the timing
+    curve = NurbsCurve.create(2, points, weights, knots)  # a fresh curve: its tables are built inside the timing
+    program = Program("wang_table1", (Block(BlockKind.NURBS, curve, {feed!r}, SourceRef("wang_table1", 1)),),
+                      curve.start_point)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     started = time.perf_counter()
     count = len(plan_lookahead(program, limits))
     elapsed = time.perf_counter() - started
+    times.append(elapsed)
     if elapsed < best:
         best, faults = elapsed, resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
-print(json.dumps({{"best_s": best, "count": count, "faults": faults}}))
+print(json.dumps({{"best_s": best, "median_s": statistics.median(times), "count": count, "faults": faults}}))
 """
 
 
-def throughput(repeat: int) -> str:
-    """Each case in a fresh process: with glibc's default allocator, and with
-    runtime.keep_freed_memory() as the nurbsmotion command sets it."""
-    rows = ["| Wang Table 1, T = 1 ms | process | set-points | best planning s | page faults | set-points / s | target |",
-            "|---|---|---|---|---|---|---|"]
-    script = THROUGHPUT_SCRIPT.format(src=str(ROOT / "src"), root=str(ROOT))
-    for process, mode in (("glibc default allocator", "default"), ("nurbsmotion command (keep_freed_memory)", "keep")):
-        for label, jerk in (("no jerk limit", "none"), (f"J = {JERK_MM_S3:g}", str(JERK_MM_S3))):
-            out = subprocess.run([sys.executable, "-c", script, str(repeat), mode, jerk],
-                                 capture_output=True, text=True, check=True)
-            result = json.loads(out.stdout.strip().splitlines()[-1])
-            rate = result["count"] / result["best_s"]
-            rows.append(f"| {label} | {process} | {result['count']} | {result['best_s']:.4f} | {result['faults']} | "
-                        f"{rate:,.0f} | >= 1,000,000 ({'met' if rate >= 1e6 else 'NOT met'}) |")
+def throughput(repeat: int, previous_src: str | None = None) -> str:
+    """Each case in a fresh process: with glibc's default allocator (a bare library call), and
+    with runtime.keep_freed_memory() as the nurbsmotion command sets it; the previous version
+    (another checkout's src) the same way when given, interleaved so both see the same load."""
+    rows = ["| Wang Table 1, T = 1 ms | version | process | set-points | best planning s | median planning s "
+            "| page faults (best) | set-points / s (best) | set-points / s (median) | target |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    script = THROUGHPUT_SCRIPT.format(chord=WANG_LIMITS.chord_error_mm, accel=WANG_LIMITS.max_accel_mm_s2,
+                                      feed=WANG_LIMITS.feed_mm_s)
+    curve = json.dumps([np.asarray(WANG_POINTS).tolist(), list(WANG_WEIGHTS), list(WANG_KNOTS)])
+    versions = [("this", str(ROOT / "src"))] + ([("previous", previous_src)] if previous_src else [])
+    for label, jerk in (("no jerk limit", "none"), (f"J = {JERK_MM_S3:g}", str(JERK_MM_S3))):
+        for process, mode in (("library call (glibc default allocator)", "default"),
+                              ("nurbsmotion command (keep_freed_memory)", "keep")):
+            for version, src in versions:
+                out = subprocess.run([sys.executable, "-c", script, str(repeat), mode, jerk, src, curve],
+                                     capture_output=True, text=True, check=True)
+                r = json.loads(out.stdout.strip().splitlines()[-1])
+                rate, median_rate = r["count"] / r["best_s"], r["count"] / r["median_s"]
+                rows.append(f"| {label} | {version} | {process} | {r['count']} | {r['best_s']:.4f} | {r['median_s']:.4f} | "
+                            f"{r['faults']} | {rate:,.0f} | {median_rate:,.0f} | >= 1,000,000 "
+                            f"({'met' if rate >= 1e6 else 'NOT met'}) |")
     load = os.getloadavg()
-    return ("Best of the repetitions, each process fresh; page faults = minor faults during the best run. "
-            f"The machine was shared with other agents' work (load average {load[0]:.1f} / {load[1]:.1f} on "
-            f"{os.cpu_count()} cores at the end): the rates are lower bounds of a quiet machine's.\n\n"
-            + "\n".join(rows))
+    return (f"{repeat} plans per process, each process fresh; best and median of them; page faults = minor "
+            f"faults during the best run. The machine was shared with other agents' work (load average "
+            f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} over 1 / 5 / 15 min at the end, on {os.cpu_count()} "
+            "cores): the rates are lower bounds of a quiet machine's."
+            + ("" if not previous_src else f" \"previous\": {previous_src} (the planner before this change).")
+            + "\n\n" + "\n".join(rows))
 
 
 # ---- one hour -------------------------------------------------------------------------------------
@@ -277,6 +294,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=20)
     parser.add_argument("--hour-minutes", type=float, default=60.0)
+    parser.add_argument("--previous-src", metavar="DIR", help="src/ of a checkout of the previous version: its throughput too")
     args = parser.parse_args()
     programs = {"Wang Table 1": read_program(ROOT / "examples" / "wang_table1.nc"),
                 "sharp corners": read_program(ROOT / "examples" / "sharp_corners.yaml"),
@@ -302,7 +320,7 @@ is shorter than the arc by ~ dL^3 kappa^2 / 24, and at a corner passed moving cu
 
 ### Throughput
 
-{throughput(args.repeat)}
+{throughput(args.repeat, args.previous_src)}
 """
     if args.hour_minutes > 0:
         body += "\n### A one-hour program in bounded memory\n" + one_hour(args.hour_minutes)

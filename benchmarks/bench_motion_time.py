@@ -90,7 +90,11 @@ def lower_bound(program: Program, limits: PlanLimits) -> float:
     return sum(run_lower_bound(run, limits) for run in split_runs(pieces, limits, settings.min_pass_mm_s))
 
 
-CASES = ((1, 1.0), (1, 0.1), (4, 10.0), (4, 1.0))  # (T ms, delta um)
+JERK_MM_S3 = 50000.0
+# (T ms, delta um, J mm/s^3 or None): the paper's setting without a jerk limit (the lower bound
+# has none), then the default planner's with one (the bound is then weaker: it ignores J)
+CASES = tuple((period_ms, delta_um, jerk) for jerk in (None, JERK_MM_S3)
+              for period_ms, delta_um in ((1, 1.0), (1, 0.1), (4, 10.0), (4, 1.0)))
 PREVIOUS_SCRIPT = r"""
 import json, sys
 sys.path.insert(0, sys.argv[1])
@@ -100,8 +104,9 @@ from nurbsmotion.program import parse_gcode, read_program
 out = []
 for kind, source, name in json.loads(sys.argv[2]):
     program = read_program(source) if kind == "file" else parse_gcode(source, name)
-    for period_ms, delta_um in json.loads(sys.argv[3]):
-        limits = PlanLimits(period_s=period_ms / 1000.0, chord_error_mm=delta_um / 1000.0, feed_mm_s=200.0)
+    for period_ms, delta_um, jerk in json.loads(sys.argv[3]):
+        limits = PlanLimits(period_s=period_ms / 1000.0, chord_error_mm=delta_um / 1000.0, feed_mm_s=200.0,
+                            max_jerk_mm_s3=jerk)
         out.append((len(plan_lookahead(program, limits)) - 1) * limits.period_s)
 print(json.dumps(out))
 """
@@ -117,24 +122,32 @@ def previous_times(src: str | None, sources: list[tuple[str, str, str]]) -> list
 
 
 def rows(programs: dict[str, Program], previous: list[float | None]) -> str:
-    out = ["| program | T ms | delta um | A T^2/8 um | limits the speed | verified max chord / delta | measured max chord / delta "
-           "| motion s (previous) | motion s | lower bound s | ratio (previous) | ratio |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = ["| program | J mm/s^3 | T ms | delta um | A T^2/8 um | limits the speed | verified max chord / delta "
+           "| measured max chord / delta | motion s (previous) | motion s | change | lower bound s | ratio (previous) "
+           "| ratio |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     before = iter(previous)
+    bounds: dict[tuple[str, int, float], float] = {}
     for name, program in programs.items():
-        for period_ms, delta_um in CASES:
-            limits = PlanLimits(period_s=period_ms / 1000.0, chord_error_mm=delta_um / 1000.0, feed_mm_s=200.0)
+        for period_ms, delta_um, jerk in CASES:
+            limits = PlanLimits(period_s=period_ms / 1000.0, chord_error_mm=delta_um / 1000.0, feed_mm_s=200.0,
+                                max_jerk_mm_s3=jerk)
             trajectory = plan_lookahead(program, limits)
             m = measure(trajectory, program)
             ceiling = limits.max_accel_mm_s2 * limits.period_s**2 / 8.0 * 1000.0
-            binds = "chord error" if delta_um < ceiling else "acceleration (chord error cannot)"
-            bound = lower_bound(program, limits)
+            binds = "chord error can" if delta_um < ceiling else "acceleration (chord error cannot)"
+            key = (name, period_ms, delta_um)
+            if key not in bounds:  # the bound has no jerk limit: the same for both rows
+                bounds[key] = lower_bound(program, limits)
+            bound = bounds[key]
             verified = trajectory.notes["verified_max_chord_error_mm"] * 1000.0 / delta_um
             old = next(before)
-            old_text = (f"{old:.3f}", f"{old / bound:.3f}") if old is not None else ("-", "-")
-            out.append(f"| {name} | {period_ms} | {delta_um:g} | {ceiling:.3g} | {binds} | {verified:.3f} | "
-                       f"{m.max_chord_error_mm * 1000.0 / delta_um:.3f} | {old_text[0]} | {m.duration_s:.3f} | "
-                       f"{bound:.3f} | {old_text[1]} | {m.duration_s / bound:.3f} |")
+            old_text = ((f"{old:.3f}", f"{(m.duration_s / old - 1.0) * 100.0:+.1f} %", f"{old / bound:.3f}")
+                        if old is not None else ("-", "-", "-"))
+            out.append(f"| {name} | {'-' if jerk is None else f'{jerk:g}'} | {period_ms} | {delta_um:g} | "
+                       f"{ceiling:.3g} | {binds} | {verified:.3f} | {m.max_chord_error_mm * 1000.0 / delta_um:.3f} | "
+                       f"{old_text[0]} | {m.duration_s:.3f} | {old_text[1]} | {bound:.3f} | {old_text[2]} | "
+                       f"{m.duration_s / bound:.3f} |")
     return "\n".join(out)
 
 
@@ -157,21 +170,31 @@ def main() -> None:
                 read_program(source) if kind == "file" else parse_gcode(source, name) for kind, source, name in sources}
     previous = previous_times(args.previous_src, sources)
     body = f"""
-F = 200 mm/s (12 m/min) for every block, A = 2500 mm/s^2, no jerk limit (the lower bound has
-none), PlanLimits defaults otherwise. "limits the speed": chord error can only limit where
-delta < A T^2 / 8 (see the benchmark's docstring). Lower bound: continuous time-optimal motion
-along the same runs at 100 % of the limits, {GRID_MM * 1000:g} um grid.
+F = 200 mm/s (12 m/min) for every block, A = 2500 mm/s^2, PlanLimits defaults otherwise; without a
+jerk limit (as the lower bound) and with J = {JERK_MM_S3:g} mm/s^3 (the default planner's usual
+setting; the lower bound ignores J, so those ratios include what the jerk limit costs). "limits
+the speed": chord error can only limit where delta < A T^2 / 8 (see the benchmark's docstring).
+Lower bound: continuous time-optimal motion along the same runs at 100 % of the limits,
+{GRID_MM * 1000:g} um grid. Motion times are deterministic (no timing involved).
 
 {rows(programs, previous)}
 
-"previous" is the planner before issue 17 (three fixed scan rounds), "ratio" the motion time
-over the lower bound. Where chord error limits the speed, the verified chord error is
-0.99-1.00 delta on Wang's curve and the butterfly (the bound kappa_max L^2 / 8 is within a
-few per cent of the true sag there); where it cannot (delta >= A T^2 / 8), every plan's
-chord error stays below A T^2 / 8 whatever the bound. The sharp-corner program (a near-cusp
-zigzag) turns within less than a step at T = 4 ms: the planner has to shorten the steps
-across the whole turn, which the bound (curvature at points, no steps) does not see; how
-much of its 1.9-4x is the bound's weakness and how much the plan's was not examined.
+"previous" is the planner before this change (the --previous-src checkout), "change" the motion
+time against it, "ratio" the motion time over the lower bound.
+
+Chord error used (issue 17, deliverable 4, target >= 0.8 delta where chord error limits the
+speed): wherever delta < A T^2 / 8 the verified chord error is 0.98-1.00 delta on Wang's curve and
+the butterfly, with and without J (measured on the true curve by planning.measure: 0.98-0.99;
+tests/planning/lookahead/test_chord_bound.py asserts >= 0.8 for these cases). The issue's 0.31 um
+of 1 um on the butterfly at T = 1 ms is the acceleration limit, not the bound: a step v T on
+curvature kappa sags kappa (v T)^2 / 8 <= A T^2 / 8 = 0.31 um whenever kappa v^2 <= A, so no plan
+within A can use more there. With J the butterfly at T = 1 ms, delta = 1 um uses only 0.11: the
+path's own jerk (v^3 |c|^2 and the normal terms) limits the speed before chord error does.
+
+The sharp-corner program (a near-cusp zigzag) turns within less than a step at T = 4 ms: the
+planner has to shorten the steps across the whole turn, which the bound (curvature at points, no
+steps) does not see; how much of its 1.9-4x is the bound's weakness and how much the plan's was
+not examined.
 """
     write_section("motion_time", "Motion time against a continuous lower bound; chord error used",
                   body, "python benchmarks/bench_motion_time.py")

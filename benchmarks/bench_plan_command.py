@@ -11,7 +11,7 @@ Targets (issue 17):
 Each run is the real command in a fresh process (`python -m nurbsmotion plan ... --json`);
 peak memory is that child's maximum resident set size (os.wait4).
 
-Run: python benchmarks/bench_plan_command.py [--copies 100 460] [--skip-braid]
+Run: python benchmarks/bench_plan_command.py [--copies 100 460] [--skip-braid] [--previous-src DIR]
 """
 
 from __future__ import annotations
@@ -52,9 +52,10 @@ def braid_text() -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_plan(program: Path, *options: str) -> dict:
-    """The plan command in a fresh process: its JSON, wall time and the child's peak RSS."""
-    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+def run_plan(program: Path, *options: str, src: str | None = None) -> dict:
+    """The plan command in a fresh process (``src``: the checkout's src/ to run, this one's by
+    default): its JSON, wall time and the child's peak RSS."""
+    env = dict(os.environ, PYTHONPATH=src or str(ROOT / "src"))
     with tempfile.TemporaryFile("w+") as out:
         started = time.perf_counter()
         child = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "plan", str(program), "--json", *options],
@@ -91,22 +92,27 @@ def long_programs(copies: list[int], work: Path) -> str:
     return "\n".join(rows)
 
 
-def braid(work: Path) -> str:
+def braid(work: Path, previous_src: str | None = None) -> str:
     program = work / "braid_cut2d.nc"
     program.write_text(braid_text())
-    rows = ["| T ms | jerk limit | result | cycles (motion time) | stops (added by the fallback) | blocks at a lower feed "
-            "| max accel mm/s^2 | max jerk mm/s^3 | planning s |", "|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| T ms | jerk limit | result | cycles (motion time) | cycles (previous) | stops (added by the fallback) "
+            "| blocks at a lower feed | max accel mm/s^2 | max jerk mm/s^3 | planning s | planning s (previous) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|"]
     for jerk in (None, JERK):
         for period in ("1", "2", "4"):
             options = ["--period-ms", period] + (["--max-jerk-mm-s3", jerk] if jerk else [])
             r = run_plan(program, *options)
+            old = run_plan(program, *options, src=previous_src) if previous_src else None
+            old_cycles, old_s = ("-", "-") if old is None else (
+                (f"{old['measured']['cycles']:,}", f"{old['planning_time_s']:.1f}") if old["exit"] == 0
+                else ("error", "-"))
             if r["exit"] != 0:
-                rows.append(f"| {period} | {jerk or 'none'} | error: {r['error']['text']} | | | | | | |")
+                rows.append(f"| {period} | {jerk or 'none'} | error: {r['error']['text']} | | {old_cycles} | | | | | | {old_s} |")
                 continue
             m, notes = r["measured"], r["notes"]
-            rows.append(f"| {period} | {jerk or 'none'} | planned | {m['cycles']:,} ({m['duration_s']:.2f} s) | "
+            rows.append(f"| {period} | {jerk or 'none'} | planned | {m['cycles']:,} ({m['duration_s']:.2f} s) | {old_cycles} | "
                         f"{notes['stops']} ({notes['fallback_stops']}) | {notes['fallback_slower_blocks']} | "
-                        f"{m['max_accel_mm_s2']:.1f} | {m['max_jerk_mm_s3']:.4g} | {r['planning_time_s']:.1f} |")
+                        f"{m['max_accel_mm_s2']:.1f} | {m['max_jerk_mm_s3']:.4g} | {r['planning_time_s']:.1f} | {old_s} |")
     return "\n".join(rows)
 
 
@@ -114,7 +120,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="*", default=[100, 460])
     parser.add_argument("--skip-braid", action="store_true")
+    parser.add_argument("--previous-src", metavar="DIR", help="src/ of a checkout of the previous version: braid figures too")
     args = parser.parse_args()
+    load_before = os.getloadavg()
     body = ""
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -124,15 +132,18 @@ def main() -> None:
                      "limit raised `block 1532: lookahead cannot hold the accel limit here (1.0013 x the limit after "
                      "16 repairs)`. Max accel/jerk measured on the set-points by planning.measure (the jerk column "
                      "includes the start from and the stop to rest at every corner without a jerk limit).\n\n"
-                     + braid(work) + "\n")
+                     + braid(work, args.previous_src) + "\n")
         if args.copies:
             body += ("\n### Peak memory of `nurbsmotion plan` on long programs\n\nWang's Table 1 curve repeated, "
                      f"T = 1 ms, J = {JERK} mm/s^3, `--trace` written (streamed chunk by chunk) and `--json`; the "
                      "command's own process, its peak RSS from os.wait4.\n\n" + long_programs(args.copies, work) + "\n")
     load = os.getloadavg()
-    body += (f"\nThe machine was shared with other agents' work (load average {load[0]:.1f} / {load[1]:.1f} on "
-             f"{os.cpu_count()} cores at the end): times are slower than on a quiet machine; memory and motion "
-             "figures do not depend on it.\n")
+    body += (f"\nThe machine was shared with other agents' work (load average over 1 / 5 / 15 min "
+             f"{load_before[0]:.1f} / {load_before[1]:.1f} / {load_before[2]:.1f} before, {load[0]:.1f} / {load[1]:.1f} / "
+             f"{load[2]:.1f} at the end, on {os.cpu_count()} cores): times are slower than on a quiet machine; memory "
+             "and motion figures do not depend on it."
+             + ("" if not args.previous_src else " \"previous\": the planner before this change (--previous-src), "
+                "run right after each row's own run.") + "\n")
     write_section("plan_command", "`nurbsmotion plan` on long and hard programs", body,
                   "python benchmarks/bench_plan_command.py")
 

@@ -49,6 +49,12 @@ def test_a_backlog_of_heartbeats_that_arrived_in_time_is_not_a_loss() -> None:
     assert consumer.newly_failed(clock.judging_time(1.4 + 0.31 + lag)) == [MASTER]
 
 
-def test_socket_pending_on_a_bus_without_a_file_descriptor_is_false() -> None:
-    with can.Bus(interface="virtual", channel="arrival-clock-test") as bus:
-        assert socket_pending(bus)() is False
+def test_pending_on_the_virtual_bus_is_its_receive_queue() -> None:
+    with can.Bus(interface="virtual", channel="arrival-clock-test") as reader, \
+            can.Bus(interface="virtual", channel="arrival-clock-test") as sender:
+        pending = socket_pending(reader)
+        assert pending() is False
+        sender.send(can.Message(arbitration_id=0x77F, data=b"\x05", is_extended_id=False))
+        assert pending() is True
+        assert reader.recv(1.0) is not None
+        assert pending() is False

@@ -31,8 +31,8 @@ class ArrivalClock:
     __slots__ = ("arrival_s", "handled_s", "_pending")
 
     def __init__(self, pending: Callable[[], bool]) -> None:
-        """``pending()``: frames are waiting in the receive socket (False when unknowable,
-        e.g. python-can's in-process virtual bus, where handling follows sending at once)."""
+        """``pending()``: frames are waiting in the receive socket or queue (False when
+        unknowable)."""
         self.arrival_s: float | None = None
         self.handled_s = 0.0
         self._pending = pending
@@ -61,10 +61,13 @@ class ArrivalClock:
 
 
 def socket_pending(bus: object) -> Callable[[], bool]:
-    """``pending()`` for a python-can bus: select() on its file descriptor when it has one
-    (SocketCAN), else always False."""
+    """``pending()`` for a python-can bus: select() on its file descriptor (SocketCAN), the
+    receive queue of python-can's in-process virtual bus, else always False."""
     import select
 
+    queue = getattr(bus, "queue", None)
+    if queue is not None and hasattr(queue, "qsize"):
+        return lambda: queue.qsize() > 0
     try:
         fileno = bus.fileno()  # type: ignore[attr-defined]
     except (AttributeError, NotImplementedError, OSError):

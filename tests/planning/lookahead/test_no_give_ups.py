@@ -53,9 +53,11 @@ def test_the_braid_program_plans_within_every_limit(braid, period_ms):
 
 def test_repairs_that_always_fail_fall_back_to_slower_verified_plans(monkeypatch):
     """No repair round at all: every window that violates falls back (stops, exact stops
-    after a block, lower feeds) and the plan still holds every limit on every cycle."""
+    after a block, lower feeds) and the plan still holds every limit on every cycle. (Cases
+    whose first round violates somewhere: mixed.nc at T = 1 ms with J no longer does, its first
+    round holds every limit; the near-cusp zigzag at T = 4 ms with J takes its place.)"""
     monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)
-    cases = [("mixed.nc", replace(WANG_LIMITS, period_s=0.001)),
+    cases = [("sharp_corners.yaml", WANG_LIMITS),
              ("mixed.nc", replace(WANG_LIMITS, max_jerk_mm_s3=None, period_s=0.001)),
              ("wang_table1.nc", replace(WANG_LIMITS, period_s=0.001))]
     for name, limits in cases:
@@ -123,3 +125,30 @@ def test_random_short_line_programs_plan_within_every_limit(steps, period_ms, je
     stream = PlanStream(program, limits, chunk_cycles=500)
     trajectory = Trajectory.concatenate(list(stream))
     assert_within_limits(measure(trajectory, program), limits)
+
+
+def test_a_repair_that_does_not_lower_the_worst_violation_gives_up_early(monkeypatch):
+    """Repairs that change nothing: each window stops after MAX_STALLED_REPAIRS rounds without
+    progress (not MAX_REPAIR_ROUNDS), and the fallbacks still give a plan within every limit."""
+    checks: list[int] = []
+    original_check = lookahead_planner.check
+
+    def counting_check(*args, **kwargs):
+        checks.append(1)
+        return original_check(*args, **kwargs)
+
+    windows: list[int] = []
+    original_window = lookahead_planner.plan_window
+
+    def counting_window(*args, **kwargs):
+        windows.append(1)
+        return original_window(*args, **kwargs)
+
+    monkeypatch.setattr(lookahead_planner, "repair", lambda *args, **kwargs: None)
+    monkeypatch.setattr(lookahead_planner, "check", counting_check)
+    monkeypatch.setattr(lookahead_planner, "plan_window", counting_window)
+    program = read_program(WANG_NC)
+    trajectory = plan_lookahead(program, WANG_LIMITS)
+    assert trajectory.notes["fallback_stops"] + trajectory.notes["fallback_slower_blocks"] >= 1
+    assert len(checks) <= len(windows) * (lookahead_planner.MAX_STALLED_REPAIRS + 1)
+    assert_within_limits(measure(trajectory, program), WANG_LIMITS)

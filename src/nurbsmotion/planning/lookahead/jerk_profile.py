@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from nurbsmotion.planning.lookahead.speed_limits import last_below, range_min
+
 MIN_SPEED = 1e-9  # mm/s, keeps the time of an interval between two stops finite
 
 
@@ -141,89 +143,138 @@ def warped_cycle_times(duration_s: float, period_s: float) -> NDArray[np.float64
     return times
 
 
-PLATEAU_SEARCH_STEPS = 40
 PLATEAU_MARGIN = 1.02  # plateaus last 2 % longer than tau_f (the grid is not the time axis)
 
 
 @dataclass(frozen=True)
 class PeakSides:
-    """Running minima of x = v^2 going out from a peak to the left and to the right (both
-    start at the peak): the first point below a level either side is one binary search."""
+    """Running minima of x = v^2 going out from each of several peaks, to the left and to the
+    right (row i: peak i; column k: k points out), as far as any superlevel stretch can
+    matter: a stretch reaching past the columns is wider than any plateau asked for, and
+    then counts as reaching the columns' end (the width test gives the same answer)."""
 
-    peak: int
-    left_min: NDArray[np.float64]  # left_min[k] = min(x[peak - k .. peak])
-    right_min: NDArray[np.float64]  # right_min[k] = min(x[peak .. peak + k])
+    peaks: NDArray[np.intp]
+    left: NDArray[np.intp]  # (n, m) grid index k points left of the peak (clipped at 0)
+    right: NDArray[np.intp]  # (n, m) grid index k points right of the peak (clipped at the end)
+    left_min: NDArray[np.float64]  # (n, m) min(x[peak - k .. peak]); +inf past the grid's start
+    right_min: NDArray[np.float64]  # (n, m) min(x[peak .. peak + k]); +inf past its end
 
     @classmethod
-    def of(cls, x: NDArray[np.float64], peak: int) -> "PeakSides":
-        return cls(peak, -np.minimum.accumulate(x[peak::-1]), -np.minimum.accumulate(x[peak:]))
+    def of(cls, s: NDArray[np.float64], x: NDArray[np.float64], peaks: NDArray[np.intp],
+           reach_mm: NDArray[np.float64]) -> "PeakSides":
+        """Columns reaching at least ``reach_mm`` (per peak) either side of every peak."""
+        lo = np.searchsorted(s, s[peaks] - reach_mm, side="left")
+        hi = np.searchsorted(s, s[peaks] + reach_mm, side="right")
+        m = int(max((peaks - lo).max(initial=0), (hi - peaks).max(initial=0))) + 2
+        offsets = np.arange(m)
+        left = peaks[:, None] - offsets[None, :]
+        right = peaks[:, None] + offsets[None, :]
+        left_x = np.where(left >= 0, x[np.maximum(left, 0)], np.inf)
+        right_x = np.where(right < len(x), x[np.minimum(right, len(x) - 1)], np.inf)
+        return cls(peaks, np.maximum(left, 0), np.minimum(right, len(x) - 1),
+                   np.minimum.accumulate(left_x, axis=1), np.minimum.accumulate(right_x, axis=1))
 
 
-def superlevel_width(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakSides, level: float) -> float:
-    """Length of the stretch around the peak where x >= level (linear crossings), for
-    level <= x[peak]: from the last point below it on the left to the first on the right
-    (the same points as scanning x, found by binary search in the negated running minima)."""
-    peak = sides.peak
-    k = int(sides.left_min.searchsorted(-level, side="right"))
-    if k < len(sides.left_min):
-        j = peak - k
-        left = s[j] + (level - x[j]) / (x[j + 1] - x[j]) * (s[j + 1] - s[j])
-    else:
-        left = s[0]
-    k = int(sides.right_min.searchsorted(-level, side="right"))
-    if k < len(sides.right_min):
-        j = peak + k
-        right = s[j - 1] + (x[j - 1] - level) / (x[j - 1] - x[j]) * (s[j] - s[j - 1])
-    else:
-        right = s[-1]
-    return right - left
+def superlevel_line(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakSides,
+                    level: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Length of the stretch around every peak where x >= level (linear crossings), for
+    level <= x[peak] (``level``: (n,) or (n, K), row i for peak i), as A + B level: from the
+    last point below the level on the left to the first on the right (the running minima count
+    the points at or above it; past the columns or the grid the stretch ends at the last
+    column). A and B stay the same while the level stays between two running-minimum values
+    (the same grid intervals are crossed): the width is linear in the level there."""
+    level = np.asarray(level, dtype=float)
+    flat = level.ndim == 1
+    lv = level[:, None] if flat else level
+    m = sides.left_min.shape[1]
+    k = np.count_nonzero(sides.left_min[:, None, :] >= lv[:, :, None], axis=2)
+    j = np.take_along_axis(sides.left, np.minimum(k, m - 1), axis=1)
+    inside = (k < m) & (j < sides.peaks[:, None])
+    jn = np.minimum(j + 1, len(x) - 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope_left = np.where(inside, (s[jn] - s[j]) / (x[jn] - x[j]), 0.0)  # left = s_j + (L - x_j) slope
+    k = np.count_nonzero(sides.right_min[:, None, :] >= lv[:, :, None], axis=2)
+    j2 = np.take_along_axis(sides.right, np.minimum(k, m - 1), axis=1)
+    inside = (k < m) & (j2 > sides.peaks[:, None])
+    jp = np.maximum(j2 - 1, 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        slope_right = np.where(inside, (s[j2] - s[jp]) / (x[jp] - x[j2]), 0.0)  # right = s_jp + (x_jp - L) slope
+    right_at_0 = np.where(inside, s[jp] + x[jp] * slope_right, s[j2])
+    left_at_0 = s[j] - x[j] * slope_left
+    width_0, slope = right_at_0 - left_at_0, -(slope_left + slope_right)
+    return (width_0[:, 0], slope[:, 0]) if flat else (width_0, slope)
 
 
-def plateau_level(s: NDArray[np.float64], x: NDArray[np.float64], peak: int, tau_f: float,
-                  allowance_mm: float) -> float:
-    """Highest x = v^2 whose superlevel stretch around ``peak`` is PLATEAU_MARGIN v tau_f +
-    allowance long (bisection)."""
-    sides = PeakSides.of(x, peak)
-    lo, hi = 0.0, float(x[peak])
-    for _ in range(PLATEAU_SEARCH_STEPS):
-        mid = 0.5 * (lo + hi)
-        if superlevel_width(s, x, sides, mid) >= PLATEAU_MARGIN * np.sqrt(mid) * tau_f + allowance_mm:
-            lo = mid
-        else:
-            hi = mid
-    return lo
+def plateau_levels(s: NDArray[np.float64], x: NDArray[np.float64], peaks: NDArray[np.intp], tau_f: float,
+                   allowance_mm: float) -> NDArray[np.float64]:
+    """Highest x = v^2 of every peak whose superlevel stretch around it is at least
+    c sqrt(x) + d long (c = PLATEAU_MARGIN tau_f, d = ``allowance_mm``), all peaks at once.
+
+    The width is tested at every running-minimum value (where its slope changes): the answer
+    lies between the highest level that passes and the next one; there the width is A + B x
+    (superlevel_line), so with q = sqrt(x): B q^2 - c q + (A - d) = 0,
+    q = 2 (A - d) / (c + sqrt(c^2 - 4 B (A - d))) (B <= 0). 0 where no level passes."""
+    c = PLATEAU_MARGIN * tau_f
+    top = x[peaks].astype(float)
+    sides = PeakSides.of(s, x, peaks, c * np.sqrt(top) + allowance_mm)
+    candidates = np.concatenate([np.zeros((len(peaks), 1)), sides.left_min, sides.right_min], axis=1)
+    candidates = np.sort(np.minimum(candidates, top[:, None]), axis=1)
+    width_0, slope = superlevel_line(s, x, sides, candidates)
+    passes = width_0 + slope * candidates >= c * np.sqrt(candidates) + allowance_mm
+    count = candidates.shape[1]
+    first_fail = np.where(passes.all(axis=1), count, np.argmin(passes, axis=1))
+    rows = np.arange(len(peaks))
+    last_ok = candidates[rows, np.maximum(first_fail - 1, 0)]
+    fail = candidates[rows, np.minimum(first_fail, count - 1)]
+    width_0, slope = superlevel_line(s, x, sides, 0.5 * (last_ok + fail))
+    excess = np.maximum(width_0 - allowance_mm, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        q = 2.0 * excess / (c + np.sqrt(np.maximum(c * c - 4.0 * slope * excess, 0.0)))
+    level = np.clip(np.nan_to_num(q * q), last_ok, fail)
+    # the width drops where the level passes a running minimum: the last passing candidate
+    # itself is the answer when the line already fails just above it
+    level = np.where(width_0 + slope * last_ok < c * np.sqrt(last_ok) + allowance_mm, last_ok, level)
+    level = np.where(first_fail == count, top, level)
+    return np.where(first_fail == 0, 0.0, level)
 
 
 def top_starts(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> NDArray[np.intp]:
-    """First grid point of the flat top that ends at each peak (the peak itself when it is sharp)."""
-    starts = peaks.copy()
-    for n, peak in enumerate(peaks):
-        level = x[peak] * (1.0 - 1e-12)
-        below = np.flatnonzero(x[:peak] < level)
-        starts[n] = below[-1] + 1 if len(below) else 0
+    """First grid point of the flat top that ends at each peak (the peak itself when it is
+    sharp): one past the last point before it below x[peak] (1 - 1e-12). Usually the start
+    of the run of values equal to x[peak] (a capped top); searched (last_below) only where
+    the point before that run is not below the level."""
+    level = x[peaks] * (1.0 - 1e-12)
+    changes = np.concatenate([[True], x[1:] != x[:-1]])
+    run_start = np.maximum.accumulate(np.where(changes, np.arange(len(x)), 0))
+    starts = run_start[peaks]
+    other = np.flatnonzero((starts > 0) & (x[np.maximum(starts - 1, 0)] >= level))
+    if len(other):
+        starts[other] = last_below(x, peaks[other], level[other]) + 1
     return starts
 
 
-def valleys_around(x: NDArray[np.float64], peak: int) -> tuple[int, int]:
-    """Indices of the lowest points reached going down from ``peak`` (over its flat top) to
-    either side: the extent of this one peak."""
-    left = peak
-    while left > 0 and x[left - 1] <= x[left]:
-        left -= 1
-    right = peak
-    while right + 1 < len(x) and x[right + 1] <= x[right]:
-        right += 1
-    return left, right
+def valleys_around(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Indices of the lowest points reached going down from every peak (over its flat top) to
+    either side: the extent of each peak (the first point, going out, where x rises again)."""
+    n = len(x)
+    rises_left = np.concatenate([[True], x[:-1] > x[1:]])  # at i: going left from i, x[i-1] > x[i] stops
+    left_stop = np.maximum.accumulate(np.where(rises_left, np.arange(n), 0))
+    rises_right = np.concatenate([x[1:] > x[:-1], [True]])  # at i: x[i+1] > x[i] stops
+    right_stop = np.minimum.accumulate(np.where(rises_right, np.arange(n), n - 1)[::-1])[::-1]
+    return left_stop[peaks], right_stop[peaks]
 
 
-def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float,
-                      jerk: float) -> NDArray[np.float64] | None:
+def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float, jerk: float,
+                      curvature_sq: NDArray[np.float64] | None = None) -> NDArray[np.float64] | None:
     """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
 
     A peak is sharp when the filtered jerk across it, (a(t_p - tau/2) - a(t_p + tau/2)) / tau,
-    exceeds J. Its plateau level v is the highest at which the stretch with speed >= v is at
-    least v tau long (so the raw motion holds that speed for tau): found by bisection. None when
-    no peak is sharp."""
+    plus the path's own tangential jerk there exceeds J: on a curve the set-points' jerk along
+    the tangent is j_t - |c|^2 v^3 (d/dt of the normal acceleration |c| v^2 turns the
+    curvature vector), which adds to the braking side of the peak; ``curvature_sq`` is |c|^2
+    at every point of ``s`` (the largest within v tau_f of the peak counts). Its plateau level
+    v is the highest at which the stretch with speed >= v is at least v tau long (so the raw
+    motion holds that speed for tau): plateau_levels. None when no peak is sharp."""
     inner = np.flatnonzero((x[1:-1] >= x[:-2]) & (x[1:-1] > x[2:]) & (x[1:-1] > 0)) + 1
     if len(inner) == 0:
         return None
@@ -231,17 +282,26 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     t_peak = 0.5 * (np.interp(s[top_starts(x, inner)], raw.s, raw.t) + np.interp(s[inner], raw.s, raw.t))
     k_before, _ = raw.locate(t_peak - tau_f / 2.0)
     k_after, _ = raw.locate(t_peak + tau_f / 2.0)
-    sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > jerk]
+    budget = np.full(len(inner), jerk)
+    if curvature_sq is not None:
+        v_peak = np.sqrt(x[inner])
+        lo = np.searchsorted(s, s[inner] - v_peak * tau_f, side="left")
+        hi = np.maximum(np.searchsorted(s, s[inner] + v_peak * tau_f, side="right") - 1, lo)
+        budget -= -range_min(-curvature_sq, lo, hi) * v_peak**3
+    sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > budget]
     if len(sharp) == 0:
         return None
-    caps = np.full(len(s), np.inf)
     spacing = float(np.diff(s).max())  # the cap only acts on grid points: allow one interval each side
-    for peak in sharp:
-        lo = plateau_level(s, x, peak, tau_f, 2.0 * spacing)
-        if lo <= 0.0:  # a move shorter than two grid intervals: no allowance for the grid
-            lo = plateau_level(s, x, peak, tau_f, 0.0)
-        left, right = valleys_around(x, peak)
-        near = np.zeros(len(s), dtype=bool)
-        near[left:right + 1] = True  # this peak only: a low plateau must not cap its neighbours
-        caps[near & (x > lo)] = np.minimum(caps[near & (x > lo)], lo)
+    level = plateau_levels(s, x, sharp, tau_f, 2.0 * spacing)
+    short = level <= 0.0  # a move shorter than two grid intervals: no allowance for the grid
+    if short.any():
+        level[short] = plateau_levels(s, x, sharp[short], tau_f, 0.0)
+    left, right = valleys_around(x, sharp)
+    # each peak caps its own extent only: a low plateau must not cap its neighbours
+    counts = right - left + 1
+    index = np.repeat(left - np.cumsum(counts) + counts, counts) + np.arange(int(counts.sum()))
+    cap = np.repeat(level, counts)
+    over = x[index] > cap
+    caps = np.full(len(s), np.inf)
+    np.minimum.at(caps, index[over], cap[over])
     return caps

@@ -28,6 +28,7 @@ chord (verify.py), which is what the chord-error limit plans and checks.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -86,6 +87,17 @@ class PathGrid:
     def junction(self) -> NDArray[np.bool_]:
         """(N-1,) True for the zero-length intervals between two pieces."""
         return self.piece[1:] != self.piece[:-1]
+
+    @cached_property
+    def kappa(self) -> NDArray[np.float64]:
+        """(N,) |x_ss|, the curvature (computed once per grid: every planning round reads it)."""
+        return row_norms(self.curv)
+
+    @cached_property
+    def dcurv_normal(self) -> NDArray[np.float64]:
+        """(N,) |x_sss less its tangent part|: the path's own normal jerk is this x v^3."""
+        along = np.einsum("ij,ij->i", self.dcurv, self.tangent)
+        return row_norms(self.dcurv - along[:, None] * self.tangent)
 
 
 def row_norms(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -216,17 +228,19 @@ def interval_curvature_max(s: NDArray[np.float64], curv: NDArray[np.float64], dc
     through (x_ss, x_sss) at its start and the left limits at its end: c(r) = A + B r + C r^2 +
     D r^3 on r in [0, 1]; the largest |c| at r = 0, 1/4, ..., 1 plus half the sample spacing
     times a bound of |c'(r)| (|B| + 2|C| + 3|D|)."""
-    h = np.diff(s)[:, None]
-    a, c1 = curv[:-1], curv_left[1:]
-    b, d1 = h * dcurv[:-1], h * dcurv_left[1:]
+    h = np.diff(s)
+    a, c1 = curv[:-1].T, curv_left[1:].T  # coordinate-major (3, N - 1): rows are contiguous
+    b, d1 = h * dcurv[:-1].T, h * dcurv_left[1:].T
     c = 3.0 * (c1 - a) - 2.0 * b - d1
     d = 2.0 * (a - c1) + b + d1
-    best = np.maximum(np.einsum("ij,ij->i", a, a), np.einsum("ij,ij->i", c1, c1))
+
+    def squared(v: NDArray[np.float64]) -> NDArray[np.float64]:
+        return v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
+
+    best = np.maximum(squared(a), squared(c1))
     for r in CURVATURE_SAMPLES[1:-1]:
-        v = ((d * r + c) * r + b) * r + a
-        best = np.maximum(best, np.einsum("ij,ij->i", v, v))
-    slope = (np.sqrt(np.einsum("ij,ij->i", b, b)) + 2.0 * np.sqrt(np.einsum("ij,ij->i", c, c))
-             + 3.0 * np.sqrt(np.einsum("ij,ij->i", d, d)))
+        best = np.maximum(best, squared(((d * r + c) * r + b) * r + a))
+    slope = np.sqrt(squared(b)) + 2.0 * np.sqrt(squared(c)) + 3.0 * np.sqrt(squared(d))
     return np.sqrt(best) + 0.5 * (CURVATURE_SAMPLES[1] - CURVATURE_SAMPLES[0]) * slope
 
 

@@ -34,7 +34,8 @@ from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGI
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
-SHARE_ROUNDS = 3  # re-evaluations of the tangential jerk share at the planned speeds (first round)
+MAX_STALLED_REPAIRS = 4  # repair rounds in a row that do not lower the worst violation: the repair diverges
+SHARE_ROUNDS = 2  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
@@ -196,9 +197,10 @@ def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[Blo
 
 
 def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[float, ...],
-               speed_cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:
-    """x = v^2 cap of every grid point from all constraints, dips widened for the jerk filter."""
-    v = np.minimum(static_speed_limit(grid, settings.caps, np.ones(len(grid))), speed_cap)
+               speed_cap: NDArray[np.float64], bounds: AccelBounds, static_mm_s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x = v^2 cap of every grid point from all constraints (``static_mm_s``: the grid's
+    static_speed_limit), dips widened for the jerk filter."""
+    v = np.minimum(static_mm_s, speed_cap)
     ends = np.flatnonzero(grid.junction)
     for i, vj in zip(ends, junction_speeds):
         v[i] = min(v[i], vj)
@@ -227,15 +229,15 @@ def braking_ramp(s: NDArray[np.float64], x0: float, bounds: AccelBounds, share: 
 
 
 def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], bounds: AccelBounds,
-            cursor: Cursor, end_free: bool, tau_f: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            cursor: Cursor, end_free: bool, tau_f: float, plateaus: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
-    with the jerk filter, sharp speed peaks are flattened (jp.peak_plateau_caps)."""
+    with the jerk filter (and ``plateaus``), sharp speed peaks are flattened (jp.peak_plateau_caps)."""
     s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
     cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
     if s[1] - s[0] <= 1e-12:  # start on a grid point
         s, cap = s[1:], cap[1:]
         cap[0] = cursor.raw_speed_mm_s**2
-        sub = bounds.subset(idx)
+        sub = bounds.subset(slice(int(idx[0]), int(idx[-1]) + 1))  # scan_grid: consecutive points
     else:
         take = np.concatenate([idx[:1], idx])
         sub = bounds.subset(take)
@@ -246,10 +248,10 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     if not end_free:
         cap[-1] = 0.0
     x = speed_profile(s, cap, sub)
-    if tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
-        plateaus = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3)
-        if plateaus is not None:
-            x = speed_profile(s, np.minimum(cap, plateaus), sub)
+    if plateaus and tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
+        peak_caps = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2)
+        if peak_caps is not None:
+            x = speed_profile(s, np.minimum(cap, peak_caps), sub)
     return s, x
 
 
@@ -286,22 +288,31 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     grid = build_grid(pieces, settings.spacing_mm)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
-    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm)
+    static = static_speed_limit(grid, settings.caps)
+    jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, None, static)
     idx = scan_grid(grid, cursor.raw_offset_mm)
     if len(idx) < 2:  # a running start whose filter memory already reaches past the run's end
         raise PlanningError(f"block {pieces[-1].block + 1}", "too close to the end of the motion to re-plan "
                             "from this state; keep the current plan", pieces[-1].block)
     period = settings.limits.period_s
+    best_worst, stalled = np.inf, 0  # the smallest worst violation ratio so far, rounds since it fell
     for repairs in range(MAX_REPAIR_ROUNDS + 1):
         bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
-        x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
-        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
-        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):  # the share at the planned speeds
-            speeds = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
-            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds)
+        x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
+        speeds = None
+        for _ in range(SHARE_ROUNDS if repairs == 0 and settings.tau_f > 0 else 0):
+            # the share at the speeds a scan plans with it: a fixed point, from below and above
+            # in turn (as in scan.speed_profile), damped by evaluating at the mean of the last
+            # two scans' speeds; the peaks' plateaus only matter to the last scan
+            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f, plateaus=False)
+            planned = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            speeds = planned if speeds is None else 0.5 * (speeds + planned)
+            jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
+                                               static)
             bounds = AccelBounds.for_grid(grid, settings.caps, accel_scale * jerk_share)
-            x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds)
-            s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
+            if bounds.speed_depends_on_scale:
+                x_cap = speed_caps(grid, settings, junction_speeds, speed_cap, bounds, static)
+        s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f)
         commit_t = np.inf
         raw = jp.raw_profile(s_raw, x)
         if not reaches_end:
@@ -333,8 +344,11 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         bad = result.violations()
         if not bad:
             break
-        if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"}:
-            raise _violation_error(pieces, samples, result, bad)
+        worst = max(float(getattr(result, name).max()) for name in bad if name != "fluctuation") \
+            if set(bad) != {"fluctuation"} else np.inf
+        best_worst, stalled = (worst, 0) if worst < best_worst else (best_worst, stalled + 1)
+        if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"} or stalled >= MAX_STALLED_REPAIRS:
+            raise _violation_error(pieces, samples, result, bad, repairs)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
     blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
     stop = None
@@ -360,13 +374,14 @@ class _WindowTooShort(Exception):
     pass
 
 
-def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: Check, bad: dict) -> PlanningError:
+def _violation_error(pieces: tuple[BlockPiece, ...], samples: Samples, result: Check, bad: dict,
+                     repairs: int) -> PlanningError:
     name, rows = next(iter(bad.items()))
     row = int(rows[0])
     block = pieces[int(samples.piece[row])].block
     value = float(getattr(result, name if name != "fluctuation" else "arc_fluctuation")[row])
     return PlanningError(f"block {block + 1}", f"lookahead cannot hold the {name} limit here "
-                         f"(figure {value:.6g} x the limit after {MAX_REPAIR_ROUNDS} repairs)", block)
+                         f"(figure {value:.6g} x the limit after {repairs} repairs)", block)
 
 
 def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDArray[np.float64],

@@ -39,9 +39,11 @@ def backward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], decel: NDAr
 def interval_bounds(bounds: AccelBounds, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two ends."""
     lo, hi = bounds.at(x)
-    accel = np.minimum(hi[:-1], hi[1:])
+    accel = np.maximum(np.minimum(hi[:-1], hi[1:]), 0.0)
+    if bounds.symmetric:
+        return accel, accel
     decel = np.minimum(-lo[:-1], -lo[1:])
-    return np.maximum(decel, 0.0), np.maximum(accel, 0.0)
+    return np.maximum(decel, 0.0), accel
 
 
 def speed_profile(s: NDArray[np.float64], cap: NDArray[np.float64], bounds: AccelBounds) -> NDArray[np.float64]:

@@ -30,6 +30,7 @@ admissible form an interval [0, x_max]: found by vectorised bisection.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -55,22 +56,42 @@ class Caps:
     axis_accel_mm_s2: NDArray[np.float64] | None
 
 
+def min_table(values: NDArray[np.float64], levels: int) -> NDArray[np.float64]:
+    """Sparse table of minima: row j holds min(values[i : i + 2^j]) at i, padded with +inf."""
+    n = len(values)
+    table = np.full((max(levels, 1), n), np.inf)
+    table[0] = values
+    width = 1
+    for j in range(1, levels):
+        np.minimum(table[j - 1, : n - width], table[j - 1, width:], out=table[j, : n - width])
+        width *= 2
+    return table
+
+
+def table_min(table: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
+    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers."""
+    level = np.floor(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.intp)
+    return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
+
+
 def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
     """min(values[lo_k : hi_k + 1]) for every k, by a sparse table (O(N log N) once, O(1) per query)."""
-    table = [values]
-    width = 1
-    while 2 * width <= len(values):
-        prev = table[-1]
-        table.append(np.minimum(prev[:-width], prev[width:]))
-        width *= 2
-    span = np.maximum(hi - lo + 1, 1)
-    level = np.floor(np.log2(span)).astype(np.intp)
-    out = np.empty(len(lo))
-    for k in np.unique(level):
-        sel = level == k
-        row = table[k]
-        out[sel] = np.minimum(row[lo[sel]], row[hi[sel] - (1 << k) + 1])
-    return out
+    span = int(np.max(hi - lo + 1, initial=1))
+    return table_min(min_table(values, int(np.floor(np.log2(max(span, 1)))) + 1), lo, hi)
+
+
+def last_below(values: NDArray[np.float64], ends: NDArray[np.intp], levels: NDArray[np.float64]) -> NDArray[np.intp]:
+    """For every k the largest j < ends[k] with values[j] < levels[k] (-1 where none), by
+    binary lifting on a sparse table of minima: from ends[k], step back over every block of
+    2^j points (largest first) whose minimum is not below the level."""
+    depth = int(np.floor(np.log2(max(len(values), 1)))) + 1
+    table = min_table(values, depth)
+    start = ends.astype(np.intp)
+    for j in range(depth - 1, -1, -1):
+        back = start - (1 << j)
+        clear = (back >= 0) & (table[j, np.maximum(back, 0)] >= levels)
+        start = np.where(clear, back, start)
+    return start - 1
 
 
 SHORT_SPAN = 8  # windows of at most this many points: a direct minimum over the offsets
@@ -106,7 +127,7 @@ def point_curvature_max(grid: PathGrid) -> NDArray[np.float64]:
     """Largest |x_ss| on the grid intervals either side of each point."""
     k = grid.kappa_max
     if len(k) == 0:
-        return row_norms(grid.curv)
+        return grid.kappa
     return np.maximum(np.concatenate([k[:1], k]), np.concatenate([k, k[-1:]]))
 
 
@@ -116,7 +137,10 @@ def chord_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     step = np.minimum(chord_step_mm(kappa, caps.chord_error_mm), grid.feed_mm_s * caps.period_s)
     for _ in range(3):  # the window depends on the step it limits: fixed-point passes
         kappa_max = -sliding_min(grid.s, -kappa, step)
-        step = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
+        shorter = np.minimum(step, chord_step_mm(kappa_max, caps.chord_error_mm))
+        if np.array_equal(shorter, step):  # a fixed point: further passes change nothing
+            break
+        step = shorter
     return step / caps.period_s
 
 
@@ -138,22 +162,23 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
 
 
 def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: float,
-                          speed_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+                          speed_mm_s: NDArray[np.float64] | None = None,
+                          static_mm_s: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
     """Share of A for the raw tangential acceleration, per grid point, so that the filter's
     tangential jerk (share x J) and the path's normal jerk N = 3 |c| v A + |c'_n| v^3 (v the
     point's speed cap: feed, chord, jerk terms and A / |c|, or ``speed_mm_s`` where lower: the
     speeds a scan planned) add up to at most J: sqrt(1 - (N/J)^2), at least
     MIN_TANGENTIAL_SHARE; the smallest within the filter's reach (v tau_f + ``reach_mm``)
-    either side. All ones without a jerk limit."""
+    either side. All ones without a jerk limit. ``static_mm_s``: static_speed_limit of the
+    grid when the caller has it already."""
     if caps.jerk_mm_s3 is None or tau_f <= 0:
         return np.ones(len(grid))
-    kappa = row_norms(grid.curv)
-    v = np.minimum(static_speed_limit(grid, caps, np.ones(len(grid))),
-                   np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
+    kappa = grid.kappa
+    static = static_speed_limit(grid, caps) if static_mm_s is None else static_mm_s
+    v = np.minimum(static, np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
     if speed_mm_s is not None:
         v = np.minimum(v, speed_mm_s)
-    along = np.einsum("ij,ij->i", grid.dcurv, grid.tangent)
-    normal = 3.0 * kappa * v * caps.accel_mm_s2 + row_norms(grid.dcurv - along[:, None] * grid.tangent) * v**3
+    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * v**3
     share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
     return sliding_min(grid.s, share, v * tau_f + reach_mm)
 
@@ -170,25 +195,37 @@ class AccelBounds:
 
     @classmethod
     def for_grid(cls, grid: PathGrid, caps: Caps, scale: NDArray[np.float64]) -> "AccelBounds":
-        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, row_norms(grid.curv))
+        return cls(grid.tangent, grid.curv, caps, caps.accel_mm_s2 * scale, grid.kappa)
 
-    def subset(self, idx: NDArray[np.intp]) -> "AccelBounds":
-        """The bounds of the points ``idx``."""
+    def subset(self, idx: slice | NDArray[np.intp]) -> "AccelBounds":
+        """The bounds of the points ``idx`` (a slice gives views, no copies)."""
         return AccelBounds(self.tangent[idx], self.curv[idx], self.caps, self.tangential_cap[idx], self.kappa[idx])
+
+    @cached_property
+    def jerk_accel_numerator(self) -> NDArray[np.float64]:
+        """JERK_SHARE J / (3 |c|) (inf on straight parts): 3 |c| v |a_t| <= JERK_SHARE J gives
+        |a_t| <= this / v."""
+        if self.caps.jerk_mm_s3 is None:
+            return np.full(len(self.kappa), np.inf)
+        with np.errstate(divide="ignore"):
+            return JERK_SHARE * self.caps.jerk_mm_s3 / (3.0 * self.kappa)
+
+    @cached_property
+    def symmetric(self) -> bool:
+        """lo = -hi at every speed: no axis acceleration limit shifts the admissible a_t."""
+        return self.caps.axis_accel_mm_s2 is None or not bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
 
     def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
         t, c = self.tangent[idx], self.curv[idx]
-        kappa = self.kappa[idx]
+        kappa_x = self.kappa[idx] * x
         a = self.caps.accel_mm_s2
-        hi = np.minimum(np.sqrt(np.maximum(a * a - (kappa * x) ** 2, 0.0)), self.tangential_cap[idx])
-        hi = np.where(kappa * x > a, -np.inf, hi)
-        lo = -hi
+        hi = np.minimum(np.sqrt(np.maximum(a * a - kappa_x * kappa_x, 0.0)), self.tangential_cap[idx])
         if self.caps.jerk_mm_s3 is not None:
-            with np.errstate(divide="ignore"):
-                cap = JERK_SHARE * self.caps.jerk_mm_s3 / (3.0 * kappa * np.sqrt(x))
-            hi = np.minimum(hi, cap)
-            lo = np.maximum(lo, -cap)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                hi = np.minimum(hi, self.jerk_accel_numerator[idx] / np.sqrt(x))
+        hi[kappa_x > a] = -np.inf
+        lo = -hi
         if self.caps.axis_accel_mm_s2 is not None:
             for i, amax in enumerate(self.caps.axis_accel_mm_s2):
                 if not np.isfinite(amax):
@@ -201,6 +238,12 @@ class AccelBounds:
                 hi = np.where(moving, np.minimum(hi, np.maximum(b1, b2)), hi)
         return lo, hi
 
+    @property
+    def speed_depends_on_scale(self) -> bool:
+        """Whether max_speed_squared depends on the tangential cap: only through the axis
+        acceleration limits (without them a_t = 0 decides, whatever the cap)."""
+        return not self.symmetric
+
     def max_speed_squared(self, x_cap: NDArray[np.float64]) -> NDArray[np.float64]:
         """Largest x <= x_cap at which some a_t is admissible (feasible x form [0, x_max]).
 
@@ -208,7 +251,7 @@ class AccelBounds:
         tangential and jerk caps are positive), so x_max = min(x_cap, A / |c|); with them,
         bisection."""
         x = np.array(x_cap, dtype=float)
-        if self.caps.axis_accel_mm_s2 is None or not np.isfinite(self.caps.axis_accel_mm_s2).any():
+        if not self.speed_depends_on_scale:
             with np.errstate(divide="ignore"):
                 return np.minimum(x, self.caps.accel_mm_s2 / self.kappa)
         lo, hi = self.at(x)
@@ -244,68 +287,89 @@ def curvature_jump_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64
     by |dc| v^2 T^2, shared between the two cycles around the step that crosses the jump:
     third difference / T^3 ~ |dc| v^2 / (2 T) <= J, applied within one step (F T) of the
     jump (the verify-and-repair loop checks what this estimate misses)."""
-    v = np.full(len(grid), np.inf)
     if caps.jerk_mm_s3 is None:
-        return v
+        return np.full(len(grid), np.inf)
     s_jump, dc = curvature_jumps(grid)
     big = dc > TINY
-    for s0, jump in zip(s_jump[big], dc[big]):
-        limit = np.sqrt(caps.jerk_mm_s3 * caps.period_s / jump)
-        reach = float(grid.feed_mm_s.max()) * caps.period_s
-        lo, hi = np.searchsorted(grid.s, [s0 - reach, s0 + reach])
-        v[lo:hi] = np.minimum(v[lo:hi], limit)
-    return v
+    s_jump, dc = s_jump[big], dc[big]
+    reach = float(grid.feed_mm_s.max()) * caps.period_s
+    lo = np.searchsorted(grid.s, s_jump - reach)
+    hi = np.searchsorted(grid.s, s_jump + reach) - 1  # the points in [s0 - reach, s0 + reach)
+    near = hi >= lo
+    return range_min_update(len(grid), lo[near], hi[near], np.sqrt(caps.jerk_mm_s3 * caps.period_s / dc[near]))
 
 
-def static_speed_limit(grid: PathGrid, caps: Caps, feed_scale: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s)."""
+def static_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
+    """Pointwise speed limit from feed, chord error, axis velocity and jerk (mm/s): the path's
+    geometry and the caps only, so a window computes it once."""
     v = np.minimum(grid.feed_mm_s, chord_speed_limit(grid, caps))
     v = np.minimum(v, axis_velocity_limit(grid, caps))
     v = np.minimum(v, jerk_speed_limit(grid, caps))
-    v = np.minimum(v, curvature_jump_speed_limit(grid, caps))
-    return v * feed_scale
+    return np.minimum(v, curvature_jump_speed_limit(grid, caps))
 
 
 DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
 DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
 
 
-def spread_min(s: NDArray[np.float64], members: NDArray[np.intp], values: NDArray[np.float64],
-               half_width_mm: float) -> NDArray[np.float64]:
-    """At every grid point, the smallest of ``values`` (at grid points ``members``, in order)
-    within +-half_width_mm in s (inf where none): sliding_min of a signal that is inf
-    elsewhere, with the search over the members only."""
-    at = s[members]
-    lo = np.searchsorted(at, s - half_width_mm, side="left")
-    hi = np.searchsorted(at, s + half_width_mm, side="right") - 1
-    out = np.full(len(s), np.inf)
-    near = hi >= lo
-    if near.any():
-        out[near] = window_min(values, lo[near], hi[near])
-    return out
+def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
+                     values: NDArray[np.float64]) -> NDArray[np.float64]:
+    """out[i] = min of values[k] over every k with lo_k <= i <= hi_k (inf where none): the
+    sparse table of range_min run backwards. Each range is two blocks of 2^j points (j =
+    floor(log2 of its length)); the blocks' minima are pushed down from the widest level,
+    each block of 2^j into its two halves."""
+    span = np.maximum(hi - lo + 1, 1)
+    level = np.floor(np.log2(span)).astype(np.intp)
+    levels = int(level.max(initial=0)) + 1
+    table = np.full((levels, n), np.inf)
+    flat = table.reshape(-1)
+    np.minimum.at(flat, level * n + lo, values)
+    np.minimum.at(flat, level * n + hi - (1 << level) + 1, values)
+    for j in range(levels - 1, 0, -1):
+        half = 1 << (j - 1)
+        width = n - (1 << j) + 1  # blocks of 2^j that fit
+        if width <= 0:
+            continue
+        np.minimum(table[j - 1, :width], table[j, :width], out=table[j - 1, :width])
+        np.minimum(table[j - 1, half:half + width], table[j, :width], out=table[j - 1, half:half + width])
+    return table[0]
+
+
+DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
+DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
+
+
+def dip_levels(inner: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The geometric speed levels of widen_dips: from the lowest finite limit (at least 1e-3
+    of the highest) up by DIP_LEVEL_RATIO, the last one the highest."""
+    finite = inner[np.isfinite(inner)]
+    top = float(finite.max())
+    level = max(float(finite.min()), 1e-3 * top, 1e-9)
+    levels = [level]
+    while level < top:
+        level = min(level * DIP_LEVEL_RATIO, top)
+        levels.append(level)
+    return np.array(levels)
 
 
 def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
     """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
     moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
 
-    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels): the limits in a band
-    spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
-    side). The two ends (the run's start and end states) are not dips and do not spread."""
+    Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels, dip_levels): the limits in
+    a band spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
+    side); all bands at once by range_min_update. The two ends (the run's start and end states)
+    are not dips and do not spread."""
     inner = v.copy()
     inner[0] = inner[-1] = np.inf
-    finite = inner[np.isfinite(inner)]
-    if averaging_s <= 0 or len(finite) == 0:
+    members = np.flatnonzero(np.isfinite(inner))
+    if averaging_s <= 0 or len(members) == 0:
         return v
-    top = float(finite.max())
-    level = max(float(finite.min()), 1e-3 * top, 1e-9)
-    out = v.copy()
-    floor = -np.inf
-    while True:
-        members = np.flatnonzero((inner <= level) & (inner > floor))
-        if len(members):
-            out = np.minimum(out, spread_min(s, members, inner[members], DIP_WIDTH_FACTOR * level * averaging_s))
-        if level >= top:
-            out[0], out[-1] = v[0], v[-1]
-            return out
-        floor, level = level, min(level * DIP_LEVEL_RATIO, top)
+    levels = dip_levels(inner)
+    band_level = levels[np.minimum(np.searchsorted(levels, inner[members], side="left"), len(levels) - 1)]
+    half_width = DIP_WIDTH_FACTOR * band_level * averaging_s
+    lo = np.searchsorted(s, s[members] - half_width, side="left")
+    hi = np.searchsorted(s, s[members] + half_width, side="right") - 1
+    out = np.minimum(v, range_min_update(len(s), lo, hi, inner[members]))
+    out[0], out[-1] = v[0], v[-1]
+    return out

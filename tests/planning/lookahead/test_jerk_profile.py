@@ -1,0 +1,149 @@
+"""The jerk filter's peak plateaus (jerk_profile.py) and the sparse-table minima they use,
+against direct computations."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from nurbsmotion.planning.lookahead import jerk_profile as jp
+from nurbsmotion.planning.lookahead import plan_lookahead
+from nurbsmotion.planning.lookahead.speed_limits import range_min
+from nurbsmotion.planning.measure import measure
+
+from .conftest import WANG_LIMITS, assert_within_limits
+
+
+def direct_width(s: np.ndarray, x: np.ndarray, peak: int, level: float) -> float:
+    """Length of the stretch around ``peak`` where x >= level, walking out point by point."""
+    j = peak
+    while j > 0 and x[j - 1] >= level:
+        j -= 1
+    left = s[0] if j == 0 else s[j - 1] + (level - x[j - 1]) / (x[j] - x[j - 1]) * (s[j] - s[j - 1])
+    k = peak
+    while k < len(x) - 1 and x[k + 1] >= level:
+        k += 1
+    right = s[-1] if k == len(x) - 1 else s[k] + (x[k] - level) / (x[k] - x[k + 1]) * (s[k + 1] - s[k])
+    return right - left
+
+
+def direct_level(s: np.ndarray, x: np.ndarray, peak: int, tau_f: float, allowance_mm: float) -> float:
+    """Highest level passing the plateau test, by 60 bisection steps on direct_width."""
+    lo, hi = 0.0, float(x[peak])
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if direct_width(s, x, peak, mid) >= jp.PLATEAU_MARGIN * np.sqrt(mid) * tau_f + allowance_mm:
+            lo = mid
+        else:
+            hi = mid
+    return lo
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_plateau_levels_in_closed_form_match_a_bisection_on_the_width(seed):
+    """Random profiles (flat tops and repeated values included): every sharp peak's level is
+    the one a fine bisection on the directly measured width finds."""
+    rng = np.random.default_rng(seed)
+    checked = 0
+    for _ in range(40):
+        n = int(rng.integers(5, 90))
+        s = np.concatenate([[0.0], np.cumsum(rng.uniform(0.05, 0.6, n - 1))])
+        x = rng.uniform(0.0, 4e4, n)
+        if rng.random() < 0.5:
+            x = np.round(x, -3)  # repeated values and flat tops
+        x[0], x[-1] = 0.0, float(rng.choice([0.0, 500.0]))
+        peaks = np.flatnonzero((x[1:-1] >= x[:-2]) & (x[1:-1] > x[2:]) & (x[1:-1] > 0)) + 1
+        if len(peaks) == 0:
+            continue
+        tau_f, allowance = float(rng.uniform(0.005, 0.1)), float(rng.choice([0.0, 0.8]))
+        levels = jp.plateau_levels(s, x, peaks, tau_f, allowance)
+        expected = np.array([direct_level(s, x, int(p), tau_f, allowance) for p in peaks])
+        np.testing.assert_allclose(levels, expected, rtol=0, atol=1e-9 * float(x.max()))
+        checked += len(peaks)
+    assert checked > 100
+
+
+def test_range_min_matches_direct_minima():
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 17, 1000):
+        values = rng.normal(size=n)
+        lo = rng.integers(0, n, 300)
+        hi = np.minimum(lo + rng.integers(0, n, 300), n - 1)
+        expected = np.array([values[a:b + 1].min() for a, b in zip(lo, hi)])
+        assert np.array_equal(range_min(values, lo, hi), expected)
+
+
+def accelerate_then_brake(v_top: float, accel: float, flat_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(s, x = v^2) of accelerating at ``accel`` to v_top, holding it ``flat_s`` seconds and
+    braking at ``accel``, on a 0.1 mm grid."""
+    ramp = v_top**2 / (2.0 * accel)
+    flat = v_top * flat_s
+    s = np.arange(0.0, 2.0 * ramp + flat, 0.1)
+    x = np.minimum(np.minimum(2.0 * accel * s, v_top**2), 2.0 * accel * (2.0 * ramp + flat - s))
+    return s, np.maximum(x, 0.0)
+
+
+def test_a_peak_is_sharp_when_the_paths_tangential_jerk_tips_it_over():
+    """+-0.4 A around a short flat top: the filter's jerk across it is 0.8 J (not sharp on a
+    line); on a curve with |c|^2 v^3 = 0.3 J the set-points' tangential jerk is 1.1 J: sharp."""
+    jerk, tau_f, v_top = 50000.0, 0.05, 190.0
+    s, x = accelerate_then_brake(v_top, 0.4 * jerk * tau_f, 0.01)
+    assert jp.peak_plateau_caps(s, x, tau_f, jerk) is None
+    curvature_sq = np.full(len(s), 0.3 * jerk / v_top**3)
+    caps = jp.peak_plateau_caps(s, x, tau_f, jerk, curvature_sq)
+    assert caps is not None and caps.min() < x.max()
+    flat_top = s[caps <= caps.min() * (1 + 1e-12)]
+    assert flat_top[-1] - flat_top[0] >= jp.PLATEAU_MARGIN * np.sqrt(caps.min()) * tau_f
+
+
+def test_wangs_curve_at_1_ms_with_a_jerk_limit_needs_no_repair_round(wang_program):
+    """The planner's first round holds every limit on Wang's curve at T = 1 ms (the throughput
+    benchmark's case): no re-planning of the window, every cycle measured within the limits."""
+    limits = replace(WANG_LIMITS, period_s=0.001, axis_max_velocity_mm_s=None, axis_max_accel_mm_s2=None)
+    trajectory = plan_lookahead(wang_program, limits)
+    assert trajectory.notes["repairs"] == 0
+    assert_within_limits(measure(trajectory, wang_program), limits)
+
+
+def test_widened_dips_spread_each_limit_over_its_bands_half_width():
+    """widen_dips against the definition: every inner limit v_j spreads over
+    +-DIP_WIDTH_FACTOR L_j tau, L_j the level of its band (the first level >= v_j)."""
+    from nurbsmotion.planning.lookahead.speed_limits import DIP_WIDTH_FACTOR, dip_levels, widen_dips
+
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        n = int(rng.integers(3, 200))
+        s = np.concatenate([[0.0], np.cumsum(rng.uniform(0.0, 0.5, n - 1))])
+        v = rng.uniform(1.0, 200.0, n)
+        v[rng.random(n) < 0.2] = np.inf
+        tau = float(rng.uniform(0.001, 0.1))
+        inner = v.copy()
+        inner[0] = inner[-1] = np.inf
+        expected = v.copy()
+        if np.isfinite(inner).any():
+            levels = dip_levels(inner)
+            for j in np.flatnonzero(np.isfinite(inner)):
+                level = levels[min(np.searchsorted(levels, inner[j]), len(levels) - 1)]
+                near = np.abs(s - s[j]) <= DIP_WIDTH_FACTOR * level * tau
+                near[0] = near[-1] = False
+                expected[near] = np.minimum(expected[near], inner[j])
+        np.testing.assert_array_equal(widen_dips(s, v, tau), expected)
+
+
+def test_last_below_and_flat_top_starts_match_a_walk():
+    from nurbsmotion.planning.lookahead.speed_limits import last_below
+
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        n = int(rng.integers(1, 120))
+        values = np.round(rng.uniform(0.0, 10.0, n))
+        ends = rng.integers(0, n + 1, 20)
+        levels = rng.uniform(0.0, 11.0, 20)
+        expected = [max([j for j in range(e) if values[j] < lv], default=-1) for e, lv in zip(ends, levels)]
+        assert list(last_below(values, ends, levels)) == expected
+        peaks = np.flatnonzero((values[1:-1] >= values[:-2]) & (values[1:-1] > values[2:])) + 1
+        for peak, start in zip(peaks, jp.top_starts(values, peaks)):
+            assert values[start:peak + 1].min() >= values[peak] * (1 - 1e-12)
+            assert start == 0 or values[start - 1] < values[peak] * (1 - 1e-12)
