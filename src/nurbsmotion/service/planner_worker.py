@@ -7,11 +7,15 @@ daemon); each request carries the machine configuration it is planned for. One j
 
 - daemon -> worker (``commands``): :class:`PlanRequest` (a job), :class:`TracePath` (the job
   record exists: write the trace there), :class:`CancelPlan` (the job ended), ``None`` (quit);
-- worker -> daemon (``results``): one :class:`PlannedChunk` per chunk (int32 counts, their
-  verified stop tail, the pauses, the block starts and the feed), then one :class:`PlanEnd`.
+- worker -> daemon (``results``): :class:`CheckedProgram` (the parsed program passed every
+  check before motion), one :class:`PlannedChunk` per chunk (int32 counts, their verified
+  stop tail, the pauses, the block starts and the feed), then one :class:`PlanEnd` (a
+  program refused before motion: a PlanEnd with its errors and nothing else).
 
-The worker parses the program itself (the daemon parses it too, to check it and to name
-lines), plans it with PlanStream (a short first window: first motion waits for it only),
+The worker parses the program and checks it (service.streamed_job.check_before_motion); the
+daemon gets the parsed program back (unpickling it costs ~1/80 of parsing it, and the
+daemon's process parsing it would compete with the cycle thread for the GIL). It plans it
+with PlanStream (a short first window: first motion waits for it only),
 converts to counts, measures the rows and writes the trace into the job record. Sending a
 chunk blocks while the daemon's bounded queue is full (the pipe fills): that bounds memory.
 Between chunks it reads its commands; a closed command pipe (the daemon died) ends it.
@@ -33,7 +37,7 @@ import numpy as np
 
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.errors import InputError
+from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.row_source import chunk_figures
 from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import limits_from_config
@@ -78,6 +82,13 @@ class CancelPlan:
 
 
 @dataclass(frozen=True, eq=False)
+class CheckedProgram:
+    """The request's program, parsed and checked: planning starts."""
+
+    program: Program
+
+
+@dataclass(frozen=True, eq=False)
 class PlannedChunk:
     """Rows [first_row, first_row + len(counts)) of the job and what the daemon needs of them."""
 
@@ -96,11 +107,12 @@ class PlannedChunk:
 @dataclass(frozen=True)
 class PlanEnd:
     """The job's planning ended: all rows planned (``finished``), cancelled, or failed
-    (``error``: (where, message))."""
+    (``errors``: (where, message) of each, one for a planning error, several for a program
+    the readers refuse)."""
 
     planned: int
     finished: bool
-    error: tuple[str, str] | None = None
+    errors: tuple[tuple[str, str], ...] = ()
     planning_time_s: float = 0.0
     notes: dict[str, Any] = field(default_factory=dict)
     measured: dict[str, Any] = field(default_factory=dict)
@@ -150,10 +162,11 @@ class WorkerJob:
         self.measure: MeasureStream | None = None
 
     def run(self) -> PlanEnd:
-        error: tuple[str, str] | None = None
+        errors: tuple[tuple[str, str], ...] = ()
         finished = False
         try:
-            program = self._parse()
+            program = self._checked_program()
+            self.results.send(CheckedProgram(program))
             self.events = sorted((e for e in program.events if e.holds), key=lambda e: e.before_block)
             self.measure = MeasureStream(program)
             self.stream = PlanStream(program, limits_from_config(self.config), self.request.chunk_cycles,
@@ -163,24 +176,32 @@ class WorkerJob:
                 self._trace_rows(self.measure.finish())
                 self._wait_for_record()
         except InputError as err:
-            name = self.request.name
-            where = err.where if err.where.startswith(name) else (f"{name}: {err.where}" if err.where else name)
-            error = (where, err.message)
+            errors = tuple(self._named(e) for e in (err.errors if isinstance(err, InputErrors) else [err]))
         except (EOFError, OSError, WorkerGone):
             raise WorkerGone() from None
         except Exception as err:  # a bug: the job must still stop on its tail, with a line saying why
-            error = (self.request.name, f"planning failed after {self.planned} set-points: {err!r}")
+            errors = ((self.request.name, f"planning failed after {self.planned} set-points: {err!r}"),)
         self._close_trace()
         stream = self.stream
-        return PlanEnd(self.planned, finished and error is None, error,
+        return PlanEnd(self.planned, finished and not errors, errors,
                        stream.planning_time_s if stream else 0.0, dict(stream.notes) if stream else {},
                        self.measure.measurements().summary() if self.measure and self.planned else {}, self.trace_rows)
 
-    def _parse(self) -> Program:
+    def _checked_program(self) -> Program:
+        """The request's program, parsed and checked before motion (InputError otherwise)."""
         from nurbsmotion.service.planner import parse
+        from nurbsmotion.service.streamed_job import check_before_motion  # it imports this module
 
         r = self.request
-        return parse(r.name, r.text, r.start_xyz, r.options)
+        program = parse(r.name, r.text, r.start_xyz, r.options)
+        check_before_motion(r.name, program, self.config, r.columns, self.axis_map)
+        return program
+
+    def _named(self, err: InputError) -> tuple[str, str]:
+        """(where, message) with the program's name in front (a planner error names the line)."""
+        name = self.request.name
+        return (err.where if err.where.startswith(name) else f"{name}: {err.where}" if err.where else name,
+                err.message)
 
     def _plan_all(self) -> bool:
         """Plan and send every chunk; False when the job was cancelled first."""
@@ -390,4 +411,10 @@ class PlannerWorker:
         log.info(kv("planner_worker_stopped", pid=process.pid, exit=process.exitcode))
 
 
-__all__ = ["PlannerWorker", "PlanRequest", "PlannedChunk", "PlanEnd", "TracePath", "CancelPlan", "serve"]
+def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
+    """The InputError (InputErrors for several) of a PlanEnd's ``errors``."""
+    found = [InputError(where, message) for where, message in errors]
+    return found[0] if len(found) == 1 else InputErrors(found)
+
+
+__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]

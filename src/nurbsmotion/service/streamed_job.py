@@ -2,8 +2,8 @@
 worker (service.planner_worker: a separate process) plans it chunk by chunk while the axes
 move, and a receiver thread here feeds the chunks to the master (fieldbus.row_source.RowFeed).
 
-Before any motion (prepare_streamed_job, while the worker parses and plans the first chunk
-in parallel): syntax and geometry (the readers), the program
+Before any motion (prepare_streamed_job; the worker parses and checks, then plans at once):
+syntax and geometry (the readers), the program
 gate (service.program_gate), the machine's axes (a program axis without a machine axis must
 not move), the soft limits from the path's verified bounding box (service.path_bounds: the
 set-points lie on the path) and the int32 count range, then the first chunk is planned (a
@@ -37,7 +37,8 @@ from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.service.path_bounds import hull_box, moving_unconfigured_axis, soft_limit_violation
-from nurbsmotion.service.planner_worker import CancelPlan, PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, TracePath
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PlanEnd, PlannedChunk, PlannerWorker,
+                                                PlanRequest, TracePath, as_error)
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
@@ -280,35 +281,46 @@ class StreamedJob:
     def _finish(self, end: PlanEnd) -> None:
         self.end = end
         self.finished = end.finished
-        if end.error is not None:
-            self.error = InputError(*end.error)
+        if end.errors:
+            self.error = as_error(end.errors)
             log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
 
 
 def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
                          chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> StreamedJob:
-    """Parse and check ``text`` completely, start planning it, and return once the first chunk
-    is planned (InputError naming file:line for anything refused; nothing moves)."""
-    from nurbsmotion.service.planner import axis_columns, parse
+    """Have the worker parse and check ``text`` completely and start planning it; return once
+    the first chunk is planned (InputError naming file:line for anything refused; nothing moves)."""
+    from nurbsmotion.service.planner import axis_columns
 
-    axis_map = AxisMap.from_config(config)
     columns = axis_columns(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
         start_xyz[columns] = start_mm
     options = options or ReadOptions(tool_table=config.tool_table)
     first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
-    # the worker parses and plans while this process parses and checks (2 cores: first motion sooner)
     connection = worker.connect(PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
                                             first_chunk_cycles))
-    try:
-        program = parse(name, text, start_xyz, options)
-        check_before_motion(name, program, config, columns, axis_map)
-    except BaseException:
-        worker.abandon()
-        raise
+    program = checked_program(name, worker, connection[1])
     job = StreamedJob(name, program, config, columns, worker, connection, chunk_cycles,
                       first_chunk_cycles=first_chunk_cycles)
     job.begin()
     return job
+
+
+def checked_program(name: str, worker: PlannerWorker, results: Any, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> Program:
+    """The worker's first answer: the program parsed and checked, or the errors refusing it."""
+    try:
+        if not results.poll(timeout_s):
+            worker.abandon()
+            raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
+        answer = results.recv()
+    except (EOFError, OSError):
+        worker.job_ended()
+        raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
+    if isinstance(answer, CheckedProgram):
+        return answer.program
+    worker.job_ended()
+    if isinstance(answer, PlanEnd) and answer.errors:
+        raise as_error(answer.errors)
+    raise InputError(name, f"the planner worker answered {type(answer).__name__} instead of the checked program")
