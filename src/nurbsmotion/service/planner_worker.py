@@ -51,7 +51,7 @@ log = logging.getLogger(__name__)
 
 READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under heavy load) is an error
 QUIT_TIMEOUT_S = 5.0
-WORKER_NICE = 10  # the worker's niceness (the daemon's cycle thread is SCHED_FIFO where allowed; the drives' threads are not)
+WORKER_NICE = 10  # the worker's niceness once a job moves (the cycle thread is SCHED_FIFO where allowed; drives' threads not)
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 
 
@@ -124,13 +124,19 @@ class WorkerGone(Exception):
 
 
 # ---------------------------------------------------------------------- the worker process
+def set_niceness(nice: int) -> None:
+    """This process' niceness: 0 while a job waits for its first chunk (first motion), then
+    WORKER_NICE while it plans ahead of the axes (the daemon's threads and the drives come
+    first for the CPU). Going back to 0 needs CAP_SYS_NICE: without it the worker stays nicer."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError:
+        pass
+
+
 def serve(commands: multiprocessing.connection.Connection,
           results: multiprocessing.connection.Connection) -> None:
     """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone."""
-    try:
-        os.nice(WORKER_NICE)  # it plans ahead of the axes: the daemon's threads (and drives) come first for the CPU
-    except OSError:
-        pass
     results.send("ready")
     try:
         while True:
@@ -164,6 +170,7 @@ class WorkerJob:
     def run(self) -> PlanEnd:
         errors: tuple[tuple[str, str], ...] = ()
         finished = False
+        set_niceness(0)
         try:
             program = self._checked_program()
             self.results.send(CheckedProgram(program))
@@ -216,6 +223,8 @@ class WorkerJob:
             self.results.send(PlannedChunk(self.planned, counts.astype(np.int32), tail.astype(np.int32),
                                            self._pauses(chunk), step, accel, rows, ids,
                                            np.asarray(chunk.feed_mm_s, np.float32), time.monotonic() - self.started))
+            if self.planned == 0:
+                set_niceness(WORKER_NICE)
             self.planned += len(counts)
             before = counts[-2:]
             self._trace_rows(self.measure.add(chunk))
