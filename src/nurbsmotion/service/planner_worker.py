@@ -324,7 +324,7 @@ class PlannerWorker:
         commands_read.close()  # the worker holds these ends: a dead worker closes them
         results_write.close()
         self._ready = False
-        log.info(kv("planner_worker_started", pid=self._process.pid))
+        log.debug(kv("planner_worker_started", pid=self._process.pid))
 
     @property
     def alive(self) -> bool:
@@ -417,7 +417,7 @@ class PlannerWorker:
         self._commands.close()
         self._results.close()
         self._idle.set()
-        log.info(kv("planner_worker_stopped", pid=process.pid, exit=process.exitcode))
+        log.debug(kv("planner_worker_stopped", pid=process.pid, exit=process.exitcode))
 
 
 def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
