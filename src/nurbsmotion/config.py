@@ -148,6 +148,7 @@ class MachineConfig:
     tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
     tool_table: Any = field(default=None, compare=False, repr=False)
     spindle: str | None = None  # 'none' or absent: no spindle drive
+    require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -423,6 +424,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "simulate": (_boolean, {}),
+    "require_homing": (_boolean, {}),
     "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
     "spindle": (_optional(lambda doc: _section_reader("spindle")(doc)), {}),
 }
@@ -488,6 +490,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         master=values.get("master", MasterConfig()),
         tools=values.get("tools"),
         spindle=values.get("spindle"),
+        require_homing=values.get("require_homing"),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)

@@ -7,7 +7,9 @@ homing: {method: here, offset_mm: 0}
 
 ``method`` is the drive's CiA-402 homing method (0x6098: 1..35 and 37 standard, -128..-1
 manufacturer specific) or ``here`` (no drive homing: the current position becomes
-``offset_mm``). Drive methods other than 35/37 need the two speeds and the acceleration. The optional
+``offset_mm``). Drive methods other than 35/37 need the two speeds and the acceleration.
+``order`` (an integer, lower homes first) sets the sequence of ``nurbsmotion home`` without
+axis names (axes without it follow, in list order). The optional
 ``speed_unit_counts_s``, ``accel_unit_counts_s2`` and ``home_offset_sign`` say what the
 drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
 ``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
@@ -42,6 +44,7 @@ class HomingConfig:
     speed_unit_counts_s: float = 1.0  # counts/s one unit of 0x6099 stands for
     accel_unit_counts_s2: float = 1.0  # counts/s² one unit of 0x609A stands for
     home_offset_sign: int = -1  # -1: CiA 402 (zero = home + 0x607C, the home reads -0x607C)
+    order: int | None = None  # `home` with no axis named: lower first; axes without: after, in list order
 
     @property
     def on_drive(self) -> bool:
@@ -86,6 +89,7 @@ _READERS = {
     "speed_unit_counts_s": _POSITIVE,
     "accel_unit_counts_s2": _POSITIVE,
     "home_offset_sign": (_sign, {}),
+    "order": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
 }
 
 

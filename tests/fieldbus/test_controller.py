@@ -231,3 +231,45 @@ def test_hold_and_pause_state_survives_a_rewind():
     assert ctl.phase is Phase.STREAMING and job.playback.pause_i == 1
     ctl.restore(snap)
     assert ctl.phase is Phase.HELD and job.playback.pause_i == 0 and job.playback.at_pause()
+
+
+def test_homing_phase_runs_the_procedure_on_one_axis_and_returns_with_the_read_position():
+    from nurbsmotion.fieldbus.homing import CW_START_HOMING, HomingProcedure
+
+    ctl = CycleController(2, [True, False], [1e6] * 2, 0.004, stuck_cycles=100, enable_timeout_cycles=1000)
+    fb = Fb(2, SW_ENABLED | 0x1000)  # IP active on axis 0
+    ctl.handle("enable", None, 0, fb)
+    fb.cycle = [5, 5]
+    ctl.step(1, fb)
+    ctl.hold[:] = [100, 200]
+    cw, sp = ctl.step(2, fb, [("home", 0)])
+    assert ctl.phase is Phase.HOMING and cw == [CW_ENABLED, CW_ENABLED] and sp == [100, 200]  # bit 4 low on axis 0
+    assert ctl.step(3, fb, [("job", "j")]) and ("refused", "j") in ctl.notices  # no job while homing
+    procedure = HomingProcedure(1, 17, 0.004, 1.0, ack_s=0.0)
+    fb.pos = [150, 200]
+    cw, sp = ctl.step(4, fb, [("home_start", procedure)])
+    assert cw[0] == CW_ENABLED and sp == [150, 200]  # armed: the rising edge comes next cycle
+    snap = ctl.snapshot()
+    cw, _ = ctl.step(5, fb)
+    assert cw[0] == CW_ENABLED | CW_START_HOMING
+    ctl.restore(snap)  # a rewind recomputes the cycle from the same procedure state
+    cw, _ = ctl.step(5, fb)
+    assert cw[0] == CW_ENABLED | CW_START_HOMING and procedure.cycles == 2
+    fb.status = [SW_ENABLED | 0x1000 | 0x0400, SW_ENABLED]  # homing attained + target reached
+    for k in range(6, 12):
+        ctl.step(k, fb)
+    assert any(n[0] == "homing_outcome" and n[2].homed for n in ctl.notices)
+    cw, sp = ctl.step(12, fb, [("home_hold", -2500)])
+    assert (cw, sp) == ([CW_ENABLED, CW_ENABLED], [-2500, 200])
+    cw, sp = ctl.step(13, fb, [("home_end", None)])
+    assert ctl.phase is Phase.HOLDING and ctl.hold == [-2500, 200] and ctl.homing is None
+    assert cw == [CW_ENABLED | 0x10, CW_ENABLED] and sp == [-2500, 200]  # IP: bit 4 high again
+
+
+def test_a_quick_stop_ends_the_homing_phase():
+    ctl, fb = holding_controller()
+    ctl.step(2, fb, [("home", 1)])
+    ctl.step(3, fb, [("quick_stop", "faulted")])
+    assert ctl.phase is Phase.QUICK_STOP and ctl.homing is None
+    ctl.step(4, fb, [("home_end", None)])  # late requests of the homing run change nothing
+    assert ctl.phase is Phase.QUICK_STOP

@@ -175,3 +175,25 @@ def test_real_drive_descriptions_that_refuse_part_of_the_plan():
         "node 1: homing configuration: 0x6099:01: the drive's EDS has no such object",
         "node 1: homing configuration: 0x6099:02: the drive's EDS has no such object",
         "node 1: homing configuration: 0x609A:00: the drive's EDS has no such object"]
+
+
+def test_a_not_started_word_waits_for_the_start_allowance_before_failing():
+    """'bit 10 without bit 12' right after the acknowledge may predate the start (a lagging
+    drive): it fails only after start_s; once the drive showed the homing under way it fails at once."""
+    proc = HomingProcedure(3, 1, cycle_period_s=0.004, timeout_s=10.0, start_s=0.2)
+    assert proc.start_cycles == 50
+    steps = _run(proc, [OE, OE] + [INTERRUPTED] * 50 + [IN_PROGRESS, ATTAINED, COMPLETED])
+    assert steps[-1].phase is Phase.HOMED  # the drive started late: homed, not a failure
+    proc = HomingProcedure(3, 1, cycle_period_s=0.004, timeout_s=10.0, start_s=0.2)
+    steps = _run(proc, [OE, OE] + [INTERRUPTED] * 51)  # the edge is sent in the 2nd step
+    assert [s.outcome for s in steps[:-1]] == [None] * 52  # 50 cycles after the edge: still waiting
+    assert steps[-1].outcome.reason.startswith("node 3: homing method 1: the drive interrupted or did not start")
+
+
+def test_cancel_ends_the_homing_with_bit_4_low():
+    proc = HomingProcedure(3, 17, cycle_period_s=0.004, timeout_s=10.0)
+    _run(proc, [OE, OE] + [IN_PROGRESS] * 5)
+    proc.cancel()
+    step = proc.step(IN_PROGRESS)
+    assert step.phase is Phase.FAILED and not step.controlword & 0x10
+    assert step.outcome.reason == "node 3: homing method 17: stopped on request (statusword 0x0237)"

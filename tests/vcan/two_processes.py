@@ -76,11 +76,12 @@ def strictly_increasing_job(start_counts: list[int], cycles: int) -> np.ndarray:
 class SimProcess:
     """`python -m nurbsmotion sim` as a child process, started and stopped by the test."""
 
-    def __init__(self, config_path: Path, record_dir: Path) -> None:
+    def __init__(self, config_path: Path, record_dir: Path, extra_args: tuple[str, ...] = ()) -> None:
         env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
         self.record_dir = record_dir
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config_path), "--record-dir", str(record_dir)],
+            [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config_path), "--record-dir", str(record_dir),
+             *extra_args],
             stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
         self.log: list[str] = []
         self.ready = threading.Event()

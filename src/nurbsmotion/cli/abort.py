@@ -14,4 +14,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return with_client(args, simple_command("abort", lambda r: f"job {r['job']}: quick stop"))
+    return with_client(args, simple_command("abort", lambda r: f"job {r['job']}: quick stop" if r['job'] else "homing: quick stop of every axis"))

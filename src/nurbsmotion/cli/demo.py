@@ -1,6 +1,8 @@
 """``nurbsmotion demo``: the daemon and three simulated CiA-402 drives in this process on
-python-can's virtual bus run Wang's Table 1 NURBS curve; prints what happened and where
-the record and the plot are.
+python-can's virtual bus: the axes are homed (the simulated drives have a limit switch and
+index pulses: X on its negative limit switch, method 17; Y on an index pulse, method 34;
+Z where it stands, ``here``), jogged (X+10) and moved by MDI, then run Wang's Table 1
+NURBS curve; prints what happened and where the record and the plot are.
 """
 
 from __future__ import annotations
@@ -13,15 +15,29 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import functools
+
 from nurbsmotion import data
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.service.client import Client, RequestFailed
+from nurbsmotion.homing_config import HomingConfig
 from nurbsmotion.service.daemon import Daemon
+from nurbsmotion.service.link import open_link
 from nurbsmotion.service.verify import drive_report
 
 HELP = "run Wang's Table 1 curve on simulated drives (daemon + drives in this process) and report"
 PROGRAM_NAME = "wang_table1.nc"
+# The demo machine's homing, for axes whose configuration has none, and the switches and index
+# pulses of its simulated drives (raw counts at power-on; 1000 counts/mm in config/demo.yaml).
+DEMO_HOMING = {
+    "X": HomingConfig(method=17, speed_search_mm_s=20, speed_zero_mm_s=2, accel_mm_s2=200, offset_mm=-20, order=2),
+    "Y": HomingConfig(method=34, speed_search_mm_s=20, speed_zero_mm_s=2, accel_mm_s2=200, offset_mm=0, order=1),
+    "Z": HomingConfig(method="here", offset_mm=0),
+}
+DEMO_SENSORS = {"X": {"negative_limit_counts": -20_000}, "Y": {"index_pitch_counts": 4000, "index_phase_counts": 1500}}
+DEMO_JOG = {"axis": "X", "distance": 10.0, "speed": 20.0}
+DEMO_MDI = "G01 X5 Y5 F3000"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -38,8 +54,17 @@ def demo_config(args: argparse.Namespace, socket_path: Path) -> MachineConfig:
         from nurbsmotion.errors import InputError
 
         raise InputError(config.where("simulate"), "the demo runs simulated drives: set simulate: true")
-    return replace(config, data_dir=args.data_dir or config.data_dir, axes=_with_findable_eds(config.axes),
+    axes = tuple(a if a.homing or a.name not in DEMO_HOMING else replace(a, homing=DEMO_HOMING[a.name])
+                 for a in _with_findable_eds(config.axes))
+    return replace(config, data_dir=args.data_dir or config.data_dir, axes=axes,
                    control=replace(config.control, socket=str(socket_path), group=None))
+
+
+def demo_sensors(config: MachineConfig) -> dict[int, Any]:
+    """The simulated drives' home switches and index pulses (sim.homing.HomeSensors) by node."""
+    from nurbsmotion.sim.homing import HomeSensors
+
+    return {a.node_id: HomeSensors(**DEMO_SENSORS[a.name]) for a in config.axes if a.name in DEMO_SENSORS}
 
 
 def _with_findable_eds(axes: tuple[AxisConfig, ...]) -> tuple[AxisConfig, ...]:
@@ -59,17 +84,55 @@ def run(args: argparse.Namespace) -> int:
     folder = Path(tempfile.mkdtemp(prefix="nurbsmotion-demo-"))
     try:
         config = demo_config(args, folder / "control.sock")
-        daemon = Daemon(config)
+        daemon = Daemon(config, functools.partial(open_link, home_sensors=demo_sensors(config)))
         daemon.start()
         try:
             print(f"drives up: {len(config.axes)} simulated axes on {config.bus.interface}:{config.bus.channel}, "
                   f"T = {config.cycle_period_s * 1000:g} ms")
+            _home_jog_mdi(config)
             info = _run_program(config, args.no_progress)
         finally:
             daemon.close()
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     return _report(info, config)
+
+
+def _home_jog_mdi(config: MachineConfig) -> None:
+    """Home every axis, jog X+10, one MDI line: each through the control API as a client would."""
+    from nurbsmotion.cli.home import follow_homing
+    from nurbsmotion.errors import InputError
+    from nurbsmotion.homing_config import homing_method_name
+
+    with Client(config.control.socket) as client:
+        names = client.call("home")["axes"]
+        print(f"homing {', '.join(names)} (simulated limit switch and index pulses)")
+        homing = follow_homing_quietly(client, names, follow_homing)
+        if homing["error"]:
+            raise InputError("demo: home", homing["error"])
+        positions = {a["name"]: a["actual_mm"] for a in client.call("status")["axes"]}
+        for axis in config.axes:
+            if axis.homing is not None:
+                print(f"  axis {axis.name}: homed by {homing_method_name(axis.homing.method)}, "
+                      f"now at {positions[axis.name]:.3f} mm")
+        for title, cmd, fields in ((f"jog X+{DEMO_JOG['distance']:g} at {DEMO_JOG['speed']:g} mm/s", "jog", DEMO_JOG),
+                                   (f"MDI {DEMO_MDI}", "mdi", {"text": DEMO_MDI})):
+            job = client.call(cmd, **fields)["job"]
+            info = follow(client, job["id"], None)
+            outcome = info["outcome"]
+            if outcome["outcome"] != "completed":
+                raise InputError(f"demo: {title}", f"{outcome['outcome']}: {outcome['reason']}")
+            end = {name: v["commanded_mm"] for name, v in outcome["final_position"].items()}
+            print(f"{title}: completed, axes at " + " ".join(f"{n}{v:.3f}" for n, v in end.items()))
+
+
+def follow_homing_quietly(client: Client, names: list[str], follow_homing: Any) -> dict[str, Any]:
+    """cli.home's follow, its per-axis lines left out (the demo prints its own)."""
+    import contextlib
+    import io
+
+    with contextlib.redirect_stdout(io.StringIO()):
+        return follow_homing(client, names)
 
 
 def _run_program(config: MachineConfig, quiet: bool) -> dict[str, Any]:
@@ -135,7 +198,7 @@ def _plot(folder: Path, config: MachineConfig) -> Path | None:
 
     plan = json.loads((folder / "plan.json").read_text(encoding="utf-8"))
     trace = read_trace(folder / "trace.csv")
-    program = parse(PROGRAM_NAME, data.read_text(PROGRAM_NAME), np.zeros(3))
+    program = parse(PROGRAM_NAME, data.read_text(PROGRAM_NAME), np.array(plan["start_mm"]))  # where the job started
     trajectory = Trajectory(plan["algorithm"], plan["period_s"], trace["block"].astype(np.int32), trace["u"],
                             np.column_stack([trace["x"], trace["y"], trace["z"]]), trace["feed"])
     path = folder / "plot.png"

@@ -37,9 +37,13 @@ def format_status(s: dict[str, Any]) -> list[str]:
         lines.append(f"job {job['id']} {job['name']}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
                      f"feed {job['feed_mm_s']:.1f} mm/s, override {job['override_percent']:g} %, "
                      f"at {job.get('line') or '-'}")
+    homing = s.get("homing") or {"axes": {}}
     for a in s["axes"]:
-        lines.append(f"axis {a['name']} node {a['node']}: {a['drive_state']}, commanded {_mm(a['commanded_mm'])} mm, "
+        homed = homing["axes"].get(a["name"])
+        lines.append(f"axis {a['name']} node {a['node']}{f' ({homed})' if homed else ''}: {a['drive_state']}, commanded {_mm(a['commanded_mm'])} mm, "
                      f"actual {_mm(a['actual_mm'])} mm, following error {_mm(a['following_error_mm'])} mm")
+    if homing.get("error"):
+        lines.append(f"homing failed: {homing['error']}")
     c = s["cycles"]
     lines.append(f"cycles {c['count']}: late {c['late']}, missed {c['missed']}, lateness p99 "
                  f"{c['lateness_p99_ms']:.3f} ms, max {c['lateness_max_ms']:.3f} ms")

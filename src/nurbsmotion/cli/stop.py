@@ -14,4 +14,4 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    return with_client(args, simple_command("stop", lambda r: f"job {r['job']}: stopping along the path"))
+    return with_client(args, simple_command("stop", lambda r: f"job {r['job']}: stopping along the path" if r['job'] else "homing: stopping the search"))

@@ -12,18 +12,23 @@ holding (re-send the held position) <-> streaming (the job's rows at the playbac
 stopping (controlled stop on the path) / quick_stop (quick-stop controlword) -> disabled;
 disabling at shutdown. A job can be held: streaming -> pausing (the stop ramp) -> held (the
 job stays, the position is re-sent) -> streaming on resume; a program pause row goes from
-streaming to held directly (the plan is at rest there).
+streaming to held directly (the plan is at rest there). Homing one axis (fieldbus.homing,
+driven by fieldbus.homing_run): holding -> homing (that axis gets bit 4 low, then the
+homing procedure's controlword each cycle while its set-point follows its position actual,
+then a fixed hold target; the other axes keep holding) -> holding.
 """
 
 from __future__ import annotations
 
 import collections
 import enum
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from nurbsmotion import cia402 as c
-from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_QUICK_STOP, CW_SHUTDOWN, enable_step, is_ready,
-                                              running_controlword)
+from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_ENABLED, CW_QUICK_STOP, CW_SHUTDOWN, enable_step,
+                                              is_ready, running_controlword)
+from nurbsmotion.fieldbus.homing import HomingProcedure
 from nurbsmotion.fieldbus.playback import Playback, PlaybackState
 
 OE_MASK, OE_VALUE = 0x6F, 0x27  # statusword coding of OPERATION ENABLED
@@ -41,9 +46,10 @@ class Phase(enum.Enum):
     DISABLING = "disabling"
     PAUSING = "pausing"  # a hold's stop ramp; the job stays
     HELD = "held"  # a job held (hold request or program pause), waiting for resume
+    HOMING = "homing"  # one axis homes (mode 6) or changes mode around it; the others hold
 
 
-RUNNING_PHASES = frozenset((Phase.HOLDING, Phase.STREAMING, Phase.STOPPING, Phase.PAUSING, Phase.HELD))
+RUNNING_PHASES = frozenset((Phase.HOLDING, Phase.STREAMING, Phase.STOPPING, Phase.PAUSING, Phase.HELD, Phase.HOMING))
 MOVING_PHASES = frozenset((Phase.STREAMING, Phase.STOPPING, Phase.PAUSING))
 
 
@@ -61,10 +67,12 @@ class Event(enum.Enum):
     HOLD = "hold"  # hold the job: ramp to rest on the path, keep it
     PAUSE_ROW = "pause row"  # a program pause row (M0/M1/M6) handed out
     RESUME = "resume"
+    HOME = "home"  # home one axis (from holding)
+    HOME_END = "home end"  # the homed axis follows set-points again
 
 
 P, E = Phase, Event
-_ANY_ONLINE = (P.ENABLING, P.HOLDING, P.STREAMING, P.STOPPING, P.QUICK_STOP, P.DISABLED)
+_ANY_ONLINE = (P.ENABLING, P.HOLDING, P.STREAMING, P.STOPPING, P.QUICK_STOP, P.DISABLED, P.HOMING)
 TRANSITIONS: dict[tuple[Phase, Event], Phase] = {
     **{(p, E.ENABLE): P.ENABLING for p in (P.OFFLINE, *_ANY_ONLINE)},
     (P.ENABLING, E.READY): P.HOLDING,
@@ -81,6 +89,8 @@ TRANSITIONS: dict[tuple[Phase, Event], Phase] = {
     (P.PAUSING, E.STOP): P.STOPPING,
     (P.HELD, E.RESUME): P.STREAMING,
     (P.HELD, E.STOP): P.HOLDING,
+    (P.HOLDING, E.HOME): P.HOMING,
+    (P.HOMING, E.HOME_END): P.HOLDING,
     **{(p, E.QUICK_STOP): P.QUICK_STOP for p in RUNNING_PHASES},
     (P.QUICK_STOP, E.DRIVES_STOPPED): P.DISABLED,
     **{(p, E.DISABLE): P.DISABLING for p in _ANY_ONLINE},
@@ -90,6 +100,31 @@ TRANSITIONS: dict[tuple[Phase, Event], Phase] = {
 def next_phase(phase: Phase, event: Event) -> Phase | None:
     """The phase ``event`` leads to from ``phase``; None: the event does not apply there."""
     return TRANSITIONS.get((phase, event))
+
+
+@dataclass
+class HomingSlot:
+    """The axis being homed: before ``procedure`` is given it holds with bit 4 low (the
+    master switches 0x6060 to 6 meanwhile); then the procedure's controlword each cycle and
+    the set-point follows the position actual; with ``hold_counts`` it holds there, bit 4
+    low (the master switches 0x6060 back), until ``home_end``."""
+
+    axis: int
+    procedure: HomingProcedure | None = None
+    hold_counts: int | None = None
+
+    def snapshot(self) -> tuple[Any, ...]:
+        proc = self.procedure
+        return (self.axis, proc, proc.snapshot() if proc is not None else None, self.hold_counts)
+
+    @staticmethod
+    def restored(snap: tuple[Any, ...] | None) -> "HomingSlot | None":
+        if snap is None:
+            return None
+        axis, proc, state, hold = snap
+        if proc is not None:
+            proc.restore(state)
+        return HomingSlot(axis, proc, hold)
 
 
 class Feedback(Protocol):
@@ -135,6 +170,7 @@ class CycleController:
         self.phase_cycle = 0
         self.job: Any = None  # the job streaming or stopping (a JobLike)
         self.rate = 1.0  # playback rate for the next jobs (feed override)
+        self.homing: HomingSlot | None = None  # phase HOMING: the axis being homed
         self.notices: collections.deque[tuple[Any, ...]] = collections.deque()
 
     # ------------------------------------------------------------------ the cycle
@@ -167,6 +203,8 @@ class CycleController:
                 self._set_phase(Event.AT_REST, k)
         elif phase is Phase.ENABLING:
             self._enabling(k, fb)
+        elif phase is Phase.HOMING:
+            self._homing_step(k, fb)
         elif phase is Phase.QUICK_STOP:
             sp[:] = fb.pos
             cw[:] = [CW_QUICK_STOP] * self.n
@@ -184,8 +222,12 @@ class CycleController:
         return cw, sp
 
     def handle(self, what: str, arg: Any, k: int, fb: Feedback) -> None:
-        """One request: job, stop, abort, quick_stop, fault_stop, rate, hold, resume, enable, disable."""
+        """One request: job, stop, abort, quick_stop, fault_stop, rate, hold, resume, enable, disable,
+        home / home_start / home_cancel / home_hold / home_end (one axis' homing, see HomingSlot)."""
         phase = self.phase
+        if what.startswith("home"):
+            self._handle_homing(what, arg, k)
+            return
         if what == "job":
             if phase is Phase.HOLDING and self.job is None:
                 self.job = arg
@@ -265,12 +307,14 @@ class CycleController:
         job = self.job
         state: PlaybackState | None = job.playback.snapshot() if job is not None else None
         return (self.phase, self.phase_cycle, job, state, job.outcome if job else "", job.finish_cycle if job else -1,
-                tuple(self.hold), tuple(self.sp), tuple(self.cw), self.rate)
+                tuple(self.hold), tuple(self.sp), tuple(self.cw), self.rate,
+                self.homing.snapshot() if self.homing is not None else None)
 
     def restore(self, snap: tuple[Any, ...]) -> None:
         """Back to the state right after an earlier step (snapshot taken then)."""
-        phase, self.phase_cycle, job, state, outcome, finish, hold, sp, cw, self.rate = snap
+        phase, self.phase_cycle, job, state, outcome, finish, hold, sp, cw, self.rate, homing = snap
         self.phase = phase
+        self.homing = HomingSlot.restored(homing)
         if job is not None and job.released and phase not in MOVING_PHASES:
             job = None  # its end already reached the wire
         self.job = job
@@ -288,6 +332,8 @@ class CycleController:
             raise RuntimeError(f"controller: event {event.value} in phase {self.phase.value}")
         self.phase = phase
         self.phase_cycle = k
+        if phase is not Phase.HOMING:
+            self.homing = None
         self.notices.append(("phase", phase, k))
 
     def _enter_enabling(self, k: int, fb: Feedback) -> None:
@@ -324,6 +370,46 @@ class CycleController:
         job.released = True
         if self.job is job and self.phase not in MOVING_PHASES:
             self.job = None
+
+    # ------------------------------------------------------------------ homing one axis
+    def _handle_homing(self, what: str, arg: Any, k: int) -> None:
+        slot = self.homing
+        if what == "home":
+            if self.phase is Phase.HOLDING and self.job is None:
+                self.homing = HomingSlot(int(arg))
+                self._set_phase(Event.HOME, k)
+            else:
+                self.notices.append(("home_refused", arg, self.phase))
+        elif slot is None or self.phase is not Phase.HOMING:
+            return  # the homing ended meanwhile (fault, quick stop, reset): the master sees the phase
+        elif what == "home_start":
+            slot.procedure = arg
+        elif what == "home_cancel":
+            if slot.procedure is not None:
+                slot.procedure.cancel()
+        elif what == "home_hold":
+            slot.procedure, slot.hold_counts = None, int(arg)
+        elif what == "home_end":
+            i = slot.axis
+            self.hold[i] = slot.hold_counts if slot.hold_counts is not None else self.hold[i]
+            self._set_phase(Event.HOME_END, k)
+
+    def _homing_step(self, k: int, fb: Feedback) -> None:
+        """The other axes hold; the homed axis as its HomingSlot says."""
+        slot = self.homing
+        assert slot is not None
+        sp, cw, i = self.sp, self.cw, slot.axis
+        sp[:] = self.hold
+        cw[:] = self.run_cw
+        cw[i] = CW_ENABLED  # bit 4 low: no interpolation (IP) / no homing start (mode 6)
+        if slot.hold_counts is not None:
+            sp[i] = slot.hold_counts
+        elif slot.procedure is not None:
+            step = slot.procedure.step(fb.status[i])
+            cw[i] = step.controlword
+            sp[i] = fb.pos[i]  # ignored in mode 6; follows the drive so no target is stale
+            if step.outcome is not None:
+                self.notices.append(("homing_outcome", i, step.outcome, k))
 
     def _enabling(self, k: int, fb: Feedback) -> None:
         sp, cw = self.sp, self.cw

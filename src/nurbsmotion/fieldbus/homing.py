@@ -60,6 +60,12 @@ INT32_MIN, INT32_MAX = -(2**31), 2**31 - 1
 # the verdict on a fast homing (35/37) by that much.
 ACK_CYCLES = 3
 ACK_S = 0.1
+# After the acknowledge, "bit 10 without bit 12" may still be the statusword from before the
+# start when the drive's answers lag the wire (a drive process inside User-Mode Linux lagged
+# 0.7-1.8 s; the vcan homing test failed on it): before the drive has shown the homing under
+# way (bit 10 low, or bit 12 / 13), that word counts as "not started yet" for START_S. A drive
+# that really does not start is reported that much later; nothing moves meanwhile.
+START_S = 3.0
 
 
 # --------------------------------------------------------------------------- drive values
@@ -217,6 +223,7 @@ class Event(enum.Enum):
     INTERRUPTED = "interrupted"
     HOMING_ERROR = "homing error"
     TIMEOUT = "timeout"
+    CANCELLED = "cancelled"  # the operator stopped the homing (cancel())
 
 
 P, E = Phase, Event
@@ -272,21 +279,34 @@ class HomingProcedure:
     read back before the first step). No I/O, no clock: time is counted in cycles."""
 
     def __init__(self, node_id: int, method: int, cycle_period_s: float, timeout_s: float,
-                 ack_s: float = ACK_S) -> None:
+                 ack_s: float = ACK_S, start_s: float = START_S) -> None:
         self.node_id = node_id
         self.method = method
         self.timeout_s = timeout_s
         self.timeout_cycles = max(1, math.ceil(timeout_s / cycle_period_s - 1e-9))
         self.ack_cycles = max(ACK_CYCLES, math.ceil(ack_s / cycle_period_s - 1e-9))
+        self.start_cycles = max(self.ack_cycles, math.ceil(start_s / cycle_period_s - 1e-9))
         self.phase = Phase.ENABLING
         self.cycles = 0
         self._started_at = -1
         self._controlword = 0
+        self.cancelled = False
         self.outcome: HomingOutcome | None = None
 
     @property
     def done(self) -> bool:
         return self.phase in (Phase.HOMED, Phase.FAILED)
+
+    def snapshot(self) -> tuple[Phase, int, int, int, bool, HomingOutcome | None]:
+        """The state after a step, for a master that computes cycles ahead and may redo them."""
+        return (self.phase, self.cycles, self._started_at, self._controlword, self.cancelled, self.outcome)
+
+    def restore(self, state: tuple[Phase, int, int, int, bool, HomingOutcome | None]) -> None:
+        self.phase, self.cycles, self._started_at, self._controlword, self.cancelled, self.outcome = state
+
+    def cancel(self) -> None:
+        """Stop the homing at the next step (bit 4 low: the drive stops its search)."""
+        self.cancelled = True
 
     def step(self, statusword: int | None) -> HomingStep:
         """The controlword for this cycle given the latest statusword; ends with an outcome."""
@@ -295,6 +315,10 @@ class HomingProcedure:
         self.cycles += 1
         acknowledged = self._started_at >= 0 and self.cycles - self._started_at > self.ack_cycles
         event = E.TIMEOUT if self.cycles > self.timeout_cycles else classify(statusword, acknowledged)
+        if self.cancelled:
+            event = E.CANCELLED
+        if event is E.INTERRUPTED and self.phase is Phase.STARTED and self.cycles - self._started_at <= self.start_cycles:
+            event = E.ACK_PENDING  # not started yet, or a statusword older than the start (START_S)
         previous = self.phase
         self.phase = _TABLE.get((previous, event), Phase.FAILED)
         if self.phase is Phase.STARTED and previous is not Phase.STARTED:
@@ -324,6 +348,8 @@ class HomingProcedure:
         where = f"node {self.node_id}: homing method {self.method}"
         if event is E.TIMEOUT:
             return f"{where}: not completed within {self.timeout_s:g} s ({word})"
+        if event is E.CANCELLED:
+            return f"{where}: stopped on request ({word})"
         if event is E.HOMING_ERROR:
             return f"{where}: the drive reports a homing error ({word}, bit 13)"
         if event is E.INTERRUPTED:

@@ -46,6 +46,8 @@ from nurbsmotion.fieldbus.controller import MOVING_PHASES, CycleController, Phas
 from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP, state_name
 from nurbsmotion.fieldbus.feedback import Feedback
 from nurbsmotion.fieldbus.heartbeat import MasterHeartbeat
+from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
+from nurbsmotion.fieldbus.homing_run import HomingRun
 from nurbsmotion.fieldbus.pdo import cycles_of_ms
 from nurbsmotion.fieldbus.playback import Playback
 from nurbsmotion.fieldbus.row_source import RowFeed
@@ -222,6 +224,7 @@ class Master:
         self._quit = False
         self._stats_idle = LatenessStats(self._late_threshold_s)
         self._pending_reactions: list[tuple[str, Any]] = []
+        self._homing_run: HomingRun | None = None
 
     # the feedback and controller lists bring-up reads and writes (by these names)
     @property
@@ -446,6 +449,26 @@ class Master:
         caller keeps the rate within what the plan allows (service.rate)."""
         self._rate_target = max(0.0, float(rate))
         self._request("rate", self._rate_target)
+
+    def home(self, i: int, plan: HomingPlan, procedure: HomingProcedure) -> HomingOutcome:
+        """Home axis i on its drive (CiA-402 mode 6, fieldbus.homing_run) while the others
+        hold; blocks until the axis holds again. FieldbusError names axis, node and step."""
+        if self._thread is None or self._job is not None or self._homing_run is not None:
+            raise FieldbusError(f"home: the axes are not holding (phase {self._phase})")
+        run = HomingRun(i, self._names[i], plan, procedure, self._trails[i], self._ip[i], self._request,
+                        lambda: self._cycle, lambda: self._ctl.phase, lambda: self._fb.status[i], self._period_s)
+        self._homing_run = run
+        self._supervisor.homing_axis = i
+        try:
+            return run.run()
+        finally:
+            self._supervisor.homing_axis = -1
+            self._homing_run = None
+
+    def stop_homing(self, quick: bool = False) -> None:
+        """Stop a homing under way: its procedure ends (bit 4 low, the drive stops its search,
+        then the streaming mode is restored), or with ``quick`` every axis is quick-stopped."""
+        self._request(*(("quick_stop", "aborted") if quick else ("home_cancel", None)))
 
     def record_feedback(self, sink: FeedbackSink | None) -> None:
         """Hand every valid TPDO1 to ``sink(cycle, axis_index, statusword, position_counts,
@@ -790,6 +813,12 @@ class Master:
                 job._finish(JobResult("aborted", 0, job.length, (), 0, 0))
             elif what == "quit":
                 self._quit = True
+            elif what in ("homing_outcome", "home_refused") and self._homing_run is not None:
+                if what == "homing_outcome":
+                    self._no_rewind_before = notice[3]  # the outcome is final: never recomputed
+                    self._homing_run.on_outcome(notice[2])
+                else:
+                    self._homing_run.on_refused(notice[2])
 
     def _after_cycle(self, k: int) -> None:
         """Finish the job whose end is on the wire; progress."""

@@ -73,6 +73,7 @@ class RowFeed:
         self.final = False  # the planned rows are all of the job's
         self.fell_behind_row = -1  # the last planned row before the playback ran onto a stop tail
         self.chunks_taken = 0
+        self.offset = np.zeros(n_axes, np.int64)  # counts added to every row as it joins the window (set before the first)
 
     # ------------------------------------------------------------------ producer
     def put(self, chunk: RowChunk, timeout_s: float | None = None) -> bool:
@@ -127,7 +128,8 @@ class RowFeed:
         index = int(position)
         keep_from = max(self.base, index - self.keep_rows) if position >= 0 else self.base
         kept = self.buf[keep_from - self.base: self.planned_end - self.base]
-        self.buf = np.concatenate([kept, chunk.rows, chunk.stop_tail]).astype(np.int64, copy=False)
+        self.buf = np.concatenate([kept, self._shifted(chunk.rows), self._shifted(chunk.stop_tail)]).astype(
+            np.int64, copy=False)
         self.view = self.buf.data
         self.base = keep_from
         self.planned_end += len(chunk.rows)
@@ -136,6 +138,9 @@ class RowFeed:
         if self._closed and not self._queue:
             self.final = len(chunk.stop_tail) == 0
         return chunk
+
+    def _shifted(self, rows: np.ndarray) -> np.ndarray:
+        return rows + self.offset if self.offset.any() else rows
 
     def __getitem__(self, ij: tuple[int, int]) -> int:
         """Row i (global), axis j: the window read as the playback reads a memoryview."""

@@ -65,6 +65,7 @@ class Supervisor:
         self.faults: list[FaultReport] = []
         self.reported: set[tuple[int | None, str]] = set()
         self.bad_tpdo_warned: set[int] = set()
+        self.homing_axis = -1  # an axis in homing mode: bit 13 is 'homing error', its set-point follows it
 
     def reset(self) -> None:
         """Faults acknowledged (re-enabling): report them again when they recur."""
@@ -112,7 +113,7 @@ class Supervisor:
         now = time.perf_counter()
         for i in range(len(self.node_ids)):
             self.check_statusword(i, k, running, phase, job, reactions)
-            if running:
+            if running and i != self.homing_axis:
                 self._check_following_error(i, k, phase, job, reactions)
             node, name = self.node_ids[i], self.names[i]
             if now - fb.hb_time[i] > self.hb_timeout_s:
@@ -128,7 +129,7 @@ class Supervisor:
         """Following error bit 13, fault bit 3, and (running) leaving OPERATION ENABLED."""
         sw = self.fb.status[i] or 0
         node, name = self.node_ids[i], self.names[i]
-        if sw & c.SW_FOLLOWING_ERROR:
+        if sw & c.SW_FOLLOWING_ERROR and i != self.homing_axis:
             self.report(node, name, "following_error", self.fb.fe[i] or 0, k, f"node {node} (axis {name}): drive "
                         f"reports following error (statusword bit 13) in {state_name(sw)} at cycle {k}",
                         phase, job, reactions)

@@ -25,6 +25,8 @@ from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.service.feedback import FeedbackLog
+from nurbsmotion.service.homing import Homing
+from nurbsmotion.service.jog import LEASE_REASON, Jogging
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
@@ -81,19 +83,23 @@ class Controller:
         self._last_job_faults: dict[tuple[int | None, str, int], int] = {}  # its faults -> its start cycle
         self._faults_acknowledged = 0
         self._override = 1.0  # requested, as a fraction
+        self.homing = Homing(config, link)  # homed state, `home`, require_homing (service.homing)
+        self.jogging = Jogging(self)  # `jog`, its lease (service.jog)
 
     # ------------------------------------------------------------------ requests
     def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
-               optional_stop: bool = True) -> dict[str, Any]:
+               optional_stop: bool = True, needs_homing: bool = True) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors.
 
         The program starts from the persisted offsets and tool with the block-delete and
         optional-stop switches given. The feed override goes back to 100 % for the new job
-        unless ``keep_override``."""
+        unless ``keep_override``. ``needs_homing``: refused until homed when required (an
+        incremental or continuous jog does not need it)."""
         check_program_name(name)
         with self._lock:
             try:
                 self._check_can_start()
+                self._check_homing(needs_homing)
             except Refused as err:
                 log.info(kv("submit_refused", name=name, error=err))
                 raise
@@ -124,7 +130,7 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
-                job.handle = plan.start(self.link)
+                job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
             except (InputError, FieldbusError) as err:
                 plan.cancel()
                 self._stop_traffic()
@@ -157,9 +163,12 @@ class Controller:
         except Refused as err:
             raise Refused("mdi", err.message) from None
 
-    def stop(self) -> dict[str, Any]:
+    def stop(self, reason: str = "stop") -> dict[str, Any]:
+        if self._job is None and self.homing.busy:  # stop the homing axis' search, restore its mode
+            self.link.stop_homing()
+            return {"ok": True, "job": None, "state": "homing"}
         job = self._running_job("stop")
-        job.stop_requested = job.stop_requested or "stop"
+        job.stop_requested = job.stop_requested or reason
         assert job.handle is not None
         job.handle.request_stop()
         return {"ok": True, "job": job.record.job_id, "state": "stopping"}
@@ -186,6 +195,9 @@ class Controller:
         return {"ok": True, "job": job.record.job_id, "state": "running"}
 
     def abort(self) -> dict[str, Any]:
+        if self._job is None and self.homing.busy:  # quick stop of every axis
+            self.link.stop_homing(quick=True)
+            return {"ok": True, "job": None}
         job = self._running_job("abort")
         job.stop_requested = "abort"
         assert job.handle is not None
@@ -196,6 +208,8 @@ class Controller:
         with self._lock:
             if self._job is not None or self._planning:
                 raise Refused("reset", "a job is running; stop or abort it first")
+            if self.homing.busy:
+                raise Refused("reset", "homing is under way; stop or abort it first")
         try:
             self.link.reset_faults()
         except FieldbusError as err:
@@ -249,6 +263,32 @@ class Controller:
                     job=job.record.job_id if job is not None else "-"))
         return {"ok": True, "requested_percent": percent, "effective_percent": round(effective * 100.0, 3)}
 
+    def home(self, axes: list[str]) -> dict[str, Any]:
+        """Home ``axes`` (all with ``homing:`` when empty) in the configured order, on the
+        homing thread (service.homing); refused while a job runs or in fault."""
+        with self._lock:
+            if self._job is not None or self._planning:
+                busy = self._job.record.job_id if self._job is not None else "another submission"
+                raise Refused("home", f"busy: job {busy} is running")
+            if self.homing.busy:
+                raise Refused("home", "homing is already under way")
+            status = self.link.status()
+            if self.state(status) == "fault":
+                raise Refused("home", "the drives are in fault; send reset first")
+            names = self.homing.start(axes, status.faults)
+        return {"ok": True, "axes": names, "state": "homing"}
+
+    def held_position_mm(self) -> np.ndarray:
+        """Where the axes hold, machine mm (axis map in force)."""
+        return self._held_position_mm(self.link.status())
+
+    def running_job_id(self) -> str | None:
+        return self._running_id()
+
+    def running_job_name(self) -> str | None:
+        job = self._job
+        return job.name if job is not None else None
+
     def inject_fault(self, spec: str) -> dict[str, Any]:
         if self.simulation is None:
             raise Refused("field 'cmd'", "inject_fault is only available when the daemon simulates its drives "
@@ -274,7 +314,7 @@ class Controller:
         if len(status.faults) > self._faults_acknowledged or status.phase in ("quick_stop", "disabled", "offline"):
             return "stopping" if job is not None and status.phase == "stopping" else "fault"
         if job is None:
-            return "idle"
+            return "homing" if self.homing.busy else "idle"
         if job.stop_requested or status.phase == "stopping":
             return "stopping"
         if status.phase in ("pausing", "held"):
@@ -283,6 +323,7 @@ class Controller:
 
     def status(self) -> dict[str, Any]:
         status = self.link.status()
+        self.homing.forget_faulted(status.faults)
         axis_map = self.link.axis_map
         setpoints = np.array([[a.setpoint_counts for a in status.axes]])
         actual = np.array([[a.position_counts if a.position_counts is not None else a.setpoint_counts
@@ -305,7 +346,7 @@ class Controller:
                                               self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None,
-                "coordinates": self.machine_state.status()}
+                "coordinates": self.machine_state.status(), "homing": self.homing.status()}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
@@ -346,6 +387,12 @@ class Controller:
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
+
+    def _check_homing(self, needs_homing: bool) -> None:
+        self.homing.forget_faulted(self.link.status().faults)
+        why = self.homing.refusal(needs_homing)
+        if why is not None:
+            raise Refused("submit", why)
 
     def _record(self, name: str, text: str, plan: JobPlan) -> JobRecord:
         """The job folder with program, configuration and plan before any motion (a streamed
@@ -514,7 +561,7 @@ class Controller:
         faults = [self._fault_record(f, status, job.start_cycle) for f in result.faults]
         reason = faults[0]["message"] if faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
-            "abort": "aborted on request (quick stop)"}.get(job.stop_requested, "")
+            "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, "")
         cut_short = job.plan.end_reason(getattr(job.handle, "fell_behind_row", -1))
         if cut_short and outcome == "completed":  # the planner stopped the job (failed or fell behind)
             outcome, reason = "stopped", cut_short

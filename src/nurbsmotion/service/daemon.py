@@ -38,7 +38,7 @@ from nurbsmotion.service.server import ControlServer
 
 log = logging.getLogger(__name__)
 
-ANSWERED_WHILE_CLOSING = frozenset({"status", "job", "jobs", "stop", "abort"})  # read, or stop sooner
+ANSWERED_WHILE_CLOSING = frozenset({"status", "job", "jobs", "stop", "abort", "jog_stop"})  # read, or stop sooner
 
 
 def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
@@ -59,6 +59,10 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
         "reset": controller.reset,
         "override": lambda: controller.override(float(f["percent"])),
         "inject_fault": lambda: controller.inject_fault(f["spec"]),
+        "home": lambda: controller.home(f.get("axes", "").replace(",", " ").split()),
+        "jog": lambda: controller.jogging.jog(f),
+        "jog_renew": controller.jogging.renew,
+        "jog_stop": controller.jogging.stop,
     }
     return handlers[request.cmd]()
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from typing import Any
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Master
@@ -27,10 +28,10 @@ class SimulatedDrives:
 
     IDLE_CLEAR_S = 10.0
 
-    def __init__(self, config: MachineConfig) -> None:
+    def __init__(self, config: MachineConfig, home_sensors: dict[int, Any] | None = None) -> None:
         from nurbsmotion.sim import SimNetwork
 
-        self.network = SimNetwork.for_machine(config)
+        self.network = SimNetwork.for_machine(config, home_sensors=home_sensors)
         self._lock = threading.Lock()
         self._recording = False
         self._stop = threading.Event()
@@ -83,10 +84,12 @@ class SimulatedDrives:
         self.network.stop()
 
 
-def open_link(config: MachineConfig) -> tuple[Master, SimulatedDrives | None]:
-    """Start the simulated drives (if configured), bring every axis up; FieldbusError names
-    the node and the step if that fails (and everything started is stopped again)."""
-    simulation = SimulatedDrives(config).start() if config.simulate else None
+def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
+              ) -> tuple[Master, SimulatedDrives | None]:
+    """Start the simulated drives (if configured; ``home_sensors`` {node id: sim.HomeSensors}
+    for their homing), bring every axis up; FieldbusError names the node and the step if
+    that fails (and everything started is stopped again)."""
+    simulation = SimulatedDrives(config, home_sensors).start() if config.simulate else None
     master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")  # the daemon's process settings
     try:
         master.bring_up()

@@ -12,6 +12,7 @@ from typing import Callable, Protocol
 import numpy as np
 
 from nurbsmotion.axes import AxisMap
+from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
 from nurbsmotion.fieldbus.reports import JobResult, MasterStatus
 from nurbsmotion.fieldbus.row_source import RowFeed
 
@@ -43,6 +44,8 @@ class MotionLink(Protocol):
     def record_traffic(self, path: str | None) -> None: ...
     def record_feedback(self, sink: Callable[[int, int, int, int, float], None] | None) -> None: ...
     def shutdown(self, timeout_s: float = 5.0) -> None: ...
+    def home(self, i: int, plan: HomingPlan, procedure: HomingProcedure) -> HomingOutcome: ...
+    def stop_homing(self, quick: bool = False) -> None: ...
 
 
 class Simulation(Protocol):

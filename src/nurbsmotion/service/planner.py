@@ -12,7 +12,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -95,7 +95,9 @@ class PlannedJob:
         """plan.json and the whole trace, before any motion."""
         record.write_plan(self.summary, self.write_trace)
 
-    def start(self, link: Any) -> Any:
+    def start(self, link: Any, shift: Callable[[np.ndarray], None]) -> Any:
+        """Stream the counts after ``shift`` (in place: onto the offsets in force, service.homing)."""
+        shift(self.counts)
         return link.stream(self.counts, pauses=tuple(p.row for p in self.pauses))
 
     def cancel(self) -> None:
@@ -157,6 +159,7 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
 
 
 MDI_NAME = "<mdi>"  # the program name of MDI lines (G-code, errors read '<mdi>:1: ...')
+JOG_NAME = "<jog>"  # a jog's one G53 line (service.jog)
 
 
 def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | None = None) -> Program:
@@ -165,7 +168,7 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
         return parse_curve_yaml(text, name)
-    if suffix in GCODE_SUFFIXES or name == MDI_NAME:
+    if suffix in GCODE_SUFFIXES or name in (MDI_NAME, JOG_NAME):
         return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")

@@ -33,6 +33,11 @@ COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "offsets": {"system": ("string", False), "x": ("number", False), "y": ("number", False), "z": ("number", False),
                 "clear": ("string", False), "select": ("string", False)},
     "inject_fault": {"spec": ("string", True)},  # only when the daemon simulates its drives
+    "home": {"axes": ("string", False)},  # names separated by spaces or commas; none: every axis with homing:
+    "jog": {"axis": ("string", True), "distance": ("number", False), "position": ("number", False),
+            "direction": ("string", False), "speed": ("number", False)},
+    "jog_renew": {},
+    "jog_stop": {},
 }
 
 

@@ -24,7 +24,7 @@ import collections
 import logging
 import threading
 import time
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -156,8 +156,13 @@ class StreamedJob:
         record.write_plan_summary(self.summary)
         self._send(TracePath(record.folder / "trace.csv"))
 
-    def start(self, link: Any) -> Any:
-        """Hand the feed to the master (the first chunk is queued): the job's handle."""
+    def start(self, link: Any, shift: Callable[[np.ndarray], None]) -> Any:
+        """Hand the feed to the master (the first chunk is queued): the job's handle. ``shift``
+        moves counts onto the offsets in force (service.homing, in place): the same for every
+        row, so the feed adds it to each chunk as it joins the window."""
+        offset = np.zeros((1, len(self.columns)), np.int64)
+        shift(offset)
+        self.feed.offset = offset[0]
         return link.stream_feed(self.feed)
 
     def cancel(self) -> None:

@@ -1,0 +1,81 @@
+"""Homing and jog on a real kernel vcan0: the daemon (config/vcan.yaml with homing sections and
+without its require_homing: false, so homing is required by default: a socketcan bus whose
+drives the daemon does not simulate) and
+`nurbsmotion sim --home-sensors` as two processes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from nurbsmotion.config import load_config
+from tests.integration.daemon_helpers import wait_until
+from tests.vcan.test_daemon_on_vcan import VcanDaemon, start_daemon
+from tests.vcan.two_processes import SimProcess
+
+pytestmark = pytest.mark.vcan
+
+HOMING_TIMEOUT_S = 90.0  # inside UML on a busy host the drives' process lags the wire by seconds
+JOB_TIMEOUT_S = 60.0
+HOMING = {1: {"method": 17, "speed_search_mm_s": 20, "speed_zero_mm_s": 2, "accel_mm_s2": 200, "offset_mm": -5},
+          2: {"method": "here", "offset_mm": 3},
+          3: {"method": 34, "speed_search_mm_s": 20, "speed_zero_mm_s": 2, "accel_mm_s2": 200, "offset_mm": 0,
+              "order": 1}}
+SENSORS = ["node=1,negative_limit=-3000", "node=3,index_pitch=2000,index_phase=700"]
+
+
+@pytest.fixture
+def machine(vcan0, tmp_path):
+    daemon = VcanDaemon(tmp_path / "data", vcan0)
+    config = yaml.safe_load(daemon.config_path.read_text())
+    config.pop("require_homing", None)  # the default on socketcan with real (not simulated) drives: on
+    for axis in config["axes"]:
+        axis["homing"] = HOMING[axis["node_id"]]
+    daemon.config_path.write_text(yaml.safe_dump(config, sort_keys=False))
+    daemon.config = load_config(daemon.config_path)
+    sim = SimProcess(daemon.config_path, tmp_path / "recordings",
+                     tuple(arg for spec in SENSORS for arg in ("--home-sensors", spec)))
+    try:
+        sim.wait_ready()
+        yield start_daemon(daemon)
+    finally:
+        daemon.close()
+        sim.stop()
+
+
+def _axes(daemon: VcanDaemon) -> dict[str, tuple[float, float]]:
+    return {a["name"]: (a["commanded_mm"], a["actual_mm"]) for a in daemon.request("status")["axes"]}
+
+
+def test_home_then_jog_on_vcan(machine):
+    daemon = machine
+    status = daemon.request("status")
+    assert status["homing"]["required"] and status["homing"]["axes"] == {"X": "not homed", "Y": "not homed",
+                                                                          "Z": "not homed"}
+    assert daemon.request("mdi", text="G01 X1 F600")["error"] == \
+        "mdi: axis X, Y, Z not homed (require_homing is on): run nurbsmotion home first"
+
+    assert daemon.request("home")["axes"] == ["Z", "X", "Y"]
+    homing = wait_until(lambda: (h := daemon.request("status")["homing"])["busy"] is False and h,
+                        HOMING_TIMEOUT_S, "the homing to end", poll_s=0.2)
+    assert homing["error"] is None, daemon.log()[-6000:]
+    assert homing["axes"] == {"X": "homed", "Y": "homed", "Z": "homed"}
+    axes = _axes(daemon)
+    assert abs(axes["X"][0] - (-4.99)) <= 0.009 and abs(axes["Z"][0] - 0.01) <= 0.009
+    assert axes["Y"][0] == 3.0
+    assert not daemon.request("status")["faults"], daemon.log()[-4000:]
+
+    job = daemon.request("jog", axis="X", distance=5.0, speed=20.0)
+    assert job["ok"], (job, daemon.log()[-4000:])
+    record = daemon.wait_job_end(job["job"]["id"], JOB_TIMEOUT_S)
+    assert record["outcome"]["outcome"] == "completed", record["outcome"]
+    assert _axes(daemon)["X"][0] == round(axes["X"][0] + 5.0, 6)
+
+    job = daemon.request("jog", axis="Y", direction="+", speed=20.0)  # never renewed: the lease ends it
+    record = daemon.wait_job_end(job["job"]["id"], JOB_TIMEOUT_S)
+    assert record["outcome"]["outcome"] == "stopped"
+    assert record["outcome"]["reason"] == "stopped: the jog's client did not renew its lease within 0.5 s"
+    assert 3.0 < _axes(daemon)["Y"][0] < 200.0
+    assert Path(record["folder"], "outcome.json").exists()
