@@ -239,7 +239,7 @@ class WorkerJob:
     def _pauses(self, chunk: Trajectory) -> tuple[tuple[int, str, int | None], ...]:
         """Rows of this chunk where a holding event (M0/M1/M6) happens: the first row of the
         block it comes before (the planner's exact stop there)."""
-        found = []
+        found: list[tuple[int, str, int | None]] = []
         while self.events and len(chunk.block) and int(chunk.block[-1]) >= self.events[0].before_block:
             event = self.events.pop(0)
             row = self.planned + int(np.searchsorted(chunk.block, event.before_block, side="left"))
