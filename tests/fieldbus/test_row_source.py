@@ -146,3 +146,16 @@ def test_pauses_arrive_with_their_chunk():
     pb = playback(feed)
     sent, _ = play(pb, 400)
     assert pb.at_pause() and len(sent) == 400 and pb.index == 301
+
+
+def test_the_offset_moves_every_row_and_stop_tail_as_its_chunk_joins():
+    feed = RowFeed(2, max_chunks=4, ahead_rows=10_000)
+    feed.offset = np.array([1000, -7], np.int64)
+    first, second = ramp(0, 50, 10), ramp(50, 50, 10)
+    assert feed.put(chunk(first, stop_tail(first[-1], 10, 5)))
+    assert feed.put(chunk(second, stop_tail(second[-1], 10, 5)))
+    feed.take_first()
+    feed.take(10.0, False)
+    expected = np.concatenate([first, second, stop_tail(second[-1], 10, 5)]) + [1000, -7]
+    assert feed.end == len(expected)
+    assert all(feed[i, j] == expected[i, j] for i in range(feed.end) for j in range(2))
