@@ -117,6 +117,7 @@ class PlanEnd:
     notes: dict[str, Any] = field(default_factory=dict)
     measured: dict[str, Any] = field(default_factory=dict)
     trace_rows: int = 0
+    max_feed_mm_s: float = 0.0  # the highest planned feed of the rows sent
 
 
 class WorkerGone(Exception):
@@ -158,6 +159,7 @@ class WorkerJob:
         self.axis_map = AxisMap.from_config(request.config)
         self.started = time.monotonic()
         self.planned = 0
+        self.max_feed_mm_s = 0.0
         self.cancelled = False
         self.trace_path: Path | None = None
         self.trace: TraceWriter | None = None
@@ -192,7 +194,8 @@ class WorkerJob:
         stream = self.stream
         return PlanEnd(self.planned, finished and not errors, errors,
                        stream.planning_time_s if stream else 0.0, dict(stream.notes) if stream else {},
-                       self.measure.measurements().summary() if self.measure and self.planned else {}, self.trace_rows)
+                       self.measure.measurements().summary() if self.measure and self.planned else {}, self.trace_rows,
+                       self.max_feed_mm_s)
 
     def _checked_program(self) -> Program:
         """The request's program, parsed and checked before motion (InputError otherwise)."""
@@ -225,6 +228,8 @@ class WorkerJob:
                                            np.asarray(chunk.feed_mm_s, np.float32), time.monotonic() - self.started))
             if self.planned == 0:
                 set_niceness(WORKER_NICE)
+            if len(chunk.feed_mm_s):
+                self.max_feed_mm_s = max(self.max_feed_mm_s, float(np.max(chunk.feed_mm_s)))
             self.planned += len(counts)
             before = counts[-2:]
             self._trace_rows(self.measure.add(chunk))

@@ -233,7 +233,7 @@ class StreamedJob:
         self.summary.update({
             "cycles": end.trace_rows, "planned_all": self.finished,
             "duration_s": round(max(self.planned - 1, 0) * self.config.cycle_period_s, 6),
-            "planning_time_s": round(end.planning_time_s, 6),
+            "planning_time_s": round(end.planning_time_s, 6), "max_feed_mm_s": round(end.max_feed_mm_s, 6),
             "first_chunk_s": round(self.first_chunk_s, 6), "notes": end.notes,
             "measured": end.measured, "pauses": [{"row": p.row, "reason": p.reason} for p in self.pauses]})
         if self.error is not None:
