@@ -26,7 +26,6 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import multiprocessing.connection
-import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -51,7 +50,6 @@ log = logging.getLogger(__name__)
 
 READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under heavy load) is an error
 QUIT_TIMEOUT_S = 5.0
-WORKER_NICE = 10  # the worker's niceness once a job moves (the cycle thread is SCHED_FIFO where allowed; drives' threads not)
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 
 
@@ -125,16 +123,6 @@ class WorkerGone(Exception):
 
 
 # ---------------------------------------------------------------------- the worker process
-def set_niceness(nice: int) -> None:
-    """This process' niceness: 0 while a job waits for its first chunk (first motion), then
-    WORKER_NICE while it plans ahead of the axes (the daemon's threads and the drives come
-    first for the CPU). Going back to 0 needs CAP_SYS_NICE: without it the worker stays nicer."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, nice)
-    except OSError:
-        pass
-
-
 def serve(commands: multiprocessing.connection.Connection,
           results: multiprocessing.connection.Connection) -> None:
     """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone."""
@@ -172,7 +160,6 @@ class WorkerJob:
     def run(self) -> PlanEnd:
         errors: tuple[tuple[str, str], ...] = ()
         finished = False
-        set_niceness(0)
         try:
             program = self._checked_program()
             self.results.send(CheckedProgram(program))
@@ -226,8 +213,6 @@ class WorkerJob:
             self.results.send(PlannedChunk(self.planned, counts.astype(np.int32), tail.astype(np.int32),
                                            self._pauses(chunk), step, accel, rows, ids,
                                            np.asarray(chunk.feed_mm_s, np.float32), time.monotonic() - self.started))
-            if self.planned == 0:
-                set_niceness(WORKER_NICE)
             if len(chunk.feed_mm_s):
                 self.max_feed_mm_s = max(self.max_feed_mm_s, float(np.max(chunk.feed_mm_s)))
             self.planned += len(counts)
