@@ -136,3 +136,11 @@ def test_master_node_and_heartbeat_keys():
         "m.yaml:2: axes[0].node_id: node id 1 is the master's (master.node_id)"]
     assert _errors("monitoring: {master_heartbeat_ms: 20000}\naxes: [{name: X, node_id: 1}]\n")[0].startswith(
         "m.yaml:1: monitoring.master_heartbeat_ms: the drives' consumer time 100000 ms")
+
+
+def test_drive_step_timeout_is_read_and_checked():
+    cfg = parse_config("bus: {drive_step_timeout_ms: 3000}\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert cfg.bus.drive_step_timeout_ms == 3000 and cfg.bus.sdo_timeout_ms == 500
+    assert parse_config("axes: [{name: X, node_id: 1}]\n").bus.drive_step_timeout_ms == 500
+    assert _errors("bus: {drive_step_timeout_ms: 0}\naxes: [{name: X, node_id: 1}]\n") == [
+        "m.yaml:1: bus.drive_step_timeout_ms: must be >= 10, got 0"]

@@ -49,3 +49,17 @@ def test_node_id_is_required_and_inputs_must_be_a_mapping():
         "m.yaml:3: io: missing required key 'node_id'",
         "m.yaml:3: io.inputs: must be a mapping of name: bit",
     ]
+
+
+def test_an_input_may_name_the_axis_it_limits():
+    from nurbsmotion.service.machine_io import limit_inputs
+
+    axes = "axes: [{name: X, node_id: 1}, {name: Y, node_id: 2}]\n"
+    cfg = parse_config(axes + "io:\n  node_id: 10\n  inputs:\n    x_neg: {bit: 2, active_low: true, limit: X}\n"
+                              "    limit_y_max: 3\n    probe: 4\n")
+    assert cfg.io.inputs[0] == IoSignal("x_neg", 2, True, limit="X")
+    assert limit_inputs(cfg) == {"x_neg": "X", "limit_y_max": "Y"}
+    assert _errors(axes + "io:\n  node_id: 10\n  inputs:\n    x_neg: {bit: 2, limit: A}\n"
+                          "  outputs:\n    lamp: {bit: 0, limit: X}\n") == [
+        "m.yaml:5: io.inputs.x_neg.limit: no axis 'A' (axes: X, Y)",
+        "m.yaml:7: io.outputs.lamp.limit: an output is no limit switch: limit is for inputs"]

@@ -49,9 +49,8 @@ def test_spindle_none_or_absent_means_no_spindle(tmp_path, value, expected):
     assert load_config(ROOT / "config" / "demo.yaml").spindle is None
 
 
-def test_a_spindle_drive_cannot_be_configured_yet(tmp_path):
+def test_a_spindle_mapping_is_read_as_a_drive(tmp_path):
     path = _config(tmp_path, "spindle: {node_id: 5}\n", table=None)
     line = len(path.read_text().splitlines())
-    with pytest.raises(InputError, match=rf"machine.yaml:{line}: spindle: must be 'none' \(a spindle drive cannot "
-                                         rf"be configured yet\)"):
+    with pytest.raises(InputError, match=rf"machine.yaml:{line}: spindle: missing required key 'counts_per_rev'"):
         load_config(path)

@@ -45,6 +45,10 @@ class BusConfig:
     bitrate: int = 1_000_000
     sync_source: str = "auto"
     sync_window_us: int = 0  # 0x1007 written on every drive that has it; 0 = no window
+    # CiA-402 bring-up: how long a drive may take to answer one state-machine step (a real
+    # drive: milliseconds); drives emulated by processes inside User-Mode Linux need seconds
+    drive_step_timeout_ms: int = 500
+    sdo_timeout_ms: int = 500  # an SDO answer (CiA 301 client time-out) from any node
 
 
 @dataclass(frozen=True)
@@ -147,7 +151,7 @@ class MachineConfig:
     master: MasterConfig = MasterConfig()
     tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
     tool_table: Any = field(default=None, compare=False, repr=False)
-    spindle: str | None = None  # 'none' or absent: no spindle drive
+    spindle: Any = None  # 'none' or absent: no spindle drive; else a spindle_config.SpindleConfig
     require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
@@ -405,7 +409,11 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                                  "sync_window_us": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
                                                               "maximum": 2**32 - 1}),
                                  "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
-                                                       "maximum": 1_000_000})}), {}),
+                                                       "maximum": 1_000_000}),
+                                 "drive_step_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                                                     "exclusive_min": False, "maximum": 60_000}),
+                                 "sdo_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                                              "exclusive_min": False, "maximum": 60_000})}), {}),
     "interpolation": (_interpolation, {}),
     "axes": (_axes, {}),
     "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
@@ -438,8 +446,9 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
     if cfg.io is not None:
-        from nurbsmotion.io_config import check_io_node
+        from nurbsmotion.io_config import check_io_limits, check_io_node
         check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
+        check_io_limits(cfg.io, cfg.axis_names(), fail)
     mon = cfg.monitoring
     if mon.heartbeat_consumer_ms <= mon.heartbeat_producer_ms:
         fail("monitoring.heartbeat_consumer_ms", f"must be longer than heartbeat_producer_ms "
@@ -499,8 +508,9 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
     cfg = _with_descriptions(cfg, base_dir, errors)
     if errors:
         raise InputErrors(errors)
+    from nurbsmotion.spindle_config import load_spindle_description
     from nurbsmotion.tooling_config import load_tool_file
-    return load_tool_file(cfg, base_dir)
+    return load_spindle_description(load_tool_file(cfg, base_dir), base_dir)
 
 
 def default_eds_path() -> str:

@@ -6,12 +6,15 @@ io:
   inputs:                      # 0x6000 sub 1.. (8 bits each): bit n = sub n//8 + 1, bit n%8
     estop: {bit: 0, active_low: true}    # normally closed: a broken wire reads as pressed
     limit_x_min: 1
+    x_neg_switch: {bit: 2, active_low: true, limit: X}   # any name, a limit switch of axis X
   outputs:                     # 0x6200 sub 1..
     coolant_flood: 0
     coolant_mist: 1
 ```
 
-A signal is ``name: bit`` or ``name: {bit: N, active_low: BOOL}``; bits 0..63 (eight 8-bit
+A signal is ``name: bit`` or ``name: {bit: N, active_low: BOOL, limit: AXIS}``; an input
+named ``limit_<axis>[_min|_max]`` or with ``limit: AXIS`` is a limit switch of that axis (the
+daemon aborts that axis' job when it becomes active, service.machine_io); bits 0..63 (eight 8-bit
 groups, what one PDO carries). Names are identifiers; a bit is used by one name only.
 config.py calls :func:`read_io` for ``io`` and :func:`check_io_node` across sections.
 """
@@ -25,7 +28,7 @@ from typing import Any
 
 import yaml
 
-from nurbsmotion.config import _MISSING, _SHOWN, _boolean, _Doc, _fields, _number
+from nurbsmotion.config import _MISSING, _SHOWN, _boolean, _Doc, _fields, _number, _string
 
 MAX_BITS = 64  # eight UNSIGNED8 groups: one 8-byte PDO
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -38,6 +41,7 @@ class IoSignal:
     name: str
     bit: int
     active_low: bool = False
+    limit: str | None = None  # the axis whose limit switch this input is (``limit: X``)
 
     @property
     def group(self) -> int:
@@ -69,7 +73,7 @@ _BIT: tuple[Callable[..., Any], dict[str, Any]] = (_number, {"integer": True, "m
 
 def _signal(name: str, doc: _Doc) -> Any:
     if isinstance(doc.node, yaml.MappingNode):
-        values = _fields(doc, {"bit": _BIT, "active_low": (_boolean, {})}, required=("bit",))
+        values = _fields(doc, {"bit": _BIT, "active_low": (_boolean, {}), "limit": (_string, {})}, required=("bit",))
         return IoSignal(name, **values) if "bit" in values else _MISSING
     bit = _BIT[0](doc, **_BIT[1])
     return _MISSING if bit is _MISSING else IoSignal(name, bit)
@@ -127,3 +131,17 @@ def check_io_node(io: IoConfig | None, axis_node_ids: tuple[int, ...], fail: Cal
     """The I/O node's id must differ from every axis' node id (one id, one device)."""
     if io is not None and io.node_id in axis_node_ids:
         fail("io.node_id", f"node id {io.node_id} is already used by an axis")
+
+
+def check_io_limits(io: IoConfig | None, axis_names: tuple[str, ...], fail: Callable[[str, str], None]) -> None:
+    """``limit: AXIS`` names a configured axis, and only on an input."""
+    if io is None:
+        return
+    for kind, signals in (("inputs", io.inputs), ("outputs", io.outputs)):
+        for s in signals:
+            if s.limit is None:
+                continue
+            if kind == "outputs":
+                fail(f"io.outputs.{s.name}.limit", "an output is no limit switch: limit is for inputs")
+            elif s.limit not in axis_names:
+                fail(f"io.inputs.{s.name}.limit", f"no axis {s.limit!r} (axes: {', '.join(axis_names)})")

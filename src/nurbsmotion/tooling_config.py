@@ -5,10 +5,12 @@ tools: tools.yaml   # the tool table (docs/programs.md), relative to this file
 spindle: none       # there is no spindle drive: programs with M3/M4 are refused
 ```
 
+(``spindle:`` may instead describe the spindle drive, see spindle_config.)
+
 ``tools`` is read with the program package's tool-table reader when the configuration is
 loaded: a missing file is an error at the ``tools`` line, a bad table one error per problem
-at the table's own line (``tools.yaml:4: tools[0].length_mm: ...``). ``spindle`` accepts only
-``none`` for now (the spindle drive is later work); absent means the same: no spindle.
+at the table's own line (``tools.yaml:4: tools[0].length_mm: ...``). ``spindle: none`` and
+an absent key both mean no spindle; a mapping is read by spindle_config.
 config.py calls :func:`read_tools`, :func:`read_spindle` and :func:`load_tool_file`.
 """
 
@@ -17,6 +19,8 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+import yaml
 
 from nurbsmotion.config import _MISSING, _SHOWN, _Doc, _string
 from nurbsmotion.errors import InputError
@@ -33,10 +37,15 @@ def read_tools(doc: _Doc) -> Any:
 
 
 def read_spindle(doc: _Doc) -> Any:
-    """``spindle: none`` (YAML reads a bare ``none`` as the string; ``null`` means absent)."""
+    """``spindle: none`` (YAML reads a bare ``none`` as the string; ``null`` means absent), or
+    the spindle drive's mapping (spindle_config)."""
+    if isinstance(doc.node, yaml.MappingNode):
+        from nurbsmotion.spindle_config import read_spindle_drive
+        return read_spindle_drive(doc)
     value = doc.value()
     if value not in SPINDLE_CHOICES:
-        doc.fail(f"must be 'none' (a spindle drive cannot be configured yet), got {_SHOWN.repr(value)}")
+        doc.fail(f"must be 'none' or a spindle drive mapping (node_id, counts_per_rev, max_rpm, accel_rpm_s, ...), "
+                 f"got {_SHOWN.repr(value)}")
         return _MISSING
     return value
 

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import nurbsmotion.sim
 
-ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log"}
+# socketcan_batch: transport only (python-can's SocketCAN bus with batched system calls), no CANopen
+ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log",
+                       "nurbsmotion.socketcan_batch"}
 ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
                      "logging", "math", "numpy", "pathlib", "select", "struct", "threading", "time", "typing"}
 

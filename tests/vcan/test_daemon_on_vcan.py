@@ -21,11 +21,10 @@ REPOSITORY = Path(__file__).resolve().parents[2]
 WANG_PROGRAM = REPOSITORY / "examples" / "wang_table1.nc"
 JOB_TIMEOUT_S = 90.0  # Wang's curve takes ~8 s of motion; UML on a busy host is slower
 FAULT_TIMEOUT_S = 20.0
-# Inside User-Mode Linux a drive process can be descheduled for hundreds of ms on a busy
-# host: the heartbeat consumer time is wider than config/vcan.yaml's. The following-error
-# window is config/vcan.yaml's (2 mm): the kernel queue keeps the cycle whatever the
-# daemon's thread does.
-HEARTBEAT_CONSUMER_MS = 1500
+# config/vcan.yaml as shipped (docs/vcan.md's recipe): its heartbeat consumer time (1.5 s,
+# a drive process inside User-Mode Linux can be descheduled for a second on a busy host) and
+# its following-error window (2 mm: the kernel queue keeps the cycle whatever the daemon's
+# thread does).
 
 
 class VcanDaemon(DaemonProcess):
@@ -38,15 +37,15 @@ class VcanDaemon(DaemonProcess):
         config["bus"]["channel"] = channel
         config["control"]["socket"] = str(self.socket)
         config["data_dir"] = str(data_dir)
-        config["monitoring"]["heartbeat_consumer_ms"] = HEARTBEAT_CONSUMER_MS
         self.config_path.write_text(yaml.safe_dump(config, sort_keys=False))
         self.config = load_config(self.config_path)
 
 
 def start_daemon(daemon: VcanDaemon) -> VcanDaemon:
-    """Start the daemon; once more if its bring-up timed out: the master's step time-out
-    (0.5 s, not configurable in the daemon) is shorter than what a drive process inside
-    User-Mode Linux on a busy host may need to answer (docs/vcan.md)."""
+    """Start the daemon; once more if its bring-up timed out: config/vcan.yaml gives a drive
+    3 s to answer each bring-up step (bus.drive_step_timeout_ms; a drive process inside
+    User-Mode Linux on a busy host was measured at 0.5-2 s), which a host descheduling the
+    guest can still exceed (docs/vcan.md)."""
     try:
         return daemon.start()
     except AssertionError as first:

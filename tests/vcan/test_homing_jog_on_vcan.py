@@ -15,7 +15,10 @@ from tests.integration.daemon_helpers import wait_until
 from tests.vcan.test_daemon_on_vcan import VcanDaemon, start_daemon
 from tests.vcan.two_processes import SimProcess
 
-pytestmark = pytest.mark.vcan
+# Quarantined (docs/vcan.md, Still to do): inside User-Mode Linux the IP axis (Z) often does not
+# report 'interpolation active' (statusword bit 12) within the ready time after its homing,
+# though the master sends bit 4 again (statusword 0x0237/0x0337 seen); passes about 1 run in 3.
+pytestmark = [pytest.mark.vcan, pytest.mark.quarantine]
 
 HOMING_TIMEOUT_S = 90.0  # inside UML on a busy host the drives' process lags the wire by seconds
 JOB_TIMEOUT_S = 60.0

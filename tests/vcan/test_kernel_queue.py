@@ -19,11 +19,11 @@ import threading
 import time
 from pathlib import Path
 
-import can
 import numpy as np
 import pytest
 
 import nurbsmotion
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus
 from tests.vcan.conftest import CYCLE_PERIOD_S
 from tests.vcan.two_processes import AXES, strictly_increasing_job, write_vcan_config
 
@@ -41,7 +41,8 @@ class WireListener:
 
     def __init__(self, channel: str) -> None:
         filters = [{"can_id": SYNC_ID, "can_mask": 0x7FF}] + [{"can_id": i, "can_mask": 0x7FF} for i in RPDO_IDS]
-        self.bus = can.Bus(interface="socketcan", channel=channel, can_filters=filters)
+        # batched reads: in the guest's one CPU a listener reading frame by frame takes from the master and drives
+        self.bus = BatchedSocketcanBus(channel=channel, can_filters=filters)
         self.frames: list[tuple[float, int, bytes]] = []
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)

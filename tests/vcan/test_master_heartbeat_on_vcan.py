@@ -21,12 +21,11 @@ pytestmark = pytest.mark.vcan
 MASTER_HEARTBEAT_MS = 100
 CONSUMER_MULTIPLE = 15
 # A drive notices the loss at most the consumer time after the last heartbeat it received
-# (sent before the kill); the drives' process inside UML may start late by its scheduling
-# (hundreds of ms on a busy host, test_daemon_on_vcan): that much is allowed on top.
-# The drives' process also handles each frame late by a backlog that grows with the frames
-# per cycle (0.7 s measured with the kernel queue, 0.03 s with the loop writer): a firmware
-# stamps a heartbeat when it arrives, so the drive's own reception lag of its last heartbeat
-# (logged as rx_lag_s, kernel stamp to handling) is measured and taken off, not allowed for.
+# (sent before the kill). The drives' process inside UML handles frames late (a backlog; and
+# it may be descheduled for hundreds of ms on a busy host): it judges on the frames' arrival
+# timeline as a firmware does (sim/arrival_clock.py) and logs the arrival-timeline time of its
+# judgement (judged_at_s, wall clock), which is what is measured here; the descheduling of the
+# process between two judgements is allowed on top.
 SCHEDULING_S = 0.5
 
 
@@ -83,9 +82,9 @@ def test_sigkill_of_the_daemon_faults_every_drive_within_the_consumer_time(daemo
         raise AssertionError(f"{missing}\n{diagnosis()}") from None
     delays = {n: round(logged_at(line) - killed, 3) for n, line in lost().items()}
     rx_lags = {n: float(line.split("rx_lag_s=")[1].split()[0]) for n, line in lost().items()}
-    reaction = {n: round(delays[n] - rx_lags[n], 3) for n in nodes}
-    print(f"drives noticed the loss after {delays} s, their reception lag {rx_lags} s, so {reaction} s after "
-          f"the heartbeat stopped arriving (consumer time {consumer_s} s)")
+    reaction = {n: round(float(line.split("judged_at_s=")[1].split()[0]) - killed, 3) for n, line in lost().items()}
+    print(f"drives logged the loss {delays} s after the kill (reception lag {rx_lags} s), judged {reaction} s after the kill "
+          f"(consumer time {consumer_s} s)")
     assert max(reaction.values()) <= consumer_s + SCHEDULING_S, f"{delays} {rx_lags}\n{diagnosis()}"
     # the last heartbeat left up to one period before the kill: no drive may react earlier than that allows
     earliest_s = consumer_s - MASTER_HEARTBEAT_MS / 1000.0 - 0.02

@@ -44,6 +44,7 @@ def format_status(s: dict[str, Any]) -> list[str]:
                      f"actual {_mm(a['actual_mm'])} mm, following error {_mm(a['following_error_mm'])} mm")
     if homing.get("error"):
         lines.append(f"homing failed: {homing['error']}")
+    lines.extend(device_lines(s))
     c = s["cycles"]
     lines.append(f"cycles {c['count']}: late {c['late']}, missed {c['missed']}, lateness p99 "
                  f"{c['lateness_p99_ms']:.3f} ms, max {c['lateness_max_ms']:.3f} ms")
@@ -53,6 +54,24 @@ def format_status(s: dict[str, Any]) -> list[str]:
         reached = f" at {last['line_reached']}" if last.get("line_reached") else ""
         lines.append(f"last job {last['id']} {last['name']}: {last['outcome']}{reached}"
                      f"{': ' + last['reason'] if last.get('reason') else ''}")
+    return lines
+
+
+def device_lines(s: dict[str, Any]) -> list[str]:
+    """The spindle (commanded / actual rpm) and machine I/O lines, when configured."""
+    lines = []
+    sp = s.get("spindle")
+    if sp:
+        actual = "-" if sp["actual_rpm"] is None else f"{sp['actual_rpm']:g}"
+        lines.append(f"spindle node {sp['node']}: {sp['drive_state']}, commanded {sp['commanded_rpm']:g} rpm, "
+                     f"actual {actual} rpm{', at speed' if sp['at_speed'] else ''}"
+                     f"{', fault: ' + sp['fault'] if sp.get('fault') else ''}")
+    io = s.get("io")
+    if io:
+        active = [n for n, on in (io["inputs"] or {}).items() if on]
+        outputs = [n for n, on in io["outputs"].items() if on]
+        lines.append(f"io node {io['node']}: inputs active {', '.join(active) or 'none'}"
+                     f"{' (unknown)' if io['inputs'] is None else ''}, outputs on {', '.join(outputs) or 'none'}")
     return lines
 
 

@@ -3,7 +3,14 @@
 One broadcast-manager (BCM) TX operation holds a ring of whole cycles (SYNC, then the RPDO
 of each axis; at most 256 frames, e.g. 64 cycles for 3 axes) and sends one frame every
 T/(1 + n_axes): SYNC at the start of each cycle, the RPDOs spread over it, all before the
-next SYNC. Python only keeps the ring ahead of the kernel:
+next SYNC. (Several ops, one per frame of the cycle, all at T, would send each cycle as one
+burst from one timer interrupt; measured, that halves the SYNC jitter inside User-Mode Linux
+and wakes every reader once per cycle instead of 1 + n times, but the kernel orders frames
+of different ops only by their timers: a delay of about T between two ops' handlers (a
+starved guest) can put an RPDO behind the next SYNC for good, and the drive then applies
+every set-point one cycle late: seen once in about 15 runs inside User-Mode Linux (node 3,
+the last 318 cycles of a job). One ring keeps the order by construction; docs/benchmarks.md,
+"Kernel-timed stream".) Python only keeps the ring ahead of the kernel:
 
 - **Where the wire is.** A raw socket that receives only SYNC counts the SYNCs the kernel
   sent (with their kernel timestamps): cycle c. The cycle thread drains it without blocking.
@@ -73,6 +80,35 @@ PHASE_GAIN = 0.1  # share of the SYNC phase error caught up per renewal
 PHASE_LIMIT = 0.04  # at most this share of T faster or slower per cycle to catch up the phase
 RE_ANCHOR_CYCLES = 4  # a phase error beyond this many periods moves the reference
 REST_LEASE_S = 1.0  # lease while every queued cycle is the same (axes at rest; module docstring)
+
+
+class QueueHeadroom:
+    """Cycles still queued beyond the wire when the cycle thread wakes while moving (h - c
+    before it commits): how close a stall came to the queue's planned end. A histogram over
+    0..cycles (negative: the kernel went past the horizon into the tail, counted as 0)."""
+
+    def __init__(self, cycles: int) -> None:
+        self.counts = [0] * (cycles + 1)
+        self.samples = 0
+        self.min = cycles
+        self.into_tail = 0  # wake-ups that found the wire past the horizon (the tail was sent)
+
+    def add(self, headroom_cycles: int) -> None:
+        if headroom_cycles < 0:
+            self.into_tail += 1
+        h = max(0, min(headroom_cycles, len(self.counts) - 1))
+        self.counts[h] += 1
+        self.samples += 1
+        self.min = min(self.min, h)
+
+    def percentile(self, share: float) -> int:
+        """Smallest headroom h with at least ``share`` of the samples at or below it."""
+        need, seen = share * self.samples, 0
+        for h, n in enumerate(self.counts):
+            seen += n
+            if seen >= need and seen:
+                return h
+        return 0
 
 
 def ring_cycles(frames_per_cycle: int) -> int:
@@ -153,6 +189,8 @@ class BcmQueueWriter:
         self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
         self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
         self.expired = 0  # lease expiries seen
+        self.headroom = QueueHeadroom(self.cycles)  # while moving (at rest the horizon is a few cycles)
+        self.moving = False
 
     def _init_frames(self) -> None:
         """SYNC frames and the RPDO frame heads of every slot (their data is packed per cycle)."""
@@ -171,11 +209,13 @@ class BcmQueueWriter:
     def next_cycle(self) -> int:
         """Sleep until the next wake-up (every WAKE_PERIOD_S, whole cycles), then count the
         SYNCs the kernel sent meanwhile: the wire cycle."""
-        woke = wait_until(self.grid.next_s, 60e-6)
+        woke = wait_until(self.grid.next_s, 0.0)  # no spin: the kernel keeps the time, not this wake-up
         lateness, missed = self.grid.advance(woke)
         self.stats.add(lateness, missed)
         assert self.echo is not None
         self.echo.drain(self._on_sync)
+        if self.running and self.moving:
+            self.headroom.add(self.h - self.c)
         return self.c
 
     def _on_sync(self, stamp: float) -> None:
@@ -190,6 +230,7 @@ class BcmQueueWriter:
         """Deepest cycle to plan: moving, as deep as the stop after it still ends before the
         lease; else a few cycles (the drives' state machine answers the feedback)."""
         least = c + self.guard + 1
+        self.moving = moving
         if moving:
             deepest = c + self.cycles - 1 - self.pad - stop_cycles
             target = (deepest // BATCH_CYCLES) * BATCH_CYCLES
@@ -319,6 +360,10 @@ class BcmQueueWriter:
                 pass
 
     def close(self) -> None:
+        if self.headroom.samples:
+            log.info(kv("kernel_queue_summary", wakes=self.headroom.samples, headroom_min=self.headroom.min,
+                        headroom_p1=self.headroom.percentile(0.01), headroom_p50=self.headroom.percentile(0.5),
+                        into_tail=self.headroom.into_tail, lease_expiries=self.expired, ring_cycles=self.cycles))
         self._delete()
         self.running = False
         if self.bcm_sock is not None:

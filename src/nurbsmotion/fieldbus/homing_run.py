@@ -54,7 +54,11 @@ class HomingRun:
     def __init__(self, axis: int, name: str, plan: HomingPlan, procedure: HomingProcedure,
                  trail: bringup.SdoTrail, ip_mode: bool, request: Callable[[str, object], None],
                  wire_cycle: Callable[[], int], phase: Callable[[], Phase],
-                 statusword: Callable[[], int | None], period_s: float) -> None:
+                 statusword: Callable[[], int | None], period_s: float, ready_timeout_s: float = READY_TIMEOUT_S) -> None:
+        """``ready_timeout_s``: how long the drive may take to follow set-points again after
+        the mode is restored (a state-machine step: the master's drive_step_timeout, at least
+        READY_TIMEOUT_S)."""
+        self._ready_timeout_s = ready_timeout_s
         self.axis = axis
         self.name = name
         self.plan = plan
@@ -171,7 +175,7 @@ class HomingRun:
         self._request("home_end", None)
         self._wait_for_phase(Phase.HOLDING, where)
         self._settle()
-        end = time.monotonic() + READY_TIMEOUT_S
+        end = time.monotonic() + self._ready_timeout_s
         while not is_ready(self._statusword() or 0, self.ip_mode):
             if time.monotonic() > end:
                 word = self._statusword()

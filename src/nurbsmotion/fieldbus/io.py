@@ -93,12 +93,12 @@ class IoNode:
     """
 
     def __init__(self, network: canopen.Network, io: IoConfig,
-                 on_change: Callable[[str, bool], None] | None = None) -> None:
+                 on_change: Callable[[str, bool], None] | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S) -> None:
         self.network = network
         self.io = io
         self.on_change = on_change
         self.node = canopen.RemoteNode(io.node_id, cia401_dictionary(io))
-        self.node.sdo.RESPONSE_TIMEOUT = SDO_TIMEOUT_S
+        self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
         network.add_node(self.node)
         self._lock = threading.Lock()
         self._inputs: dict[str, bool] | None = None
@@ -161,8 +161,14 @@ class IoNode:
         self._sdo(step, pdo.save)
 
     def close(self) -> None:
-        self.node.tpdo[1].callbacks.clear()
-        self.network.unsubscribe(self.node.tpdo[1].cob_id, self.node.tpdo[1].on_message)
+        """Stop taking its TPDO (nothing to undo when the bring-up did not get that far)."""
+        tpdo = self.node.tpdo[1]
+        tpdo.callbacks.clear()
+        if tpdo.cob_id is not None:
+            try:
+                self.network.unsubscribe(tpdo.cob_id, tpdo.on_message)
+            except (KeyError, ValueError):  # never subscribed: the mapping step failed
+                pass
 
     # ------------------------------------------------------------------ inputs
     @property

@@ -47,7 +47,7 @@ from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP, state_name
 from nurbsmotion.fieldbus.feedback import Feedback
 from nurbsmotion.fieldbus.heartbeat import MasterHeartbeat
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
-from nurbsmotion.fieldbus.homing_run import HomingRun
+from nurbsmotion.fieldbus.homing_run import READY_TIMEOUT_S, HomingRun
 from nurbsmotion.fieldbus.pdo import cycles_of_ms
 from nurbsmotion.fieldbus.playback import Playback
 from nurbsmotion.fieldbus.row_source import RowFeed
@@ -58,6 +58,7 @@ from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import CycleWriter, CyclicFrames, LoopWriter
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # fewer system calls per cycle (its docstring)
 
 log = logging.getLogger(__name__)
 
@@ -177,12 +178,14 @@ class Master:
         self._sync_source = sync_source
         self._bootup_timeout_s = bootup_timeout_s
         self._enable_timeout_s = enable_timeout_s
+        self._stuck_timeout_s = stuck_timeout_s
         self._sdo_timeout_s = sdo_timeout_s
         self._spin_s = spin_s
         self._late_threshold_s = late_threshold_s if late_threshold_s is not None else 0.1 * config.cycle_period_s
         self._period_s = config.cycle_period_s
         self._progress_every = cycles_of_ms(progress_period_s * 1000.0, self._period_s)
         self._network: canopen.Network | None = None
+        self._extra_receive_ids: list[int] = []  # receive_from(): the spindle's and I/O node's frames
 
         axes = config.axes
         n = self._n = len(axes)
@@ -259,6 +262,22 @@ class Master:
     def _phase(self) -> str:
         return self._ctl.phase.value
 
+    @property
+    def network(self) -> canopen.Network | None:
+        """The connected canopen Network (after connect()): other nodes (spindle, I/O) join it."""
+        return self._network
+
+    def receive_from(self, node_id: int, cob_ids: tuple[int, ...] = ()) -> None:
+        """Also accept another node's EMCY, SDO answers, heartbeat and ``cob_ids`` (its TPDOs)
+        when the kernel-queue receive filter is on (fieldbus.spindle, fieldbus.io)."""
+        self._extra_receive_ids += [c.COB_EMCY + node_id, c.COB_SDO_TX + node_id, c.COB_HEARTBEAT + node_id, *cob_ids]
+        self._filter_received()
+
+    def quick_stop(self, reason: str) -> None:
+        """Quick stop every axis now, with or without a job (then disabled, as an abort):
+        the machine I/O's e-stop input (service.machine_io)."""
+        self._request("quick_stop", reason)
+
     # ------------------------------------------------------------------ connection
     def connect(self) -> None:
         """Open the bus (if not given), start canopen's notifier and the feedback callbacks."""
@@ -267,7 +286,8 @@ class Master:
         if self._bus is None:
             bus_cfg = self.config.bus
             try:
-                self._bus = can.Bus(interface=bus_cfg.interface, channel=bus_cfg.channel, bitrate=bus_cfg.bitrate)
+                self._bus = BatchedSocketcanBus(channel=bus_cfg.channel) if bus_cfg.interface == "socketcan" else \
+                    can.Bus(interface=bus_cfg.interface, channel=bus_cfg.channel, bitrate=bus_cfg.bitrate)
             except (can.CanError, OSError, ValueError, ImportError) as err:
                 raise FieldbusError(f"bus {bus_cfg.interface}:{bus_cfg.channel}: cannot open ({err})") from None
         network = canopen.Network(self._bus)
@@ -456,7 +476,8 @@ class Master:
         if self._thread is None or self._job is not None or self._homing_run is not None:
             raise FieldbusError(f"home: the axes are not holding (phase {self._phase})")
         run = HomingRun(i, self._names[i], plan, procedure, self._trails[i], self._ip[i], self._request,
-                        lambda: self._cycle, lambda: self._ctl.phase, lambda: self._fb.status[i], self._period_s)
+                        lambda: self._cycle, lambda: self._ctl.phase, lambda: self._fb.status[i], self._period_s,
+                        ready_timeout_s=max(READY_TIMEOUT_S, self._stuck_timeout_s))
         self._homing_run = run
         self._supervisor.homing_axis = i
         try:
@@ -613,7 +634,7 @@ class Master:
             self._bus.set_filters(None)
             return
         ids = [base + node for node in self._node_ids for base in (c.COB_EMCY, c.COB_SDO_TX, c.COB_HEARTBEAT)]
-        ids += [frame.cob_id for plan in self.plans for frame in plan.layout.tpdos]
+        ids += [frame.cob_id for plan in self.plans for frame in plan.layout.tpdos] + self._extra_receive_ids
         self._bus.set_filters([{"can_id": can_id, "can_mask": 0x7FF, "extended": False} for can_id in ids])
 
     def shutdown(self, timeout_s: float = 5.0) -> None:

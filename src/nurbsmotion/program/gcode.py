@@ -4,7 +4,7 @@ The accepted language, with every error, is described in docs/programs.md. The t
 lexed line by line (gcode_words), O-word constructs are paired (owords), then the lines
 run in program order with a modal state, ``#`` parameters and a call stack. Each line
 follows RS274NGC's order of execution (LinuxCNC "G-code overview", Order of Execution):
-F, S, T, M6/M61, M3-M5, M7-M9, G4, plane, units, G43/G49, G54-G59.3, G61/G64, G90/G91,
+F, S, T, M6/M61, M3-M5, M7-M9, M62-M65 (digital output P), G4, plane, units, G43/G49, G54-G59.3, G61/G64, G90/G91,
 G10/G28/G30/G92, motion (G53 applies to it), M0/M1/M2/M30.
 
 Every problem is reported (up to ``ReadOptions.max_errors``), one line each, in line
@@ -75,7 +75,8 @@ SYSTEM_CODES = {540: 1, 550: 2, 560: 3, 570: 4, 580: 5, 590: 6, 591: 7, 592: 8, 
 AXIS_USERS = {100: "G10", 280: "G28", 300: "G30", 920: "G92", 431: "G43.1"}  # use the block's axis words
 M_GROUPS = {0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping", 6: "tool change", 61: "tool change",
             70: "modal state", 71: "modal state", 72: "modal state", 73: "modal state",
-            3: "spindle", 4: "spindle", 5: "spindle", 7: "coolant", 8: "coolant", 9: "coolant"}
+            3: "spindle", 4: "spindle", 5: "spindle", 7: "coolant", 8: "coolant", 9: "coolant",
+            62: "digital output", 63: "digital output", 64: "digital output", 65: "digital output"}
 END_CODES = {2, 30}
 ROTARY_LETTERS = "ABCUVW"
 WORD_LETTERS = "XYZIJKRFPLQSTHND"
@@ -304,6 +305,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.apply_tool(line, m_codes)
         self.apply_modal_state(line, m_codes.get("modal state"), self.frames[-1].autorestore if self.frames else [None])
         self.apply_spindle_and_coolant(line, m_codes)
+        self.apply_digital_output(line, m_codes.get("digital output"), groups)
         self.apply_dwell(line, groups)
         self.apply_tool_length(line, groups.get("tool length"))
         self.apply_path_control(line, groups.get("path control"))
@@ -454,6 +456,23 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                 mode = {7: CoolantMode.MIST, 8: CoolantMode.FLOOD, 9: CoolantMode.OFF}[int(m.value)]
                 self.coolant = set() if mode is CoolantMode.OFF else self.coolant | {mode}
                 self.add_event(line, EventKind.COOLANT, m.text, coolant=mode)
+
+    def apply_digital_output(self, line: GcodeLine, m: Word | None, groups: dict[str, Word]) -> None:
+        """LinuxCNC's M62/M63 (output P on/off with the next motion) and M64/M65 (at once): an
+        OUTPUT event; P is the output's bit in the io node's outputs (0x6200)."""
+        if m is None:
+            return
+        g = groups.get("non-modal")
+        if g is not None and round(g.value * 10) == 40:
+            raise InputError(line.at(m), "takes P, and so does the G4 on this line: write them on two lines")
+        p = line.claim("P").get("P")
+        if p is None:
+            raise InputError(line.at(m), "needs P: the output number")
+        if p.value != int(p.value) or p.value < 0:
+            raise InputError(line.at(p), f"an output number is a whole number >= 0, got {p.value:g}")
+        code = int(m.value)
+        self.add_event(line, EventKind.OUTPUT, m.text, output=int(p.value), output_on=code in (62, 64),
+                       output_synchronized=code in (62, 63))
 
     def apply_dwell(self, line: GcodeLine, groups: dict[str, Word]) -> None:
         g = groups.get("non-modal")

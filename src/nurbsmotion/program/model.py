@@ -76,6 +76,7 @@ class EventKind(str, enum.Enum):
     TOOL_CHANGE = "tool_change"  # M6: manual tool change to ``tool``, hold until resume
     SPINDLE = "spindle"  # M3/M4/M5, or S while the spindle turns
     COOLANT = "coolant"  # M7/M8/M9
+    OUTPUT = "output"  # M62/M63 (with the next motion), M64/M65 (at once): digital output P on/off
 
 
 class SpindleDirection(str, enum.Enum):
@@ -108,6 +109,9 @@ class ProgramEvent:
     spindle_rpm: float | None = None  # the S value: rpm, or surface speed (units/min) under G96
     constant_surface_speed: bool = False  # G96 in effect
     coolant: CoolantMode | None = None
+    output: int | None = None  # M62-M65 P: the output number
+    output_on: bool | None = None  # M62/M64 on, M63/M65 off
+    output_synchronized: bool = False  # M62/M63 (LinuxCNC: with the next motion)
 
     @property
     def holds(self) -> bool:
@@ -115,8 +119,13 @@ class ProgramEvent:
         return self.kind in HOLDING_EVENTS
 
     @property
+    def waits_for_spindle(self) -> bool:
+        """M3/M4, or S while the spindle turns: the next move waits for the spindle at speed."""
+        return self.kind is EventKind.SPINDLE and self.spindle is not SpindleDirection.OFF
+
+    @property
     def stops_motion(self) -> bool:
-        return self.kind in STOPPING_EVENTS
+        return self.kind in STOPPING_EVENTS or self.waits_for_spindle
 
 
 @dataclass(frozen=True, eq=False)

@@ -24,9 +24,12 @@ from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
+from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.homing import Homing
+from nurbsmotion.service.job_events import JobEvents
 from nurbsmotion.service.jog import LEASE_REASON, Jogging
+from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
@@ -60,6 +63,8 @@ class ActiveJob:
     watcher: threading.Thread | None = None
     feedback: FeedbackLog | None = None
     overrides: list[dict[str, Any]] = field(default_factory=list)  # the override history of the job
+    events: JobEvents | None = None  # spindle / coolant events at their rows (service.job_events)
+    machine_fault: str = ""  # e-stop, limit input, spindle: the job's one-line reason
 
     @property
     def start_cycle(self) -> int:
@@ -69,8 +74,10 @@ class ActiveJob:
 
 class Controller:
     def __init__(self, config: MachineConfig, link: MotionLink, planner: Planner, records: JobRecords,
-                 simulation: Simulation | None = None, machine_state: MachineState | None = None) -> None:
+                 simulation: Simulation | None = None, machine_state: MachineState | None = None,
+                 devices: MachineDevices | None = None) -> None:
         self.config = config
+        self.machine = MachineJobs(devices, link, lambda: self._job)  # spindle and machine I/O hooks
         self.machine_state = machine_state or MachineState()  # offsets and tool: persisted after each completed job
         self.link = link
         self.planner = planner
@@ -113,11 +120,16 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
+<<<<<<< HEAD
             try:
                 record = self._record(name, text, plan)
             except InputError:
                 plan.cancel()
                 raise
+=======
+            plan, wait_rows = self.machine.prepare(plan)
+            record = self._record(name, text, plan)
+>>>>>>> main
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
             if not keep_override and self._override != 1.0:
@@ -130,7 +142,14 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
+<<<<<<< HEAD
                 job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
+=======
+                self.homing.shift_counts(plan.counts)  # onto the offsets `method: here` set
+                self.machine.ready()
+                job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
+                self.machine.start(job, wait_rows)
+>>>>>>> main
             except (InputError, FieldbusError) as err:
                 plan.cancel()
                 self._stop_traffic()
@@ -210,6 +229,8 @@ class Controller:
                 raise Refused("reset", "a job is running; stop or abort it first")
             if self.homing.busy:
                 raise Refused("reset", "homing is under way; stop or abort it first")
+        if (refusal := self.machine.reset_refusal()) is not None:
+            raise Refused("reset", refusal)
         try:
             self.link.reset_faults()
         except FieldbusError as err:
@@ -346,7 +367,8 @@ class Controller:
                                               self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]],
                 "last_job": self._last, "simulate": self.simulation is not None,
-                "coordinates": self.machine_state.status(), "homing": self.homing.status()}
+                "coordinates": self.machine_state.status(), "homing": self.homing.status(),
+                **self.machine.status()}
 
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
@@ -385,6 +407,8 @@ class Controller:
         if self._job is not None or self._planning:
             busy = self._job.record.job_id if self._job is not None else "another submission"
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
+        if (refusal := self.machine.start_refusal()) is not None:
+            raise Refused("submit", refusal)
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
 
@@ -493,7 +517,11 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
+<<<<<<< HEAD
         job.plan.cancel()  # a streamed job's planner stops (the job ended)
+=======
+        self.machine.end(job, result)
+>>>>>>> main
         status, settled = self._settled_status()
         self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
         outcome = self._outcome(job, result, status, settled)
@@ -559,7 +587,9 @@ class Controller:
         if result.faults:
             outcome = "fault"
         faults = [self._fault_record(f, status, job.start_cycle) for f in result.faults]
-        reason = faults[0]["message"] if faults else {
+        if job.machine_fault:
+            outcome = "fault"
+        reason = job.machine_fault or faults[0]["message"] if job.machine_fault or faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
             "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, "")
         cut_short = job.plan.end_reason(getattr(job.handle, "fell_behind_row", -1))
@@ -571,7 +601,7 @@ class Controller:
                 "sent": result.sent, "planned": result.length,
                 "line_reached": self._line_reached(job, result.sent - 1),
                 "final_position": self._positions_mm(status), "settled": settled,
-                "overrides": job.overrides,
+                "overrides": job.overrides, "machine_events": job.events.done if job.events is not None else [],
                 "feedback_rows": job.feedback.rows if job.feedback is not None else None,
                 "motion_time_s": round(time.monotonic() - job.started_s, 3),
                 "missed_cycles": result.missed_cycles - job.missed_before,
@@ -612,6 +642,7 @@ class Controller:
             job.handle.request_stop()
             if job.watcher is not None:
                 job.watcher.join(timeout_s)
+        self.machine.close()
         self.link.shutdown(timeout_s)
 
 
@@ -624,8 +655,11 @@ def check_program_name(name: str) -> None:
 def config_dict(config: MachineConfig) -> dict[str, Any]:
     """The configuration a job ran with, every default filled in (config.json of a record)."""
     plain_axes = tuple(dataclasses.replace(a, od=None) for a in config.axes)  # the EDS as read: not a value
-    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes))
+    spindle = dataclasses.replace(config.spindle, od=None) if hasattr(config.spindle, "od") else config.spindle
+    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
     out.pop("lines", None)
+    if isinstance(out["spindle"], dict):
+        out["spindle"].pop("od", None)
     for axis in out["axes"]:
         axis.pop("od", None)
     return out

@@ -25,6 +25,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.service.devices import open_devices
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
@@ -96,7 +97,15 @@ class Daemon:
         except BaseException:
             self._stop_planner_worker()
             raise
-        self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state)
+        try:
+            devices = open_devices(self.config, link)  # spindle and I/O node, after the axes
+        except BaseException:
+            link.shutdown(2.0)
+            self._stop_simulation()
+            self._stop_planner_worker()
+            raise
+        self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
+                                     devices)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()

@@ -90,7 +90,9 @@ def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
     for their homing), bring every axis up; FieldbusError names the node and the step if
     that fails (and everything started is stopped again)."""
     simulation = SimulatedDrives(config, home_sensors).start() if config.simulate else None
-    master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")  # the daemon's process settings
+    master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze",  # the daemon's process settings
+                    stuck_timeout_s=config.bus.drive_step_timeout_ms / 1000.0,
+                    sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
     try:
         master.bring_up()
     except BaseException:

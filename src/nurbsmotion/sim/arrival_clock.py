@@ -61,10 +61,15 @@ class ArrivalClock:
 
 
 def socket_pending(bus: object) -> Callable[[], bool]:
-    """``pending()`` for a python-can bus: select() on its file descriptor (SocketCAN), the
-    receive queue of python-can's in-process virtual bus, else always False."""
+    """``pending()`` for a python-can bus: the bus's own ``frames_waiting()`` (the batched
+    SocketCAN bus, nurbsmotion.socketcan_batch: frames it has read but not yet handed out are
+    invisible to select()), the receive queue of python-can's in-process virtual bus,
+    select() on its file descriptor (SocketCAN), else always False."""
     import select
 
+    frames_waiting = getattr(bus, "frames_waiting", None)
+    if callable(frames_waiting):
+        return frames_waiting
     queue = getattr(bus, "queue", None)
     if queue is not None and hasattr(queue, "qsize"):
         return lambda: queue.qsize() > 0

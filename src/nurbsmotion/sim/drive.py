@@ -356,8 +356,10 @@ class SimDrive:
         arrival_now = self._arrival.judging_time(now)
         for producer in self._heartbeat_consumer.newly_failed(arrival_now):
             if not self.silent:
+                # judged_at_s: the arrival-timeline time of the judgement, as wall-clock time
                 log.warning(kv("sim.heartbeat_lost", node=self.node_id, producer=producer,
-                               rx_lag_s=round(self._heartbeat_rx_lag_s.get(producer, 0.0), 3)))
+                               rx_lag_s=round(self._heartbeat_rx_lag_s.get(producer, 0.0), 3),
+                               judged_at_s=f"{arrival_now - self._wall_to_clock_s:.3f}"))
                 self.axis.raise_fault(EmcyCode.HEARTBEAT)
         self._watch_sync_and_rpdos(arrival_now)
         due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),

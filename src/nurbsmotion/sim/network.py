@@ -19,6 +19,7 @@ from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
 from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus
 from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
@@ -62,6 +63,14 @@ class SpindleSim:
         return velocity_counts_s * 60.0 / self.counts_per_rev
 
 
+def machine_spindle(machine: Any) -> SpindleSim | None:
+    """The spindle drive of a configuration's ``spindle`` section (None: 'none' or absent)."""
+    spindle: Any = getattr(machine, "spindle", None)
+    if spindle is None or not hasattr(spindle, "node_id"):
+        return None
+    return SpindleSim(spindle.node_id, spindle.counts_per_rev, spindle.eds)
+
+
 class SimNetwork:
     """Any number of :class:`SimDrive` and :class:`SimIoNode` on one bus
     (``interface``/``channel`` as python-can).
@@ -84,6 +93,7 @@ class SimNetwork:
         self._wake = threading.Event()
         self._ticker: threading.Thread | None = None
         self.started_at = time.monotonic()
+        self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (nurbsmotion/socketcan_batch.py)
 
     def add_drive(self, node_id: int, eds: str | Path | None = None, **drive_kwargs: Any) -> SimDrive:
         """Create drive ``node_id`` (keyword arguments as :class:`SimDrive`)."""
@@ -132,7 +142,8 @@ class SimNetwork:
         mode, cycle period and everything else are what the master writes, so a missing
         write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive;
         ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds;
-        ``spindle`` adds a spindle drive (its node id must be free).
+        ``spindle`` adds a spindle drive (its node id must be free); without it, the machine's
+        own ``spindle`` section if it describes a drive (node_id, counts_per_rev, eds).
         """
         bus = machine.bus
         net = cls(interface=bus.interface, channel=bus.channel, bitrate=bus.bitrate)
@@ -159,6 +170,7 @@ class SimNetwork:
         io = getattr(machine, "io", None)
         if io is not None:
             net._add_machine_io(io)
+        spindle = spindle or machine_spindle(machine)
         if spindle is not None:
             net.add_spindle(spindle, record=record, sync=sync)
         return net
@@ -191,6 +203,8 @@ class SimNetwork:
             return self
         network = canopen.Network()
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+        if self.interface == "socketcan":  # one system call per frame (nurbsmotion/socketcan_batch.py)
+            network.bus = BatchedSocketcanBus(channel=self.channel, batch=self.rx_batch, **self.bus_kwargs)
         network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
         self.network = network
         self.started_at = time.monotonic()
@@ -217,9 +231,21 @@ class SimNetwork:
         for io_node in self.io_nodes.values():
             io_node.detach()
         if self.network is not None:
+            self._log_receive_lag()
             self.network.disconnect()
             self.network = None
         log.info(kv("sim.stop", channel=self.channel))
+
+    def _log_receive_lag(self) -> None:
+        """One line: how far behind the wire the drives' process read (SocketCAN only)."""
+        bus = self.network.bus if self.network is not None else None
+        if isinstance(bus, BatchedSocketcanBus) and bus.lag.wakeups:
+            lag = bus.lag
+            log.info(kv("sim.rx", frames=lag.frames, wakeups=lag.wakeups,
+                        frames_per_wakeup=round(lag.frames / lag.wakeups, 2),
+                        lag_p50_ms=round(lag.percentile_s(0.5) * 1000, 2),
+                        lag_p99_ms=round(lag.percentile_s(0.99) * 1000, 2),
+                        lag_max_ms=round(max(lag.samples_s) * 1000, 2)))
 
     def __enter__(self) -> "SimNetwork":
         return self.start()

@@ -1,0 +1,118 @@
+"""What jobs do with the spindle and the machine I/O (service.devices): the controller's hooks.
+
+- before a job: refuse it while the e-stop or a limit input is active; add the spindle's
+  at-speed waits to its pause rows (service.job_events); enable a spindle an abort disabled;
+- during it: its events at their rows (JobEvents); an e-stop or limit input, or a spindle
+  that stops on its own, ends it with one line (``job.machine_fault``, the outcome's reason);
+- at its end: the spindle ramps to 0 (completed, stopped) or gets a quick stop and is
+  disabled (abort, fault); coolant off. An e-stop also quick-stops the axes without a job.
+
+Every method is a no-op without devices, so the controller calls them unconditionally.
+Jobs are the controller's ActiveJob (handle, record, plan, events, machine_fault, stop_requested).
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from collections.abc import Callable
+from typing import Any
+
+from nurbsmotion.errors import FieldbusError
+from nurbsmotion.log import kv
+from nurbsmotion.service.devices import MachineDevices
+from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
+from nurbsmotion.service.machine_io import SafetyTrip
+from nurbsmotion.service.planner import PlannedJob
+
+log = logging.getLogger(__name__)
+ENDED_SOFTLY = ("done", "stopped")  # master JobResult outcomes after which the spindle ramps down
+
+
+class MachineJobs:
+    def __init__(self, devices: MachineDevices | None, link: Any, running_job: Callable[[], Any]) -> None:
+        self.devices = devices
+        self.link = link
+        self.running_job = running_job
+        if devices is not None:
+            devices.on_trip = self.trip
+            devices.on_spindle_fault = self.spindle_fault
+
+    # ------------------------------------------------------------------ before a job
+    def start_refusal(self) -> str | None:
+        return self.devices.start_refusal() if self.devices is not None else None
+
+    def reset_refusal(self) -> str | None:
+        """Reset is refused while the e-stop input is active."""
+        io = self.devices.io if self.devices is not None else None
+        return io.start_refusal() if io is not None and io.estop_active() else None
+
+    def prepare(self, plan: PlannedJob) -> tuple[PlannedJob, frozenset[int]]:
+        """The plan with the spindle's wait rows (unchanged without devices)."""
+        return with_spindle_waits(plan) if self.devices is not None else (plan, frozenset())
+
+    def ready(self) -> None:
+        if self.devices is not None:
+            self.devices.ready_for_job()
+
+    # ------------------------------------------------------------------ during and after
+    def start(self, job: Any, wait_rows: frozenset[int]) -> None:
+        if self.devices is None or job.handle is None:
+            return
+        job.events = JobEvents(job.plan, wait_rows, self.devices, job.record.folder, self.link.status,
+                               job.handle.resume, lambda reason: self.stop_job(job, reason, abort=False))
+        job.events.start()
+
+    def end(self, job: Any, result: Any) -> None:
+        """Spindle ramped down or quick-stopped and disabled, coolant off; one record line."""
+        if self.devices is None:
+            return
+        if job.events is not None:
+            job.events.finish()
+        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
+        try:
+            self.devices.all_off(hard)
+        except FieldbusError as err:
+            log.error(kv("devices_not_stopped", job=job.record.job_id, error=err))
+        if job.events is not None:
+            job.events.record("devices_off", {"spindle": "quick stop, disabled" if hard else "ramped to 0",
+                                              "coolant": "off"})
+
+    def stop_job(self, job: Any, reason: str, abort: bool) -> None:
+        """End ``job`` for a machine reason: ``reason`` becomes its outcome's one line."""
+        if job.machine_fault or job.handle is None:
+            return
+        job.machine_fault = reason
+        job.stop_requested = job.stop_requested or ("abort" if abort else "stop")
+        if job.events is not None:  # the job's events.log and outcome: one line (logged there too)
+            job.events.record("job_machine_fault", {"job": job.record.job_id, "reason": reason})
+        else:
+            log.warning(kv("job_machine_fault", job=job.record.job_id, reason=reason))
+        if abort:
+            job.handle.abort()
+        else:
+            job.handle.request_stop()
+
+    def trip(self, trip: SafetyTrip) -> None:
+        """An e-stop or limit input became active (receive thread: requests only, no waiting)."""
+        log.warning(kv("io.trip", input=trip.input, axis=trip.axis or "-", reason=trip.message))
+        job = self.running_job()
+        if job is not None:
+            self.stop_job(job, trip.message, abort=True)
+        if trip.axis is None:  # e-stop: every axis, with or without a job, then the spindle
+            self.link.quick_stop(trip.message)
+            if self.devices is not None:
+                threading.Thread(target=self.devices.all_off, args=(True,), name="estop-devices", daemon=True).start()
+
+    def spindle_fault(self, message: str) -> None:
+        """The spindle left OPERATION ENABLED on its own: the running job is aborted."""
+        job = self.running_job()
+        if job is not None and self.devices is not None and self.devices.spindle is not None:
+            self.stop_job(job, f"spindle node {self.devices.spindle.config.node_id}: {message}", abort=True)
+
+    def status(self) -> dict[str, Any]:
+        return self.devices.status() if self.devices is not None else {}
+
+    def close(self) -> None:
+        if self.devices is not None:
+            self.devices.close()

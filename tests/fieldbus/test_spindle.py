@@ -1,0 +1,134 @@
+"""The master's side of the spindle drive against the simulated drive on python-can's virtual
+bus: bring-up in profile velocity (3) and cyclic synchronous velocity (9) mode, 'at speed'
+from bit 10 / the ramp, direction, stop, quick stop + disable without a fault report, a fault."""
+
+from __future__ import annotations
+
+import contextlib
+import time
+import uuid
+from collections.abc import Iterator
+from dataclasses import replace
+
+import canopen
+import pytest
+
+from nurbsmotion import drive_od
+from nurbsmotion.config import default_eds_path
+from nurbsmotion.errors import FieldbusError
+from nurbsmotion.fieldbus.spindle import SpindleDrive, csv_at_speed, ramp_step
+from nurbsmotion.sim.network import SimNetwork, SpindleSim
+from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+
+NODE = 5
+CONFIG = SpindleConfig(node_id=NODE, counts_per_rev=4096, max_rpm=12000, accel_rpm_s=30000,
+                       od=drive_od.load_description(default_eds_path(), NODE))
+SYNC_S = 0.002
+
+
+@contextlib.contextmanager
+def spindle_bus(config: SpindleConfig) -> Iterator[tuple[canopen.Network, SimNetwork]]:
+    channel = f"spindle-{uuid.uuid4().hex}"
+    sim = SimNetwork(channel=channel)
+    sim.add_spindle(SpindleSim(NODE, config.counts_per_rev), record=False)
+    sim.start()
+    master = canopen.Network()
+    master.NOTIFIER_CYCLE = 0.05
+    master.connect(interface="virtual", channel=channel)
+    master.sync.start(SYNC_S)  # the drive's velocity loop runs on SYNC
+    try:
+        yield master, sim
+    finally:
+        master.sync.stop()
+        master.disconnect()
+        sim.stop()
+
+
+def wait_for(condition, timeout_s: float = 3.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if condition():
+            return True
+        time.sleep(0.005)
+    return False
+
+
+def test_ramp_step_and_csv_window():
+    assert ramp_step(0.0, 100.0, 30.0) == 30.0 and ramp_step(90.0, 100.0, 30.0) == 100.0
+    assert ramp_step(0.0, -100.0, 30.0) == -30.0
+    assert csv_at_speed(9810, 10000) and not csv_at_speed(9790, 10000) and csv_at_speed(1, 0)
+
+
+@pytest.mark.parametrize("mode", list(SpindleMode))
+def test_spins_up_to_speed_both_directions_and_stops(mode):
+    config = replace(CONFIG, mode=mode)
+    with spindle_bus(config) as (master, sim):
+        spindle = SpindleDrive(master, config)
+        spindle.bring_up()
+        try:
+            assert sim[NODE].axis.mode_display == mode.number
+            spindle.command_rpm(6000)  # 0.2 s ramp at 30000 rpm/s
+            assert not spindle.at_speed()
+            assert spindle.wait_at_speed(3.0)
+            assert spindle.status().actual_rpm == pytest.approx(6000, rel=0.021)
+            assert sim[NODE].axis.velocity_actual > 0
+            spindle.command_rpm(-3000)  # M4: the other way
+            assert spindle.wait_at_speed(3.0)
+            assert sim[NODE].axis.velocity_actual < 0
+            spindle.command_rpm(0)
+            assert wait_for(lambda: sim[NODE].axis.velocity_actual == 0)
+            assert spindle.status().fault is None
+        finally:
+            spindle.close()
+
+
+def test_quick_stop_and_disable_are_no_fault_and_enable_comes_back():
+    faults: list[str] = []
+    with spindle_bus(CONFIG) as (master, sim):
+        spindle = SpindleDrive(master, CONFIG, on_fault=faults.append)
+        spindle.bring_up()
+        try:
+            spindle.command_rpm(3000)
+            assert spindle.wait_at_speed(3.0)
+            spindle.quick_stop()
+            spindle.disable()
+            assert sim[NODE].axis.velocity_actual == 0  # the quick-stop ramp ended before the disable
+            assert wait_for(lambda: spindle.status().state == "SWITCH ON DISABLED")
+            assert not spindle.enabled and faults == []
+            spindle.enable()
+            assert spindle.enabled and spindle.status().commanded_rpm == 0
+        finally:
+            spindle.close()
+
+
+def test_a_drive_that_leaves_operation_enabled_is_reported_once():
+    faults: list[str] = []
+    with spindle_bus(CONFIG) as (master, sim):
+        spindle = SpindleDrive(master, CONFIG, on_fault=faults.append)
+        spindle.bring_up()
+        try:
+            spindle.command_rpm(3000)
+            master[NODE].sdo[0x6040].raw = 0x02  # someone else quick-stops it
+            assert wait_for(lambda: bool(faults))
+            assert len(faults) == 1 and "left OPERATION ENABLED" in faults[0]
+            assert not spindle.wait_at_speed(0.2)
+        finally:
+            spindle.close()
+
+
+def test_no_answer_names_node_and_step():
+    with spindle_bus(replace(CONFIG, node_id=9, od=drive_od.load_description(default_eds_path(), 9))) as (master, _):
+        spindle = SpindleDrive(master, replace(CONFIG, node_id=9, od=drive_od.load_description(default_eds_path(), 9)))
+        with pytest.raises(FieldbusError, match=r"node 9: spindle step 'read 0x6502': no SDO answer"):
+            spindle.bring_up()
+
+
+def test_the_drive_is_told_to_watch_the_masters_heartbeat_and_the_cycle_period():
+    with spindle_bus(CONFIG) as (master, sim):
+        spindle = SpindleDrive(master, CONFIG, master_heartbeat=(127, 500), cycle_period_s=SYNC_S)
+        spindle.bring_up()
+        try:
+            assert master[NODE].sdo[0x1016][1].raw == 127 << 16 | 500
+            assert sim[NODE].period_s == pytest.approx(SYNC_S)  # 0x60C2: the ramp steps by the SYNC period
+        finally:
+            spindle.close()

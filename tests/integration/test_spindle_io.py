@@ -1,0 +1,162 @@
+"""The spindle drive and machine I/O through the daemon, in-process, with the simulated
+drives, spindle and CiA-401 node on a private virtual bus: M3/M4/S/M5 with 'at speed' waits,
+coolant outputs, e-stop and limit inputs, job end and abort stopping everything, records."""
+
+from __future__ import annotations
+
+import tempfile
+import time
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from nurbsmotion.cli.status import format_status
+from nurbsmotion.config import load_config
+from nurbsmotion.errors import InputError
+from nurbsmotion.service.daemon import Daemon
+from tests.integration.daemon_helpers import CONFIG, wait_until
+
+SPINDLE_IO = """\
+spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, at_speed_timeout_s: 3.0}
+io:
+  node_id: 10
+  inputs: {estop: {bit: 0, active_low: true}, limit_x_max: 1}
+  outputs: {coolant_flood: 0, coolant_mist: 1, clamp: 4}
+"""
+MILL = "G21 G90\nS6000 M3\nM8\nG01 X5 F3000\nS9000\nG01 X10\nM5 M9\nG01 X0\nM30\n"
+
+
+@pytest.fixture
+def machine(tmp_path: Path) -> Iterator[Daemon]:
+    folder = Path(tempfile.mkdtemp(prefix="nm-"))
+    path = folder / "machine.yaml"
+    path.write_text(CONFIG.format(channel=f"sp-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
+                                  data_dir=tmp_path / "data") + SPINDLE_IO)
+    daemon = Daemon(load_config(path))
+    daemon.start()
+    try:
+        yield daemon
+    finally:
+        daemon.close()
+
+
+def sim(daemon: Daemon):
+    return daemon.simulation.network  # type: ignore[union-attr]
+
+
+def spindle_rpm(daemon: Daemon) -> float:
+    return sim(daemon)[5].axis.velocity_actual * 60.0 / 4096
+
+
+def wait_job(daemon: Daemon, job_id: str, timeout_s: float = 30.0) -> dict:
+    assert daemon.controller is not None
+    return wait_until(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info, timeout_s,
+                      f"job {job_id} end")
+
+
+def test_a_mill_program_waits_for_the_spindle_switches_coolant_and_stops_both_at_the_end(machine):
+    controller = machine.controller
+    assert controller.status()["spindle"]["commanded_rpm"] == 0
+    wait_until(lambda: controller.status()["spindle"]["actual_rpm"] is not None, 2.0, "first 0x606C read")
+    lines = format_status(controller.status())
+    assert "spindle node 5: OPERATION ENABLED, commanded 0 rpm, actual 0 rpm, at speed" in lines
+    assert "io node 10: inputs active none, outputs on none" in lines
+    job = controller.submit("mill.nc", MILL)["job"]["id"]
+    status = wait_until(lambda: (s := controller.status())["job"] and s["job"]["paused"] and s, 10.0, "spindle wait")
+    assert "S6000 M3" in status["job"]["paused"] or "M3 at mill.nc:2" in status["job"]["paused"]
+    assert abs(status["axes"][0]["commanded_mm"]) < 1e-9  # nothing moved before the spindle is at speed
+    info = wait_job(machine, job)
+    outcome = info["outcome"]
+    assert outcome["outcome"] == "completed", outcome["reason"]
+    events = [(e["code"], e.get("rpm"), e.get("at_speed")) for e in outcome["machine_events"] if "code" in e]
+    assert events[:2] == [("M3", 6000.0, True), ("M8", None, None)]
+    assert ("S9000", 9000.0, True) in events and ("M5", 0.0, None) in events and ("M9", None, None) in events
+    log_lines = (Path(info["folder"]) / "events.log").read_text().splitlines()
+    assert len(log_lines) == len(outcome["machine_events"]) and log_lines[0].startswith("spindle_event ")
+    assert sim(machine).io_nodes[10].outputs == b"\x00"  # coolant off after M9 and at the end
+    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after M5")
+
+
+def test_the_flood_output_is_on_between_m8_and_m9(machine):
+    controller = machine.controller
+    job = controller.submit("c.nc", "G21 G90\nM8\nG01 X20 F600\nM9\n")["job"]["id"]
+    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x01", 5.0, "flood on")
+    assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
+    assert sim(machine).io_nodes[10].outputs == b"\x00"
+
+
+def test_m64_and_m65_switch_the_output_at_bit_p_at_their_row(machine):
+    controller = machine.controller
+    job = controller.submit("o.nc", "G21 G90\nM64 P4\nG01 X20 F600\nM65 P4\nG01 X0\n")["job"]["id"]
+    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x10", 5.0, "clamp on")
+    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x00", 10.0, "clamp off at M65's row")
+    events = wait_job(machine, job)["outcome"]["machine_events"]
+    assert [(e.get("code"), e.get("outputs")) for e in events][:2] == [("M64", {"clamp": True}),
+                                                                       ("M65", {"clamp": False})]
+    assert events[1]["row"] > 100  # after the first move (G01 X20 at 10 mm/s: ~2 s)
+
+
+def test_abort_quick_stops_and_disables_the_spindle_and_the_next_job_enables_it(machine):
+    controller = machine.controller
+    job = controller.submit("a.nc", "G21 G90\nS3000 M4\nG01 X50 F600\nM5\n")["job"]["id"]
+    wait_until(lambda: spindle_rpm(machine) < -2900 and controller.status()["job"]["cycle"] > 10, 10.0, "M4 running")
+    controller.abort()
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "aborted"
+    wait_until(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
+    assert spindle_rpm(machine) == 0
+    controller.reset()
+    job = controller.submit("b.nc", "G21 G90\nS1000 M3\nG01 X1 F600\n")["job"]["id"]
+    assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
+    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle ramped to rest at job end")
+
+
+def test_an_unreachable_speed_stops_the_job_with_one_line(machine):
+    controller = machine.controller
+    machine.config.spindle.__dict__  # noqa: B018 - the config is frozen: slow the simulated drive instead
+    drive = sim(machine)[5]
+    job = controller.submit("slow.nc", "G21 G90\nS6000 M3\nG01 X5 F600\n")["job"]["id"]
+    time.sleep(0.05)
+    drive.axis.params = type(drive.axis.params)(**{**drive.axis.params.__dict__,
+                                                   "velocity_profile": type(drive.axis.params.velocity_profile)(
+                                                       100.0, 100.0, 0.0, 0.0)})  # 100 counts/s²: minutes to 6000 rpm
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "fault"
+    assert outcome["reason"].startswith("slow.nc:2: M3: the spindle did not reach 6000 rpm within 3 s")
+    assert outcome["sent"] == 0 or abs(outcome["final_position"]["X"]["commanded_mm"]) < 1e-9
+
+
+def test_estop_aborts_the_job_disables_everything_and_refuses_motion_until_released(machine):
+    controller = machine.controller
+    job = controller.submit("e.nc", "G21 G90\nS3000 M3\nM8\nG01 X50 F600\n")["job"]["id"]
+    wait_until(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
+    sim(machine).set_io_input("estop", True)
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "fault" and outcome["reason"].startswith("e-stop input estop (io node 10 bit 0")
+    wait_until(lambda: controller.status()["phase"] == "disabled", 5.0, "axes disabled")
+    wait_until(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
+    assert sim(machine).io_nodes[10].outputs == b"\x00"
+    with pytest.raises(InputError, match="e-stop input estop .* is active: release it first"):
+        controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")
+    with pytest.raises(InputError, match="e-stop"):
+        controller.reset()
+    sim(machine).set_io_input("estop", False)
+    wait_until(lambda: controller.status()["io"]["estop_active"] is False, 5.0, "estop released")
+    controller.reset()
+    job = controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")["job"]["id"]
+    assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
+
+
+def test_a_limit_input_faults_the_job_with_one_line_naming_the_axis(machine):
+    controller = machine.controller
+    job = controller.submit("l.nc", "G21 G90\nG01 X50 F600\n")["job"]["id"]
+    wait_until(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
+    sim(machine).set_io_input("limit_x_max", True)
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "fault"
+    assert outcome["reason"] == "limit input limit_x_max (io node 10 bit 1) is active: axis X"
+    assert [e["event"] for e in outcome["machine_events"]] == ["job_machine_fault", "devices_off"]
+    with pytest.raises(InputError, match="limit input limit_x_max .* axis X is on its limit switch"):
+        controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")
