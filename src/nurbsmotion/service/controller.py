@@ -120,16 +120,12 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
-<<<<<<< HEAD
+            plan, wait_rows = self.machine.prepare(plan)  # unchanged without spindle/I-O (and then it may stream)
             try:
                 record = self._record(name, text, plan)
             except InputError:
                 plan.cancel()
                 raise
-=======
-            plan, wait_rows = self.machine.prepare(plan)
-            record = self._record(name, text, plan)
->>>>>>> main
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
             if not keep_override and self._override != 1.0:
@@ -142,14 +138,9 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
-<<<<<<< HEAD
-                job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
-=======
-                self.homing.shift_counts(plan.counts)  # onto the offsets `method: here` set
                 self.machine.ready()
-                job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
+                job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
                 self.machine.start(job, wait_rows)
->>>>>>> main
             except (InputError, FieldbusError) as err:
                 plan.cancel()
                 self._stop_traffic()
@@ -517,11 +508,8 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
-<<<<<<< HEAD
         job.plan.cancel()  # a streamed job's planner stops (the job ended)
-=======
         self.machine.end(job, result)
->>>>>>> main
         status, settled = self._settled_status()
         self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
         outcome = self._outcome(job, result, status, settled)

@@ -89,21 +89,16 @@ class Daemon:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
-        if needs_planner_worker(self.config):  # before the cycle thread: it imports the planner meanwhile
-            self.planner_worker = PlannerWorker()
-            self.planner_worker.start()
-        try:
-            link, self.simulation = self._open_motion(self.config)
-        except BaseException:
-            self._stop_planner_worker()
-            raise
+        link, self.simulation = self._open_motion(self.config)
         try:
             devices = open_devices(self.config, link)  # spindle and I/O node, after the axes
         except BaseException:
             link.shutdown(2.0)
             self._stop_simulation()
-            self._stop_planner_worker()
             raise
+        if needs_planner_worker(self.config) and devices is None:  # the spindle's job events need the whole plan
+            self.planner_worker = PlannerWorker()
+            self.planner_worker.start()
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
