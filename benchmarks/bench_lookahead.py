@@ -182,9 +182,10 @@ if sys.argv[2] == "keep":
     keep_freed_memory()
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.planning import PlanLimits
-from nurbsmotion.planning.lookahead import plan_lookahead
+from nurbsmotion.planning.lookahead import PlanStream, plan_lookahead
 from nurbsmotion.program import Block, BlockKind, Program, SourceRef
 points, weights, knots = json.loads(sys.argv[5])
+chunk_cycles = int(sys.argv[6])  # 0: the whole plan (plan_lookahead); else PlanStream's chunks, not kept
 jerk = None if sys.argv[3] == "none" else float(sys.argv[3])
 limits = PlanLimits(period_s=0.001, chord_error_mm={chord!r}, max_accel_mm_s2={accel!r}, feed_mm_s={feed!r},
                     max_jerk_mm_s3=jerk)
@@ -195,7 +196,10 @@ for _ in range(int(sys.argv[1])):
                       curve.start_point)
     before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
     started = time.perf_counter()
-    count = len(plan_lookahead(program, limits))
+    if chunk_cycles:
+        count = sum(len(chunk) for chunk in PlanStream(program, limits, chunk_cycles))
+    else:
+        count = len(plan_lookahead(program, limits))
     elapsed = time.perf_counter() - started
     times.append(elapsed)
     if elapsed < best:
@@ -204,10 +208,14 @@ print(json.dumps({{"best_s": best, "median_s": statistics.median(times), "count"
 """
 
 
+CHUNK_CYCLES = 2000  # PlanStream's default chunk, what streamed daemon jobs use
+
+
 def throughput(repeat: int, previous_src: str | None = None) -> str:
     """Each case in a fresh process: with glibc's default allocator (a bare library call), and
     with runtime.keep_freed_memory() as the nurbsmotion command sets it; the previous version
-    (another checkout's src) the same way when given, interleaved so both see the same load."""
+    (another checkout's src) the same way when given, interleaved so both see the same load.
+    With J also chunked planning (PlanStream, CHUNK_CYCLES) in the nurbsmotion process."""
     rows = ["| Wang Table 1, T = 1 ms | version | process | set-points | best planning s | median planning s "
             "| page faults (best) | set-points / s (best) | set-points / s (median) | target |",
             "|---|---|---|---|---|---|---|---|---|---|"]
@@ -215,17 +223,20 @@ def throughput(repeat: int, previous_src: str | None = None) -> str:
                                       feed=WANG_LIMITS.feed_mm_s)
     curve = json.dumps([np.asarray(WANG_POINTS).tolist(), list(WANG_WEIGHTS), list(WANG_KNOTS)])
     versions = [("this", str(ROOT / "src"))] + ([("previous", previous_src)] if previous_src else [])
-    for label, jerk in (("no jerk limit", "none"), (f"J = {JERK_MM_S3:g}", str(JERK_MM_S3))):
-        for process, mode in (("library call (glibc default allocator)", "default"),
-                              ("nurbsmotion command (keep_freed_memory)", "keep")):
-            for version, src in versions:
-                out = subprocess.run([sys.executable, "-c", script, str(repeat), mode, jerk, src, curve],
-                                     capture_output=True, text=True, check=True)
-                r = json.loads(out.stdout.strip().splitlines()[-1])
-                rate, median_rate = r["count"] / r["best_s"], r["count"] / r["median_s"]
-                rows.append(f"| {label} | {version} | {process} | {r['count']} | {r['best_s']:.4f} | {r['median_s']:.4f} | "
-                            f"{r['faults']} | {rate:,.0f} | {median_rate:,.0f} | >= 1,000,000 "
-                            f"({'met' if rate >= 1e6 else 'NOT met'}) |")
+    chunked = f"nurbsmotion command, PlanStream chunks of {CHUNK_CYCLES}"
+    cases = [(label, process, mode, jerk, 0) for label, jerk in (("no jerk limit", "none"), (f"J = {JERK_MM_S3:g}", str(JERK_MM_S3)))
+             for process, mode in (("library call (glibc default allocator)", "default"),
+                                   ("nurbsmotion command (keep_freed_memory)", "keep"))]
+    cases.append((f"J = {JERK_MM_S3:g}", chunked, "keep", str(JERK_MM_S3), CHUNK_CYCLES))
+    for label, process, mode, jerk, chunk_cycles in cases:
+        for version, src in versions:
+            out = subprocess.run([sys.executable, "-c", script, str(repeat), mode, jerk, src, curve, str(chunk_cycles)],
+                                 capture_output=True, text=True, check=True)
+            r = json.loads(out.stdout.strip().splitlines()[-1])
+            rate, median_rate = r["count"] / r["best_s"], r["count"] / r["median_s"]
+            rows.append(f"| {label} | {version} | {process} | {r['count']} | {r['best_s']:.4f} | {r['median_s']:.4f} | "
+                        f"{r['faults']} | {rate:,.0f} | {median_rate:,.0f} | >= 1,000,000 "
+                        f"({'met' if rate >= 1e6 else 'NOT met'}) |")
     load = os.getloadavg()
     return (f"{repeat} plans per process, each process fresh; best and median of them; page faults = minor "
             f"faults during the best run. The machine was shared with other agents' work (load average "
@@ -295,7 +306,11 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=20)
     parser.add_argument("--hour-minutes", type=float, default=60.0)
     parser.add_argument("--previous-src", metavar="DIR", help="src/ of a checkout of the previous version: its throughput too")
+    parser.add_argument("--throughput-only", action="store_true", help="print the throughput table only (docs unchanged)")
     args = parser.parse_args()
+    if args.throughput_only:
+        print(throughput(args.repeat, args.previous_src))
+        return
     programs = {"Wang Table 1": read_program(ROOT / "examples" / "wang_table1.nc"),
                 "sharp corners": read_program(ROOT / "examples" / "sharp_corners.yaml"),
                 "mixed.nc": read_program(ROOT / "examples" / "mixed.nc")}

@@ -11,7 +11,7 @@ import re
 from typing import Any
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, simple_command, with_client
-from nurbsmotion.cli.run import _display, describe_outcome, follow_to_the_end
+from nurbsmotion.cli.run import _display, follow_and_report
 from nurbsmotion.service.client import Client, RequestFailed
 
 HELP = "jog one axis: X+10 (by 10 mm), X 25 (to 25 mm), X+ / X- (continuous until Ctrl-C), or stop"
@@ -86,15 +86,9 @@ def run(args: argparse.Namespace) -> int:
         job = response["job"]
         inner = _display(f"jog {args.jog}", args.no_progress)
         display = _Renewing(client, inner) if response["jog"]["continuous"] else inner
-        try:
-            info = follow_to_the_end(client, job, display)  # Ctrl-C: stop along the path
-        finally:
-            if display is not None:
-                display.close()
+        info = follow_and_report(client, args, job, display, "jog")
         if info is None:
-            error_line(args, f"the daemon ended while jog {job['id']} ran; its record: {job['folder']}")
             return 1
-        print(describe_outcome(info))
         outcome = (info.get("outcome") or {}).get("outcome")
         return 0 if outcome == "completed" or (response["jog"]["continuous"] and outcome == "stopped") else 1
     return with_client(args, body)

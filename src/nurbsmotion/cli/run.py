@@ -171,18 +171,24 @@ def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: 
         for line in response.get("errors") or [response.get("error", "rejected")]:
             error_line(args, line)
         return EXIT_REFUSED
-    job = response["job"]
-    display = _display(title, args.no_progress)
+    info = follow_and_report(client, args, response["job"], _display(title, args.no_progress), "job")
+    return 0 if info is not None and (info.get("outcome") or {}).get("outcome") == "completed" else 1
+
+
+def follow_and_report(client: Client, args: argparse.Namespace, job: dict[str, Any], display: Any,
+                      noun: str) -> dict[str, Any] | None:
+    """Follow ``job`` to its end with ``display`` (closed after), print its outcome; None (said
+    on stderr, naming its record) when the daemon ended meanwhile."""
     try:
-        info = follow_to_the_end(client, job, display)
+        info = follow_to_the_end(client, job, display)  # Ctrl-C: stop along the path
     finally:
         if display is not None:
             display.close()
     if info is None:
-        error_line(args, f"the daemon ended while job {job['id']} ran; its record: {job['folder']}")
-        return 1
+        error_line(args, f"the daemon ended while {noun} {job['id']} ran; its record: {job['folder']}")
+        return None
     print(describe_outcome(info))
-    return 0 if (info.get("outcome") or {}).get("outcome") == "completed" else 1
+    return info
 
 
 def run(args: argparse.Namespace) -> int:

@@ -168,6 +168,7 @@ class BcmQueueWriter:
         self.stats = LatenessStats(late_threshold_s)
         self.send_errors = 0
         self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
+        self._ring_view = memoryview(self.buf)  # for ring_uniform (the buffer is never resized)
         self.scratch = [bytearray(dlc) for _, dlc, _, _ in frames.rpdos]
         self._init_frames()
         self.bcm_sock: socket.socket | None = None
@@ -290,9 +291,11 @@ class BcmQueueWriter:
         self.running = True
 
     def ring_uniform(self) -> bool:
-        """Every slot of the ring holds the same frames (the kernel may send it round again)."""
+        """Every slot of the ring holds the same frames (the kernel may send it round again):
+        the ring equals itself shifted by one slot (memoryview comparison, no copy)."""
+        ring = self._ring_view
         slot = self.fpc * FRAME_BYTES
-        return self.buf == bytes(self.buf[:slot]) * self.cycles
+        return ring[slot:] == ring[:-slot]
 
     def _trim(self) -> float:
         """Period correction (s per cycle), two terms. Frequency: the median of the last

@@ -111,6 +111,13 @@ def _variable(node: canopen.RemoteNode, index: int, subindex: int) -> Any:
         raise FieldbusError(f"node {node.id}: the drive's EDS has no 0x{index:04X}:{subindex:02X}") from None
 
 
+def sdo_failure(err: SdoAbortedError | SdoCommunicationError) -> str:
+    """One line for an SDO that failed: the abort code and its CiA 301 meaning, or silence."""
+    if isinstance(err, SdoAbortedError):
+        return f"SDO abort 0x{err.code:08X} ({SdoAbortedError.CODES.get(err.code, 'unknown')})"
+    return f"no SDO answer ({err})"
+
+
 def _sdo(trail: SdoTrail, step: str, action: Any) -> Any:
     """Run one SDO action; an abort or silence becomes the step's one-line error."""
     node_id = trail.node_id

@@ -24,6 +24,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import FieldbusError
+from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.io_config import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
@@ -139,11 +140,8 @@ class IoNode:
     def _sdo(self, step: str, action: Callable[[], Any]) -> Any:
         try:
             return action()
-        except SdoAbortedError as err:
-            raise self._error(step, f"SDO abort 0x{err.code:08X} ({SdoAbortedError.CODES.get(err.code, 'unknown')})"
-                              ) from None
-        except SdoCommunicationError as err:
-            raise self._error(step, f"no SDO answer ({err})") from None
+        except (SdoAbortedError, SdoCommunicationError) as err:
+            raise self._error(step, sdo_failure(err)) from None
 
     def _check_size(self, index: int, needed: int, what: str) -> None:
         step = f"I/O {what}"

@@ -35,6 +35,7 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from nurbsmotion import cia402 as c
 from nurbsmotion import drive_od
 from nurbsmotion.errors import FieldbusError
+from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
 from nurbsmotion.spindle_config import (PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
@@ -319,10 +320,7 @@ class SpindleDrive:
         try:
             with self._sdo_lock:
                 return action()
-        except SdoAbortedError as err:
-            raise self._error(step, f"SDO abort 0x{err.code:08X} ({SdoAbortedError.CODES.get(err.code, 'unknown')})"
-                              ) from None
-        except SdoCommunicationError as err:
-            raise self._error(step, f"no SDO answer ({err})") from None
+        except (SdoAbortedError, SdoCommunicationError) as err:
+            raise self._error(step, sdo_failure(err)) from None
         except (can.CanError, OSError) as err:  # the bus is closed or refuses the frame
             raise self._error(step, f"cannot send ({err})") from None

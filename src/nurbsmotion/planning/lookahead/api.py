@@ -55,6 +55,7 @@ class _Figures:
         self.values: dict[str, float] = {}
         self.repairs = 0
         self.windows = 0
+        self.discarded = 0
         self.runs = 0
         self.fallbacks: dict[str, int] = {}
 
@@ -63,6 +64,7 @@ class _Figures:
             self.values[key] = max(self.values.get(key, 0.0), value)
         self.repairs += plan.repairs
         self.windows += 1
+        self.discarded += plan.discarded
         if plan.fallback:
             self.fallbacks[plan.fallback] = self.fallbacks.get(plan.fallback, 0) + 1
 
@@ -78,6 +80,7 @@ def notes_for(limits: PlanLimits, figures: _Figures, runs: int) -> dict[str, flo
         "accel_limit_mm_s2": limits.max_accel_mm_s2,
         "repairs": figures.repairs,  # ints are floats to the notes' type (numeric tower)
         "windows": figures.windows,
+        "discarded_windows": figures.discarded,  # window plans thrown away (failed, too short, re-planned)
         "runs": runs,
         "stops": max(runs - 1, 0) + sum(figures.fallbacks.values()) - figures.fallbacks.get(FALLBACK_SLOWER, 0),
         "fallback_stops": figures.fallbacks.get(FALLBACK_STOP, 0) + figures.fallbacks.get(FALLBACK_SPLIT, 0),

@@ -265,7 +265,8 @@ def valleys_around(x: NDArray[np.float64], peaks: NDArray[np.intp]) -> tuple[NDA
 
 
 def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float, jerk: float,
-                      curvature_sq: NDArray[np.float64] | None = None) -> NDArray[np.float64] | None:
+                      curvature_sq: NDArray[np.float64] | None = None,
+                      first_peak: int = 0) -> NDArray[np.float64] | None:
     """Caps (x = v^2) that cut every sharp speed peak of the raw profile to a plateau.
 
     A peak is sharp when the filtered jerk across it, (a(t_p - tau/2) - a(t_p + tau/2)) / tau,
@@ -274,8 +275,13 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     curvature vector), which adds to the braking side of the peak; ``curvature_sq`` is |c|^2
     at every point of ``s`` (the largest within v tau_f of the peak counts). Its plateau level
     v is the highest at which the stretch with speed >= v is at least v tau long (so the raw
-    motion holds that speed for tau): plateau_levels. None when no peak is sharp."""
+    motion holds that speed for tau): plateau_levels. None when no peak is sharp.
+
+    Points before ``first_peak`` are history (motion already committed, history_peak_caps):
+    they count for the plateaus' widths but their own peaks are not capped again, and the
+    grid allowance is taken from the points from ``first_peak`` on."""
     inner = np.flatnonzero((x[1:-1] >= x[:-2]) & (x[1:-1] > x[2:]) & (x[1:-1] > 0)) + 1
+    inner = inner[inner >= first_peak]
     if len(inner) == 0:
         return None
     raw = raw_profile(s, x)
@@ -291,7 +297,7 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     sharp = inner[(raw.a[k_before] - raw.a[k_after]) / tau_f > budget]
     if len(sharp) == 0:
         return None
-    spacing = float(np.diff(s).max())  # the cap only acts on grid points: allow one interval each side
+    spacing = float(np.diff(s[first_peak:]).max())  # the cap only acts on grid points: allow one interval each side
     level = plateau_levels(s, x, sharp, tau_f, 2.0 * spacing)
     short = level <= 0.0  # a move shorter than two grid intervals: no allowance for the grid
     if short.any():
@@ -305,3 +311,23 @@ def peak_plateau_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: flo
     caps = np.full(len(s), np.inf)
     np.minimum.at(caps, index[over], cap[over])
     return caps
+
+
+def history_peak_caps(s: NDArray[np.float64], x: NDArray[np.float64], tau_f: float, jerk: float,
+                      curvature_sq: NDArray[np.float64], history: RawProfile | None) -> NDArray[np.float64] | None:
+    """peak_plateau_caps of a window's raw profile (s, x) that starts moving, with the raw
+    motion before its start (``history``, ending at s[0]) in front: a peak just after the
+    start is then measured with the stretch before it. Without it the stretch would end at
+    the window's start, the plateau come out below the start speed, and the scan would lower
+    the start speed itself (a jump of the raw speed at the join: up to 2-3 J on the first
+    cycles). The history's curvature is taken as the start's (it only widens the budget test
+    of peaks within v tau_f of the start)."""
+    if history is None or len(history.s) < 2:
+        return peak_plateau_caps(s, x, tau_f, jerk, curvature_sq)
+    before = history.s[:-1] < s[0] - 1e-12
+    h = int(np.count_nonzero(before))
+    s_all = np.concatenate([history.s[:-1][before], s])
+    x_all = np.concatenate([history.v[:-1][before] ** 2, x])
+    curvature_all = np.concatenate([np.full(h, curvature_sq[0]), curvature_sq])
+    caps = peak_plateau_caps(s_all, x_all, tau_f, jerk, curvature_all, first_peak=h)
+    return None if caps is None else caps[h:]

@@ -132,6 +132,7 @@ class WindowPlan:
     start_piece: int = 0  # index into the run's pieces of the window's first piece
     early_stop: bool = False  # a stop before the run's end (the planner's fallback)
     fallback: str = ""  # set on the first plan of a run the fallback made: FALLBACK_STOP/_SPLIT/_SLOWER
+    discarded: int = 0  # window plans thrown away before this one (failed, too short, or re-planned held-back)
 
     def next_cursor(self) -> Cursor:
         """Where the next window starts: every non-final window has one."""
@@ -241,16 +242,20 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     else:
         take = np.concatenate([idx[:1], idx])
         sub = bounds.subset(take)
+    ramp = None
     if cursor.raw_speed_mm_s > 0:
         # a running start above the caps (a lowered feed override): brake down to them
         share = START_BRAKE_SHARE if tau_f <= 0 else START_BRAKE_SHARE_FILTERED
-        cap = np.maximum(cap, braking_ramp(s, cursor.raw_speed_mm_s**2, sub, share))
+        ramp = braking_ramp(s, cursor.raw_speed_mm_s**2, sub, share)
+        cap = np.maximum(cap, ramp)
     if not end_free:
         cap[-1] = 0.0
     x = speed_profile(s, cap, sub)
     if plateaus and tau_f > 0 and bounds.caps.jerk_mm_s3 is not None:
-        peak_caps = jp.peak_plateau_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2)
+        peak_caps = jp.history_peak_caps(s, x, tau_f, bounds.caps.jerk_mm_s3, sub.kappa**2, cursor.history)
         if peak_caps is not None:
+            if ramp is not None:  # the start speed is committed: brake from it, never jump below it
+                peak_caps = np.maximum(peak_caps, ramp)
             x = speed_profile(s, np.minimum(cap, peak_caps), sub)
     return s, x
 
@@ -530,6 +535,11 @@ class _Followup:
     """What plan_run plans after a run it had to give up on: (run, feed floor) pairs, in order."""
 
     runs: list[tuple[Run, float | None, str]] = field(default_factory=list)
+    discarded: int = 0  # window plans thrown away so far (failed, too short, or a held-back window re-planned)
+
+    def take_discarded(self) -> int:
+        count, self.discarded = self.discarded, 0
+        return count
 
 
 FALLBACK_STOP = "stop"  # the held-back window ran to its own stop; the rest of its run starts from rest
@@ -551,14 +561,17 @@ def plan_run(run: Run, settings: PlanSettings, before: NDArray[np.float64],
     block that fails from rest is planned at half its feed, down to 1/2**MAX_FEED_HALVINGS of
     it (then PlanningError). Every yielded plan carries the (sub-)run it belongs to."""
     todo: list[tuple[Run, Cursor | None, float | None, str]] = [(run, cursor, None, "")]
+    discarded = 0
     while todo:
         part, start, floor, reason = todo.pop()
         followup = _Followup()
         for plan in run_windows(part, settings, before, start, floor, followup):
+            plan.discarded, discarded = discarded + followup.take_discarded(), 0
             plan.run = plan.run or part
             plan.fallback, reason = reason, ""
             before = np.concatenate([before, plan.samples.position_mm])[-3:]
             yield plan
+        discarded += followup.take_discarded()
         todo.extend((r, None, f, why) for r, f, why in reversed(followup.runs))
 
 
@@ -582,9 +595,11 @@ def run_windows(run: Run, settings: PlanSettings, before: NDArray[np.float64], c
         try:
             plan = plan_window(run, cursor, settings, length)
         except _WindowTooShort:
+            followup.discarded += 1
             length *= 2.0
             continue
         except PlanningError as error:
+            followup.discarded += 1
             if pending is None:
                 if not cursor.at_rest:
                     raise  # a running start (plan_from_state, resume): nothing committed to stop with
@@ -593,6 +608,7 @@ def run_windows(run: Run, settings: PlanSettings, before: NDArray[np.float64], c
             if backtracks < MAX_BACKTRACKS:
                 backtracks += 1
                 length *= 2.0
+                followup.discarded += 1  # the held-back window's plan, or this re-plan of it
                 try:
                     pending = plan_window(run, pending_cursor, settings, length)
                 except (PlanningError, _WindowTooShort):
