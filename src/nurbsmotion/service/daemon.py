@@ -21,6 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
@@ -89,16 +90,19 @@ class Daemon:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
-        link, self.simulation = self._open_motion(self.config)
+        self._start_planner_worker()
+        try:
+            link, self.simulation = self._open_motion(self.config)
+        except BaseException:
+            self._stop_planner_worker()
+            raise
         try:
             devices = open_devices(self.config, link)  # spindle and I/O node, after the axes
         except BaseException:
             link.shutdown(2.0)
             self._stop_simulation()
+            self._stop_planner_worker()
             raise
-        if needs_planner_worker(self.config) and devices is None:  # the spindle's job events need the whole plan
-            self.planner_worker = PlannerWorker()
-            self.planner_worker.start()
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
@@ -109,6 +113,21 @@ class Daemon:
             raise
         sd_notify("READY=1")
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
+
+    def _start_planner_worker(self) -> None:
+        """Spawn the planner worker and wait for its imports before the bus starts: started
+        later, a fresh interpreter's imports compete for the CPU with the cycle thread and
+        (simulated) drives already running, and the first job waits for them (inside
+        User-Mode Linux, one CPU: 13 s to the first motion, drives lagging seconds behind).
+        A worker that is not ready in time is waited for again by the first job."""
+        if not needs_planner_worker(self.config):
+            return
+        self.planner_worker = PlannerWorker()
+        self.planner_worker.start()
+        try:
+            self.planner_worker.wait_ready()
+        except InputError as err:
+            log.warning(kv("planner_worker_not_ready", error=err))
 
     def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
         return prepare_job(name, text, self.config, start, options, self.planner_worker)

@@ -27,6 +27,7 @@ from nurbsmotion.program import AXES, Program, ReadOptions, parse_curve_yaml, pa
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
+from nurbsmotion.spindle_config import SpindleConfig
 
 if TYPE_CHECKING:
     from nurbsmotion.service.planner_worker import PlannerWorker
@@ -187,8 +188,10 @@ def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarra
 
 
 def needs_planner_worker(config: MachineConfig) -> bool:
-    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker)."""
-    return config.interpolation.algorithm == "lookahead"
+    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker),
+    except on a machine with a spindle or an I/O node: their job events read the whole plan."""
+    has_devices = isinstance(config.spindle, SpindleConfig) or config.io is not None
+    return config.interpolation.algorithm == "lookahead" and not has_devices
 
 
 def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,

@@ -303,6 +303,7 @@ class PlannerWorker:
         self._lock = threading.Lock()
         self._idle = threading.Event()  # no job's receiver reads the results pipe
         self._idle.set()
+        self._started_s = 0.0
 
     def start(self) -> None:
         """Spawn the worker (it imports the planner meanwhile; the first job waits for it)."""
@@ -314,11 +315,17 @@ class PlannerWorker:
         commands_read.close()  # the worker holds these ends: a dead worker closes them
         results_write.close()
         self._ready = False
+        self._started_s = time.monotonic()
         log.debug(kv("planner_worker_started", pid=self._process.pid))
 
     @property
     def alive(self) -> bool:
         return self._process is not None and self._process.is_alive()
+
+    @property
+    def ready(self) -> bool:
+        """The worker answered that its imports are done (a job starts planning at once)."""
+        return self._ready
 
     @property
     def pid(self) -> int | None:
@@ -384,6 +391,7 @@ class PlannerWorker:
         except (EOFError, OSError):
             raise InputError("planner worker", f"ended while starting ({self.exit_description()})") from None
         self._ready = True
+        log.debug(kv("planner_worker_ready", pid=self.pid, after_s=round(time.monotonic() - self._started_s, 3)))
 
     def close(self) -> None:
         """Ask the worker to quit; end it if it does not (the daemon stops)."""
