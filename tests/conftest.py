@@ -1,6 +1,9 @@
-"""Shared fixtures: the papers' curves."""
+"""Shared fixtures: the papers' curves; the root logger restored after each test."""
 
 from __future__ import annotations
+
+import logging
+from collections.abc import Iterator
 
 import pytest
 
@@ -28,3 +31,17 @@ def planner_worker():
     worker.start()
     yield worker
     worker.close()
+
+
+@pytest.fixture(autouse=True)
+def _restore_root_logger() -> Iterator[None]:
+    """A CLI entry point called in-process (nurbsmotion.log.setup_logging) gives the root logger
+    a handler on the test's captured stderr, which pytest closes after the test: later threads'
+    log lines then print 'Logging error ... I/O operation on closed file' tracebacks."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    yield
+    for handler in list(root.handlers):  # pytest's own capture handlers change per phase: leave them
+        if type(handler) is logging.StreamHandler and handler not in handlers:
+            root.removeHandler(handler)
+    root.setLevel(level)

@@ -570,7 +570,7 @@ def load_config(path: str | Path) -> MachineConfig:
     """Read and validate a configuration file."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")
     except (OSError, UnicodeDecodeError) as err:
         raise InputError(str(path), f"cannot read configuration: {getattr(err, 'strerror', None) or err}") from None
     return parse_config(text, source=str(path), base_dir=p.parent)

@@ -68,3 +68,17 @@ def test_the_machine_gate_tool_table_and_persisted_offsets_apply(tmp_path, capsy
     part.write_text("G21 G90\nG43 H4\nG01 X10 Z60 F3000\n")  # machine Z 210: beyond
     assert main(["check", "--config", str(config), str(part)]) == 2
     assert "part.nc:3: axis Z would reach 210 mm, beyond the soft limit 200 mm" in capsys.readouterr().err
+
+
+def test_a_program_starting_with_a_byte_order_mark_is_read_by_every_command(tmp_path, capsys):
+    """CAM posts and Windows editors write a UTF-8 BOM (tests/data/gcode/textbook_simple_mill.gcode
+    has one): it is not part of line 1 for check, check --config, plan or what run submits."""
+    from nurbsmotion.cli.run import read_program
+
+    part = tmp_path / "part.nc"
+    part.write_bytes(b"\xef\xbb\xbfG21 G90\nG01 X10 F3000\n")
+    assert main(["check", str(part)]) == 0
+    assert main(["check", "--config", DEMO, str(part)]) == 0
+    assert main(["plan", "--config", DEMO, str(part)]) == 0
+    assert not read_program(str(part)).startswith("\ufeff")
+    assert "\ufeff" not in capsys.readouterr().err

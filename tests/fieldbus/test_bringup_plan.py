@@ -153,9 +153,28 @@ def test_master_heartbeat_off_writes_no_consumer():
 
 def test_sdo_list_is_written_last_in_order():
     p = plan(config("csp", axis_extra="    sdo:\n      - {index: 0x60C4, subindex: 2, value: 1}\n"
-                                      "      - {index: 0x1007, value: 1000}\n"))
-    last = [(s.index, s.subindex, s.value) for s in p.steps[-2:]]
-    assert last == [(0x60C4, 2, 1), (0x1007, 0, 1000)]
+                                      "      - {index: 0x605A, value: 1}\n      - {index: 0x1007, value: 1000}\n"))
+    last = [(s.index, s.subindex, s.value) for s in p.steps[-3:]]
+    # another quick-stop option within 1-4, and this drive's own SYNC window, are the user's choice
+    assert last == [(0x60C4, 2, 1), (0x605A, 0, 1), (0x1007, 0, 1000)]
+
+
+@pytest.mark.parametrize("entry, message", [
+    ("{index: 0x605A, value: 6}", "0x605A (quick stop option) = 6 is refused: the master needs 1-4"),
+    ("{index: 0x6060, value: 1}", "0x6060 is written by the bring-up from axes[].mode; set it there"),
+    ("{index: 0x6066, value: 100}", "0x6066 is written by the bring-up from axes[].following_error_timeout_ms"),
+    ("{index: 0x1016, subindex: 1, value: 0}", "from monitoring.master_heartbeat_ms"),
+    ("{index: 0x1A00, subindex: 1, value: 0x60410010}", "0x1A00 is a PDO object the bring-up maps itself"),
+])
+def test_sdo_list_may_not_undo_what_the_bring_up_writes(entry, message):
+    """The list is written last: an entry for an object the plan writes would silently undo it
+    (a 0x605A of 5-8 would let a quick-stopped drive resume motion)."""
+    cfg = config("csp", axis_extra=f"    sdo:\n      - {{index: 0x60C4, subindex: 2, value: 1}}\n      - {entry}\n")
+    with pytest.raises(InputError) as info:
+        plan(cfg)
+    text = str(info.value)
+    assert text.startswith("machine.yaml:8: axes[0].sdo[1] (X, node 1): nurbsmotion-servo.eds: ") and "\n" not in text
+    assert message in text
 
 
 def test_abort_descriptions_name_the_object_in_hex_and_words():

@@ -217,3 +217,10 @@ def test_blocks_without_a_programmed_feed_take_the_machines_rapid_or_default_fee
     assert rapid.feed_or_default_mm_s(100.0, 300.0) == 300.0
     assert line.feed_or_default_mm_s(100.0, 300.0) == 10.0
     assert curve.feed_or_default_mm_s(100.0, 300.0) == 100.0
+
+
+def test_a_byte_order_mark_is_not_part_of_line_1():
+    from nurbsmotion.program.gcode import parse_gcode
+
+    program = parse_gcode("\ufeffG21 G90\nG01 X10 F3000\n", "bom.nc")
+    assert len(program.blocks) == 1

@@ -8,9 +8,11 @@ from pathlib import Path
 
 import nurbsmotion.sim
 
-# socketcan_batch: transport only (python-can's SocketCAN bus with batched system calls), no CANopen
+# socketcan_batch: transport only (python-can's SocketCAN bus with batched system calls), no CANopen;
+# arrival_clock: a clock on the frames' receive timestamps, no CANopen (the master judges its
+# heartbeat consumer on it too: the same rule for both judges, no protocol code shared)
 ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log",
-                       "nurbsmotion.socketcan_batch"}
+                       "nurbsmotion.socketcan_batch", "nurbsmotion.arrival_clock"}
 ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
                      "logging", "math", "numpy", "pathlib", "select", "struct", "threading", "time", "typing"}
 

@@ -23,7 +23,7 @@ CONSUMER_MULTIPLE = 15
 # A drive notices the loss at most the consumer time after the last heartbeat it received
 # (sent before the kill). The drives' process inside UML handles frames late (a backlog; and
 # it may be descheduled for hundreds of ms on a busy host): it judges on the frames' arrival
-# timeline as a firmware does (sim/arrival_clock.py) and logs the arrival-timeline time of its
+# timeline as a firmware does (arrival_clock.py) and logs the arrival-timeline time of its
 # judgement (judged_at_s, wall clock), which is what is measured here; the descheduling of the
 # process between two judgements is allowed on top.
 SCHEDULING_S = 0.5

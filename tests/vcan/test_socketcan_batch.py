@@ -108,9 +108,9 @@ def test_another_threads_frame_leaves_at_once_after_the_receive_threads_earlier_
 
 
 def test_frames_read_but_not_handed_out_count_as_waiting(vcan0):
-    """The drives' arrival clock (sim/arrival_clock.py) asks the bus whether frames wait: the
+    """The drives' arrival clock (arrival_clock.py) asks the bus whether frames wait: the
     frames of a batch already read into the bus are invisible to select() but still wait."""
-    from nurbsmotion.sim.arrival_clock import socket_pending
+    from nurbsmotion.arrival_clock import socket_pending
 
     bus = BatchedSocketcanBus(channel=vcan0)
     sender = can.Bus(interface="socketcan", channel=vcan0)

@@ -57,7 +57,7 @@ def check_on_machine(args: argparse.Namespace, config: MachineConfig, options: R
     from nurbsmotion.service.planner import axis_columns, plan_job
 
     start_mm = np.array(args.start, dtype=float)[axis_columns(config)]
-    text = Path(args.program).read_text(encoding="utf-8")  # read_program read it already: it is readable
+    text = Path(args.program).read_text(encoding="utf-8-sig")  # read_program read it already: it is readable
     plan = plan_job(args.program, text, config, start_mm, options).summary
     return {"config": str(args.config), "axes": [a.name for a in config.axes], "cycles": plan["cycles"],
             "duration_s": plan["duration_s"], "algorithm": plan["algorithm"]}

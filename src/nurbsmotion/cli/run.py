@@ -37,7 +37,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def read_program(path: str) -> str:
     try:
-        return Path(path).read_text(encoding="utf-8")
+        return Path(path).read_text(encoding="utf-8-sig")  # a BOM is not part of line 1
     except (OSError, UnicodeDecodeError) as err:
         raise InputError(path, f"cannot read program: {getattr(err, 'strerror', None) or err}") from None
 

@@ -267,15 +267,29 @@ def _mode_problem(od: ObjectDictionary, mode: c.Mode, eds: str) -> str | None:
     if problem:
         return f"{eds}'s 0x6060:00 (modes of operation) {problem}"
     if mode == c.Mode.INTERPOLATED_POSITION:
-        for sub in (1, 2):
-            if drive_od.find(od, c.IP_TIME_PERIOD, sub) is None:
-                return f"{eds} has no 0x60C2:{sub:02X} (interpolation time period)"
+        problem = _ip_period_problem(od, eds)
+        if problem:
+            return problem
         sub_mode = drive_od.find(od, c.IP_SUB_MODE, 0)
         if sub_mode is not None and drive_od.write_problem(sub_mode, 0) and sub_mode.default != 0:
             span = drive_od.allowed_range(sub_mode)
             return f"{eds}'s 0x60C0:00 (interpolation sub-mode) allows {span[0]}..{span[1]}, not 0 (linear)" \
                 if span else f"{eds}'s 0x60C0:00 cannot be set to 0 (linear)"
     return None
+
+
+def _ip_period_problem(od: ObjectDictionary, eds: str) -> str | None:
+    """IP interpolates over one period: 0x60C2 (value and exponent), or for a drive without
+    0x60C2 (Technosoft IDM/ISD860: IP in 0x6502, no 0x60C2) a writable 0x1006 cycle period in
+    µs, which such drives take as their interpolation period (CiA 301 §7.5.2.6)."""
+    missing = [sub for sub in (1, 2) if drive_od.find(od, c.IP_TIME_PERIOD, sub) is None]
+    if not missing:
+        return None
+    cycle = drive_od.find(od, c.COMM_CYCLE_PERIOD, 0)
+    if len(missing) == 2 and cycle is not None and cycle.writable:
+        return None
+    return f"{eds} has no 0x60C2:{missing[0]:02X} (interpolation time period)" + \
+        ("" if len(missing) == 1 else " and no writable 0x1006 (communication cycle period) to take it from")
 
 
 def offered_modes(od: ObjectDictionary, eds: str) -> list[c.Mode]:
@@ -339,9 +353,12 @@ def _period_writes(b: _Builder, mode: c.Mode, period_s: float, window_us: int) -
             else:
                 b.skipped.append(Skipped("0x60C2:02", f"read-only, fixed at {exponent}: the value is scaled to it"))
     else:
-        b.skipped.append(Skipped("0x60C2", f"{b.eds} has no 0x60C2: the drive takes the cycle from SYNC"))
+        b.skipped.append(Skipped("0x60C2", f"{b.eds} has no 0x60C2: the drive takes the cycle from "
+                                 + ("0x1006" if ip else "SYNC")))
     period_us = round(period_s * 1e6)
-    b.write("set cycle period", c.COMM_CYCLE_PERIOD, 0, period_us, f"{period_us} µs", optional=True)
+    b.write("set cycle period", c.COMM_CYCLE_PERIOD, 0, period_us,
+            f"{period_us} µs" + (" (the interpolation period: no 0x60C2)" if ip and exponent_var is None else ""),
+            optional=not (ip and exponent_var is None), field_name="mode")
     b.write("set SYNC window", 0x1007, 0, window_us, "0 = no window (bus.sync_window_us)" if window_us == 0
             else f"{window_us} µs: later RPDOs are discarded", optional=True)
 
@@ -440,11 +457,56 @@ def _plan(config: MachineConfig, i: int, od: ObjectDictionary, eds: str, window_
                 "drive units, as configured", field_name="quick_stop_decel")
     else:
         b.skipped.append(Skipped("0x6085:00", "quick_stop_decel not configured: the drive's own value"))
+    owned = _objects_written(b.steps)
     for entry in axis.sdo:
+        problem = _sdo_overrides_plan(entry.index, entry.value, owned)
+        if problem:
+            raise InputError(f"{entry.where} ({axis.name}, node {axis.node_id})", f"{eds}: {problem}")
         b.steps.append(Write("write sdo list", entry.index, entry.subindex, entry.value, entry.where))
     modes = drive_od.find(od, c.SUPPORTED_DRIVE_MODES, 0)
     return DrivePlan(i, axis.name, axis.node_id, eds, mode, modes is not None and modes.readable,
                      tuple(b.steps), layout, tuple(b.skipped))
+
+
+# objects the bring-up writes itself -> the configuration that sets them
+OWNER_KEYS = {
+    c.MODES_OF_OPERATION: "axes[].mode", c.COMM_CYCLE_PERIOD: "cycle_period_ms", c.IP_TIME_PERIOD: "cycle_period_ms",
+    c.IP_SUB_MODE: "nothing (linear interpolation is required)",
+    c.FOLLOWING_ERROR_WINDOW: "axes[].following_error_window_mm",
+    c.FOLLOWING_ERROR_TIMEOUT: "axes[].following_error_timeout_ms",
+    c.PRODUCER_HEARTBEAT_TIME: "monitoring.heartbeat_producer_ms",
+    c.CONSUMER_HEARTBEAT_TIME: "monitoring.master_heartbeat_ms", c.QUICK_STOP_DECELERATION: "axes[].quick_stop_decel",
+}
+PDO_OBJECTS = range(c.RPDO_COMM, c.TPDO_MAPPING + 0x200)  # 0x1400-0x1BFF: communication and mapping
+
+
+def _objects_written(steps: list[Step]) -> set[int]:
+    """Indices the plan writes: SDO writes and the PDOs it maps or disables."""
+    owned = {step.index for step in steps if isinstance(step, Write)}
+    for step in steps:
+        if isinstance(step, PdoSetup):
+            comm = c.RPDO_COMM if step.kind == "RPDO" else c.TPDO_COMM
+            owned |= {comm + step.number - 1, comm + 0x200 + step.number - 1}
+    return owned
+
+
+def _sdo_overrides_plan(index: int, value: int, owned: set[int]) -> str | None:
+    """Why an ``sdo:`` entry may not write an object the bring-up writes itself: the list is
+    written last, so it would silently undo the plan. 0x605A may choose another option within
+    1-4 (each ends QUICK STOP ACTIVE in SWITCH ON DISABLED, so the drive never resumes a
+    set-point by itself, CiA 402 §6.2.2); 5-8 would leave it in QUICK STOP ACTIVE. 0x1007 may
+    give one drive its own SYNC window."""
+    if index == c.QUICK_STOP_OPTION:
+        if 1 <= value <= 4:
+            return None
+        return (f"0x605A (quick stop option) = {value} is refused: the master needs 1-4 (quick stop ends in "
+                f"SWITCH ON DISABLED); 5-8 keep the drive in QUICK STOP ACTIVE, where a controlword could resume motion")
+    if index not in owned or index == 0x1007:  # a per-drive SYNC window over bus.sync_window_us (docs/fieldbus.md)
+        return None
+    if index in PDO_OBJECTS:
+        return f"0x{index:04X} is a PDO object the bring-up maps itself from the EDS; the sdo list may not change it"
+    return f"0x{index:04X} is written by the bring-up from {OWNER_KEYS.get(index, 'the configuration')}; " \
+        "set it there, not in the sdo list"
 
 
 def _heartbeat_consumer(b: _Builder, config: MachineConfig) -> None:

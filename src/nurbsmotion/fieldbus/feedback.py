@@ -12,11 +12,24 @@ import collections
 import time
 from typing import Any, Callable
 
+import can
+
+from nurbsmotion.arrival_clock import ArrivalClock
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 
 EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3
 
 Callback = Callable[[int, bytearray, float], None]
+
+
+def arrival_perf_s(timestamp: float) -> float:
+    """A frame's receive timestamp (``time.time()`` based: kernel time on SocketCAN, the
+    sender's time on the virtual bus) on the ``perf_counter`` timeline the supervisor judges
+    on; a frame without one (0) arrived now, and none arrived later than now."""
+    now = time.perf_counter()
+    if timestamp <= 0.0:
+        return now
+    return min(now, timestamp - time.time() + now)
 
 
 class Feedback:
@@ -32,11 +45,23 @@ class Feedback:
         self.bad_tpdo = [0] * n_axes
         self.emcy_count = [0] * n_axes
         self.last_emcy: list[int | None] = [None] * n_axes
-        self.hb_time = [0.0] * n_axes  # perf_counter of the last heartbeat
+        self.hb_time = [0.0] * n_axes  # arrival of the last heartbeat (perf_counter timeline)
         self.hb_state: list[int | None] = [None] * n_axes
         self.events: collections.deque[tuple[int, int, int]] = collections.deque()
         self.wire_cycle = 0
         self.sink: Callable[[int, int, int, int, float], None] | None = None  # Master.record_feedback
+        # the master's own reception lag, so heartbeats are judged as they arrived (arrival_clock)
+        self.arrival = ArrivalClock(lambda: False)
+
+    def watch_reception(self, pending: Callable[[], bool]) -> "ArrivalListener":
+        """Judge on the arrival timeline of the bus whose waiting frames ``pending()`` reports;
+        returns the listener to add to the bus's notifier (it stamps every frame handled)."""
+        self.arrival = ArrivalClock(pending)
+        return ArrivalListener(self.arrival)
+
+    def judging_time_s(self) -> float:
+        """Now on the frames' arrival timeline (perf_counter based, arrival_clock)."""
+        return self.arrival.judging_time(time.perf_counter())
 
     def tpdo1_callback(self, i: int, first_call: Callable[[], None] | None = None) -> Callback:
         size = TPDO1_FORMAT.size
@@ -107,9 +132,20 @@ class Feedback:
             if not data:
                 return
             state = data[0] & 0x7F
-            self.hb_time[i] = time.perf_counter()
+            self.hb_time[i] = arrival_perf_s(timestamp)
             if state != self.hb_state[i]:
                 self.hb_state[i] = state
                 self.events.append((EVENT_NMT, i, state))
             on_state(state)
         return on_heartbeat
+
+
+class ArrivalListener(can.Listener):
+    """python-can listener on the master's notifier: every handled frame moves the arrival
+    clock (after canopen's own listener has dispatched it to the callbacks)."""
+
+    def __init__(self, clock: ArrivalClock) -> None:
+        self.clock = clock
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.clock.arrived(arrival_perf_s(msg.timestamp), time.perf_counter())

@@ -35,6 +35,7 @@ import canopen
 import numpy as np
 
 from nurbsmotion import cia402 as c
+from nurbsmotion.arrival_clock import socket_pending
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
@@ -293,6 +294,7 @@ class Master:
         network = canopen.Network(self._bus)
         self._traffic_log = TrafficLog(self._traffic_path)  # paused without a path
         network.listeners.append(self._traffic_log)
+        network.listeners.append(self._fb.watch_reception(socket_pending(self._bus)))
         self._wrap_network_send(network, self._traffic_log)
         self._traffic = self._traffic_log if self._traffic_path else None
         network.connect()
@@ -416,6 +418,11 @@ class Master:
                         rpdos=len(plan.layout.rpdos), tpdos=len(plan.layout.tpdos),
                         skipped=",".join(s.what for s in plan.skipped), position=self._fb_pos[i],
                         statusword=f"0x{self._fb_status[i]:04X}"))
+            unwatched = next((s for s in plan.skipped if s.what == "0x1016:01"
+                              and self.config.monitoring.master_heartbeat_ms), None)
+            if unwatched is not None:  # an operator must know which drive keeps moving if the daemon dies
+                log.warning(kv("master_heartbeat_unwatched", node=axis.node_id, axis=axis.name,
+                               reason=unwatched.reason))
         twin = self._twin_error()  # checked after the SDO steps, so a late twin's boot-up is seen too
         if twin is not None:
             raise twin

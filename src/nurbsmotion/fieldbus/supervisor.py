@@ -116,13 +116,24 @@ class Supervisor:
             if running and i != self.homing_axis:
                 self._check_following_error(i, k, phase, job, reactions)
             node, name = self.node_ids[i], self.names[i]
-            if now - fb.hb_time[i] > self.hb_timeout_s:
+            silent_s = self._heartbeat_silence_s(i, now)
+            if silent_s > self.hb_timeout_s:
                 self.report(node, name, "heartbeat", -1, k, f"node {node} (axis {name}): no heartbeat for "
-                            f"{(now - fb.hb_time[i]) * 1000:.0f} ms (consumer time "
+                            f"{silent_s * 1000:.0f} ms (consumer time "
                             f"{self.hb_timeout_s * 1000:.0f} ms) at cycle {k}", phase, job, reactions)
-            elif running and k - fb.cycle[i] > max(self.fe_timeout_cycles[i] + 3, self.hb_timeout_s / self.period_s):
+            elif running and k - fb.cycle[i] > max(self.fe_timeout_cycles[i] + 3, self.hb_timeout_s / self.period_s) \
+                    and fb.arrival.caught_up():  # a TPDO1 waiting unread in our socket is not missing
                 self.report(node, name, "following_error", 0, k, f"node {node} (axis {name}): no TPDO1 (position "
                             f"actual) for {k - fb.cycle[i]} cycles at cycle {k}", phase, job, reactions)
+
+    def _heartbeat_silence_s(self, i: int, now_s: float) -> float:
+        """How long axis i's drive has been silent, judged as its heartbeats arrived (CiA 301
+        heartbeat consumer): only when the process clock says the consumer time has run out is
+        the arrival timeline asked (one look at the socket), since it never runs ahead of it."""
+        silent_s = now_s - self.fb.hb_time[i]
+        if silent_s <= self.hb_timeout_s:
+            return silent_s
+        return self.fb.judging_time_s() - self.fb.hb_time[i]
 
     def check_statusword(self, i: int, k: int, running: bool, phase: Phase, job: Any,
                          reactions: list[tuple[str, Any]]) -> None:

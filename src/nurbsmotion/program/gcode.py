@@ -152,6 +152,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     # ---- driver ------------------------------------------------------------------------
     def parse(self, text: str) -> Program:
+        text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors, CAM posts) is not part of line 1
         self.lines = lines = self.lex(text.split("\n"))
         flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
         try:

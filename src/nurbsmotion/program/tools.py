@@ -121,7 +121,7 @@ def parse_tool_table(text: str, source: str = "<tool table>") -> ToolTable:
 
 def load_tool_table(path: str | Path) -> ToolTable:
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = Path(path).read_text(encoding="utf-8-sig")
     except OSError as err:
         raise InputError(str(path), f"cannot read tool table: {err.strerror or err}") from None
     return parse_tool_table(text, str(path))

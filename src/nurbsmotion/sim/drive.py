@@ -36,7 +36,7 @@ from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim import axis as axis_module
-from nurbsmotion.sim.arrival_clock import RETRY_S, ArrivalClock, socket_pending
+from nurbsmotion.arrival_clock import RETRY_S, ArrivalClock, socket_pending
 from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
 from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
@@ -352,7 +352,7 @@ class SimDrive:
 
     def _judge_timeouts(self, now: float) -> float:
         """Heartbeat consumer, SYNC loss and RPDO timers at ``now`` seen through the reception
-        lag (sim.arrival_clock); returns when (drive clock) the next of them falls due."""
+        lag (nurbsmotion.arrival_clock); returns when (drive clock) the next of them falls due."""
         arrival_now = self._arrival.judging_time(now)
         for producer in self._heartbeat_consumer.newly_failed(arrival_now):
             if not self.silent:

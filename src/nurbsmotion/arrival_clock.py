@@ -1,21 +1,27 @@
-"""The simulated drive's time on the frames' arrival timeline.
+"""Time on the frames' arrival timeline, for whoever judges a CANopen timeout in Python.
 
 A drive firmware stamps each frame as it arrives (an interrupt) and judges its timeouts
 (CiA 301 heartbeat consumer 0x1016, SYNC loss, RPDO event timers 0x14xx:05) against those
-stamps, in real time. A simulated drive is a Python process that handles frames after they
-arrive: inside a starved guest (User-Mode Linux on a busy host) by up to seconds, and the
-lag changes as the process is descheduled. Judged against the process's own clock, a backlog
-of frames that all arrived in time reads as a loss.
+stamps, in real time; a master's heartbeat consumer (CiA 301 §7.2.8.3.2.2) judges the same way.
+A Python process handles frames after they arrive: inside a starved guest (User-Mode Linux on a
+busy host) by up to seconds, and on a loaded machine whenever its receive thread waits for the
+CPU or the GIL. Judged against the process's own clock, a backlog of frames that all arrived in
+time reads as a loss.
 
-So the drive judges on the arrival timeline, never more leniently than the frames show:
+So the simulated drives (sim/drive.py) and the master's supervisor (fieldbus/supervisor.py)
+judge on the arrival timeline, never more leniently than the frames show:
 
-- each frame's arrival time is its receive timestamp (kernel time on SocketCAN);
+- each frame's arrival time is its receive timestamp (kernel time on SocketCAN, the sender's
+  time on python-can's in-process virtual bus);
 - while frames wait in the socket, the judging time is the arrival of the last frame handled:
   the bus is known up to there, and a heartbeat missing between stamped frames is found just
   as a firmware finds it;
 - once nothing waits, the judging time runs on from there in real time (``last arrival +
   (now - last handled)``): a bus gone silent is found the timeout after the last arrival,
   seen through the process's lag.
+
+A neutral module (like socketcan_batch): it knows no CANopen object, so the simulator and the
+master share a clock, not a protocol implementation.
 """
 
 from __future__ import annotations
@@ -26,25 +32,34 @@ RETRY_S = 0.002  # while frames wait in the socket, judge again this much later
 
 
 class ArrivalClock:
-    """Arrival time of the last handled frame and the judging time derived from it."""
+    """Arrival time of the last handled frame and the judging time derived from it.
 
-    __slots__ = ("arrival_s", "handled_s", "_pending")
+    The pair (arrival, handled) is one attribute, replaced in one store: a reader in another
+    thread (the master's cycle loop reading what the notifier thread wrote) never pairs a new
+    arrival with an old handling time, which would run the judging time ahead of the wire."""
+
+    __slots__ = ("_last", "_pending")
 
     def __init__(self, pending: Callable[[], bool]) -> None:
         """``pending()``: frames are waiting in the receive socket or queue (False when
         unknowable)."""
-        self.arrival_s: float | None = None
-        self.handled_s = 0.0
+        self._last: tuple[float, float] | None = None
         self._pending = pending
+
+    @property
+    def arrival_s(self) -> float | None:
+        """Arrival time of the last handled frame (None before any)."""
+        return None if self._last is None else self._last[0]
 
     @property
     def lag_s(self) -> float:
         """How late the last frame was handled after it arrived."""
-        return 0.0 if self.arrival_s is None else max(0.0, self.handled_s - self.arrival_s)
+        last = self._last
+        return 0.0 if last is None else max(0.0, last[1] - last[0])
 
     def arrived(self, arrival_s: float, handled_s: float) -> float:
-        """A frame that arrived at ``arrival_s`` is handled at ``handled_s`` (drive clock)."""
-        self.arrival_s, self.handled_s = arrival_s, handled_s
+        """A frame that arrived at ``arrival_s`` is handled at ``handled_s`` (the judge's clock)."""
+        self._last = (arrival_s, handled_s)
         return arrival_s
 
     def caught_up(self) -> bool:
@@ -53,11 +68,12 @@ class ArrivalClock:
 
     def judging_time(self, now_s: float) -> float:
         """``now_s`` on the arrival timeline (module docstring)."""
-        if self.arrival_s is None:
+        last = self._last
+        if last is None:
             return now_s
         if not self.caught_up():
-            return self.arrival_s
-        return self.arrival_s + max(0.0, now_s - self.handled_s)
+            return last[0]
+        return last[0] + max(0.0, now_s - last[1])
 
 
 def socket_pending(bus: object) -> Callable[[], bool]:

@@ -1,4 +1,5 @@
-"""The simulated drive judges its timeouts on the frames' arrival timeline (sim.arrival_clock):
+"""Timeouts judged on the frames' arrival timeline (nurbsmotion.arrival_clock), as the simulated
+drives and the master's heartbeat consumer judge them:
 a backlog of frames that arrived in time is not a loss; a silent bus is."""
 
 from __future__ import annotations
@@ -6,7 +7,7 @@ from __future__ import annotations
 import can
 import pytest
 
-from nurbsmotion.sim.arrival_clock import ArrivalClock, socket_pending
+from nurbsmotion.arrival_clock import ArrivalClock, socket_pending
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 
 MASTER = 0x7F
