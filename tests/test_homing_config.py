@@ -69,3 +69,21 @@ def test_manufacturer_specific_method_is_accepted():
 def test_drive_methods_35_and_37_need_no_speeds():
     homing = parse_config(_axis("{method: 37, offset_mm: 1}")).axes[0].homing
     assert homing.on_drive and not homing.moves
+
+
+def test_an_axis_sim_section_places_the_simulated_switches_and_index_pulses():
+    from nurbsmotion.homing_config import AxisSimSensors
+
+    cfg = parse_config("axes:\n  - name: X\n    node_id: 1\n    sim: {negative_limit_mm: -3, index_pitch_mm: 2, "
+                       "index_phase_mm: 0.7}\n  - {name: Y, node_id: 2}\n")
+    assert cfg.axes[0].sim == AxisSimSensors(negative_limit_mm=-3, index_pitch_mm=2, index_phase_mm=0.7)
+    assert cfg.axes[1].sim is None
+
+
+def test_axis_sim_errors_name_their_yaml_line():
+    assert _errors("axes:\n  - name: X\n    node_id: 1\n    sim:\n      negative_limit_mm: 5\n"
+                   "      positive_limit_mm: 5\n      index_pitch_mm: 0\n      home_switch_mm: 1\n") == [
+        "m.yaml:8: axes[0].sim.home_switch_mm: unknown key 'home_switch_mm'; expected one of: negative_limit_mm, "
+        "positive_limit_mm, index_pitch_mm, index_phase_mm",
+        "m.yaml:7: axes[0].sim.index_pitch_mm: must be > 0, got 0",
+        "m.yaml:5: axes[0].sim: negative_limit_mm 5 must be below positive_limit_mm 5"]

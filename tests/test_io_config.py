@@ -52,14 +52,16 @@ def test_node_id_is_required_and_inputs_must_be_a_mapping():
 
 
 def test_an_input_may_name_the_axis_it_limits():
-    from nurbsmotion.service.machine_io import limit_inputs
+    from nurbsmotion.service.machine_io import LimitSwitch, limit_inputs, limit_switches
 
     axes = "axes: [{name: X, node_id: 1}, {name: Y, node_id: 2}]\n"
     cfg = parse_config(axes + "io:\n  node_id: 10\n  inputs:\n    x_neg: {bit: 2, active_low: true, limit: X}\n"
-                              "    limit_y_max: 3\n    probe: 4\n")
+                              "    limit_y_max: 3\n    probe: 4\n    y_low: {bit: 5, limit: Y-}\n    limit_x: 6\n")
     assert cfg.io.inputs[0] == IoSignal("x_neg", 2, True, limit="X")
-    assert limit_inputs(cfg) == {"x_neg": "X", "limit_y_max": "Y"}
+    assert limit_inputs(cfg) == {"x_neg": "X", "limit_y_max": "Y", "y_low": "Y", "limit_x": "X"}
+    assert limit_switches(cfg) == {"x_neg": LimitSwitch("x_neg", "X", 0), "limit_y_max": LimitSwitch("limit_y_max", "Y", 1),
+                                   "y_low": LimitSwitch("y_low", "Y", -1), "limit_x": LimitSwitch("limit_x", "X", 0)}
     assert _errors(axes + "io:\n  node_id: 10\n  inputs:\n    x_neg: {bit: 2, limit: A}\n"
                           "  outputs:\n    lamp: {bit: 0, limit: X}\n") == [
-        "m.yaml:5: io.inputs.x_neg.limit: no axis 'A' (axes: X, Y)",
+        "m.yaml:5: io.inputs.x_neg.limit: no axis 'A' (axes: X, Y; X- / X+ name its negative / positive end)",
         "m.yaml:7: io.outputs.lamp.limit: an output is no limit switch: limit is for inputs"]

@@ -26,9 +26,12 @@ def faults_of_a_plan():
     limits = replace(WANG_LIMITS, period_s=0.001, max_jerk_mm_s3=50000.0)  # the default planner's set-up
     for _ in range(3):  # warm up: the heap reaches its working size
         plan_lookahead(wang_program(), limits)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
-    plan_lookahead(wang_program(), limits)
-    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+    counts = []
+    for _ in range(3):  # the least of three: the kernel's own work on a busy host adds faults to one plan
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        plan_lookahead(wang_program(), limits)
+        counts.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+    return min(counts)
 
 default = faults_of_a_plan()
 kept = keep_freed_memory()

@@ -20,7 +20,7 @@ from nurbsmotion import drive_od
 from nurbsmotion.errors import InputError, InputErrors
 
 if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
-    from nurbsmotion.homing_config import HomingConfig
+    from nurbsmotion.homing_config import AxisSimSensors, HomingConfig
     from nurbsmotion.io_config import IoConfig
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
@@ -103,6 +103,7 @@ class AxisConfig:
     quick_stop_decel: int | None = None  # 0x6085 in the drive's own units; None: left to the drive
     sdo: tuple[SdoEntry, ...] = ()
     od: ObjectDictionary | None = field(default=None, compare=False, repr=False)  # the EDS as canopen reads it
+    sim: AxisSimSensors | None = None  # the simulated drive's switches and index pulses (homing_config)
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -269,9 +270,9 @@ def _section_reader(name: str) -> Callable[[_Doc], Any]:
     if name in ("tools", "spindle"):
         from nurbsmotion import tooling_config
         return tooling_config.read_tools if name == "tools" else tooling_config.read_spindle
-    if name == "homing":
-        from nurbsmotion.homing_config import read_homing
-        return read_homing
+    if name in ("homing", "sim"):
+        from nurbsmotion.homing_config import read_axis_sim, read_homing
+        return read_homing if name == "homing" else read_axis_sim
     from nurbsmotion.io_config import read_io
     return read_io
 
@@ -349,6 +350,7 @@ _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "identity": (_optional(_identity), {}),
     "quick_stop_decel": (_optional(_number), {"integer": True, "minimum": 0, "maximum": 2**32 - 1}),
     "sdo": (_sdo_list, {}),
+    "sim": (_optional(lambda doc: _section_reader("sim")(doc)), {}),
 }
 
 

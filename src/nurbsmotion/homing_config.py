@@ -14,8 +14,10 @@ axis names (axes without it follow, in list order). The optional
 drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
 ``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
 
-config.py calls :func:`read_homing` for ``axes[i].homing`` (this module imports config's
-YAML readers; config imports this module only when it reads the section).
+config.py calls :func:`read_homing` for ``axes[i].homing`` and :func:`read_axis_sim` for
+``axes[i].sim`` (where a simulated drive's switches and index pulses are: the sensors homing
+finds), this module imports config's YAML readers; config imports this module only when it
+reads the section.
 """
 
 from __future__ import annotations
@@ -104,6 +106,38 @@ def read_homing(doc: _Doc) -> Any:
     if len(doc.errors) > before or method is None:
         return _MISSING
     return HomingConfig(**values)
+
+
+@dataclass(frozen=True)
+class AxisSimSensors:
+    """``axes[i].sim``: where the simulated drive of this axis has its limit switches and
+    index pulses, in machine mm (the axis map's coordinates at power-on, before any homing).
+    Used only when the drives are simulated (``simulate: true``, ``nurbsmotion sim``)."""
+
+    negative_limit_mm: float | None = None  # a switch active at and below this position
+    positive_limit_mm: float | None = None  # ... at and above
+    index_pitch_mm: float | None = None  # encoder index pulses every this many mm
+    index_phase_mm: float = 0.0  # the position of one index pulse
+
+
+_SIM_READERS = {
+    "negative_limit_mm": (_number, {}),
+    "positive_limit_mm": (_number, {}),
+    "index_pitch_mm": _POSITIVE,
+    "index_phase_mm": (_number, {}),
+}
+
+
+def read_axis_sim(doc: _Doc) -> Any:
+    """``axes[i].sim`` -> AxisSimSensors (or _MISSING after recording located errors)."""
+    before = len(doc.errors)
+    values = _fields(doc, _SIM_READERS)
+    low, high = values.get("negative_limit_mm"), values.get("positive_limit_mm")
+    if low is not None and high is not None and low >= high:
+        doc.fail(f"negative_limit_mm {low:g} must be below positive_limit_mm {high:g}")
+    if len(doc.errors) > before:
+        return _MISSING
+    return AxisSimSensors(**values)
 
 
 def homing_method_name(method: int | str) -> str:

@@ -6,7 +6,7 @@ io:
   inputs:                      # 0x6000 sub 1.. (8 bits each): bit n = sub n//8 + 1, bit n%8
     estop: {bit: 0, active_low: true}    # normally closed: a broken wire reads as pressed
     limit_x_min: 1
-    x_neg_switch: {bit: 2, active_low: true, limit: X}   # any name, a limit switch of axis X
+    x_neg_switch: {bit: 2, active_low: true, limit: X-}  # any name: the switch at X's negative end
   outputs:                     # 0x6200 sub 1..
     coolant_flood: 0
     coolant_mist: 1
@@ -14,7 +14,9 @@ io:
 
 A signal is ``name: bit`` or ``name: {bit: N, active_low: BOOL, limit: AXIS}``; an input
 named ``limit_<axis>[_min|_max]`` or with ``limit: AXIS`` is a limit switch of that axis (the
-daemon aborts that axis' job when it becomes active, service.machine_io); bits 0..63 (eight 8-bit
+daemon aborts that axis' job when it becomes active, service.machine_io); ``limit: X-`` /
+``limit: X+`` (and the names' ``_min`` / ``_max``) say which end, so a jog can move the axis
+off it (away from that end); bits 0..63 (eight 8-bit
 groups, what one PDO carries). Names are identifiers; a bit is used by one name only.
 config.py calls :func:`read_io` for ``io`` and :func:`check_io_node` across sections.
 """
@@ -41,7 +43,7 @@ class IoSignal:
     name: str
     bit: int
     active_low: bool = False
-    limit: str | None = None  # the axis whose limit switch this input is (``limit: X``)
+    limit: str | None = None  # the axis whose limit switch this input is (``limit: X``, ``X-``, ``X+``)
 
     @property
     def group(self) -> int:
@@ -133,8 +135,16 @@ def check_io_node(io: IoConfig | None, axis_node_ids: tuple[int, ...], fail: Cal
         fail("io.node_id", f"node id {io.node_id} is already used by an axis")
 
 
+def limit_axis_side(limit: str) -> tuple[str, int]:
+    """``limit: X-`` -> ("X", -1) (the switch at the axis' negative end), ``X+`` -> ("X", +1),
+    ``X`` -> ("X", 0): the end is not said."""
+    if limit.endswith(("+", "-")):
+        return limit[:-1], 1 if limit.endswith("+") else -1
+    return limit, 0
+
+
 def check_io_limits(io: IoConfig | None, axis_names: tuple[str, ...], fail: Callable[[str, str], None]) -> None:
-    """``limit: AXIS`` names a configured axis, and only on an input."""
+    """``limit: AXIS`` (or ``AXIS-`` / ``AXIS+``) names a configured axis, and only on an input."""
     if io is None:
         return
     for kind, signals in (("inputs", io.inputs), ("outputs", io.outputs)):
@@ -143,5 +153,6 @@ def check_io_limits(io: IoConfig | None, axis_names: tuple[str, ...], fail: Call
                 continue
             if kind == "outputs":
                 fail(f"io.outputs.{s.name}.limit", "an output is no limit switch: limit is for inputs")
-            elif s.limit not in axis_names:
-                fail(f"io.inputs.{s.name}.limit", f"no axis {s.limit!r} (axes: {', '.join(axis_names)})")
+            elif limit_axis_side(s.limit)[0] not in axis_names:
+                fail(f"io.inputs.{s.name}.limit", f"no axis {limit_axis_side(s.limit)[0]!r} (axes: "
+                     f"{', '.join(axis_names)}; X- / X+ name its negative / positive end)")

@@ -81,3 +81,25 @@ def test_a_controlword_change_alone_is_not_uniform() -> None:
     queue.commit(0, queue.horizon(0, 0, moving=False), 1, hold_tail(0x0F, [0, 0, 0]))  # enabling: 0x07 then 0x0F
     assert not queue.ring_uniform()
     assert queue.lease_end == queue.cycles - 1 - queue.pad
+
+
+def test_a_cycle_slot_frame_is_packed_with_its_cycle_in_every_ring_slot() -> None:
+    """The csv spindle's 0x60FF (fieldbus.cyclic_velocity) rides after the axes' RPDOs: each
+    queued cycle x carries pack(x), whether it was computed or is the tail."""
+    from nurbsmotion.fieldbus.bcm_queue import FRAME_BYTES
+
+    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
+                          [(0x205, 4, lambda data, x: struct.pack_into("<i", data, 0, 1000 * x))])
+    history = CycleHistory(4096, N_AXES)
+    queue = BcmQueueWriter("vcan-test", frames, history, PERIOD_S, 0.5 * PERIOD_S, bus=None)  # type: ignore[arg-type]
+    queue.bcm_sock = FakeBcmSocket()  # type: ignore[assignment]
+    assert queue.fpc == 1 + N_AXES + 1
+    for k in range(history.size):
+        history.store(k, [0x0F] * N_AXES, [0, 0, 0])
+    queue.commit(0, queue.horizon(0, 0, moving=False), 1, hold_tail(0x0F, [0, 0, 0]))
+    slot_bytes = queue.fpc * FRAME_BYTES
+    for x in range(queue.op_base, queue.op_base + queue.cycles - 1):
+        frame = ((x - queue.op_base) % queue.cycles) * slot_bytes + (1 + N_AXES) * FRAME_BYTES
+        can_id, dlc = struct.unpack_from("<IB", queue.buf, frame)
+        assert (can_id, dlc) == (0x205, 4)
+        assert struct.unpack_from("<i", queue.buf, frame + 8)[0] == 1000 * x

@@ -115,3 +115,42 @@ def test_a_drive_at_the_io_node_id_is_refused():
                 IoNode(master, IO).bring_up(heartbeat_producer_ms=50)
         finally:
             master.disconnect()
+
+
+def test_the_master_consumes_the_nodes_heartbeat_and_the_node_the_masters():
+    sim = SimIoNode(12, input_groups=2, output_groups=2)
+    sim.set_input(0, True)
+    with io_bus(sim) as master:
+        lost: list[str] = []
+        io = IoNode(master, IO, on_lost=lost.append)
+        io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=200, master_heartbeat=(127, 500))
+        assert sim.node.sdo[0x1016][1].raw == 127 << 16 | 500  # the node watches the master (CiA 301 0x1016:01)
+        time.sleep(0.4)  # heartbeats every 50 ms: nothing lost
+        assert lost == [] and io.lost is None and io.input("estop") is False
+        sim.detach()  # the node goes silent
+        t0 = time.monotonic()
+        wait_until(lambda: lost, 2.0, "the loss")
+        assert 0.15 < time.monotonic() - t0 < 1.0
+        assert len(lost) == 1 and lost[0].startswith("io node 12: no heartbeat for ")
+        assert lost[0].endswith(" ms (consumer time 200 ms)")
+        assert io.inputs is None and io.input("estop") is None  # unknown: an unread e-stop counts as pressed
+        io.close()
+
+
+def test_a_restarted_node_is_lost_and_a_second_bring_up_revives_it():
+    sim = SimIoNode(12, input_groups=2, output_groups=2)
+    with io_bus(sim) as master:
+        lost: list[str] = []
+        io = IoNode(master, IO, on_lost=lost.append)
+        io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=300)
+        master.nmt.send_command(0x81)  # NMT reset node: boot-up, defaults, PRE-OPERATIONAL
+        wait_until(lambda: lost, 2.0, "the loss")
+        assert lost == ["io node 12: heartbeat reports boot-up: the node restarted (its PDO mapping and outputs are "
+                        "back to defaults)"]
+        io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=300)
+        assert io.lost is None and io.inputs is not None
+        sim.set_input(10, True)
+        wait_until(lambda: io.input("probe") is True, what="TPDO1 after the second bring-up")
+        time.sleep(0.4)
+        assert len(lost) == 1
+        io.close()

@@ -3,6 +3,7 @@ private virtual bus, a private socket and a private data directory."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
@@ -10,6 +11,7 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
+from collections.abc import Iterator
 from typing import Any
 
 import pytest
@@ -21,12 +23,14 @@ from nurbsmotion.service.client import Client, DaemonUnavailable
 SRC_DIR = Path(nurbsmotion.__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
 
-CONFIG = """\
+CONFIG_HEAD = """\
 cycle_period_ms: 4
 simulate: true
 bus: {{interface: virtual, channel: {channel}}}
 interpolation: {{algorithm: lookahead, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
                 max_jerk_mm_s3: 50000, acc_time_s: 0.1}}
+"""  # the machine without its axes: CONFIG's, or a test's own
+CONFIG = CONFIG_HEAD + """\
 axes:
   - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100],
      max_velocity_mm_s: 200, max_accel_mm_s2: 2000, following_error_window_mm: 2.0}}
@@ -49,6 +53,24 @@ def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
         time.sleep(poll_s)
+
+
+@contextlib.contextmanager
+def daemon_in_process(data_dir: Path, extra_yaml: str, prefix: str) -> Iterator[Any]:
+    """A started service.daemon.Daemon (this process) on CONFIG + ``extra_yaml``, a private
+    virtual channel and socket; closed at the end."""
+    from nurbsmotion.service.daemon import Daemon
+
+    folder = Path(tempfile.mkdtemp(prefix="nm-"))
+    path = folder / "machine.yaml"
+    path.write_text(CONFIG.format(channel=f"{prefix}-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
+                                  data_dir=data_dir) + extra_yaml)
+    daemon = Daemon(load_config(path))
+    daemon.start()
+    try:
+        yield daemon
+    finally:
+        daemon.close()
 
 
 def subprocess_environment(notify_socket: Path | None = None) -> dict[str, str]:

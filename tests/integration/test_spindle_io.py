@@ -4,19 +4,18 @@ coolant outputs, e-stop and limit inputs, job end and abort stopping everything,
 
 from __future__ import annotations
 
-import tempfile
+import subprocess
+import sys
 import time
-import uuid
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from nurbsmotion.cli.status import format_status
-from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import CONFIG, wait_until
+from tests.integration.daemon_helpers import daemon_in_process, subprocess_environment, wait_until
 
 SPINDLE_IO = """\
 spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, at_speed_timeout_s: 3.0}
@@ -30,16 +29,8 @@ MILL = "G21 G90\nS6000 M3\nM8\nG01 X5 F3000\nS9000\nG01 X10\nM5 M9\nG01 X0\nM30\
 
 @pytest.fixture
 def machine(tmp_path: Path) -> Iterator[Daemon]:
-    folder = Path(tempfile.mkdtemp(prefix="nm-"))
-    path = folder / "machine.yaml"
-    path.write_text(CONFIG.format(channel=f"sp-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
-                                  data_dir=tmp_path / "data") + SPINDLE_IO)
-    daemon = Daemon(load_config(path))
-    daemon.start()
-    try:
+    with daemon_in_process(tmp_path / "data", SPINDLE_IO, "sp") as daemon:
         yield daemon
-    finally:
-        daemon.close()
 
 
 def sim(daemon: Daemon):
@@ -160,3 +151,47 @@ def test_a_limit_input_faults_the_job_with_one_line_naming_the_axis(machine):
     assert [e["event"] for e in outcome["machine_events"]] == ["job_machine_fault", "devices_off"]
     with pytest.raises(InputError, match="limit input limit_x_max .* axis X is on its limit switch"):
         controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")
+
+
+def test_an_mdi_of_spindle_and_output_words_runs_them_without_motion_and_leaves_them_on(machine):
+    controller = machine.controller
+    before = [a["commanded_mm"] for a in controller.status()["axes"]]
+    job = controller.mdi("M3 S1000")["job"]["id"]
+    outcome = wait_job(machine, job)["outcome"]
+    assert outcome["outcome"] == "completed", outcome["reason"]
+    assert [(e.get("code"), e.get("rpm"), e.get("at_speed")) for e in outcome["machine_events"]][0] == \
+        ("M3", 1000.0, True)
+    assert outcome["machine_events"][-1]["event"] == "devices_kept"
+    assert abs(spindle_rpm(machine) - 1000.0) < 20.0  # still turning after the job
+    status = controller.status()
+    assert status["spindle"]["commanded_rpm"] == pytest.approx(1000.0, abs=0.01) and status["state"] == "idle"
+    assert [a["commanded_mm"] for a in status["axes"]] == before  # no axis moved
+    assert controller.jobs()["jobs"][0]["id"] == job  # recorded like any job
+
+    job = controller.mdi("M8\nM64 P4")["job"]["id"]
+    assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
+    assert sim(machine).io_nodes[10].outputs == b"\x11"  # flood and clamp stay on
+    job = controller.mdi("M5 M9")["job"]["id"]
+    outcome = wait_job(machine, job)["outcome"]
+    assert [e.get("code") for e in outcome["machine_events"]][:2] == ["M5", "M9"]
+    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
+    assert sim(machine).io_nodes[10].outputs == b"\x10"  # coolant off, the clamp (M64) kept
+
+    with pytest.raises(InputError, match="^only.nc: the program has no motion$"):
+        controller.submit("only.nc", "M3 S1000\n")  # a program file still needs motion
+
+
+def test_the_cli_mdi_m3_turns_the_spindle_and_m5_stops_it(machine):
+    socket = str(machine.config.control.socket)
+
+    def cli(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "nurbsmotion", *args, "--socket", socket], capture_output=True,
+                              text=True, env=subprocess_environment(), timeout=60)
+
+    done = cli("mdi", "M3 S1000", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    assert "completed" in done.stdout and "Traceback" not in done.stderr
+    assert abs(spindle_rpm(machine) - 1000.0) < 20.0
+    done = cli("mdi", "M5", "--no-progress")
+    assert done.returncode == 0, done.stderr
+    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")

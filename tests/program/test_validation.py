@@ -211,3 +211,18 @@ def test_yaml_error_names_line_and_field(text, where, fragment):
 )
 def test_curves_that_stop_dead_are_rejected_naming_the_line(text, where, fragment):
     assert_rejected(parse_gcode, text, "t.nc", where, fragment)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("G21\no100 sub\no200 sub\no200 endsub\no100 endsub\n", "p.nc:3: o200sub: a sub cannot be defined inside another sub"),
+    ("G21\n#1=6001\n#[#1]=1\n", "p.nc:3: #[#1]=1: parameter number must be a whole number from 1 to 5602, got 6001"),
+    ("G21 (a (b) c)\n", "p.nc:1: nested comments are not supported"),
+    ("G21 G17 G90 F100\nG2 X0 Y0 R5\n", "p.nc:2: R5: an R arc needs an end point different from the start"),
+    ("G21 G17 F100\nG2 X5 Y0 R0\n", "p.nc:2: R0: arc radius must not be zero"),
+    ("G21 G17 F100\nG2 X5 Y0 I0 J0\n", "p.nc:2: I0 J0: arc radius is zero (the centre is at the start point)"),
+])
+def test_error_table_rows_for_subs_parameters_comments_and_zero_radii(text, message):
+    """Rows of docs/programs.md's error table, each as the one line a user reads."""
+    with pytest.raises((InputError, InputErrors)) as info:
+        parse_gcode(text, "p.nc")
+    assert str(info.value).splitlines()[0].startswith(message)

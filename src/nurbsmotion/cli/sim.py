@@ -17,6 +17,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.sim import FaultInjection, SimNetwork, parse_fault_spec
 from nurbsmotion.sim.homing import HomeSensors
+from nurbsmotion.sim.machine_sensors import machine_home_sensors
 from nurbsmotion.sim.network import SpindleSim
 from nurbsmotion.sim.network import DriveSetupError
 from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
@@ -199,7 +200,7 @@ def serve(
 def run(args: argparse.Namespace) -> int:
     machine = load_config(args.config)
     faults = parse_faults(args.fault, machine)
-    home_sensors = parse_home_sensors(args.home_sensors, machine)
+    home_sensors = {**machine_home_sensors(machine), **parse_home_sensors(args.home_sensors, machine)}
     spindle = parse_spindle(args.spindle, machine)
     check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
     sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)

@@ -71,7 +71,8 @@ def device_lines(s: dict[str, Any]) -> list[str]:
         active = [n for n, on in (io["inputs"] or {}).items() if on]
         outputs = [n for n, on in io["outputs"].items() if on]
         lines.append(f"io node {io['node']}: inputs active {', '.join(active) or 'none'}"
-                     f"{' (unknown)' if io['inputs'] is None else ''}, outputs on {', '.join(outputs) or 'none'}")
+                     f"{' (unknown)' if io['inputs'] is None else ''}, outputs on {', '.join(outputs) or 'none'}"
+                     f"{', LOST: ' + io['lost'] if io.get('lost') else ''}")
     return lines
 
 

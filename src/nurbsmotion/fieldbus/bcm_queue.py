@@ -169,7 +169,7 @@ class BcmQueueWriter:
         self.send_errors = 0
         self.buf = bytearray(self.cycles * self.fpc * FRAME_BYTES)
         self._ring_view = memoryview(self.buf)  # for ring_uniform (the buffer is never resized)
-        self.scratch = [bytearray(dlc) for _, dlc, _, _ in frames.rpdos]
+        self.scratch = [bytearray(dlc) for _, dlc in frames.heads()]
         self._init_frames()
         self.bcm_sock: socket.socket | None = None
         self.echo: SyncEcho | None = None
@@ -198,7 +198,7 @@ class BcmQueueWriter:
         for slot in range(self.cycles):
             base = slot * self.fpc * FRAME_BYTES
             CAN_FRAME_HEAD.pack_into(self.buf, base, self.frames.sync_id, 0)
-            for j, (can_id, dlc, _, _) in enumerate(self.frames.rpdos):
+            for j, (can_id, dlc) in enumerate(self.frames.heads()):
                 CAN_FRAME_HEAD.pack_into(self.buf, base + (1 + j) * FRAME_BYTES, can_id, dlc)
 
     # ------------------------------------------------------------------ CycleWriter
@@ -267,6 +267,12 @@ class BcmQueueWriter:
         for j, (_, dlc, i, pack) in enumerate(self.frames.rpdos):
             data = self.scratch[j]
             pack(data, cw[i], sp[i])
+            offset = base + j * FRAME_BYTES
+            buf[offset:offset + dlc] = data
+        first_extra = len(self.frames.rpdos)
+        for j, (_, dlc, pack_cycle) in enumerate(self.frames.extras, first_extra):
+            data = self.scratch[j]
+            pack_cycle(data, x)
             offset = base + j * FRAME_BYTES
             buf[offset:offset + dlc] = data
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -25,6 +26,8 @@ from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
+from nurbsmotion.fieldbus.feedback import arrival_perf_s
+from nurbsmotion.fieldbus.node_heartbeat import HeartbeatWatch
 from nurbsmotion.io_config import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
@@ -35,6 +38,7 @@ WRITE_OUTPUT_8 = 0x6200
 CIA_401 = 0x0191  # device type 0x1000, low 16 bits: the device profile number
 EVENT_DRIVEN = 255  # transmission type: on change (CiA 301 'event-driven, device profile specific')
 SDO_TIMEOUT_S = 0.5
+OBJECT_DOES_NOT_EXIST, SUBINDEX_DOES_NOT_EXIST = 0x06020000, 0x06090011  # CiA 301 SDO abort codes
 
 
 def signal_state(groups: bytes, signal: IoSignal) -> bool:
@@ -65,6 +69,7 @@ def cia401_dictionary(io: IoConfig) -> ObjectDictionary:
     u8, u16, u32 = odt.UNSIGNED8, odt.UNSIGNED16, odt.UNSIGNED32
     od.add_object(_variable(c.DEVICE_TYPE, 0, u32, "ro"))
     od.add_object(_variable(c.PRODUCER_HEARTBEAT_TIME, 0, u16, "rw"))
+    od.add_object(_record(c.CONSUMER_HEARTBEAT_TIME, [(0, u8, "ro"), (1, u32, "rw")]))
     for comm, mapping in ((c.RPDO_COMM, c.RPDO_MAPPING), (c.TPDO_COMM, c.TPDO_MAPPING)):
         od.add_object(_record(comm, [(0, u8, "ro"), (1, u32, "rw"), (2, u8, "rw")]))
         od.add_object(_record(mapping, [(n, u8 if n == 0 else u32, "rw") for n in range(9)]))
@@ -94,26 +99,43 @@ class IoNode:
     """
 
     def __init__(self, network: canopen.Network, io: IoConfig,
-                 on_change: Callable[[str, bool], None] | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S) -> None:
+                 on_change: Callable[[str, bool], None] | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S,
+                 on_lost: Callable[[str], None] | None = None,
+                 judging_time_s: Callable[[], float] = time.perf_counter) -> None:
+        """``judging_time_s``: now on the frames' arrival timeline (the master's
+        ``judging_time_s``; perf_counter based) for the heartbeat watch."""
         self.network = network
+        self.judging_time_s = judging_time_s
         self.io = io
         self.on_change = on_change
+        self.on_lost = on_lost  # the heartbeat watch found the node lost: one line naming it
         self.node = canopen.RemoteNode(io.node_id, cia401_dictionary(io))
         self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
         network.add_node(self.node)
+        self.heartbeat: HeartbeatWatch | None = None  # the master's consumer of its heartbeat (bring_up)
+        self.node.nmt.add_heartbeat_callback(self._heard)
         self._lock = threading.Lock()
         self._inputs: dict[str, bool] | None = None
         self._outputs: dict[str, bool] = {s.name: False for s in io.outputs}
         self._output_names = {s.name for s in io.outputs}
 
     # ------------------------------------------------------------------ bring-up
-    def bring_up(self, heartbeat_producer_ms: int) -> None:
+    def bring_up(self, heartbeat_producer_ms: int, heartbeat_consumer_ms: int | None = None,
+                 master_heartbeat: tuple[int, int] | None = None) -> None:
         """Check, configure, read the inputs, start (NMT); FieldbusError names node and step.
 
         In NMT PRE-OPERATIONAL: 0x1000 is a CiA-401 device; 0x6000:00 / 0x6200:00 hold the
         configured groups; TPDO1 = 0x6000:01..n and RPDO1 = 0x6200:01..m, transmission type
-        255 (canopen's PdoMap: disable, count 0, entries, count, enable); 0x1017 heartbeat.
+        255 (canopen's PdoMap: disable, count 0, entries, count, enable); 0x1017 heartbeat;
+        with ``master_heartbeat`` (master node id, consumer ms) 0x1016:01, so the node
+        switches its outputs off when the master dies (a node without 0x1016 is logged, not
+        refused: CiA 301 makes the consumer optional). With ``heartbeat_consumer_ms`` the
+        master watches the node's heartbeat from the NMT start (fieldbus.node_heartbeat):
+        on loss the inputs become unknown and ``on_lost`` gets one line. Callable again to
+        bring the node back after a loss.
         """
+        if self.heartbeat is not None:
+            self.heartbeat.stop()
         device = self._sdo("I/O device type", lambda: self.node.sdo[c.DEVICE_TYPE].raw)
         if device & 0xFFFF != CIA_401:
             raise self._error("I/O device type", f"0x1000 = 0x{device:08X}: not a CiA-401 I/O device")
@@ -123,7 +145,11 @@ class IoNode:
         self._map(self.node.rpdo[1], c.COB_RPDO[0], WRITE_OUTPUT_8, self.io.output_groups, "configure RPDO1")
         self._sdo("set heartbeat producer", lambda: setattr(self.node.sdo[c.PRODUCER_HEARTBEAT_TIME], "raw",
                                                              heartbeat_producer_ms))
+        if master_heartbeat is not None:
+            self._consume_master_heartbeat(*master_heartbeat)
+        self.node.tpdo[1].callbacks.clear()  # a second bring-up (after a loss) adds it again
         self.node.tpdo[1].add_callback(self._on_tpdo)
+
         def read_group(n: int) -> int:
             return int(self._sdo("read inputs", lambda: self.node.sdo[READ_INPUT_8][n].raw))
 
@@ -131,8 +157,41 @@ class IoNode:
         with self._lock:
             self._inputs = input_states(groups, self.io.inputs)
         self.node.nmt.send_command(c.NmtCommand.START)
+        if heartbeat_consumer_ms:
+            self.heartbeat = HeartbeatWatch(self.io.node_id, heartbeat_consumer_ms / 1000.0, self._lost,
+                                            clock=self.judging_time_s)
+            self.heartbeat.start()
         self._send_outputs()
-        log.info(kv("io.ready", node=self.io.node_id, inputs=self.inputs))
+        log.info(kv("io.ready", node=self.io.node_id, inputs=self.inputs, heartbeat_consumer_ms=heartbeat_consumer_ms))
+
+    def _consume_master_heartbeat(self, master_id: int, consumer_ms: int) -> None:
+        """0x1016:01 = master node id << 16 | consumer ms (CiA 301 §7.5.2.29)."""
+        try:
+            self.node.sdo[c.CONSUMER_HEARTBEAT_TIME][1].raw = master_id << 16 | consumer_ms
+        except SdoAbortedError as err:
+            if err.code not in (OBJECT_DOES_NOT_EXIST, SUBINDEX_DOES_NOT_EXIST):
+                raise self._error("watch the master's heartbeat", sdo_failure(err)) from None
+            log.warning(kv("io.no_heartbeat_consumer", node=self.io.node_id, abort=f"0x{err.code:08X}"))
+        except SdoCommunicationError as err:
+            raise self._error("watch the master's heartbeat", sdo_failure(err)) from None
+
+    def _heard(self, state: int) -> None:
+        """canopen's heartbeat callback; its NmtMaster stored the frame's timestamp just before."""
+        watch = self.heartbeat
+        if watch is not None:
+            watch.heard(state, arrival_perf_s(self.node.nmt.timestamp or 0.0))
+
+    def _lost(self, reason: str) -> None:
+        """The heartbeat watch's verdict (its thread): inputs unknown from now, one line up."""
+        with self._lock:
+            self._inputs = None
+        if self.on_lost is not None:
+            self.on_lost(f"io node {self.io.node_id}: {reason}")
+
+    @property
+    def lost(self) -> str | None:
+        """Why the node's heartbeat was lost (None while watched and fine, or not watched)."""
+        return self.heartbeat.lost if self.heartbeat is not None else None
 
     def _error(self, step: str, message: str) -> FieldbusError:
         return FieldbusError(f"node {self.io.node_id}: bring-up step '{step}': {message}")
@@ -159,7 +218,10 @@ class IoNode:
         self._sdo(step, pdo.save)
 
     def close(self) -> None:
-        """Stop taking its TPDO (nothing to undo when the bring-up did not get that far)."""
+        """Stop watching its heartbeat and taking its TPDO (nothing to undo when the bring-up
+        did not get that far)."""
+        if self.heartbeat is not None:
+            self.heartbeat.stop()
         tpdo = self.node.tpdo[1]
         tpdo.callbacks.clear()
         if tpdo.cob_id is not None:
@@ -180,6 +242,8 @@ class IoNode:
             return None if self._inputs is None else self._inputs[name]
 
     def _on_tpdo(self, pdo: Any) -> None:
+        if self.lost:  # unknown until brought up again, whatever still arrives
+            return
         data = bytes(pdo.data)
         if len(data) < self.io.input_groups:
             log.warning(kv("io.tpdo_length", node=self.io.node_id, length=len(data), expected=self.io.input_groups))

@@ -43,6 +43,7 @@ from nurbsmotion.fieldbus import bringup
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, Field, PdoFrame, plan_within_load, rpdo_packer
 from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_load
 from nurbsmotion.fieldbus.cycle import LatenessStats
+from nurbsmotion.fieldbus.cyclic_velocity import spindle_cyclic_velocity
 from nurbsmotion.fieldbus.controller import MOVING_PHASES, CycleController, Phase
 from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP, state_name
 from nurbsmotion.fieldbus.feedback import Feedback
@@ -210,8 +211,15 @@ class Master:
         self.plans: list[DrivePlan] = plan_within_load(config, self._fe_window, check_load)
         self.following_error_tpdo = any(p.layout.has_following_error for p in self.plans)
         self._trails: list[bringup.SdoTrail] = []  # per axis after connect(): its SDO access, named in errors
+        # the csv spindle's 0x60FF, sent with every SYNC after the axes' RPDOs (fieldbus.cyclic_velocity)
+        self.cyclic_velocity = spindle_cyclic_velocity(config)
+        extras = []
+        if self.cyclic_velocity is not None:
+            self.cyclic_velocity.notify = lambda: self._request("cyclic_velocity", None)
+            self.cyclic_velocity.wire_cycle = lambda: self._cycle
+            extras.append((self.cyclic_velocity.cob_id, self.cyclic_velocity.dlc, self.cyclic_velocity.pack))
         self._frames = CyclicFrames([(frame.cob_id, frame.dlc, i, rpdo_packer(frame))
-                                     for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos])
+                                     for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos], extras)
         self._heartbeat: MasterHeartbeat | None = None
         self._heartbeat_cycle = -1  # the cycle the heartbeat watchdog saw last
         self._writer: CycleWriter | None = None
@@ -273,6 +281,11 @@ class Master:
         when the kernel-queue receive filter is on (fieldbus.spindle, fieldbus.io)."""
         self._extra_receive_ids += [c.COB_EMCY + node_id, c.COB_SDO_TX + node_id, c.COB_HEARTBEAT + node_id, *cob_ids]
         self._filter_received()
+
+    def judging_time_s(self) -> float:
+        """Now on the frames' arrival timeline (perf_counter based, nurbsmotion.arrival_clock):
+        what another node's heartbeat consumer judges on (fieldbus.io)."""
+        return self._fb.judging_time_s()
 
     def quick_stop(self, reason: str) -> None:
         """Quick stop every axis now, with or without a job (then disabled, as an abort):
@@ -368,6 +381,9 @@ class Master:
             raise err from None
         for node_id in self._node_ids:
             self._network[node_id].nmt.send_command(c.NmtCommand.START)
+        if self.cyclic_velocity is not None:  # its RPDO goes out from the first SYNC: PRE-OPERATIONAL ignores
+            self._network.send_message(c.COB_NMT,  # PDOs (CiA 301 §7.3.2.2) until its own bring-up starts it
+                                       bytes([c.NmtCommand.PRE_OPERATIONAL, self.cyclic_velocity.node_id]))
         now = time.perf_counter()
         self._hb_time = [now] * self._n
         self._start_loop()
@@ -767,12 +783,18 @@ class Master:
         first = k + writer.guard + 1
         if self._horizon < first - 1:
             self._adopt_tail(k, first - 1)
-        if requests and self._horizon >= first:
+        velocity = any(what == "cyclic_velocity" for what, _ in requests)  # a new 0x60FF target: not the axes'
+        if velocity:
+            requests = [r for r in requests if r[0] != "cyclic_velocity"]
+        if (requests or velocity) and self._horizon >= first:
             back = max(first - 1, self._no_rewind_before)
             snap = snaps[back % HISTORY_CYCLES]
             if back < self._horizon and snap is not None:
                 ctl.restore(snap)
                 self._horizon = back
+        if velocity and self.cyclic_velocity is not None:  # from the first cycle packed again: no jump
+            self.cyclic_velocity.apply(self._horizon + 1)
+            self._first_new = min(self._first_new, self._horizon + 1)
         while True:
             if self._horizon >= writer.horizon(k, ctl.stop_cycles(), ctl.phase in MOVING_PHASES) and not requests:
                 break

@@ -6,11 +6,13 @@ statusword bit 10 'target reached' (CiA 402-2 6.3). So everything here is canope
 client on a RemoteNode, as its authors intend, plus a monitor thread that reads 0x6041
 and 0x606C every ``POLL_S`` (status, faults, 'at speed').
 
-In cyclic synchronous velocity mode (9) the drive follows 0x60FF at once; the master ramps
-it with ``accel_rpm_s`` in steps of ``POLL_S`` (the drive holds the last value between
-steps, as CiA 402-2 'csv' drives do when no new set-point comes) and calls it at speed once
-the ramp has ended and |0x606C - 0x60FF| <= ``CSV_WINDOW`` of the target (bit 10 has no
-meaning in csv). A drive that insists on a set-point each SYNC needs an RPDO: not done.
+In cyclic synchronous velocity mode (9) the drive follows 0x60FF at once. With the master's
+``cyclic`` slot (fieldbus.cyclic_velocity, the daemon's case) bring-up maps 0x60FF into the
+drive's RPDO1 (synchronous, transmission type 1) and the master sends it with every SYNC,
+ramped per cycle with ``accel_rpm_s``; without one (a SpindleDrive on its own) the monitor
+ramps it by SDO in steps of ``POLL_S`` (the drive holds the last value between steps, as
+CiA 402-2 'csv' drives do when no new set-point comes). At speed once the ramp has ended
+and |0x606C - 0x60FF| <= ``CSV_WINDOW`` of the target (bit 10 has no meaning in csv).
 
 Bring-up (NMT pre-operational): 0x6502 has the mode's bit (when the drive has 0x6502),
 0x6060 = mode, 0x6083/0x6084 = accel (counts/s²), 0x60FF = 0, 0x60C2 / 0x1006 = the cycle
@@ -36,6 +38,7 @@ from nurbsmotion import cia402 as c
 from nurbsmotion import drive_od
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
+from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
 from nurbsmotion.spindle_config import (PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
@@ -80,13 +83,16 @@ class SpindleDrive:
 
     def __init__(self, network: canopen.Network, config: SpindleConfig,
                  on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None,
-                 cycle_period_s: float | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S) -> None:
+                 cycle_period_s: float | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S,
+                 cyclic: CyclicVelocity | None = None) -> None:
         """``master_heartbeat``: (master node id, consumer time ms) for 0x1016:01, so the drive
         stops on its own when the daemon dies (as the axes do); None writes nothing.
         ``cycle_period_s``: the SYNC period, written to 0x60C2 and 0x1006 where the drive has
-        them (a csv drive steps by it; a drive that takes 0x60C2's default would ramp wrong)."""
+        them (a csv drive steps by it; a drive that takes 0x60C2's default would ramp wrong).
+        ``cyclic``: the master's per-SYNC 0x60FF slot (csv only; module docstring)."""
         assert config.od is not None  # loaded with the configuration
         self.config = config
+        self.cyclic = cyclic if config.mode is SpindleMode.CSV else None
         self.cycle_period_s = cycle_period_s
         self.master_heartbeat = master_heartbeat
         self.on_fault = on_fault
@@ -122,6 +128,8 @@ class SpindleDrive:
         self._write("zero target velocity", TARGET_VELOCITY, 0)
         if self.cycle_period_s:
             self._write_cycle_period(self.cycle_period_s)
+        if self.cyclic is not None:
+            self._map_cyclic_rpdo(self.cyclic)
         if self.master_heartbeat is not None and drive_od.find(cfg.od, c.CONSUMER_HEARTBEAT_TIME, 1) is not None:  # type: ignore[arg-type]
             master, consumer_ms = self.master_heartbeat
             self._sdo("watch the master's heartbeat",  # 0x1016:01 = node << 16 | ms (CiA 301 §7.5.2.29)
@@ -144,6 +152,22 @@ class SpindleDrive:
                 self._write("set cycle period 0x60C2", c.IP_TIME_PERIOD, exponent, 2)
         if drive_od.find(od, c.COMM_CYCLE_PERIOD) is not None:  # type: ignore[arg-type]
             self._write("set cycle period 0x1006", c.COMM_CYCLE_PERIOD, round(period_s * 1e6))
+
+    def _map_cyclic_rpdo(self, cyclic: CyclicVelocity) -> None:
+        """RPDO1 = 0x60FF, COB-ID of the master's slot, transmission type 1 (acted on at the next
+        SYNC), through canopen's PdoMap from the drive's EDS (disable, count 0, entry, count,
+        enable: CiA 301 §7.5.2.36); the slot carries 0 until the first command."""
+        cyclic.request(0, at_once=True)
+        try:
+            rpdo = self.node.rpdo[1]
+            rpdo.clear()
+            rpdo.cob_id = cyclic.cob_id
+            rpdo.trans_type = 1
+            rpdo.add_variable(TARGET_VELOCITY)
+            rpdo.enabled = True
+        except (KeyError, ValueError) as err:
+            raise self._error("map 0x60FF into RPDO1", f"the EDS has no RPDO1 for it ({err})") from None
+        self._sdo("map 0x60FF into RPDO1", rpdo.save)
 
     def _enable(self) -> None:
         """Fault reset if needed, then SHUTDOWN -> SWITCH ON -> ENABLE OPERATION (CiA 402 state machine)."""
@@ -171,6 +195,8 @@ class SpindleDrive:
             self._target_counts_s = counts_s
         if self.config.mode is SpindleMode.PROFILE_VELOCITY:
             self._write("target velocity 0x60FF", TARGET_VELOCITY, counts_s)
+        elif self.cyclic is not None:
+            self.cyclic.request(counts_s)
         log.info(kv("spindle.command", node=self.config.node_id, rpm=rpm, counts_s=counts_s))
 
     def quick_stop(self) -> None:
@@ -179,6 +205,8 @@ class SpindleDrive:
             self._target_counts_s = 0
             self._sent_counts_s = 0.0
             self._off = True
+        if self.cyclic is not None:
+            self.cyclic.request(0, at_once=True)
         self._write_quietly(c.CONTROLWORD, int(c.Controlword.QUICK_STOP))
         self._write_quietly(TARGET_VELOCITY, 0)
 
@@ -204,6 +232,8 @@ class SpindleDrive:
         with self._lock:
             self._target_counts_s = 0
             self._sent_counts_s = 0.0
+        if self.cyclic is not None:
+            self.cyclic.request(0, at_once=True)
         self._write("zero target velocity", TARGET_VELOCITY, 0)
         self._enable()
 
@@ -217,7 +247,9 @@ class SpindleDrive:
             return False
         if self.config.mode is SpindleMode.PROFILE_VELOCITY:
             return bool(sw & c.SW_TARGET_REACHED) and actual is not None and csv_at_speed(actual, target)
-        return sent == target and actual is not None and csv_at_speed(actual, target)
+        ramped = self.cyclic.ramp_done() and self.cyclic.target_counts_s == target if self.cyclic is not None \
+            else sent == target
+        return ramped and actual is not None and csv_at_speed(actual, target)
 
     def status(self) -> SpindleStatus:
         with self._lock:
@@ -265,7 +297,7 @@ class SpindleDrive:
             if state is not c.State.OPERATION_ENABLED:
                 self._lost(f"spindle drive left OPERATION ENABLED: {state.value if state else '?'} "
                            f"(statusword 0x{sw:04X})")
-            elif self.config.mode is SpindleMode.CSV:
+            elif self.config.mode is SpindleMode.CSV and self.cyclic is None:
                 self._csv_step()
 
     def _csv_step(self) -> None:

@@ -28,23 +28,31 @@ from nurbsmotion.fieldbus.supervisor import CycleHistory
 
 
 RpdoSlot = tuple[int, int, int, Callable[[bytearray, int, int], None]]  # COB-ID, DLC, axis, pack(data, cw, sp)
+CycleSlot = tuple[int, int, Callable[[bytearray, int], None]]  # COB-ID, DLC, pack(data, cycle)
 
 
 class CyclicFrames:
     """SYNC (COB-ID 0x80, no data), then the RPDOs of every axis as bring-up mapped them
-    (bringup_plan.rpdo_packer: controlword + set-point in one frame, or split in two)."""
+    (bringup_plan.rpdo_packer: controlword + set-point in one frame, or split in two), then
+    the ``extras``: RPDOs of other nodes whose data is a function of the cycle (the csv
+    spindle's 0x60FF, fieldbus.cyclic_velocity)."""
 
-    def __init__(self, rpdos: list[RpdoSlot]) -> None:
+    def __init__(self, rpdos: list[RpdoSlot], extras: list[CycleSlot] | None = None) -> None:
         self.sync_id = c.COB_SYNC
         self.rpdos = rpdos
-        self.rpdo_ids = [cob_id for cob_id, _, _, _ in rpdos]
-        self.per_cycle = 1 + len(rpdos)
+        self.extras = extras or []
+        self.rpdo_ids = [cob_id for cob_id, _, _, _ in rpdos] + [cob_id for cob_id, _, _ in self.extras]
+        self.per_cycle = 1 + len(rpdos) + len(self.extras)
+
+    def heads(self) -> list[tuple[int, int]]:
+        """(COB-ID, DLC) of every RPDO of a cycle, in the order they are sent."""
+        return [(cob_id, dlc) for cob_id, dlc, _, _ in self.rpdos] + [(cob_id, dlc) for cob_id, dlc, _ in self.extras]
 
     def messages(self) -> tuple[can.Message, list[can.Message]]:
-        """One reusable SYNC message and one message per RPDO."""
+        """One reusable SYNC message and one message per RPDO (the axes', then the extras)."""
         sync = can.Message(arbitration_id=self.sync_id, is_extended_id=False, data=b"")
         return sync, [can.Message(arbitration_id=cob_id, is_extended_id=False, data=bytearray(dlc))
-                      for cob_id, dlc, _, _ in self.rpdos]
+                      for cob_id, dlc in self.heads()]
 
 
 class CycleWriter(Protocol):
@@ -88,6 +96,7 @@ class LoopWriter:
         self.on_sent = on_sent  # traffic log while it records
         self.on_error = on_error
         self.sync_msg, self.rpdo_msgs = frames.messages()
+        self.extra_msgs = self.rpdo_msgs[len(frames.rpdos):]
         self.all_msgs = [self.sync_msg, *self.rpdo_msgs]
         self.grid = DeadlineGrid(period_s, time.perf_counter() + period_s)
         self.k = 0
@@ -112,6 +121,9 @@ class LoopWriter:
             send(self.sync_msg)
             for msg, (_, _, i, pack) in zip(self.rpdo_msgs, self.frames.rpdos):  # one or two RPDOs per axis
                 pack(msg.data, cw[i], sp[i])
+                send(msg)
+            for msg, (_, _, pack_cycle) in zip(self.extra_msgs, self.frames.extras):
+                pack_cycle(msg.data, k)
                 send(msg)
         except (can.CanError, OSError) as err:
             self.send_errors += 1

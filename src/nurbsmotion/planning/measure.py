@@ -157,7 +157,7 @@ def chord_errors(trajectory: Trajectory, program: Program) -> NDArray[np.float64
     blocks, u, p = trajectory.block, trajectory.u, trajectory.position_mm
     n = len(u)
     errors = np.zeros(n)
-    if n < 2:
+    if n < 2 or not program.blocks:  # no curve (an MDI without motion stands still): no chord
         return errors
     # pieces: (block, u_lo, u_hi, row); a step inside one block is one piece
     same = blocks[1:] == blocks[:-1]

@@ -29,6 +29,7 @@ from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.homing import Homing
 from nurbsmotion.service.job_events import JobEvents
 from nurbsmotion.service.jog import LEASE_REASON, Jogging
+from nurbsmotion.service.machine_io import AxisMotion
 from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
@@ -95,17 +96,18 @@ class Controller:
 
     # ------------------------------------------------------------------ requests
     def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
-               optional_stop: bool = True, needs_homing: bool = True) -> dict[str, Any]:
+               optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors.
 
         The program starts from the persisted offsets and tool with the block-delete and
         optional-stop switches given. The feed override goes back to 100 % for the new job
         unless ``keep_override``. ``needs_homing``: refused until homed when required (an
-        incremental or continuous jog does not need it)."""
+        incremental or continuous jog does not need it). ``jog``: the job is a jog of one axis in
+        that direction, which may start while a limit switch it moves away from is active."""
         check_program_name(name)
         with self._lock:
             try:
-                self._check_can_start()
+                self._check_can_start(jog)
                 self._check_homing(needs_homing)
             except Refused as err:
                 log.info(kv("submit_refused", name=name, error=err))
@@ -394,11 +396,11 @@ class Controller:
         return effective_rate(self._override, job.plan.max_rate) if job is not None else self._override
 
     # ------------------------------------------------------------------ job life
-    def _check_can_start(self) -> None:
+    def _check_can_start(self, jog: AxisMotion | None = None) -> None:
         if self._job is not None or self._planning:
             busy = self._job.record.job_id if self._job is not None else "another submission"
             raise Refused("submit", f"busy: job {busy} is running (one job at a time)")
-        if (refusal := self.machine.start_refusal()) is not None:
+        if (refusal := self.machine.start_refusal(jog)) is not None:
             raise Refused("submit", refusal)
         if self.state() == "fault":
             raise Refused("submit", "the drives are in fault; send reset first")
@@ -599,7 +601,7 @@ class Controller:
     def _line_reached(self, job: ActiveJob, index: int) -> dict[str, Any] | None:
         """The program line of planned set-point ``index`` (None before the first one)."""
         program, block = job.plan.program, job.plan.block_at(index)
-        if program is None or block is None:
+        if program is None or block is None or not program.blocks:  # no motion: no line reached
             return None
         source = program.blocks[block].source
         return {"where": str(source), "line": source.line, "text": source.text, "block": block, "setpoint": index}

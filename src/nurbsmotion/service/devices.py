@@ -9,6 +9,7 @@ must act on (an e-stop or limit input, a spindle that stops on its own) go to
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -17,7 +18,7 @@ from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import IoNode
 from nurbsmotion.fieldbus.spindle import SpindleDrive
 from nurbsmotion.log import kv
-from nurbsmotion.service.machine_io import MachineIo, SafetyTrip
+from nurbsmotion.service.machine_io import AxisMotion, MachineIo, SafetyTrip
 from nurbsmotion.spindle_config import SpindleConfig
 
 log = logging.getLogger(__name__)
@@ -30,6 +31,7 @@ class MachineDevices:
         self.link = link
         self.on_trip: Callable[[SafetyTrip], None] = lambda trip: None
         self.on_spindle_fault: Callable[[str], None] = lambda message: None
+        self.axis_direction: Callable[[str], int] = lambda axis: 0  # the way an axis moves now (+1/-1/0)
         network = getattr(link, "network", None)
         if network is None:
             raise FieldbusError("devices: the master is not connected")
@@ -37,30 +39,56 @@ class MachineDevices:
         self.io: MachineIo | None = None
         if isinstance(config.spindle, SpindleConfig):
             link.receive_from(config.spindle.node_id)
-            mon = config.monitoring
-            watch = (config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple) \
-                if mon.master_heartbeat_ms else None
             self.spindle = SpindleDrive(network, config.spindle, on_fault=lambda m: self.on_spindle_fault(m),
-                                        master_heartbeat=watch, cycle_period_s=config.cycle_period_s,
-                                        sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
+                                        master_heartbeat=self.master_heartbeat(),
+                                        cycle_period_s=config.cycle_period_s,
+                                        sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
+                                        cyclic=getattr(link, "cyclic_velocity", None))
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
-            node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
-            self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip))
+            node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
+                          judging_time_s=getattr(link, "judging_time_s", time.perf_counter))
+            self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip),
+                                moving=lambda axis: self.axis_direction(axis))
+
+    def master_heartbeat(self) -> tuple[int, int] | None:
+        """(master node id, consumer ms) for a node's 0x1016:01; None without a master heartbeat."""
+        mon = self.config.monitoring
+        if not mon.master_heartbeat_ms:
+            return None
+        return self.config.master.node_id, mon.master_heartbeat_ms * mon.master_heartbeat_consumer_multiple
 
     def bring_up(self) -> None:
         """I/O node first (an e-stop pressed at start is known before anything turns), then the
         spindle; FieldbusError names node and step."""
         if self.io is not None:
-            self.io.node.bring_up(self.config.monitoring.heartbeat_producer_ms)
-            if self.io.estop_active():
-                log.warning(kv("io.estop_active_at_start", node=self.config.io.node_id))  # type: ignore[union-attr]
+            self._bring_up_io()
         if self.spindle is not None:
             self.spindle.bring_up()
 
-    def start_refusal(self) -> str | None:
-        """Why motion may not start (e-stop, limit input), else None."""
-        return self.io.start_refusal() if self.io is not None else None
+    def _bring_up_io(self) -> None:
+        """The io node with the drives' heartbeat times: it produces every heartbeat_producer_ms,
+        the master consumes with heartbeat_consumer_ms, and it consumes the master's."""
+        assert self.io is not None
+        mon = self.config.monitoring
+        self.io.node.bring_up(mon.heartbeat_producer_ms, mon.heartbeat_consumer_ms, self.master_heartbeat())
+        if self.io.estop_active():
+            log.warning(kv("io.estop_active_at_start", node=self.config.io.node_id))  # type: ignore[union-attr]
+
+    def revive_io(self) -> str | None:
+        """``reset`` after the io node was lost: bring it up again; the one line why not, or None."""
+        if self.io is None or self.io.node.lost is None:
+            return None
+        try:
+            self._bring_up_io()
+        except FieldbusError as err:
+            return str(err)
+        log.info(kv("io.revived", node=self.config.io.node_id))  # type: ignore[union-attr]
+        return None
+
+    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+        """Why motion may not start (e-stop, limit input unless ``jog`` moves off it), else None."""
+        return self.io.start_refusal(jog) if self.io is not None else None
 
     def all_off(self, hard: bool) -> None:
         """Job end (``hard`` False: the spindle decelerates to 0 with its ramp) or abort, fault,
@@ -73,6 +101,15 @@ class MachineDevices:
                 self.spindle.command_rpm(0)
         if self.io is not None:
             self.io.coolant_off()
+
+    def kept(self) -> dict[str, Any]:
+        """What stays on after a job that keeps the devices (record line): spindle rpm, outputs on."""
+        out: dict[str, Any] = {}
+        if self.spindle is not None:
+            out["spindle_rpm"] = self.spindle.status().commanded_rpm
+        if self.io is not None:
+            out["outputs_on"] = sorted(n for n, on in self.io.node.outputs.items() if on)
+        return out
 
     def ready_for_job(self) -> None:
         """Enable the spindle again if an abort or fault disabled it (target 0)."""

@@ -94,11 +94,18 @@ class JobEvents:
     def start(self) -> None:
         self._thread.start()
 
-    def finish(self) -> None:
-        """The job ended: stop the thread (the controller switches everything off)."""
+    def finish(self, drain: bool = False) -> None:
+        """The job ended: stop the thread. ``drain`` (a completed job that leaves the spindle and
+        outputs as it set them, service.machine_jobs): first do, in order and without waiting for
+        the spindle, the events the thread had not got to (a job of a few rows can end between
+        two polls)."""
         self._finished.set()
         if self._thread.is_alive() and threading.current_thread() is not self._thread:
             self._thread.join(2.0)
+        if drain and not self._thread.is_alive():
+            while self._next < len(self.events):
+                self._next += 1
+                self._do(self.events[self._next - 1], wait=False)
 
     def _ready(self, e: RowEvent, index: int, held_row: int | None) -> bool:
         """A wait row is done while the master holds there; any other event once playback is
@@ -123,7 +130,7 @@ class JobEvents:
             if waited and held_row not in self.user_pause_rows:
                 self.resume()
 
-    def _do(self, e: RowEvent) -> bool:
+    def _do(self, e: RowEvent, wait: bool = True) -> bool:
         """Do one event; False when the job must end (the spindle did not come to speed)."""
         event, ok = e.event, True
         fields: dict[str, Any] = {"code": event.code, "at": str(event.source), "row": e.row}
@@ -131,7 +138,7 @@ class JobEvents:
             rpm = signed_rpm(event)
             self.devices.spindle.command_rpm(rpm)
             fields["rpm"] = rpm
-            if e.waits:
+            if e.waits and wait:
                 timeout_s = self.devices.spindle.config.at_speed_timeout_s
                 ok = self.devices.spindle.wait_at_speed(timeout_s, self._finished.is_set)
                 actual = self.devices.spindle.status().actual_rpm

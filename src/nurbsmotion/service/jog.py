@@ -12,7 +12,8 @@ lives while the client renews its lease (``jog_renew``, every ~0.2 s by the CLI)
 Checked before anything is planned, each one line: the axis exists; the speed is positive
 and within the axis' ``max_velocity_mm_s``; the target within the soft limits; a continuous
 jog needs a soft limit in its direction; an absolute jog needs the axes homed when
-``require_homing`` is on (service.homing).
+``require_homing`` is on (service.homing). While a limit input is active, only a jog of its
+axis away from it starts (service.machine_io).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 from nurbsmotion.config import AxisConfig, MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
+from nurbsmotion.service.machine_io import AxisMotion
 from nurbsmotion.service.planner import JOG_NAME
 
 if TYPE_CHECKING:
@@ -141,7 +143,8 @@ class Jogging:
 
         try:
             response = controller.submit(JOG_NAME, jog_gcode(axis.name, target, request.speed_mm_s),
-                                         keep_override=True, needs_homing=request.absolute)
+                                         keep_override=True, needs_homing=request.absolute,
+                                         jog=AxisMotion(axis.name, 1 if target > held_mm else -1))
         except Refused as err:
             raise Refused("jog", err.message) from None
         job_id = response["job"]["id"]

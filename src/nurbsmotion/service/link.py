@@ -31,7 +31,10 @@ class SimulatedDrives:
     def __init__(self, config: MachineConfig, home_sensors: dict[int, Any] | None = None) -> None:
         from nurbsmotion.sim import SimNetwork
 
-        self.network = SimNetwork.for_machine(config, home_sensors=home_sensors)
+        from nurbsmotion.sim.machine_sensors import machine_home_sensors
+
+        sensors = {**machine_home_sensors(config), **(home_sensors or {})}  # axes[i].sim, then the caller's
+        self.network = SimNetwork.for_machine(config, home_sensors=sensors)
         self._lock = threading.Lock()
         self._recording = False
         self._stop = threading.Event()
@@ -86,8 +89,8 @@ class SimulatedDrives:
 
 def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
               ) -> tuple[Master, SimulatedDrives | None]:
-    """Start the simulated drives (if configured; ``home_sensors`` {node id: sim.HomeSensors}
-    for their homing), bring every axis up; FieldbusError names the node and the step if
+    """Start the simulated drives (if configured; their switches and index pulses from each
+    axis' ``sim`` section, or ``home_sensors`` {node id: sim.HomeSensors} for a node), bring every axis up; FieldbusError names the node and the step if
     that fails (and everything started is stopped again)."""
     simulation = SimulatedDrives(config, home_sensors).start() if config.simulate else None
     master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze",  # the daemon's process settings

@@ -5,12 +5,21 @@
   ends in 'disabled'); a running job ends aborted; no job, MDI or reset starts while it is
   active. Hardware safety stays the STO chain's job: this is the controller's reaction.
 - ``limit_<axis>_min`` / ``limit_<axis>_max`` / ``limit_<axis>`` (axis name in lower case,
-  e.g. ``limit_x_min``), or any input with ``limit: AXIS`` in YAML: active while a job runs -> that job is aborted with one line naming
-  the input and axis; no job starts while one is active.
+  e.g. ``limit_x_min``), or any input with ``limit: AXIS`` (``AXIS-`` / ``AXIS+``) in YAML:
+  becoming active while a job runs -> that job is aborted with one line naming the input and
+  axis. While one is active nothing starts but a jog of that axis away from it (LinuxCNC's
+  and grblHAL's way off a switch): away from the end the switch sits at (``_min``: -1,
+  ``_max``: +1), or, for a switch whose end is not said, from the direction the axis moved
+  when it tripped. A trip happens when the input becomes active, so the jog off is not
+  tripped by it and the switch is armed again once it clears.
 - M62-M65 P switch the output at bit P (0x6200) when playback reaches their row (M62/M63,
   'with the next motion' in LinuxCNC, and M64/M65, 'at once', alike: the program's order);
 - M7 / M8 / M9 switch the coolant output(s) named in service.program_gate.COOLANT_OUTPUTS;
   job end, abort and faults switch every coolant output off.
+
+The node's heartbeat is watched (fieldbus.node_heartbeat, the drives' consumer time): when
+it is lost, its inputs are unknown, and an e-stop that cannot be read is an e-stop: the
+same reaction, one line naming the node; nothing starts until ``reset`` brought it up again.
 
 Inputs arrive on the network's receive thread (fieldbus.io.IoNode.on_change); the handler
 only sends requests (quick stop, abort), never waits.
@@ -24,7 +33,7 @@ from dataclasses import dataclass
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus.io import IoNode
-from nurbsmotion.io_config import IoSignal
+from nurbsmotion.io_config import IoSignal, limit_axis_side
 from nurbsmotion.log import kv
 from nurbsmotion.program import CoolantMode
 from nurbsmotion.service.program_gate import COOLANT_OUTPUTS
@@ -32,14 +41,48 @@ from nurbsmotion.service.program_gate import COOLANT_OUTPUTS
 log = logging.getLogger(__name__)
 
 ESTOP = "estop"
+HEARTBEAT = "heartbeat"  # SafetyTrip.input of a lost I/O node
 
 
 def limit_inputs(config: MachineConfig) -> dict[str, str]:
     """{input name: axis name} of the io inputs that are limit switches of a configured axis."""
+    return {name: switch.axis for name, switch in limit_switches(config).items()}
+
+
+@dataclass(frozen=True)
+class LimitSwitch:
+    """A limit input of ``axis`` at its ``side`` end: -1 negative (``_min``, ``X-``), +1
+    positive (``_max``, ``X+``), 0 not said (``limit_x``, ``limit: X``)."""
+
+    input: str
+    axis: str
+    side: int
+
+
+@dataclass(frozen=True)
+class AxisMotion:
+    """A motion of one axis in machine coordinates: ``direction`` +1 / -1 (a jog)."""
+
+    axis: str
+    direction: int
+
+    def text(self) -> str:
+        return f"{self.axis}{'+' if self.direction > 0 else '-'}"
+
+
+def limit_switches(config: MachineConfig) -> dict[str, LimitSwitch]:
+    """{input name: LimitSwitch} of the io inputs that are limit switches of a configured axis."""
     if config.io is None:
         return {}
-    by_name = {f"limit_{a.name.lower()}{end}": a.name for a in config.axes for end in ("", "_min", "_max")}
-    return {s.name: s.limit or by_name[s.name] for s in config.io.inputs if s.limit or s.name in by_name}
+    by_name = {f"limit_{a.name.lower()}{end}": (a.name, side) for a in config.axes
+               for end, side in (("", 0), ("_min", -1), ("_max", 1))}
+    switches = {}
+    for s in config.io.inputs:
+        if s.limit:
+            switches[s.name] = LimitSwitch(s.name, *limit_axis_side(s.limit))
+        elif s.name in by_name:
+            switches[s.name] = LimitSwitch(s.name, *by_name[s.name])
+    return switches
 
 
 def coolant_outputs(config: MachineConfig) -> tuple[str, ...]:
@@ -59,17 +102,22 @@ class SafetyTrip:
 
 class MachineIo:
     """The I/O node as the daemon uses it. ``on_trip(SafetyTrip)`` is called (receive thread)
-    when the e-stop or a limit input becomes active."""
+    when the e-stop or a limit input becomes active; ``moving(axis)`` says which way an axis
+    moves now (+1 / -1, 0 at rest or unknown): the end of a switch whose end is not said."""
 
-    def __init__(self, config: MachineConfig, node: IoNode, on_trip: Callable[[SafetyTrip], None]) -> None:
+    def __init__(self, config: MachineConfig, node: IoNode, on_trip: Callable[[SafetyTrip], None],
+                 moving: Callable[[str], int] = lambda axis: 0) -> None:
         assert config.io is not None
         self.config = config
         self.node = node
         self.on_trip = on_trip
-        self.limits = limit_inputs(config)
+        self.moving = moving
+        self.switches = limit_switches(config)
+        self._tripped_side: dict[str, int] = {}  # a switch whose end is not said: the way its axis moved
         self.coolant = coolant_outputs(config)
         self._signals: dict[str, IoSignal] = {s.name: s for s in config.io.inputs}
         node.on_change = self._on_change
+        node.on_lost = self._on_lost
 
     def _describe(self, name: str) -> str:
         signal = self._signals[name]
@@ -78,13 +126,29 @@ class MachineIo:
 
     def _on_change(self, name: str, active: bool) -> None:
         if not active:
+            if name in self.switches:  # cleared: the next activation trips again
+                self._tripped_side.pop(name, None)
+                log.info(kv("io.limit_armed", input=name, axis=self.switches[name].axis))
             return
         if name == ESTOP:
             self.on_trip(SafetyTrip(name, None, f"e-stop input {name} ({self._describe(name)}) is active: quick stop, "
                                                f"then every drive disabled"))
-        elif name in self.limits:
-            axis = self.limits[name]
+        elif name in self.switches:
+            axis = self.switches[name].axis
+            if self.switches[name].side == 0:
+                self._tripped_side[name] = self.moving(axis)
             self.on_trip(SafetyTrip(name, axis, f"limit input {name} ({self._describe(name)}) is active: axis {axis}"))
+
+    def _on_lost(self, message: str) -> None:
+        """The node's heartbeat is lost: an e-stop that cannot be read is an e-stop."""
+        self.on_trip(SafetyTrip(HEARTBEAT, None, f"{message}: its inputs are unknown: quick stop, then every "
+                                                 f"drive disabled"))
+
+    def lost_refusal(self) -> str | None:
+        """While the node is lost: why nothing starts (reset brings it up again)."""
+        if self.node.lost is None:
+            return None
+        return f"io node {self.node.io.node_id} lost ({self.node.lost}): its inputs are unknown; reset brings it up again"
 
     def has_estop(self) -> bool:
         return ESTOP in self._signals
@@ -93,13 +157,33 @@ class MachineIo:
         """The e-stop input is active, or not known yet (unknown counts as pressed)."""
         return self.has_estop() and self.node.input(ESTOP) is not False
 
-    def start_refusal(self) -> str | None:
-        """Why no motion may start now (e-stop or a limit input active), else None."""
+    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+        """Why no motion may start now, else None: the e-stop is active, or a limit input is
+        and the motion is not ``jog``, a jog of that axis away from the switch."""
+        if (lost := self.lost_refusal()) is not None:
+            return lost
         if self.estop_active():
             return f"e-stop input {ESTOP} ({self._describe(ESTOP)}) is active: release it first"
-        for name, axis in self.limits.items():
+        for name, switch in self.switches.items():
             if self.node.input(name):
-                return f"limit input {name} ({self._describe(name)}) is active: axis {axis} is on its limit switch"
+                why = self._limit_refusal(switch, jog)
+                if why is not None:
+                    return why
+        return None
+
+    def _limit_refusal(self, switch: LimitSwitch, jog: AxisMotion | None) -> str | None:
+        """None when ``jog`` moves ``switch``'s axis away from it; else the one line."""
+        side = switch.side or self._tripped_side.get(switch.input, 0)
+        on = f"limit input {switch.input} ({self._describe(switch.input)}) is active: axis {switch.axis} is on its " \
+             f"limit switch"
+        if side == 0:
+            return f"{on}, and which end it is is not known (name the input limit_{switch.axis.lower()}_min / _max " \
+                   f"or give limit: {switch.axis}- / {switch.axis}+): move the axis off it by hand"
+        away = AxisMotion(switch.axis, -side)
+        if jog is None or jog.axis != switch.axis:
+            return f"{on}: only a jog {away.text()} (away from it) may move"
+        if jog.direction == side:
+            return f"{on}: jog {jog.text()} moves towards it; jog {away.text()} moves away"
         return None
 
     def set_coolant(self, mode: CoolantMode) -> dict[str, bool]:
@@ -127,4 +211,5 @@ class MachineIo:
 
     def status(self) -> dict[str, object]:
         return {"node": self.config.io.node_id, "inputs": self.node.inputs,  # type: ignore[union-attr]
-                "outputs": self.node.outputs, "estop_active": self.estop_active() if self.has_estop() else None}
+                "outputs": self.node.outputs, "estop_active": self.estop_active() if self.has_estop() else None,
+                "lost": self.node.lost}

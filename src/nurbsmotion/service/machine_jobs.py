@@ -5,7 +5,8 @@
 - during it: its events at their rows (JobEvents); an e-stop or limit input, or a spindle
   that stops on its own, ends it with one line (``job.machine_fault``, the outcome's reason);
 - at its end: the spindle ramps to 0 (completed, stopped) or gets a quick stop and is
-  disabled (abort, fault); coolant off. An e-stop also quick-stops the axes without a job.
+  disabled (abort, fault); coolant off; a completed MDI and a completed or stopped jog leave
+  the spindle and outputs as they are. An e-stop also quick-stops the axes without a job.
 
 Every method is a no-op without devices, so the controller calls them unconditionally.
 Jobs are the controller's ActiveJob (handle, record, plan, events, machine_fault, stop_requested).
@@ -18,15 +19,19 @@ import threading
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
-from nurbsmotion.service.machine_io import SafetyTrip
-from nurbsmotion.service.planner import PlannedJob
+from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
+from nurbsmotion.service.planner import JOG_NAME, MDI_NAME, PlannedJob
 
 log = logging.getLogger(__name__)
+DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
 ENDED_SOFTLY = ("done", "stopped")  # master JobResult outcomes after which the spindle ramps down
+KEEPS_DEVICES = {MDI_NAME: ("done",), JOG_NAME: ("done", "stopped")}  # job name -> outcomes that leave them on
 
 
 class MachineJobs:
@@ -37,14 +42,20 @@ class MachineJobs:
         if devices is not None:
             devices.on_trip = self.trip
             devices.on_spindle_fault = self.spindle_fault
+            devices.axis_direction = self.axis_direction
 
     # ------------------------------------------------------------------ before a job
-    def start_refusal(self) -> str | None:
-        return self.devices.start_refusal() if self.devices is not None else None
+    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+        return self.devices.start_refusal(jog) if self.devices is not None else None
 
     def reset_refusal(self) -> str | None:
-        """Reset is refused while the e-stop input is active."""
-        io = self.devices.io if self.devices is not None else None
+        """Reset brings a lost io node up again (refused, with its bring-up line, if it cannot)
+        and is refused while the e-stop input is active."""
+        if self.devices is None:
+            return None
+        if (why := self.devices.revive_io()) is not None:
+            return why
+        io = self.devices.io
         return io.start_refusal() if io is not None and io.estop_active() else None
 
     def prepare(self, plan: PlannedJob) -> tuple[PlannedJob, frozenset[int]]:
@@ -64,12 +75,19 @@ class MachineJobs:
         job.events.start()
 
     def end(self, job: Any, result: Any) -> None:
-        """Spindle ramped down or quick-stopped and disabled, coolant off; one record line."""
+        """Spindle ramped down or quick-stopped and disabled, coolant off; one record line.
+        An MDI that completed, or a jog that completed or was stopped, leaves them as they are
+        (as LinuxCNC does: ``mdi "M3 S1000"`` keeps the spindle turning, ``mdi "M5"`` stops it)."""
         if self.devices is None:
+            return
+        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
+        if not hard and result.outcome in KEEPS_DEVICES.get(job.name, ()):
+            if job.events is not None:
+                job.events.finish(drain=True)
+                job.events.record("devices_kept", self.devices.kept())
             return
         if job.events is not None:
             job.events.finish()
-        hard = bool(job.machine_fault) or bool(result.faults) or result.outcome not in ENDED_SOFTLY
         try:
             self.devices.all_off(hard)
         except FieldbusError as err:
@@ -103,6 +121,19 @@ class MachineJobs:
             self.link.quick_stop(trip.message)
             if self.devices is not None:
                 threading.Thread(target=self.devices.all_off, args=(True,), name="estop-devices", daemon=True).start()
+
+    def axis_direction(self, axis: str) -> int:
+        """+1 / -1: the way the running job moves ``axis`` (machine mm) around the set-point the
+        master sends now (DIRECTION_ROWS either side); 0 without a job or at rest."""
+        job = self.running_job()
+        index = self.link.status().job_index
+        axis_map = self.link.axis_map
+        if job is None or index is None or axis not in axis_map.names:
+            return 0
+        i, rows = axis_map.names.index(axis), job.plan.counts
+        last = len(rows) - 1
+        step = int(rows[min(index + DIRECTION_ROWS, last)][i]) - int(rows[min(max(index - DIRECTION_ROWS, 0), last)][i])
+        return int(np.sign(step * axis_map.sign[i]))
 
     def spindle_fault(self, message: str) -> None:
         """The spindle left OPERATION ENABLED on its own: the running job is aborted."""

@@ -194,6 +194,19 @@ def needs_planner_worker(config: MachineConfig) -> bool:
     return config.interpolation.algorithm == "lookahead" and not has_devices
 
 
+STILL_ROWS = 2  # a job without motion: the held position twice, so row 0 can be a pause row (< last)
+
+
+def still_trajectory(program: Program, period_s: float) -> Trajectory:
+    """The trajectory of MDI lines without motion (``M3 S1000``, ``M8``, ``M64 P4``, ``G54``):
+    STILL_ROWS rows at the start position, every event at row 0, so the job runs them (and
+    waits for the spindle at speed there) like any job's events, without moving an axis."""
+    rows = STILL_ROWS
+    return Trajectory(algorithm="none (no motion)", period_s=period_s, block=np.zeros(rows, dtype=np.int32),
+                      u=np.zeros(rows), position_mm=np.tile(np.asarray(program.start_position, dtype=float), (rows, 1)),
+                      feed_mm_s=np.zeros(rows))
+
+
 def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
              options: ReadOptions | None = None) -> PlannedJob:
     """Parse, plan, check and convert ``text`` (see the module docstring). ``options``: the
@@ -204,11 +217,12 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
         start_xyz[axis_columns(config)] = start_mm
     program = parse(name, text, start_xyz, options or ReadOptions(tool_table=config.tool_table))
     check_machine_can_run(program, config)  # spindle, coolant, holds: before any planning
-    if not program.blocks:
+    if not program.blocks and name != MDI_NAME:
         raise InputError(name, "the program has no motion")
     t0 = time.perf_counter()
     try:
-        trajectory = plan(program, limits_from_config(config), config.interpolation.algorithm)
+        trajectory = plan(program, limits_from_config(config), config.interpolation.algorithm) if program.blocks \
+            else still_trajectory(program, config.cycle_period_s)
     except InputError as err:  # a planner names 'block N': say which program it is
         raise InputError(f"{name}: {err.where}" if err.where else name, err.message) from None
     planning_s = time.perf_counter() - t0
