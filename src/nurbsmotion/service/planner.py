@@ -179,8 +179,9 @@ def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarra
                 options: ReadOptions | None = None, worker: "PlannerWorker | None" = None) -> "PlannedJob | StreamedJob":
     """The daemon's planner: the lookahead planner streams the job while it runs in the
     planner worker (service.streamed_job, checked completely first); the papers' methods
-    plan it whole."""
-    if config.interpolation.algorithm == "lookahead" and worker is not None:
+    plan it whole, and so are MDI lines (one line: planned at once; one without motion runs
+    as a still job, which a streamed job cannot be)."""
+    if config.interpolation.algorithm == "lookahead" and worker is not None and name != MDI_NAME:
         from nurbsmotion.service.streamed_job import prepare_streamed_job
 
         return prepare_streamed_job(name, text, config, worker, start_mm, options)
