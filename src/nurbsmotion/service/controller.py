@@ -122,7 +122,9 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
-            plan, wait_rows = self.machine.prepare(plan)  # unchanged without spindle/I-O (and then it may stream)
+            wait_rows: frozenset[int] = frozenset()
+            if isinstance(plan, PlannedJob):  # a streamed job only on a machine without spindle/I-O
+                plan, wait_rows = self.machine.prepare(plan)
             try:
                 record = self._record(name, text, plan)
             except InputError:
