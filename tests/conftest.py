@@ -24,6 +24,17 @@ def wang_curve() -> NurbsCurve:
     return NurbsCurve.create(2, WANG_POINTS, WANG_WEIGHTS, WANG_KNOTS)
 
 
+@pytest.fixture(scope="session")
+def planner_worker():
+    """One planner worker process (service.planner_worker) for the streamed jobs of the session."""
+    from nurbsmotion.service.planner_worker import PlannerWorker
+
+    worker = PlannerWorker()
+    worker.start()
+    yield worker
+    worker.close()
+
+
 @pytest.fixture(autouse=True)
 def _restore_root_logger() -> Iterator[None]:
     """A CLI entry point called in-process (nurbsmotion.log.setup_logging) gives the root logger

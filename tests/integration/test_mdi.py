@@ -52,3 +52,13 @@ def test_the_mdi_command_line(daemon, capsys):
     assert "completed" in capsys.readouterr().out
     assert _commanded(daemon) == [2.0, 2.0, 0.0]
     assert main(["mdi", "--socket", str(daemon.socket), "G01 X0 Y0 F3000"]) == 0
+
+
+def test_an_mdi_line_without_motion_runs_as_a_still_job_where_programs_are_streamed(daemon):
+    """This machine (lookahead, no spindle or I/O node) streams programs from its planner
+    worker; MDI lines are planned whole, so one without motion (a work offset) runs as
+    main's two-row still job instead of being refused as 'the program has no motion'."""
+    job = _mdi(daemon, "G55")
+    assert job["outcome"]["outcome"] == "completed", job["outcome"]
+    refused = daemon.request("submit", name="still.nc", program="G21 G90\nG55\n")
+    assert refused["ok"] is False and "no motion" in refused["error"]

@@ -24,6 +24,7 @@ class FakeJob:
         self.stop_flag = ""
         self.done = threading.Event()
         self.result: JobResult | None = None
+        self.fell_behind_row = -1
 
     def wait(self, timeout: float | None = None) -> JobResult | None:
         return self.result if self.done.wait(timeout) else None
@@ -65,10 +66,20 @@ class FakeLink:
         threading.Thread(target=self._play, args=(job,), daemon=True).start()
         return job
 
+    def stream_feed(self, feed, on_progress=None) -> FakeJob:
+        """A streamed job (fieldbus.row_source.RowFeed): its rows are played as they arrive."""
+        if feed.planned_end == 0:
+            feed.take_first()
+        return self.stream(RowsSoFar(feed))
+
     def _play(self, job: FakeJob) -> None:
         outcome = "done"
         stop = threading.Event()
-        for i in range(len(job.counts)):
+        i = -1
+        while True:
+            i += 1
+            if not (job.counts.has(i) if isinstance(job.counts, RowsSoFar) else i < len(job.counts)):
+                break
             stop.wait(self.cycle_s)
             job.index = i
             self.cycle = job.start_cycle + i
@@ -86,7 +97,7 @@ class FakeLink:
                 self.phase = "quick_stop" if job.stop_flag == "aborted" else "holding"
                 outcome = job.stop_flag
                 break
-        else:
+        if outcome == "done":
             self.phase = "holding"
         self.job = None
         job.result = JobResult(outcome, job.index + 1, len(job.counts), tuple(self.faults if outcome == "faulted" else ()),
@@ -120,6 +131,31 @@ class FakeLink:
             self.job.done.wait(timeout_s)
         self.shut = True
         self.phase = "offline"
+
+
+class RowsSoFar:
+    """The rows of a RowFeed as a growing array for FakeLink._play (index and len only)."""
+
+    def __init__(self, feed) -> None:
+        self.feed = feed
+        self.last_index = -1.0
+
+    def __len__(self) -> int:
+        return self.feed.planned_end
+
+    def has(self, i: int) -> bool:
+        """Row i is (or becomes) available: waits for the producer (the playing thread only)."""
+        feed = self.feed
+        while i >= feed.planned_end:
+            if feed.take(self.last_index, False) is None:
+                if feed.final or (feed._closed and not feed.waiting):
+                    return False
+                threading.Event().wait(0.001)
+        return True
+
+    def __getitem__(self, i):
+        self.last_index = float(i)
+        return np.array([self.feed[i, j] for j in range(self.feed.n_axes)])
 
 
 class FakePlannedJob(PlannedJob):

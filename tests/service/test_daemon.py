@@ -88,3 +88,37 @@ def test_a_corrupt_offsets_file_stops_the_start_with_one_line_naming_file_and_fi
                               "[x, y, z] in mm, got [1, 'x', 3]")
     assert links == [] and not Path(config.control.socket).exists()  # nothing was started
     daemon.close()
+
+
+def test_the_planner_worker_is_ready_before_the_bus_starts(config):
+    """The planner worker's interpreter imports the planner before the bus and the cycle
+    thread start: spawned after bring-up it competed with them and with the drives for the
+    CPU (inside User-Mode Linux, one CPU: first motion 13 s after the first submission and
+    the drives' process seconds behind its socket), and the first job waited for it."""
+    seen: list[tuple[bool, bool]] = []
+
+    def open_motion(cfg):
+        worker = daemon.planner_worker
+        seen.append((worker is not None and worker.alive, worker is not None and worker.ready))
+        return FakeLink(cfg, 0.002), None
+
+    daemon = Daemon(config, open_motion)
+    daemon.start()
+    try:
+        assert seen == [(True, True)]
+    finally:
+        daemon.close()
+    assert daemon.planner_worker is None
+
+
+def test_a_bus_that_fails_to_open_stops_the_planner_worker_too(config):
+    workers = []
+
+    def open_motion(cfg):
+        workers.append(daemon.planner_worker)
+        raise OSError("no such device: vcan9")
+
+    daemon = Daemon(config, open_motion)
+    with pytest.raises(OSError):
+        daemon.start()
+    assert daemon.planner_worker is None and workers and not workers[0].alive

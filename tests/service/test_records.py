@@ -56,3 +56,23 @@ def test_a_rejected_submission_keeps_its_program_and_errors(tmp_path):
     record = records.create_rejected("bad.nc", "G01 Q7\n", ["bad.nc:1: Q7: unsupported word Q"])
     assert record.outcome()["outcome"] == "rejected" and record.outcome()["errors"] == ["bad.nc:1: Q7: unsupported word Q"]
     assert record.summary()["name"] == "bad.nc" and records.mark_interrupted() == []
+
+
+def test_a_streamed_job_left_mid_plan_gets_its_cycles_from_the_whole_trace_rows(tmp_path):
+    records = JobRecords(tmp_path)
+    record = records.create("long.nc", "G01 X60\n")
+    record.write_plan_summary({"streamed": True, "cycles": None, "period_s": 0.001})
+    (record.folder / "trace.csv.part").write_text("t,x\n0,0\n0.001,0.5\n0.002,1.0\n0.00")  # killed mid-line
+    assert records.mark_interrupted() == [record]
+    assert (record.folder / "trace.csv").read_text() == "t,x\n0,0\n0.001,0.5\n0.002,1.0\n"
+    assert not (record.folder / "trace.csv.part").exists()
+    plan = record.plan()
+    assert plan["cycles"] == 3 and plan["planned_all"] is False and plan["duration_s"] == 0.002
+
+
+def test_a_whole_plan_record_is_left_as_written(tmp_path):
+    records = JobRecords(tmp_path)
+    record = records.create("a.nc", "G01 X1\n")
+    record.write_plan({"cycles": 2}, lambda path: path.write_text("t,x\n0,0\n0.001,1\n"))
+    records.mark_interrupted()
+    assert record.plan() == {"cycles": 2}

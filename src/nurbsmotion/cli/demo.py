@@ -144,8 +144,12 @@ def _run_program(config: MachineConfig, quiet: bool) -> dict[str, Any]:
 
             raise InputError(PROGRAM_NAME, "; ".join(err.errors)) from None
         plan = job["summary"]
-        print(f"planned {PROGRAM_NAME}: {plan['length_mm']:.1f} mm in {plan['cycles']} cycles "
-              f"({plan['duration_s']:.2f} s, {plan['algorithm']}, planning {plan['planning_time_s']:.2f} s)")
+        if plan.get("streamed"):  # planned while it runs (docs/daemon.md, streamed jobs)
+            print(f"planned {PROGRAM_NAME} while it runs: {plan['length_mm']:.1f} mm, {plan['blocks']} blocks, "
+                  f"first chunk in {plan['first_chunk_s']:.2f} s ({plan['algorithm']}, streamed)")
+        else:
+            print(f"planned {PROGRAM_NAME}: {plan['length_mm']:.1f} mm in {plan['cycles']} cycles "
+                  f"({plan['duration_s']:.2f} s, {plan['algorithm']}, planning {plan['planning_time_s']:.2f} s)")
         display = _display(PROGRAM_NAME, quiet)
         try:
             return follow(client, job["id"], display.update if display else None)

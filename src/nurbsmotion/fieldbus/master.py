@@ -53,6 +53,7 @@ from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedu
 from nurbsmotion.fieldbus.homing_run import READY_TIMEOUT_S, HomingRun
 from nurbsmotion.fieldbus.pdo import cycles_of_ms
 from nurbsmotion.fieldbus.playback import Playback
+from nurbsmotion.fieldbus.row_source import RowFeed
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
 from nurbsmotion.fieldbus.stop_ramp import ramp_slope
 from nurbsmotion.fieldbus.supervisor import CycleHistory, Supervisor
@@ -73,12 +74,13 @@ FeedbackSink = Callable[[int, int, int, int, float], None]  # see Master.record_
 class Job:
     """Handle of one streamed set-point sequence; every method is thread-safe."""
 
-    def __init__(self, master: "Master", rows: memoryview, playback: Playback,
-                 on_progress: Callable[[int, int], None] | None, progress_every: int) -> None:
+    def __init__(self, master: "Master", rows: Any, playback: Playback,
+                 on_progress: Callable[[int, int], None] | None, progress_every: int,
+                 feed: RowFeed | None = None) -> None:
         self._master = master
         self.rows = rows
-        self.length = rows.shape[0]
-        self.last = rows.shape[0] - 1
+        self.feed = feed  # a streamed job's rows (fieldbus.row_source), None: all given at the start
+        self._length = rows.shape[0]
         self.playback = playback
         self.on_progress = on_progress
         self.progress_every = progress_every
@@ -94,6 +96,16 @@ class Job:
     def index(self) -> int:
         """Index of the last planned set-point handed to the bus (queued included)."""
         return self.playback.index
+
+    @property
+    def length(self) -> int:
+        """Planned rows: all of them, or for a streamed job those received so far."""
+        return self.feed.planned_end if self.feed is not None else self._length
+
+    @property
+    def fell_behind_row(self) -> int:
+        """A streamed job that ran onto a stop tail: its last planned row (-1: it did not)."""
+        return self.feed.fell_behind_row if self.feed is not None else -1
 
     def wait(self, timeout: float | None = None) -> JobResult | None:
         """Block until the job ended (or ``timeout`` s passed: None)."""
@@ -529,19 +541,8 @@ class Master:
             raise InputError("set-points", f"counts must be integers (int32), got dtype {arr.dtype}")
         if arr.size and (arr.min() < -(2**31) or arr.max() > 2**31 - 1):
             raise InputError("set-points", "counts outside the int32 range")
-        if self._phase != "holding" or self._thread is None:
-            raise FieldbusError(f"stream: the axes are not holding (phase {self._phase}); "
-                                f"{'call reset_faults()' if self._thread is not None else 'call bring_up()'} first")
-        if self._job is not None or any(r[0] == "job" for r in self._requests):
-            raise FieldbusError("stream: a job is already running")
-        if self._supervisor.reported:
-            raise FieldbusError("stream: faults not acknowledged; call reset_faults() first")
-        hold = self._hold
-        for j in range(self._n):
-            if abs(int(arr[0, j]) - hold[j]) > self._fe_window[j]:
-                raise InputError("set-points", f"axis {self._names[j]}: the job starts at {int(arr[0, j])} counts "
-                                 f"but the axis holds {hold[j]} counts (more than the following-error window "
-                                 f"{self._fe_window[j]} counts away)")
+        self._check_can_stream()
+        self._check_start_row(arr[0])
         # A 2-D memoryview: 8 bytes per set-point, read per cycle as rows[i, j] -> int
         # (nested lists would cost ~10x the memory for a long program).
         as_int64 = np.ascontiguousarray(arr, dtype=np.int64)
@@ -557,6 +558,55 @@ class Master:
         self._gc.quiet()
         self._request("job", job)
         return job
+
+    def stream_feed(self, feed: RowFeed, on_progress: Callable[[int, int], None] | None = None) -> Job:
+        """Start a job whose rows arrive over time (fieldbus.row_source): its first chunk must
+        be queued already (and start within the following-error window of the held position);
+        the producer keeps putting chunks while the job plays and closes the feed after the
+        last. The stop ramp always has the newest chunk's stop tail to stop on; a job that
+        runs onto it ends at rest there (``Job.fell_behind_row``). Program pauses come with
+        the chunks. Other arguments as :meth:`stream`."""
+        if feed.n_axes != self._n:
+            raise InputError("set-points", f"expected rows of {self._n} axes, got {feed.n_axes}")
+        self._check_can_stream()
+        if feed.planned_end == 0:
+            first = feed.take_first()
+            if first is None or len(first.rows) == 0:
+                raise InputError("set-points", "the streamed job has no first chunk of rows")
+        else:
+            first = None
+        self._check_start_row(np.asarray(feed.buf[0]))
+        step = list(first.max_step) if first is not None and first.max_step else [0.0] * self._n
+        accel = list(first.max_accel) if first is not None and first.max_accel else [0.0] * self._n
+        slope = 1.0  # ramp_slope of the first chunk's steps (lowered as larger steps arrive)
+        for j in range(self._n):
+            if step[j] > 0:
+                slope = min(slope, float(self._accel_counts_s2[j]) * self._period_s**2 / step[j])
+        playback = Playback(feed, slope, self._rate_target, step, accel,
+                            tuple(first.pauses) if first is not None else (), feed=feed,
+                            accel_limits=[float(a) for a in self._accel_counts_s2], period_s=self._period_s)
+        job = Job(self, feed, playback, on_progress, self._progress_every, feed)
+        self._gc.quiet()
+        self._request("job", job)
+        return job
+
+    def _check_can_stream(self) -> None:
+        if self._phase != "holding" or self._thread is None:
+            raise FieldbusError(f"stream: the axes are not holding (phase {self._phase}); "
+                                f"{'call reset_faults()' if self._thread is not None else 'call bring_up()'} first")
+        if self._job is not None or any(r[0] == "job" for r in self._requests):
+            raise FieldbusError("stream: a job is already running")
+        if self._supervisor.reported:
+            raise FieldbusError("stream: faults not acknowledged; call reset_faults() first")
+
+    def _check_start_row(self, row: np.ndarray) -> None:
+        """The first set-point is within each axis' following-error window of the held position."""
+        hold = self._hold
+        for j in range(self._n):
+            if abs(int(row[j]) - hold[j]) > self._fe_window[j]:
+                raise InputError("set-points", f"axis {self._names[j]}: the job starts at {int(row[j])} counts "
+                                 f"but the axis holds {hold[j]} counts (more than the following-error window "
+                                 f"{self._fe_window[j]} counts away)")
 
     def status(self) -> MasterStatus:
         """A consistent-enough snapshot (lists copied) for the daemon; any thread."""

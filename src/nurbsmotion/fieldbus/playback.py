@@ -17,12 +17,22 @@ and lets it ramp back up to the requested rate like an override change). Pause r
 M0/M1/M6, where the planner already brought the axes to rest) stop the advance exactly on
 that row; resuming there restarts at the requested rate at once (the plan itself
 accelerates from rest, so no extra ramp is needed).
+
+Streamed jobs (fieldbus.row_source.RowFeed): the rows arrive in chunks while the job plays.
+Each cycle the playback appends the next queued chunk to its window unless it already ran
+onto the newest chunk's stop tail or a stop is under way; the stop slope's figures (largest
+step and planned acceleration per axis) are running maxima over the rows received. At the
+end of the rows received the playback waits there (the chunk ended at rest) or, on a stop
+tail at rest, ends the job: planning fell behind (``feed.fell_behind_row``).
 """
 
 from __future__ import annotations
 
 import math
 
+from typing import Any
+
+from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
 from nurbsmotion.fieldbus.stop_ramp import RATE_RAMP_SHARE, StopRamp, setpoints_at, stop_slope
 
 PlaybackState = tuple[float, float, float, int, bool, float, float, float, int]
@@ -32,14 +42,20 @@ class Playback:
     """Where a job plays now and how fast; every per-cycle method is float arithmetic only."""
 
     __slots__ = ("rows", "last", "n_axes", "s", "r", "target", "index", "stopping", "ramp", "ramp_dr",
-                 "max_step", "planned_accel", "pauses", "pause_i")
+                 "max_step", "planned_accel", "pauses", "pause_i", "feed", "accel_limits", "period_s")
 
-    def __init__(self, rows: memoryview, ramp_dr: float, rate: float, max_step: list[float],
-                 planned_accel: list[float], pauses: tuple[int, ...] = ()) -> None:
-        """``rows``: 2-D memoryview (cycles x axes) of int64 counts; ``ramp_dr``: ramp_slope of
-        the rows; ``max_step``/``planned_accel``: per-axis largest |Δc| per cycle and planned
-        acceleration (counts/s²), for the stop slope; ``pauses``: sorted row indices where the
-        playback stops and waits for :meth:`resume` (program pauses, axes at rest there)."""
+    def __init__(self, rows: Any, ramp_dr: float, rate: float, max_step: list[float],
+                 planned_accel: list[float], pauses: tuple[int, ...] = (), feed: RowFeed | None = None,
+                 accel_limits: list[float] | None = None, period_s: float = 0.0) -> None:
+        """``rows``: 2-D memoryview (cycles x axes) of int64 counts, or the ``feed`` of a streamed
+        job; ``ramp_dr``: ramp_slope of the rows; ``max_step``/``planned_accel``: per-axis
+        largest |Δc| per cycle and planned acceleration (counts/s²), for the stop slope;
+        ``pauses``: sorted row indices where the playback stops and waits for :meth:`resume`
+        (program pauses, axes at rest there). A ``feed`` needs ``accel_limits`` (counts/s²)
+        and ``period_s`` to lower ``ramp_dr`` as larger steps arrive."""
+        self.feed = feed
+        self.accel_limits = accel_limits or []
+        self.period_s = period_s
         self.rows = rows
         self.last = rows.shape[0] - 1
         self.n_axes = rows.shape[1]
@@ -52,7 +68,7 @@ class Playback:
         self.target = rate
         self.index = -1  # last planned row handed out (int(s)); -1 before the first
         self.stopping = False
-        self.pauses = tuple(p for p in pauses if 0 <= p < self.last)
+        self.pauses = [p for p in pauses if 0 <= p < self.last]
         self.pause_i = 0  # index into pauses of the next pause row not yet reached
 
     @property
@@ -77,6 +93,11 @@ class Playback:
 
     def advance(self, out: list[int]) -> bool:
         """Set-points of the next cycle into ``out``; True once the last row is reached."""
+        feed = self.feed
+        if feed is not None and not feed.final:
+            chunk = feed.take(self.s if self.index >= 0 else -1.0, self.stopping)
+            if chunk is not None:
+                self._adopt(chunk, feed)
         if self.index < 0:
             s = 0.0
         else:
@@ -92,7 +113,29 @@ class Playback:
         self.s = s
         setpoints_at(self.rows, s, out, self.n_axes)
         self.index = int(s)
-        return self.index == self.last
+        if self.index != self.last:
+            return False
+        if feed is None or feed.final:
+            return True
+        if self.index >= feed.planned_end:  # at rest at the end of a stop tail: planning fell behind
+            feed.fell_behind_row = feed.planned_end - 1
+            return True
+        return False  # at rest at the end of the rows received: wait for the next chunk
+
+    def _adopt(self, chunk: RowChunk, feed: RowFeed) -> None:
+        """The window grew by ``chunk``: its last row, pauses and stop-slope figures."""
+        self.last = feed.end - 1
+        if not self.stopping:
+            self.ramp.last = self.next_pause
+        self.pauses.extend(chunk.pauses)
+        for j in range(self.n_axes):
+            step = chunk.max_step[j] if chunk.max_step else 0.0
+            if step > self.max_step[j]:
+                self.max_step[j] = step
+                if self.accel_limits and step > 0.0:
+                    self.ramp_dr = min(self.ramp_dr, self.accel_limits[j] * self.period_s**2 / step)
+            if chunk.max_accel and chunk.max_accel[j] > self.planned_accel[j]:
+                self.planned_accel[j] = chunk.max_accel[j]
 
     def start_stop(self, accel_limits: list[float], period_s: float) -> None:
         """Begin a controlled stop from the position and rate played last."""

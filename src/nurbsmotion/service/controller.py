@@ -34,12 +34,14 @@ from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
+from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
 log = logging.getLogger(__name__)
 
-Planner = Callable[[str, str, np.ndarray, ReadOptions], PlannedJob]  # (name, text, start mm, reader options) -> plan
+JobPlan = PlannedJob | StreamedJob  # planned whole before motion, or while it runs (the daemon's lookahead jobs)
+Planner = Callable[[str, str, np.ndarray, ReadOptions], JobPlan]  # (name, text, start mm, reader options) -> plan
 SETTLE_S = 0.5  # the longest a job's end waits for the axes to reach their last set-point (final_position)
 OUTCOME_OF_RESULT = {"done": "completed", "stopped": "stopped", "aborted": "aborted", "faulted": "fault"}
 
@@ -52,7 +54,7 @@ class Refused(InputError):
 class ActiveJob:
     record: JobRecord
     name: str
-    plan: PlannedJob
+    plan: JobPlan
     handle: JobHandle | None = None
     stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown'
     late_before: int = 0  # the link's cycle counters when the job started (outcome: the job's own)
@@ -120,8 +122,14 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
-            plan, wait_rows = self.machine.prepare(plan)
-            record = self._record(name, text, plan)
+            wait_rows: frozenset[int] = frozenset()
+            if isinstance(plan, PlannedJob):  # a streamed job only on a machine without spindle/I-O
+                plan, wait_rows = self.machine.prepare(plan)
+            try:
+                record = self._record(name, text, plan)
+            except InputError:
+                plan.cancel()
+                raise
             job = ActiveJob(record, name, plan, late_before=status.timing.late_cycles,
                             missed_before=status.timing.missed_cycles)
             if not keep_override and self._override != 1.0:
@@ -134,11 +142,11 @@ class Controller:
                 self._record_traffic(record)
                 job.feedback = self._record_feedback(record)
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
-                self.homing.shift_counts(plan.counts)  # onto the offsets `method: here` set
                 self.machine.ready()
-                job.handle = self.link.stream(plan.counts, pauses=tuple(p.row for p in plan.pauses))
+                job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
                 self.machine.start(job, wait_rows)
             except (InputError, FieldbusError) as err:
+                plan.cancel()
                 self._stop_traffic()
                 self._stop_feedback(job)
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
@@ -151,8 +159,9 @@ class Controller:
         finally:
             with self._lock:
                 self._planning = False
-        log.info(kv("job_started", job=record.job_id, name=name, cycles=len(plan.counts),
-                    duration_s=plan.trajectory.duration_s, override_percent=round(rate * 100.0, 3),
+        log.info(kv("job_started", job=record.job_id, name=name, cycles=plan.total_cycles,
+                    duration_s=plan.summary.get("duration_s"), streamed=isinstance(plan, StreamedJob),
+                    override_percent=round(rate * 100.0, 3),
                     folder=record.folder))
         return {"ok": True, "job": {"id": record.job_id, "folder": str(record.folder), "summary": plan.summary}}
 
@@ -359,14 +368,17 @@ class Controller:
     def _job_progress(self, job: ActiveJob | None, status: MasterStatus) -> dict[str, Any] | None:
         if job is None:
             return None
-        total = len(job.plan.counts)
-        index = status.job_index if status.job_index is not None and status.job_length == total else -1
+        total = job.plan.total_cycles  # None while a streamed job is still being planned
+        mine = status.job_index is not None and (total is None and job.start_cycle >= 0 or status.job_length == total)
+        index = status.job_index if mine and status.job_index is not None else -1
         cycle = max(index + 1, 0)
-        feed = float(job.plan.trajectory.feed_mm_s[min(max(index, 0), total - 1)]) * self._effective(job)
+        feed = job.plan.feed_at(index) * self._effective(job)
         reached = self._line_reached(job, index)
         pause = job.plan.pauses[status.pause] if status.pause is not None else None
         return {"paused": pause.reason if pause else None, "tool": pause.tool if pause else None,"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
-                "total": total, "percent": round(100.0 * cycle / total, 2), "feed_mm_s": round(feed, 3),
+                "total": total if total is not None else max(status.job_length or 0, cycle),
+                "percent": round(job.plan.percent_at(index), 2), "planned_all": total is not None,
+                "feed_mm_s": round(feed, 3),
                 "override_percent": round(self._effective(job) * 100.0, 3),
                 "line": reached["where"] if reached else None, "started_at": job.started_at,
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
@@ -401,13 +413,14 @@ class Controller:
         if why is not None:
             raise Refused("submit", why)
 
-    def _record(self, name: str, text: str, plan: PlannedJob) -> JobRecord:
-        """The job folder with program, plan and trace, complete before any motion."""
+    def _record(self, name: str, text: str, plan: JobPlan) -> JobRecord:
+        """The job folder with program, configuration and plan before any motion (a streamed
+        job's trace follows as it is planned)."""
         record = None
         try:
             record = self.records.create(name, text)
             record.write_config(config_dict(self.config))
-            record.write_plan(plan.summary, plan.write_trace)
+            plan.write_records(record)
             return record
         except OSError as err:
             if record is not None:
@@ -487,7 +500,7 @@ class Controller:
         held = np.array([[a.setpoint_counts for a in status.axes]])
         return self.link.axis_map.to_mm(held)[0]
 
-    def _set_link_rate(self, plan: PlannedJob) -> float:
+    def _set_link_rate(self, plan: JobPlan) -> float:
         rate = effective_rate(self._override, plan.max_rate)
         self.link.set_rate(rate)
         return rate
@@ -499,6 +512,7 @@ class Controller:
         while result is None:
             result = job.handle.wait(1.0)
             self._flush_feedback(job)
+        job.plan.cancel()  # a streamed job's planner stops (the job ended)
         self.machine.end(job, result)
         status, settled = self._settled_status()
         self._stop_feedback(job)  # after the settling: feedback.csv shows the axes come to rest
@@ -510,6 +524,10 @@ class Controller:
             except OSError as err:
                 log.warning(kv("recording_not_written", job=job.record.job_id, error=err))
         self._keep_program_state(job, outcome["outcome"])
+        try:
+            job.plan.finish_records(job.record)
+        except OSError as err:
+            log.error(kv("plan_not_written", job=job.record.job_id, error=err))
         try:
             job.record.write_outcome(outcome)
         except OSError as err:  # the record is incomplete, but the daemon must stay usable
@@ -566,6 +584,10 @@ class Controller:
         reason = job.machine_fault or faults[0]["message"] if job.machine_fault or faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
             "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, "")
+        cut_short = job.plan.end_reason(getattr(job.handle, "fell_behind_row", -1))
+        if cut_short and outcome == "completed":  # the planner stopped the job (failed or fell behind)
+            outcome, reason = "stopped", cut_short
+            log.warning(kv("job_cut_short", job=job.record.job_id, reason=cut_short))
         return {"outcome": outcome, "job": job.record.job_id, "name": job.name, "reason": reason,
                 "fault": faults[0] if faults else None, "faults": faults,
                 "sent": result.sent, "planned": result.length,
@@ -580,10 +602,9 @@ class Controller:
 
     def _line_reached(self, job: ActiveJob, index: int) -> dict[str, Any] | None:
         """The program line of planned set-point ``index`` (None before the first one)."""
-        program, blocks = job.plan.program, job.plan.trajectory.block
-        if program is None or index < 0 or not len(blocks) or not program.blocks:  # no motion: no line reached
+        program, block = job.plan.program, job.plan.block_at(index)
+        if program is None or block is None or not program.blocks:  # no motion: no line reached
             return None
-        block = int(blocks[min(index, len(blocks) - 1)])
         source = program.blocks[block].source
         return {"where": str(source), "line": source.line, "text": source.text, "block": block, "setpoint": index}
 

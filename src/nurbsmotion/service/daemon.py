@@ -18,8 +18,12 @@ import signal
 import threading
 from typing import Any, Callable
 
+import numpy as np
+
 from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
+from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.devices import open_devices
@@ -28,7 +32,8 @@ from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
-from nurbsmotion.service.planner import plan_job
+from nurbsmotion.service.planner import needs_planner_worker, prepare_job
+from nurbsmotion.service.planner_worker import PlannerWorker
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
@@ -77,6 +82,7 @@ class Daemon:
         self.simulation: Simulation | None = None
         self._closing = False
         self.ownership = BusOwnership(config)
+        self.planner_worker: PlannerWorker | None = None  # plans streamed jobs in its own process
 
     def start(self) -> None:
         self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
@@ -84,16 +90,21 @@ class Daemon:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
-        link, self.simulation = self._open_motion(self.config)
+        self._start_planner_worker()
+        try:
+            link, self.simulation = self._open_motion(self.config)
+        except BaseException:
+            self._stop_planner_worker()
+            raise
         try:
             devices = open_devices(self.config, link)  # spindle and I/O node, after the axes
         except BaseException:
             link.shutdown(2.0)
             self._stop_simulation()
+            self._stop_planner_worker()
             raise
-        self.controller = Controller(self.config, link,
-                                     lambda name, text, start, options: plan_job(name, text, self.config, start, options),
-                                     self.records, self.simulation, machine_state, devices)
+        self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
+                                     devices)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
         try:
             self.server.start()
@@ -102,6 +113,24 @@ class Daemon:
             raise
         sd_notify("READY=1")
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
+
+    def _start_planner_worker(self) -> None:
+        """Spawn the planner worker and wait for its imports before the bus starts: started
+        later, a fresh interpreter's imports compete for the CPU with the cycle thread and
+        (simulated) drives already running, and the first job waits for them (inside
+        User-Mode Linux, one CPU: 13 s to the first motion, drives lagging seconds behind).
+        A worker that is not ready in time is waited for again by the first job."""
+        if not needs_planner_worker(self.config):
+            return
+        self.planner_worker = PlannerWorker()
+        self.planner_worker.start()
+        try:
+            self.planner_worker.wait_ready()
+        except InputError as err:
+            log.warning(kv("planner_worker_not_ready", error=err))
+
+    def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
+        return prepare_job(name, text, self.config, start, options, self.planner_worker)
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller
@@ -120,6 +149,7 @@ class Daemon:
         served = self.controller is not None
         self.controller = None
         self._stop_simulation()
+        self._stop_planner_worker()
         if served:  # a start-up that failed has said so in its error already
             log.info(kv("daemon_stopped"))
         self.ownership.release()
@@ -129,6 +159,12 @@ class Daemon:
             self.controller.shutdown()
             self.controller = None
         self._stop_simulation()
+        self._stop_planner_worker()
+
+    def _stop_planner_worker(self) -> None:
+        if self.planner_worker is not None:
+            self.planner_worker.close()
+            self.planner_worker = None
 
     def _stop_simulation(self) -> None:
         if self.simulation is not None:

@@ -12,7 +12,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -27,6 +27,11 @@ from nurbsmotion.program import AXES, Program, ReadOptions, parse_curve_yaml, pa
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
+from nurbsmotion.spindle_config import SpindleConfig
+
+if TYPE_CHECKING:
+    from nurbsmotion.service.planner_worker import PlannerWorker
+    from nurbsmotion.service.streamed_job import StreamedJob
 
 
 @dataclass(frozen=True)
@@ -70,6 +75,40 @@ class PlannedJob:
         """The same CSV as ``nurbsmotion plan --trace`` (planning.trace)."""
         assert self.measurements is not None
         write_trace(path, self.trajectory, self.measurements)
+
+    # the job interface the controller uses (service.streamed_job.StreamedJob has the same)
+    @property
+    def total_cycles(self) -> int | None:
+        return len(self.counts)
+
+    def block_at(self, index: int) -> int | None:
+        blocks = self.trajectory.block
+        return None if index < 0 or not len(blocks) else int(blocks[min(index, len(blocks) - 1)])
+
+    def percent_at(self, index: int) -> float:
+        return 100.0 * max(index + 1, 0) / len(self.counts) if len(self.counts) else 0.0
+
+    def feed_at(self, index: int) -> float:
+        feed = self.trajectory.feed_mm_s
+        return float(feed[min(max(index, 0), len(feed) - 1)]) if len(feed) else 0.0
+
+    def write_records(self, record: Any) -> None:
+        """plan.json and the whole trace, before any motion."""
+        record.write_plan(self.summary, self.write_trace)
+
+    def start(self, link: Any, shift: Callable[[np.ndarray], None]) -> Any:
+        """Stream the counts after ``shift`` (in place: onto the offsets in force, service.homing)."""
+        shift(self.counts)
+        return link.stream(self.counts, pauses=tuple(p.row for p in self.pauses))
+
+    def cancel(self) -> None:
+        """Nothing runs beside the job."""
+
+    def end_reason(self, fell_behind_row: int) -> str:
+        return ""
+
+    def finish_records(self, record: Any) -> None:
+        """Everything was written before the motion."""
 
 
 def axis_columns(config: MachineConfig) -> list[int]:
@@ -134,6 +173,26 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
         return parse_gcode(text, name, start_mm, options)
     raise InputError(name, f"unknown program type {suffix or '(no extension)'!r}: "
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
+
+
+def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+                options: ReadOptions | None = None, worker: "PlannerWorker | None" = None) -> "PlannedJob | StreamedJob":
+    """The daemon's planner: the lookahead planner streams the job while it runs in the
+    planner worker (service.streamed_job, checked completely first); the papers' methods
+    plan it whole, and so are MDI lines (one line: planned at once; one without motion runs
+    as a still job, which a streamed job cannot be)."""
+    if config.interpolation.algorithm == "lookahead" and worker is not None and name != MDI_NAME:
+        from nurbsmotion.service.streamed_job import prepare_streamed_job
+
+        return prepare_streamed_job(name, text, config, worker, start_mm, options)
+    return plan_job(name, text, config, start_mm, options)
+
+
+def needs_planner_worker(config: MachineConfig) -> bool:
+    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker),
+    except on a machine with a spindle or an I/O node: their job events read the whole plan."""
+    has_devices = isinstance(config.spindle, SpindleConfig) or config.io is not None
+    return config.interpolation.algorithm == "lookahead" and not has_devices
 
 
 STILL_ROWS = 2  # a job without motion: the held position twice, so row 0 can be a pause row (< last)

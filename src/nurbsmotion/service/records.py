@@ -57,6 +57,16 @@ def write_json(path: Path, obj: dict[str, Any]) -> None:
     write_atomic(path, (json.dumps(obj, indent=2, sort_keys=True) + "\n").encode("utf-8"))
 
 
+def whole_rows(path: Path) -> int:
+    """Data rows of a CSV with one header line, cut after its last complete line (a file
+    whose writer was killed may end mid-line)."""
+    with open(path, "rb+") as csv:
+        data = csv.read()
+        end = data.rfind(b"\n") + 1
+        csv.truncate(end)
+    return max(data[:end].count(b"\n") - 1, 0)
+
+
 def _safe_suffix(name: str) -> str:
     suffix = Path(name).suffix.lower()
     return suffix if re.fullmatch(r"\.[a-z0-9]{1,8}", suffix) else ".txt"
@@ -78,6 +88,40 @@ class JobRecord:
         write_trace(tmp)
         os.replace(tmp, self.folder / TRACE_FILE)
         write_json(self.folder / PLAN_FILE, summary)
+
+    def write_plan_summary(self, summary: dict[str, Any]) -> None:
+        """plan.json alone (a streamed job: written before motion, then again at its end)."""
+        write_json(self.folder / PLAN_FILE, summary)
+
+    def complete_streamed_plan(self) -> int | None:
+        """A streamed job whose daemon died: its trace (``trace.csv.part``, written as it was
+        planned) cut to whole rows and named trace.csv, and plan.json's ``cycles`` set to its
+        rows, so the record holds what was planned (None: nothing to complete)."""
+        plan_path = self.folder / PLAN_FILE
+        try:
+            plan = json.loads(plan_path.read_text())
+        except (OSError, ValueError):
+            return None
+        if not plan.get("streamed") or plan.get("cycles") is not None:
+            return None
+        rows = self.adopt_trace_part()
+        plan.update({"cycles": rows, "planned_all": False,
+                     "duration_s": round(max(rows - 1, 0) * float(plan.get("period_s", 0.0)), 6),
+                     "cycles_note": "the trace rows planned before the daemon ended"})
+        write_json(plan_path, plan)
+        return rows
+
+    def adopt_trace_part(self) -> int:
+        """The trace its writer left unfinished (``trace.csv.part``: killed) cut to whole rows
+        and named trace.csv; the trace's data rows (0 when there is none)."""
+        part = self.folder / f"{TRACE_FILE}.part"
+        trace = part if part.exists() else self.folder / TRACE_FILE
+        if not trace.exists():
+            return 0
+        rows = whole_rows(trace)
+        if trace == part:
+            os.replace(part, self.folder / TRACE_FILE)
+        return rows
 
     def write_config(self, config: dict[str, Any]) -> None:
         write_json(self.folder / CONFIG_FILE, config)
@@ -200,6 +244,7 @@ class JobRecords:
         marked = []
         for record in self.all():
             if not (record.folder / OUTCOME_FILE).exists():
+                record.complete_streamed_plan()
                 record.write_outcome({"outcome": "interrupted", "job": record.job_id,
                                       "reason": "the daemon ended while this job was in progress",
                                       "recorded_at": now_iso()})

@@ -9,7 +9,7 @@ import numpy as np
 from nurbsmotion.planning import Trajectory
 from nurbsmotion.planning.lookahead import PlanStream, plan_lookahead
 from nurbsmotion.planning.measure import measure
-from nurbsmotion.program import read_program
+from nurbsmotion.program import parse_gcode, read_program
 from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits
 
 LIMITS = replace(WANG_LIMITS, period_s=0.001)
@@ -46,6 +46,33 @@ def test_every_chunk_can_stop_along_the_path_within_the_limits():
         assert m.max_chord_error_mm <= LIMITS.chord_error_mm * ok
         end = joined.position_mm[-1]
         assert np.linalg.norm(curve.points(np.array([joined.u[-1]]))[0] - end) < 1e-9  # at rest on the path
+
+
+def test_a_short_first_window_gives_a_short_first_chunk_and_the_same_guarantees_across_the_join():
+    """PlanStream(first_chunk_cycles): the first chunk from a short window (a streaming job
+    starts moving on it), the rest resumed from it; the whole still holds every limit, ends
+    at the program's end, and the first chunk's stop tail stops within the limits."""
+    program = read_program(EXAMPLES / "wang_table1.nc")
+    stream = PlanStream(program, LIMITS, chunk_cycles=2000, first_chunk_cycles=200)
+    pairs = list(stream.chunks())
+    whole_first = next(PlanStream(program, LIMITS, chunk_cycles=2000).chunks())[0]
+    assert len(pairs[0][0]) < len(whole_first) / 4  # Wang's whole curve is one chunk otherwise
+    streamed = Trajectory.concatenate([chunk for chunk, _ in pairs])
+    assert_within_limits(measure(streamed, program), LIMITS)
+    assert np.allclose(streamed.position_mm[-1], program.end_position[:3], atol=1e-9)
+    assert stream.notes["windows"] >= len(pairs)
+    stop = pairs[0][1].stop
+    assert stop is not None
+    m = measure(Trajectory.concatenate([pairs[0][0], stop]), program)
+    assert m.max_accel_mm_s2 <= LIMITS.max_accel_mm_s2 * (1 + 1e-9) and m.max_jerk_mm_s3 <= LIMITS.max_jerk_mm_s3 * (1 + 1e-9)
+
+
+def test_a_program_shorter_than_the_first_window_keeps_its_trailing_dwell():
+    program = parse_gcode("G21 G90\nG01 X1 F600\nG04 P0.5\n", "dwell.nc")
+    pairs = list(PlanStream(program, LIMITS, chunk_cycles=2000, first_chunk_cycles=200).chunks())
+    whole = plan_lookahead(program, LIMITS)
+    assert sum(len(chunk) for chunk, _ in pairs) == len(whole)
+    assert np.allclose(pairs[-1][0].position_mm[-1], whole.position_mm[-1])
 
 
 def test_chunked_planning_of_wangs_curve_throws_no_window_away():

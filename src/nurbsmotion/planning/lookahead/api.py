@@ -264,10 +264,16 @@ class PlanStream:
     verified set-points that stop the machine on the path from the end of that chunk);
     ``notes`` has the guarantees and the verified maxima of the chunks planned so far.
 
-    Memory is one look-ahead window, whatever the program's length."""
+    Memory is one look-ahead window, whatever the program's length.
 
-    def __init__(self, program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES) -> None:
+    ``first_chunk_cycles`` (smaller than ``chunk_cycles``): the first chunk is planned with a
+    window of that length and the rest resumed from it (plan_lookahead_resumable's join), so
+    a consumer that starts moving on the first chunk waits for a short window only."""
+
+    def __init__(self, program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
+                 first_chunk_cycles: int | None = None) -> None:
         self.program, self.limits, self.chunk_cycles = program, limits, chunk_cycles
+        self.first_chunk_cycles = first_chunk_cycles
         self.figures = _Figures()
         self.planning_time_s = 0.0
 
@@ -278,12 +284,27 @@ class PlanStream:
             yield _rest_chunk(self.program, self.limits), None
             return
         started = time.perf_counter()
-        for chunk, resume in _named_lines(self.program, _chunks(runs, settings, None, self.figures,
-                                                                trailing_rest=trailing)):
+        for chunk, resume in _named_lines(self.program, self._all_chunks(runs, settings, trailing)):
             self.planning_time_s += time.perf_counter() - started
             yield chunk, resume
             started = time.perf_counter()
         self.planning_time_s += time.perf_counter() - started
+
+    def _all_chunks(self, runs: list[Run], settings: PlanSettings, trailing: int) -> Iterator[tuple[Trajectory, Resume]]:
+        """All chunks; the first with a short window when asked (see the class docstring)."""
+        first_cycles = self.first_chunk_cycles
+        if first_cycles is None or first_cycles >= self.chunk_cycles:
+            yield from _chunks(runs, settings, None, self.figures, trailing_rest=trailing)
+            return
+        short_runs, short, _ = _setup(self.program, self.limits, first_cycles)
+        first = _chunks(short_runs, short, None, self.figures, trailing_rest=trailing)
+        chunk, resume = next(first)
+        yield chunk, resume
+        rest, cursor = resume_runs(runs, resume)
+        if rest:
+            yield from _chunks(rest, settings, cursor, self.figures, resume.before, trailing)
+        else:  # the first chunk ended the last run: only a trailing dwell may follow
+            yield from first
 
     def __iter__(self) -> Iterator[Trajectory]:
         for chunk, _ in self.chunks():

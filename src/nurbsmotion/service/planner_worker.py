@@ -1,0 +1,427 @@
+"""The planner worker: a separate process, started once with the daemon, that plans streamed
+jobs chunk by chunk, so the daemon's process (its cycle thread and, simulating, the drives)
+never waits for the planner's hold on the GIL: it only receives and copies rows.
+
+Spawned (multiprocessing 'spawn' context: a fresh interpreter, never a fork of the threaded
+daemon); each request carries the machine configuration it is planned for. One job at a time; the conversation is two pipes:
+
+- daemon -> worker (``commands``): :class:`PlanRequest` (a job), :class:`TracePath` (the job
+  record exists: write the trace there), :class:`CancelPlan` (the job ended), ``None`` (quit);
+- worker -> daemon (``results``): :class:`CheckedProgram` (the parsed program passed every
+  check before motion), one :class:`PlannedChunk` per chunk (int32 counts, their verified
+  stop tail, the pauses, the block starts and the feed), then one :class:`PlanEnd` (a
+  program refused before motion: a PlanEnd with its errors and nothing else).
+
+The worker parses the program and checks it (service.streamed_job.check_before_motion); the
+daemon gets the parsed program back (unpickling it costs ~1/80 of parsing it, and the
+daemon's process parsing it would compete with the cycle thread for the GIL). It plans it
+with PlanStream (a short first window: first motion waits for it only),
+converts to counts, measures the rows and writes the trace into the job record. Sending a
+chunk blocks while the daemon's bounded queue is full (the pipe fills): that bounds memory.
+Between chunks it reads its commands; a closed command pipe (the daemon died) ends it.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import multiprocessing.connection
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nurbsmotion.axes import AxisMap
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.fieldbus.row_source import chunk_figures
+from nurbsmotion.log import kv
+from nurbsmotion.planning.limits import limits_from_config
+from nurbsmotion.planning.lookahead import PlanStream
+from nurbsmotion.planning.measure import MeasureStream, RowFigures
+from nurbsmotion.planning.trace import TraceWriter
+from nurbsmotion.planning.trajectory import Trajectory
+from nurbsmotion.program import Program, ReadOptions
+
+log = logging.getLogger(__name__)
+
+READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under heavy load) is an error
+QUIT_TIMEOUT_S = 5.0
+IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """Plan ``text`` (as ``name``) for the machine ``config`` from ``start_xyz`` in chunks of
+    ``chunk_cycles`` (the first of ``first_chunk_cycles``); the machine's columns of the
+    program's XYZ."""
+
+    config: MachineConfig
+    name: str
+    text: str
+    start_xyz: np.ndarray
+    options: ReadOptions
+    columns: list[int]
+    chunk_cycles: int
+    first_chunk_cycles: int
+
+
+@dataclass(frozen=True)
+class TracePath:
+    path: Path
+
+
+@dataclass(frozen=True)
+class CancelPlan:
+    pass
+
+
+@dataclass(frozen=True, eq=False)
+class CheckedProgram:
+    """The request's program, parsed and checked: planning starts."""
+
+    program: Program
+
+
+@dataclass(frozen=True, eq=False)
+class PlannedChunk:
+    """Rows [first_row, first_row + len(counts)) of the job and what the daemon needs of them."""
+
+    first_row: int
+    counts: np.ndarray  # (m, axes) int32
+    stop_tail: np.ndarray  # (t, axes) int32, (0, axes) when the chunk ends at rest
+    pauses: tuple[tuple[int, str, int | None], ...]  # (row, reason, tool) of M0/M1/M6 holds
+    max_step: tuple[float, ...]
+    max_accel: tuple[float, ...]
+    block_rows: np.ndarray  # first row of each block reached in this chunk (int64)
+    block_ids: np.ndarray  # those blocks (int32)
+    feed_mm_s: np.ndarray  # (m,) float32: the planned feed (status)
+    planned_s: float  # seconds since the request when this chunk was planned
+
+
+@dataclass(frozen=True)
+class PlanEnd:
+    """The job's planning ended: all rows planned (``finished``), cancelled, or failed
+    (``errors``: (where, message) of each, one for a planning error, several for a program
+    the readers refuse)."""
+
+    planned: int
+    finished: bool
+    errors: tuple[tuple[str, str], ...] = ()
+    planning_time_s: float = 0.0
+    notes: dict[str, Any] = field(default_factory=dict)
+    measured: dict[str, Any] = field(default_factory=dict)
+    trace_rows: int = 0
+    max_feed_mm_s: float = 0.0  # the highest planned feed of the rows sent
+
+
+class WorkerGone(Exception):
+    """The daemon's end of a pipe is closed: the worker ends."""
+
+
+# ---------------------------------------------------------------------- the worker process
+def serve(commands: multiprocessing.connection.Connection,
+          results: multiprocessing.connection.Connection) -> None:
+    """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone."""
+    results.send("ready")
+    try:
+        while True:
+            command = commands.recv()
+            if command is None:
+                return
+            if isinstance(command, PlanRequest):
+                results.send(WorkerJob(command, commands, results).run())
+    except (EOFError, OSError, WorkerGone):
+        return
+
+
+class WorkerJob:
+    """One job planned in the worker (module docstring)."""
+
+    def __init__(self, request: PlanRequest, commands: Any, results: Any) -> None:
+        self.config, self.request = request.config, request
+        self.commands, self.results = commands, results
+        self.axis_map = AxisMap.from_config(request.config)
+        self.started = time.monotonic()
+        self.planned = 0
+        self.max_feed_mm_s = 0.0
+        self.cancelled = False
+        self.trace_path: Path | None = None
+        self.trace: TraceWriter | None = None
+        self.trace_rows = 0
+        self.pending: list[RowFigures] = []
+        self.events: list[Any] = []
+        self.stream: PlanStream | None = None
+        self.measure: MeasureStream | None = None
+
+    def run(self) -> PlanEnd:
+        errors: tuple[tuple[str, str], ...] = ()
+        finished = False
+        try:
+            program = self._checked_program()
+            self.results.send(CheckedProgram(program))
+            self.events = sorted((e for e in program.events if e.holds), key=lambda e: e.before_block)
+            self.measure = MeasureStream(program)
+            self.stream = PlanStream(program, limits_from_config(self.config), self.request.chunk_cycles,
+                                     self.request.first_chunk_cycles)
+            finished = self._plan_all()
+            if finished:
+                self._trace_rows(self.measure.finish())
+                self._wait_for_record()
+        except InputError as err:
+            errors = tuple(self._named(e) for e in (err.errors if isinstance(err, InputErrors) else [err]))
+        except (EOFError, OSError, WorkerGone):
+            raise WorkerGone() from None
+        except Exception as err:  # a bug: the job must still stop on its tail, with a line saying why
+            errors = ((self.request.name, f"planning failed after {self.planned} set-points: {err!r}"),)
+        self._close_trace()
+        stream = self.stream
+        return PlanEnd(self.planned, finished and not errors, errors,
+                       stream.planning_time_s if stream else 0.0, dict(stream.notes) if stream else {},
+                       self.measure.measurements().summary() if self.measure and self.planned else {}, self.trace_rows,
+                       self.max_feed_mm_s)
+
+    def _checked_program(self) -> Program:
+        """The request's program, parsed and checked before motion (InputError otherwise)."""
+        from nurbsmotion.service.planner import parse
+        from nurbsmotion.service.streamed_job import check_before_motion  # it imports this module
+
+        r = self.request
+        program = parse(r.name, r.text, r.start_xyz, r.options)
+        check_before_motion(r.name, program, self.config, r.columns, self.axis_map)
+        return program
+
+    def _named(self, err: InputError) -> tuple[str, str]:
+        """(where, message) with the program's name in front (a planner error names the line)."""
+        name = self.request.name
+        return (err.where if err.where.startswith(name) else f"{name}: {err.where}" if err.where else name,
+                err.message)
+
+    def _plan_all(self) -> bool:
+        """Plan and send every chunk; False when the job was cancelled first."""
+        assert self.stream is not None and self.measure is not None
+        before = np.zeros((0, len(self.request.columns)), np.int64)
+        for chunk, resume in self.stream.chunks():
+            counts = self._counts(chunk)
+            tail = self._counts(resume.stop) if resume is not None and resume.stop is not None \
+                else np.zeros((0, counts.shape[1]), np.int64)
+            step, accel = chunk_figures(np.concatenate([counts, tail]), before, self.config.cycle_period_s)
+            rows, ids = block_starts(chunk.block, self.planned)
+            self.results.send(PlannedChunk(self.planned, counts.astype(np.int32), tail.astype(np.int32),
+                                           self._pauses(chunk), step, accel, rows, ids,
+                                           np.asarray(chunk.feed_mm_s, np.float32), time.monotonic() - self.started))
+            if len(chunk.feed_mm_s):
+                self.max_feed_mm_s = max(self.max_feed_mm_s, float(np.max(chunk.feed_mm_s)))
+            self.planned += len(counts)
+            before = counts[-2:]
+            self._trace_rows(self.measure.add(chunk))
+            if self._read_commands(block=False):
+                return False
+        return True
+
+    def _counts(self, rows: Trajectory) -> np.ndarray:
+        """Set-points in counts; int32 range checked before motion (streamed_job.check_before_motion)."""
+        return self.axis_map.to_counts(rows.position_mm[:, self.request.columns]).astype(np.int64)
+
+    def _pauses(self, chunk: Trajectory) -> tuple[tuple[int, str, int | None], ...]:
+        """Rows of this chunk where a holding event (M0/M1/M6) happens: the first row of the
+        block it comes before (the planner's exact stop there)."""
+        found: list[tuple[int, str, int | None]] = []
+        while self.events and len(chunk.block) and int(chunk.block[-1]) >= self.events[0].before_block:
+            event = self.events.pop(0)
+            row = self.planned + int(np.searchsorted(chunk.block, event.before_block, side="left"))
+            if event.tool is not None and event.kind.value == "tool_change":
+                found.append((row, f"{event.code} tool change to T{event.tool} at {event.source}", int(event.tool)))
+            else:
+                found.append((row, f"{event.code} at {event.source}", None))
+        return tuple(found)
+
+    def _read_commands(self, block: bool) -> bool:
+        """Apply the commands waiting (or, ``block``, wait for one); True once cancelled."""
+        while block or self.commands.poll():
+            command = self.commands.recv()  # EOFError: the daemon is gone
+            if command is None:
+                raise WorkerGone()
+            if isinstance(command, TracePath):
+                self.trace_path = command.path
+                self._trace_rows(None)
+            elif isinstance(command, CancelPlan):
+                self.cancelled = True
+            block = block and not self.cancelled and self.trace_path is None
+        return self.cancelled
+
+    def _wait_for_record(self) -> None:
+        """All planned: the trace needs the record's folder (or the job ended without one)."""
+        if self.trace_path is None and not self.cancelled:
+            self._read_commands(block=True)
+
+    def _trace_rows(self, figures: RowFigures | None) -> None:
+        """Write measured rows to the trace once its path is known (until then they wait: at
+        most the chunks planned ahead of the record's creation)."""
+        if figures is not None:
+            self.pending.append(figures)
+        if self.trace is None and self.trace_path is not None:
+            self.trace = TraceWriter(self.trace_path)
+        if self.trace is not None:
+            for f in self.pending:
+                self.trace.write(f)
+                self.trace_rows += len(f.rows.block)
+            self.trace.out.flush()  # a daemon killed later loses no planned row of the record
+            self.pending.clear()
+
+    def _close_trace(self) -> None:
+        try:
+            if self.trace is not None:
+                self.trace.close()
+        except InputError as err:
+            log.warning(kv("trace_not_written", program=self.request.name, error=err))
+
+
+def block_starts(blocks: np.ndarray, first_row: int) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, blocks) where the block changes in ``blocks`` (its first row included)."""
+    blocks = np.asarray(blocks)
+    if not len(blocks):
+        return np.zeros(0, np.int64), np.zeros(0, np.int32)
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(blocks)) + 1])
+    return (first_row + starts).astype(np.int64), blocks[starts].astype(np.int32)
+
+
+# ---------------------------------------------------------------------- the daemon's side
+class PlannerWorker:
+    """The daemon's handle on its planner worker process (module docstring). Not thread-safe:
+    the controller runs one job at a time."""
+
+    def __init__(self) -> None:
+        self._context = multiprocessing.get_context("spawn")
+        self._process: Any = None
+        self._commands: Any = None
+        self._results: Any = None
+        self._ready = False
+        self._lock = threading.Lock()
+        self._idle = threading.Event()  # no job's receiver reads the results pipe
+        self._idle.set()
+        self._started_s = 0.0
+
+    def start(self) -> None:
+        """Spawn the worker (it imports the planner meanwhile; the first job waits for it)."""
+        commands_read, self._commands = self._context.Pipe(duplex=False)
+        self._results, results_write = self._context.Pipe(duplex=False)
+        self._process = self._context.Process(target=serve, args=(commands_read, results_write),
+                                              name="nurbsmotion-planner", daemon=True)
+        self._process.start()
+        commands_read.close()  # the worker holds these ends: a dead worker closes them
+        results_write.close()
+        self._ready = False
+        self._started_s = time.monotonic()
+        log.debug(kv("planner_worker_started", pid=self._process.pid))
+
+    @property
+    def alive(self) -> bool:
+        return self._process is not None and self._process.is_alive()
+
+    @property
+    def ready(self) -> bool:
+        """The worker answered that its imports are done (a job starts planning at once)."""
+        return self._ready
+
+    @property
+    def pid(self) -> int | None:
+        return self._process.pid if self._process is not None else None
+
+    def exit_description(self) -> str:
+        """How the worker ended: 'exit code N' or 'signal N' (waits up to 1 s for it to end)."""
+        if self._process is not None:
+            self._process.join(1.0)
+        code = self._process.exitcode if self._process is not None else None
+        return f"exit code {code}" if code is not None and code >= 0 else f"signal {-code}" if code else "no exit code"
+
+    def connect(self, request: PlanRequest) -> tuple[Any, Any]:
+        """Send ``request`` to a ready worker (restarted if it died): the (commands, results)
+        connections of this job. InputError when no worker can be had."""
+        with self._lock:
+            if not self._idle.wait(IDLE_TIMEOUT_S):  # the last job's worker never said it ended
+                log.error(kv("planner_worker_stuck", pid=self.pid, waited_s=IDLE_TIMEOUT_S))
+                self._end_process()
+            if not self.alive:
+                if self._process is not None:
+                    log.warning(kv("planner_worker_restarted", previous=self.exit_description()))
+                self.start()
+            if not self._ready:
+                self._wait_ready()
+            try:
+                self._commands.send(request)
+            except OSError as err:
+                raise InputError(request.name, f"the planner worker is not reachable: {err}") from None
+            self._idle.clear()
+            return self._commands, self._results
+
+    def abandon(self, timeout_s: float = IDLE_TIMEOUT_S) -> None:
+        """The job just sent is refused before any chunk was used: cancel it and read the
+        worker's answers up to its PlanEnd (ended and restarted if it does not answer)."""
+        try:
+            self._commands.send(CancelPlan())
+            deadline = time.monotonic() + timeout_s
+            while self._results.poll(max(deadline - time.monotonic(), 0.0)):
+                if isinstance(self._results.recv(), PlanEnd):
+                    self.job_ended()
+                    return
+        except (EOFError, OSError):
+            pass
+        with self._lock:
+            self._end_process()  # silent or gone: the next job starts a new worker
+
+    def job_ended(self) -> None:
+        """The job's receiver read its PlanEnd (or the worker's death): the next job may start."""
+        self._idle.set()
+
+    def wait_ready(self) -> None:
+        """Block until the worker has started (its imports done): InputError if it cannot."""
+        with self._lock:
+            if not self._ready:
+                self._wait_ready()
+
+    def _wait_ready(self) -> None:
+        try:
+            if not self._results.poll(READY_TIMEOUT_S):
+                raise InputError("planner worker", f"did not start within {READY_TIMEOUT_S:g} s")
+            self._results.recv()
+        except (EOFError, OSError):
+            raise InputError("planner worker", f"ended while starting ({self.exit_description()})") from None
+        self._ready = True
+        log.debug(kv("planner_worker_ready", pid=self.pid, after_s=round(time.monotonic() - self._started_s, 3)))
+
+    def close(self) -> None:
+        """Ask the worker to quit; end it if it does not (the daemon stops)."""
+        if self._process is None:
+            return
+        try:
+            self._commands.send(None)
+        except OSError:
+            pass
+        self._end_process()
+
+    def _end_process(self) -> None:
+        """Wait for the worker to end (terminate it after QUIT_TIMEOUT_S); close the pipes."""
+        process, self._process = self._process, None
+        if process is None:
+            return
+        process.join(QUIT_TIMEOUT_S)
+        if process.is_alive():
+            process.terminate()
+            process.join(QUIT_TIMEOUT_S)
+        self._commands.close()
+        self._results.close()
+        self._idle.set()
+        log.debug(kv("planner_worker_stopped", pid=process.pid, exit=process.exitcode))
+
+
+def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
+    """The InputError (InputErrors for several) of a PlanEnd's ``errors``."""
+    found = [InputError(where, message) for where, message in errors]
+    return found[0] if len(found) == 1 else InputErrors(found)
+
+
+__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]

@@ -1,0 +1,331 @@
+"""A job planned while it runs: the program is checked completely up front, then the planner
+worker (service.planner_worker: a separate process) plans it chunk by chunk while the axes
+move, and a receiver thread here feeds the chunks to the master (fieldbus.row_source.RowFeed).
+
+Before any motion (prepare_streamed_job; the worker parses and checks, then plans at once):
+syntax and geometry (the readers), the program
+gate (service.program_gate), the machine's axes (a program axis without a machine axis must
+not move), the soft limits from the path's verified bounding box (service.path_bounds: the
+set-points lie on the path) and the int32 count range, then the first chunk is planned (a
+short window, PlanStream's first_chunk_cycles): a program the planner refuses at its start is
+refused with that line. Later the worker runs ahead of the axes by at most ``MAX_CHUNKS_AHEAD``
+chunks (bounded memory: sending blocks while the queue is full) and writes the trace into the
+record as it goes; plan.json is written before motion and at the end (a killed daemon's is
+completed from the trace by the next daemon, service.records). If planning fails part-way, the
+worker dies or planning falls behind, the axes stop on the verified stop tail of the last
+chunk and the outcome names the program line (or the worker's end).
+
+The daemon's process only receives, copies and indexes rows: the planner never holds its GIL.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+from nurbsmotion.axes import AxisMap
+from nurbsmotion.config import MachineConfig
+from nurbsmotion.errors import InputError
+from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
+from nurbsmotion.log import kv
+from nurbsmotion.planning.limits import PlanLimits, limits_from_config
+from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
+from nurbsmotion.program import AXES, Program, ReadOptions
+from nurbsmotion.service.path_bounds import hull_box, moving_unconfigured_axis, soft_limit_violation
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PlanEnd, PlannedChunk, PlannerWorker,
+                                                PlanRequest, TracePath, as_error)
+from nurbsmotion.service.program_gate import check_machine_can_run
+from nurbsmotion.service.rate import max_rate
+
+log = logging.getLogger(__name__)
+
+CHUNK_CYCLES = 2000  # set-points per planned chunk after the first (2 s at 1 ms)
+FIRST_CHUNK_CYCLES = 200  # the first chunk's window: first motion waits for it only
+MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s at 1 ms)
+FIRST_CHUNK_TIMEOUT_S = 60.0
+END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
+FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
+
+
+def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int]) -> float:
+    """The highest feed override rate for a plan not yet made, from bounds that hold for any
+    plan of it: an axis moves no faster than the path (<= the highest feed of its blocks, the
+    planner's fluctuation guarantee included) and accelerates no more than the path's
+    resultant limit; the axis limits cap both (the planner keeps them)."""
+    feed = max(b.feed_or_default_mm_s(limits.default_feed_mm_s, limits.rapid_feed_mm_s) for b in program.blocks)
+    if limits.feed_mm_s is not None:
+        feed = limits.feed_mm_s
+    v_bound, a_bound = [], []
+    for axis in config.axes:
+        v = feed * (1.0 + FLUCTUATION_LIMIT)
+        a = limits.max_accel_mm_s2 * (1.0 + TOLERANCE)
+        v_bound.append(min(v, axis.max_velocity_mm_s) if axis.max_velocity_mm_s else v)
+        axis_a = axis.max_accel_mm_s2
+        a_bound.append(min(a, axis_a) if axis_a else a)
+    return max_rate(np.array(v_bound), np.array(a_bound), [a.max_velocity_mm_s for a in config.axes],
+                    [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
+
+
+def check_before_motion(name: str, program: Program, config: MachineConfig, columns: list[int],
+                        axis_map: AxisMap) -> None:
+    """Everything about the program knowable without planning it (module docstring)."""
+    check_machine_can_run(program, config)
+    if not program.blocks:
+        raise InputError(name, "the program has no motion")
+    moved = moving_unconfigured_axis(program, columns)
+    if moved is not None:
+        raise InputError(name, f"the program moves {AXES[moved]}, which this machine has no axis for")
+    beyond = soft_limit_violation(program, config, columns)
+    if beyond is not None:
+        raise beyond
+    low, high = hull_box(program, columns)
+    try:
+        axis_map.to_counts(np.array([low, high]), check_limits=False)
+    except InputError as err:
+        raise InputError(f"{name}: {err.where}", err.message) from None
+
+
+class StreamedJob:
+    """One streamed job: its checks passed, the worker planning ahead (see module docstring).
+
+    The controller uses the same members as service.planner.PlannedJob: ``summary``,
+    ``max_rate``, ``program``, ``pauses``, ``total_cycles``, ``block_at``, ``feed_at``,
+    ``write_records``, ``start``, ``finish_records``, ``cancel``, ``end_reason``."""
+
+    def __init__(self, name: str, program: Program, config: MachineConfig, columns: list[int],
+                 worker: PlannerWorker, connection: tuple[Any, Any], chunk_cycles: int = CHUNK_CYCLES,
+                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
+        self.name = name
+        self.program = program
+        self.config = config
+        self.columns = columns
+        self.worker = worker
+        self.chunk_cycles = chunk_cycles
+        self.first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
+        self.limits = limits_from_config(config)
+        self.max_rate = streamed_max_rate(program, self.limits, config, columns)
+        self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
+        self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
+        self.error: InputError | None = None  # planning failed part-way (the program line) or the worker died
+        self.planned = 0  # rows planned so far
+        self.finished = False  # every row planned
+        self.submitted_s = time.monotonic()
+        self.first_chunk_s = float("nan")
+        self.end: PlanEnd | None = None  # the worker's last word on this job
+        self._block_rows: list[int] = []  # first row of each block reached, in order
+        self._block_ids: list[int] = []
+        self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
+        self._length_before = np.concatenate([[0.0], np.cumsum([b.length_mm for b in program.blocks])])
+        self._commands, self._results = connection  # the worker got this job's PlanRequest
+        self._cancel_sent = False
+        self._send_lock = threading.Lock()
+        self._first = threading.Event()
+        self._ended = threading.Event()
+        self._thread = threading.Thread(target=self._receive, name="job-receiver", daemon=True)
+        start = program.blocks[0].start
+        self.summary: dict[str, Any] = {
+            "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
+            "algorithm": "lookahead", "streamed": True, "period_s": config.cycle_period_s,
+            "chunk_cycles": chunk_cycles, "first_chunk_cycles": self.first_chunk_cycles,
+            "cycles": None, "duration_s": None,
+            "axes": [{"name": a.name, "node": a.node_id} for a in config.axes],
+            "start_mm": [round(float(x), 6) for x in start], "end_mm": [round(float(x), 6) for x in program.end_position],
+            "max_override_percent": round(max(1.0, self.max_rate) * 100.0, 3), "pauses": []}
+
+    # ------------------------------------------------------------------ before motion
+    def begin(self, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> None:
+        """Receive the worker's chunks and wait for the first; InputError if it cannot plan it."""
+        self._thread.start()
+        if not self._first.wait(timeout_s):
+            self.cancel()
+            raise InputError(self.name, f"planning the first {self.first_chunk_cycles} set-points took more "
+                             f"than {timeout_s:g} s")
+        if self.error is not None and self.planned == 0:
+            self.cancel()
+            self._ended.wait(END_TIMEOUT_S)
+            raise self.error
+        self.summary["first_chunk_s"] = round(self.first_chunk_s, 6)
+
+    def write_records(self, record: Any) -> None:
+        """plan.json now (what is known before motion); the worker writes the trace as it plans."""
+        record.write_plan_summary(self.summary)
+        self._send(TracePath(record.folder / "trace.csv"))
+
+    def start(self, link: Any, shift: Callable[[np.ndarray], None]) -> Any:
+        """Hand the feed to the master (the first chunk is queued): the job's handle. ``shift``
+        moves counts onto the offsets in force (service.homing, in place): the same for every
+        row, so the feed adds it to each chunk as it joins the window."""
+        offset = np.zeros((1, len(self.columns)), np.int64)
+        shift(offset)
+        self.feed.offset = offset[0]
+        return link.stream_feed(self.feed)
+
+    def cancel(self) -> None:
+        """The job ended or never started: the worker stops after the chunk it plans."""
+        self.feed.cancel()
+        with self._send_lock:
+            if self._cancel_sent or self._ended.is_set():
+                return
+            self._cancel_sent = True
+        self._send(CancelPlan())
+
+    def _send(self, command: Any) -> None:
+        if self._commands is None or self._ended.is_set():
+            return
+        try:
+            self._commands.send(command)
+        except OSError:
+            pass  # the worker is gone: the receiver says so
+
+    # ------------------------------------------------------------------ while it runs
+    @property
+    def total_cycles(self) -> int | None:
+        """Rows of the whole job once planned (None while planning goes on)."""
+        return self.planned if self.finished else None
+
+    def block_at(self, index: int) -> int | None:
+        """The program block of planned row ``index`` (None before the first)."""
+        if index < 0 or not self._block_rows:
+            return None
+        i = int(np.searchsorted(np.asarray(self._block_rows), index, side="right")) - 1
+        return self._block_ids[max(i, 0)]
+
+    def feed_at(self, index: int) -> float:
+        """Planned feed (mm/s) at row ``index`` when it is recent, else 0."""
+        for first, feed in reversed(self._feeds):
+            if first <= index < first + len(feed):
+                return float(feed[index - first])
+        return 0.0
+
+    def percent_at(self, index: int) -> float:
+        """Progress: of the rows once all are planned, else of the path's length up to the
+        start of the block reached."""
+        if index < 0:
+            return 0.0
+        if self.finished and self.planned:
+            return 100.0 * (index + 1) / self.planned
+        block = self.block_at(index)
+        total = float(self._length_before[-1])
+        return 100.0 * float(self._length_before[block]) / total if block is not None and total > 0 else 0.0
+
+    def end_reason(self, fell_behind_row: int) -> str:
+        """Why a job ended before its program's end although nobody stopped it ('' if it did not)."""
+        if self.error is not None:
+            return str(self.error)
+        if fell_behind_row >= 0:
+            block = self.block_at(fell_behind_row)
+            where = str(self.program.blocks[block].source) if block is not None else self.name
+            return f"planning fell behind at {where}"
+        return ""
+
+    def finish_records(self, record: Any) -> None:
+        """After the job: the worker stopped and closed the trace; plan.json with the figures
+        of the rows planned."""
+        self.cancel()
+        if not self._ended.wait(END_TIMEOUT_S):
+            log.warning(kv("planner_worker_silent", program=self.name, waited_s=END_TIMEOUT_S))
+        end = self.end or PlanEnd(self.planned, False, trace_rows=record.adopt_trace_part())  # the worker died
+        self.summary.update({
+            "cycles": end.trace_rows, "planned_all": self.finished,
+            "duration_s": round(max(self.planned - 1, 0) * self.config.cycle_period_s, 6),
+            "planning_time_s": round(end.planning_time_s, 6), "max_feed_mm_s": round(end.max_feed_mm_s, 6),
+            "first_chunk_s": round(self.first_chunk_s, 6), "notes": end.notes,
+            "measured": end.measured, "pauses": [{"row": p.row, "reason": p.reason} for p in self.pauses]})
+        if self.error is not None:
+            self.summary["error"] = str(self.error)
+        record.write_plan_summary(self.summary)
+
+    # ------------------------------------------------------------------ the receiver thread
+    def _receive(self) -> None:
+        """Chunks from the worker into the feed until its PlanEnd (or its death)."""
+        try:
+            while True:
+                message = self._results.recv()
+                if isinstance(message, PlannedChunk):
+                    self._take(message)
+                elif isinstance(message, PlanEnd):
+                    self._finish(message)
+                    return
+        except (EOFError, OSError):
+            self.error = InputError(self.name, f"the planner worker ended unexpectedly "
+                                    f"({self.worker.exit_description()}) after {self.planned} set-points")
+            log.error(kv("planner_worker_died", program=self.name, row=self.planned, error=self.error))
+        finally:
+            self.feed.close()
+            self._ended.set()
+            self._first.set()
+            self.worker.job_ended()
+
+    def _take(self, chunk: PlannedChunk) -> None:
+        """Index the chunk (lines, pauses, feed) before the master can reach it, then queue it
+        (blocks while the queue is full; dropped once the job ended)."""
+        if self.feed.cancelled.is_set():
+            return
+        from nurbsmotion.service.planner import JobPause  # the shared pause record
+
+        self.pauses.extend(JobPause(row, reason, tool) for row, reason, tool in chunk.pauses)
+        for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
+            if not self._block_ids or self._block_ids[-1] != block:
+                self._block_rows.append(row)
+                self._block_ids.append(block)
+        self._feeds.append((chunk.first_row, chunk.feed_mm_s))
+        rows = RowChunk(chunk.counts.astype(np.int64), chunk.stop_tail.astype(np.int64),
+                        tuple(row for row, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
+        if not self.feed.put(rows):
+            return  # the job ended
+        if self.planned == 0:
+            self.first_chunk_s = time.monotonic() - self.submitted_s
+        self.planned += len(chunk.counts)
+        self._first.set()
+
+    def _finish(self, end: PlanEnd) -> None:
+        self.end = end
+        self.finished = end.finished
+        if end.errors:
+            self.error = as_error(end.errors)
+            log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
+
+
+def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
+                         start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
+                         chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> StreamedJob:
+    """Have the worker parse and check ``text`` completely and start planning it; return once
+    the first chunk is planned (InputError naming file:line for anything refused; nothing moves)."""
+    from nurbsmotion.service.planner import axis_columns
+
+    columns = axis_columns(config)
+    start_xyz = np.zeros(len(AXES))
+    if start_mm is not None:
+        start_xyz[columns] = start_mm
+    options = options or ReadOptions(tool_table=config.tool_table)
+    first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
+    connection = worker.connect(PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
+                                            first_chunk_cycles))
+    program = checked_program(name, worker, connection[1])
+    job = StreamedJob(name, program, config, columns, worker, connection, chunk_cycles,
+                      first_chunk_cycles=first_chunk_cycles)
+    job.begin()
+    return job
+
+
+def checked_program(name: str, worker: PlannerWorker, results: Any, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> Program:
+    """The worker's first answer: the program parsed and checked, or the errors refusing it."""
+    try:
+        if not results.poll(timeout_s):
+            worker.abandon()
+            raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
+        answer = results.recv()
+    except (EOFError, OSError):
+        worker.job_ended()
+        raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
+    if isinstance(answer, CheckedProgram):
+        return answer.program
+    worker.job_ended()
+    if isinstance(answer, PlanEnd) and answer.errors:
+        raise as_error(answer.errors)
+    raise InputError(name, f"the planner worker answered {type(answer).__name__} instead of the checked program")
