@@ -22,7 +22,10 @@ from tests.vcan.conftest import CYCLE_PERIOD_S
 from tests.vcan.test_kernel_queue import WireListener
 from tests.vcan.two_processes import SLOW_KERNEL_MASTER_OPTIONS, write_vcan_config
 
-pytestmark = pytest.mark.vcan
+# quarantined 2026-11-24 21:50: failed 6 of 6 runs on main, the machine2 tip and the commit that
+# added it (quiet host, load < 1): the spindle's SDO answers (0x6502, 0x1600 mapping, statusword)
+# took over 10 s from the simulated drives in this process inside UML (docs/vcan.md, Still to do)
+pytestmark = [pytest.mark.vcan, pytest.mark.quarantine]
 
 SPINDLE_NODE = 5
 ACCEL_RPM_S = 10000
