@@ -783,15 +783,16 @@ class Master:
             yield requests.popleft()
 
     def _plan(self, k: int, requests: list[tuple[str, Any]]) -> None:
-        """Commands of every cycle up to the writer's horizon; requests act from k + guard + 1
-        on (queued cycles beyond that are computed again from the state kept for each)."""
+        """Commands of every cycle up to the writer's horizon; requests act from k +
+        change_guard + 1 on (queued cycles beyond that are computed again from the state kept
+        for each; the kernel queue widens its change guard when the wire overtook a change)."""
         writer, ctl, fb, snaps = self._writer, self._ctl, self._fb, self._snaps
         assert writer is not None
         if any(what in ("abort", "quick_stop") for what, _ in requests):
             writer.quick_stop_now(k, [CW_QUICK_STOP] * self._n, list(fb.pos))
-        first = k + writer.guard + 1
-        if self._horizon < first - 1:
-            self._adopt_tail(k, first - 1)
+        if self._horizon < k + writer.guard:
+            self._adopt_tail(k, k + writer.guard)
+        first = k + writer.change_guard + 1
         velocity = any(what == "cyclic_velocity" for what, _ in requests)  # a new 0x60FF target: not the axes'
         if velocity:
             requests = [r for r in requests if r[0] != "cyclic_velocity"]
