@@ -178,6 +178,13 @@ def test_an_mdi_of_spindle_and_output_words_runs_them_without_motion_and_leaves_
     assert [a["commanded_mm"] for a in status["axes"]] == before  # no axis moved
     assert controller.jobs()["jobs"][0]["id"] == job  # recorded like any job
 
+    job = controller.mdi("S2000")["job"]["id"]  # S alone changes the running spindle (LinuxCNC)
+    outcome = wait_job(machine, job)["outcome"]
+    assert [(e.get("code"), e.get("rpm"), e.get("at_speed")) for e in outcome["machine_events"]][0] == \
+        ("S2000", 2000.0, True)
+    assert abs(spindle_rpm(machine) - 2000.0) < 40.0
+    assert controller.status()["spindle"]["commanded_rpm"] == pytest.approx(2000.0, abs=0.01)
+
     job = controller.mdi("M8\nM64 P4")["job"]["id"]
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert sim(machine).io_nodes[10].outputs == b"\x11"  # flood and clamp stay on
@@ -186,6 +193,9 @@ def test_an_mdi_of_spindle_and_output_words_runs_them_without_motion_and_leaves_
     assert [e.get("code") for e in outcome["machine_events"]][:2] == ["M5", "M9"]
     wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
     assert sim(machine).io_nodes[10].outputs == b"\x10"  # coolant off, the clamp (M64) kept
+    job = controller.mdi("S500")["job"]["id"]  # the spindle stopped: S alone starts nothing
+    assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
+    assert controller.status()["spindle"]["commanded_rpm"] == 0.0 and spindle_rpm(machine) == 0
 
     with pytest.raises(InputError, match="^only.nc: the program has no motion$"):
         controller.submit("only.nc", "M3 S1000\n")  # a program file still needs motion
