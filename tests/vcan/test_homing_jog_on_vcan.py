@@ -91,3 +91,31 @@ def test_home_then_jog_on_vcan(machine):
     assert record["outcome"]["reason"] == "stopped: the jog's client did not renew its lease within 0.5 s"
     assert 3.0 < _axes(daemon)["Y"][0] < 200.0
     assert Path(record["folder"], "outcome.json").exists()
+
+    # MDI from where the axes are, then a program held and resumed, as an operator would
+    job = daemon.request("mdi", text="G90 G01 X10 Y5 F600")
+    assert job["ok"], (job, daemon.log()[-4000:])
+    record = daemon.wait_job_end(job["job"]["id"], JOB_TIMEOUT_S)
+    assert record["outcome"]["outcome"] == "completed", record["outcome"]
+    assert abs(_axes(daemon)["X"][0] - 10.0) < 1e-6 and abs(_axes(daemon)["Y"][0] - 5.0) < 1e-6
+
+    job = daemon.request("submit", name="hold.nc", program="G21 G90\nG01 X40 F600\nG01 Y20\n")
+    assert job["ok"], (job, daemon.log()[-4000:])
+    job_id = job["job"]["id"]
+    wait_until(lambda: _axes(daemon)["X"][0] > 15.0, JOB_TIMEOUT_S, "the program moving", poll_s=0.05)
+    assert daemon.request("hold")["state"] == "pausing"
+    held = wait_until(lambda: (s := daemon.request("status"))["state"] == "held" and s, JOB_TIMEOUT_S,
+                      "the job held", poll_s=0.05)
+    rest = _axes(daemon)
+    assert 15.0 < rest["X"][0] < 40.0 and held["job"]["id"] == job_id
+    wait_until(lambda: abs(_axes(daemon)["X"][1] - rest["X"][0]) < 0.01, JOB_TIMEOUT_S,
+               "the drive at rest where the hold ended")  # the drives' feedback, not the plan
+    assert _axes(daemon)["X"][0] == rest["X"][0]  # held: nothing more was commanded
+    assert daemon.request("resume")["state"] == "running"
+    record = daemon.wait_job_end(job_id, JOB_TIMEOUT_S)
+    assert record["outcome"]["outcome"] == "completed", record["outcome"]
+    assert abs(_axes(daemon)["X"][0] - 40.0) < 1e-6 and abs(_axes(daemon)["Y"][0] - 20.0) < 1e-6
+    folder = Path(record["folder"])
+    rows = (folder / "feedback.csv").read_text().splitlines()
+    assert len(rows) > 100, "the drives' actual positions per cycle, from their TPDOs"
+    assert (folder / "config.json").exists()
