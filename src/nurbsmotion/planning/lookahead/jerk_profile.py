@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.speed_limits import last_below, range_min
+from nurbsmotion.planning.lookahead.search import search_sorted
 
 MIN_SPEED = 1e-9  # mm/s, keeps the time of an interval between two stops finite
 
@@ -56,7 +57,7 @@ class RawProfile:
         return np.concatenate([[0.0], np.cumsum(piece)])
 
     def locate(self, t: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
-        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
+        k = np.clip(search_sorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
         return k, t - self.t[k]
 
     def position(self, t: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from weakref import WeakKeyDictionary
 
 import numpy as np
 from numpy.typing import NDArray
@@ -122,12 +123,49 @@ def coarse_u(curve: NurbsCurve, u_start: float, u_end: float, per_span: int = CO
     return np.append((edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * frac[None, :]).ravel(), u_end)
 
 
+COARSE_MEMO_ENTRIES = 4  # coarse looks kept per curve (a long block cut into windows asks for new ones)
+_COARSE_MEMO: "WeakKeyDictionary[NurbsCurve, dict[tuple[float, float, int], CoarseLook]]" = WeakKeyDictionary()
+
+
+@dataclass(frozen=True, eq=False)
+class CoarseLook:
+    """x and x' of a curve at coarse_u: what sizing a window (coarse_lengths) and placing the
+    grid (piece_u_grid) both start from, evaluated once per curve part."""
+
+    u: NDArray[np.float64]
+    x: NDArray[np.float64]  # (n, dim)
+    dx: NDArray[np.float64]  # (n, dim) x'(u)
+
+    @cached_property
+    def lengths(self) -> NDArray[np.float64]:
+        """Polyline length from the first point to each point."""
+        return np.concatenate([[0.0], np.cumsum(row_norms(np.diff(self.x, axis=0)))])
+
+
+def coarse_look(curve: NurbsCurve, u_start: float, u_end: float, per_span: int = COARSE_PER_SPAN) -> CoarseLook:
+    """x and x' at coarse_u(curve, u_start, u_end, per_span), memoised on the curve: the
+    first window of a run sizes itself on the same part that short_run_plan measured and that
+    the grid starts from (the same numbers: a pure function of its arguments)."""
+    memo = _COARSE_MEMO.get(curve)
+    if memo is None:
+        memo = _COARSE_MEMO.setdefault(curve, {})
+    key = (u_start, u_end, per_span)
+    look = memo.get(key)
+    if look is None:
+        u = coarse_u(curve, u_start, u_end, per_span)
+        x, dx = curve.derivatives(u, 1)
+        look = CoarseLook(u, x, dx)
+        if len(memo) >= COARSE_MEMO_ENTRIES:
+            del memo[next(iter(memo))]
+        memo[key] = look
+    return look
+
+
 def coarse_lengths(curve: NurbsCurve, u_start: float, u_end: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(u, approximate arc length from u_start) on a coarse polyline (COARSE_PER_SPAN points per
     knot span): enough to size look-ahead windows, without the curve's exact quadrature."""
-    u = coarse_u(curve, u_start, u_end)
-    x = curve.points(u)
-    return u, np.concatenate([[0.0], np.cumsum(row_norms(np.diff(x, axis=0)))])
+    look = coarse_look(curve, u_start, u_end)
+    return look.u, look.lengths
 
 
 def _speed_fit() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -170,8 +208,8 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
     """u values of the grid of one piece: each coarse interval split so that it is at most
     ``spacing_mm`` long and turns at most MAX_TURN_RAD."""
     curve = piece.curve
-    coarse = coarse_u(curve, piece.u_start, piece.u_end, 2 if curve.degree == 1 else COARSE_PER_SPAN)
-    d = curve.derivatives(coarse, 1)[1]
+    look = coarse_look(curve, piece.u_start, piece.u_end, 2 if curve.degree == 1 else COARSE_PER_SPAN)
+    coarse, d = look.u, look.dx
     speed = row_norms(d)
     t = d / np.maximum(speed, TINY_SPEED)[:, None]
     du = np.diff(coarse)

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, to_3d
+from nurbsmotion.planning.lookahead.search import search_sorted
 
 ARC_TOLERANCE_SHARE = 1e-8
 ARC_TOLERANCE_FLOOR_MM = 1e-13
@@ -54,7 +55,7 @@ def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> ND
 
 def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
     """Interval k with s_k <= s < s_k+1; at a junction the interval of the later piece."""
-    k = np.clip(np.searchsorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
+    k = np.clip(search_sorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
     # a zero-length (junction) interval at the very end of the grid: step back into the piece
     while True:
         zero = grid.s[k + 1] <= grid.s[k]

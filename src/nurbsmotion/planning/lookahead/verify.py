@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
+from nurbsmotion.planning.lookahead.search import search_sorted
 from nurbsmotion.planning.lookahead.speed_limits import window_min
 
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
@@ -127,7 +128,7 @@ def grid_chord_errors(grid: PathGrid, s_prev: NDArray[np.float64], s: NDArray[np
     """Largest distance of the grid points inside each step (s_prev, s) from its chord a-b:
     catches sharp turns shorter than the step, which a few samples per step could miss."""
     out = np.zeros(len(s))
-    step = np.searchsorted(s, grid.s, side="left")
+    step = search_sorted(s, grid.s, side="left")
     inside = (step < len(s)) & (grid.s > s_prev[np.minimum(step, len(s) - 1)])
     k = step[inside]
     d = distance_to_chord(grid.position[inside][:, None, :], a[k], b[k])[:, 0]
@@ -172,8 +173,8 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
     if len(grid) < 2 or len(s) < 2:
         return np.zeros(len(samples.u))
     last = len(grid) - 2
-    k_lo = np.clip(np.searchsorted(grid.s, s[:-1], side="right") - 1, 0, last)
-    k_hi = np.clip(np.searchsorted(grid.s, s[1:], side="left") - 1, 0, last)
+    k_lo = np.clip(search_sorted(grid.s, s[:-1], side="right") - 1, 0, last)
+    k_hi = np.clip(search_sorted(grid.s, s[1:], side="left") - 1, 0, last)
     kappa = -window_min(-grid.kappa_max, k_lo, np.maximum(k_hi, k_lo))
     arc = np.diff(s) * (1.0 + FLUCTUATION_LIMIT)
     chord = kappa * arc * arc / 8.0
