@@ -52,9 +52,17 @@ class RawProfile:
     @property
     def integrals(self) -> NDArray[np.float64]:
         """integral of s from t[0] to t[k] for every k."""
-        dt = np.diff(self.t)
-        piece = self.s[:-1] * dt + self.v[:-1] * dt**2 / 2.0 + self.a * dt**3 / 6.0
-        return np.concatenate([[0.0], np.cumsum(piece)])
+        dt = self.dt
+        piece = dt * (self.s[:-1] + dt * (self.v[:-1] / 2.0 + dt * (self.a / 6.0)))
+        out = np.empty(len(self.t))
+        out[0] = 0.0
+        np.cumsum(piece, out=out[1:])
+        return out
+
+    @property
+    def dt(self) -> NDArray[np.float64]:
+        """(K,) piece durations."""
+        return np.diff(self.t)
 
     def locate(self, t: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
         k = np.clip(search_sorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
@@ -69,15 +77,20 @@ class RawProfile:
         return np.where(t >= self.t[-1], self.s[-1] + self.v[-1] * (t - self.t[-1]), s)
 
     def integral(self, t: NDArray[np.float64], cumulative: NDArray[np.float64]) -> NDArray[np.float64]:
-        """integral of s from t[0] to t (extended as in the class docstring)."""
+        """integral of s from t[0] to t (extended as in the class docstring): on the piece k
+        holding t, cumulative[k] + s_k tau + v_k tau^2 / 2 + a_k tau^3 / 6 (Horner)."""
         k, tau = self.locate(t)
-        tau_in = np.clip(tau, 0.0, np.diff(self.t)[k])
-        inside = cumulative[k] + self.s[k] * tau_in + self.v[k] * tau_in**2 / 2.0 + self.a[k] * tau_in**3 / 6.0
-        dt0 = t - self.t[0]
-        before = self.s[0] * dt0 + self.v[0] * dt0**2 / 2.0
-        dte = t - self.t[-1]
-        after = cumulative[-1] + self.s[-1] * dte + self.v[-1] * dte**2 / 2.0
-        return np.where(t < self.t[0], before, np.where(t >= self.t[-1], after, inside))
+        np.clip(tau, 0.0, self.dt[k], out=tau)
+        out = cumulative[k] + tau * (self.s[k] + tau * (self.v[k] / 2.0 + tau * (self.a[k] / 6.0)))
+        before = np.flatnonzero(t < self.t[0])  # outside the pieces (few points): the straight extensions
+        if len(before):
+            dt0 = t[before] - self.t[0]
+            out[before] = self.s[0] * dt0 + self.v[0] * dt0 * dt0 / 2.0
+        after = np.flatnonzero(t >= self.t[-1])
+        if len(after):
+            dte = t[after] - self.t[-1]
+            out[after] = cumulative[-1] + self.s[-1] * dte + self.v[-1] * dte * dte / 2.0
+        return out
 
 
 def raw_profile(s: NDArray[np.float64], x: NDArray[np.float64], t0: float = 0.0) -> RawProfile:

@@ -231,9 +231,11 @@ def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[N
     sigma2 = (np.einsum("ij,ij->i", d2, d2) + np.einsum("ij,ij->i", d1, d3) - sigma1**2) / sigma
     n = d2 * sigma[:, None] - d1 * sigma1[:, None]
     n1 = d3 * sigma[:, None] - d1 * sigma2[:, None]
-    curv = n / sigma[:, None] ** 3
-    dcurv = n1 / sigma[:, None] ** 4 - 3.0 * n * (sigma1 / sigma**5)[:, None]
-    return x, t, curv, dcurv, 1.0 / sigma, -sigma1 / sigma**3
+    u_s = 1.0 / sigma
+    u_s3 = u_s * u_s * u_s  # products, not powers: numpy's pow is ~7x slower than a multiply
+    curv = n * u_s3[:, None]
+    dcurv = (n1 - 3.0 * n * (sigma1 * u_s)[:, None]) * (u_s3 * u_s)[:, None]
+    return x, t, curv, dcurv, u_s, -sigma1 * u_s3
 
 
 def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -293,7 +295,7 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
         u = piece_u_grid(piece, spacing_mm)
         x, t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
         curv_left, dcurv_left, u_ss_left = left_limits(piece.curve, u, curv, dcurv, u_ss)
-        cubed = u_s**3  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
+        cubed = u_s * u_s * u_s  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
         poly = speed_polynomials(piece.curve, u, 1.0 / u_s, -u_ss / cubed, -u_ss_left / cubed)
         polys += [poly, np.zeros((SPEED_DEGREE + 1, 1))]  # the zero-length junction interval after it
         s = offset + np.concatenate([[0.0], np.cumsum(interval_lengths(poly, np.diff(u)))])

@@ -179,7 +179,7 @@ def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: fl
     v = np.minimum(static, np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
     if speed_mm_s is not None:
         v = np.minimum(v, speed_mm_s)
-    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * v**3
+    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * (v * v * v)
     share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
     return sliding_min(grid.s, share, v * tau_f + reach_mm)
 
