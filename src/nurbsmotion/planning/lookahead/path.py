@@ -95,6 +95,33 @@ class PathGrid:
         return row_norms(self.curv)
 
     @cached_property
+    def speed_integral_poly(self) -> NDArray[np.float64]:
+        """(SPEED_DEGREE + 1, N-1) coefficients of the integral of sigma(r) over [0, r], divided
+        by r: speed_poly[j] / (j + 1) (sampling evaluates it on every set-point)."""
+        return self.speed_poly / np.arange(1.0, SPEED_DEGREE + 2.0)[:, None]
+
+    @cached_property
+    def interval_mm(self) -> NDArray[np.float64]:
+        """(N-1,) arc length of every interval (0 at junctions)."""
+        return np.diff(self.s)
+
+    @cached_property
+    def u_of_s_poly(self) -> NDArray[np.float64]:
+        """(6, N-1) coefficients in r = (s - s_k) / h_k of the quintic Hermite of u(s) on every
+        interval through u, du/ds and d2u/ds2 at both ends (left limits at the end); zero-length
+        intervals get u_k. From the basis h00 = 1 - 10 r^3 + 15 r^4 - 6 r^5, h10 = r - 6 r^3 +
+        8 r^4 - 3 r^5, h20 = (r^2 - 3 r^3 + 3 r^4 - r^5) / 2, h01 = 1 - h00, h11 = -4 r^3 + 7 r^4
+        - 3 r^5, h21 = (r^3 - 2 r^4 + r^5) / 2."""
+        h = self.interval_mm
+        u0, u1 = self.u[:-1], self.u[1:]
+        d0, d1 = h * self.u_s[:-1], h * self.u_s[1:]
+        e0, e1 = 0.5 * h * h * self.u_ss[:-1], 0.5 * h * h * self.u_ss_left[1:]
+        du = u1 - u0
+        return np.stack([u0, d0, e0, 10.0 * du - 6.0 * d0 - 4.0 * d1 - 3.0 * e0 + e1,
+                         -15.0 * du + 8.0 * d0 + 7.0 * d1 + 3.0 * e0 - 2.0 * e1,
+                         6.0 * du - 3.0 * d0 - 3.0 * d1 - e0 + e1])
+
+    @cached_property
     def dcurv_normal(self) -> NDArray[np.float64]:
         """(N,) |x_sss less its tangent part|: the path's own normal jerk is this x v^3."""
         along = np.einsum("ij,ij->i", self.dcurv, self.tangent)
@@ -247,19 +274,29 @@ def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
     return out
 
 
-def left_limits(curve: NurbsCurve, u: NDArray[np.float64], curv: NDArray[np.float64], dcurv: NDArray[np.float64],
-                u_ss: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """x_ss, x_sss and d2u/ds2 at each u approached from below: re-evaluated one ulp below the
-    interior knots."""
+def knot_points(curve: NurbsCurve, u: NDArray[np.float64]) -> NDArray[np.intp]:
+    """Indices of the grid points at the curve's interior knots where x_ss may jump (degree
+    <= 3; degree >= 4 is C2 or better at simple knots): their left limits differ."""
+    if curve.degree > 3:
+        return np.zeros(0, dtype=np.intp)
     knots = curve.breakpoints[1:-1]
     nearest = np.clip(np.searchsorted(u, knots), 0, len(u) - 1)
-    at_knot = nearest[u[nearest] == knots]
-    if len(at_knot) == 0 or curve.degree > 3:  # degree >= 4 is C2 or better at simple knots
-        return curv, dcurv, u_ss
-    curv, dcurv, u_ss = curv.copy(), dcurv.copy(), u_ss.copy()
-    _, _, c, dc, _, uss = arc_length_derivatives(curve, np.nextafter(u[at_knot], -np.inf))
-    curv[at_knot], dcurv[at_knot], u_ss[at_knot] = c, dc, uss
-    return curv, dcurv, u_ss
+    return nearest[u[nearest] == knots]
+
+
+def grid_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[tuple[NDArray[np.float64], ...], ...]:
+    """arc_length_derivatives at u, and x_ss, x_sss and d2u/ds2 approached from below
+    (re-evaluated one ulp below the interior knots, knot_points): one evaluation of the
+    curve for both (the same numbers as two: every point is evaluated on its own)."""
+    at_knot = knot_points(curve, u)
+    both = arc_length_derivatives(curve, np.concatenate([u, np.nextafter(u[at_knot], -np.inf)]))
+    n = len(u)
+    x, t, curv, dcurv, u_s, u_ss = (a[:n] for a in both)
+    if len(at_knot) == 0:
+        return (x, t, curv, dcurv, u_s, u_ss), (curv, dcurv, u_ss)
+    curv_left, dcurv_left, u_ss_left = curv.copy(), dcurv.copy(), u_ss.copy()
+    curv_left[at_knot], dcurv_left[at_knot], u_ss_left[at_knot] = both[2][n:], both[3][n:], both[5][n:]
+    return (x, t, curv, dcurv, u_s, u_ss), (curv_left, dcurv_left, u_ss_left)
 
 
 def interval_curvature_max(s: NDArray[np.float64], curv: NDArray[np.float64], dcurv: NDArray[np.float64],
@@ -293,8 +330,7 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     offset = 0.0
     for index, piece in enumerate(pieces):
         u = piece_u_grid(piece, spacing_mm)
-        x, t, curv, dcurv, u_s, u_ss = arc_length_derivatives(piece.curve, u)
-        curv_left, dcurv_left, u_ss_left = left_limits(piece.curve, u, curv, dcurv, u_ss)
+        (x, t, curv, dcurv, u_s, u_ss), (curv_left, dcurv_left, u_ss_left) = grid_derivatives(piece.curve, u)
         cubed = u_s * u_s * u_s  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
         poly = speed_polynomials(piece.curve, u, 1.0 / u_s, -u_ss / cubed, -u_ss_left / cubed)
         polys += [poly, np.zeros((SPEED_DEGREE + 1, 1))]  # the zero-length junction interval after it

@@ -37,20 +37,16 @@ class Samples:
 
 
 def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quintic Hermite interpolation of u(s) on grid interval k."""
-    h = grid.s[k + 1] - grid.s[k]
-    safe = np.where(h > 0, h, 1.0)
-    r = np.clip((s - grid.s[k]) / safe, 0.0, 1.0)
-    r2, r3 = r * r, r * r * r
-    h00 = 1 - 10 * r3 + 15 * r3 * r - 6 * r3 * r2
-    h10 = r - 6 * r3 + 8 * r3 * r - 3 * r3 * r2
-    h20 = 0.5 * (r2 - 3 * r3 + 3 * r3 * r - r3 * r2)
-    h01 = 10 * r3 - 15 * r3 * r + 6 * r3 * r2
-    h11 = -4 * r3 + 7 * r3 * r - 3 * r3 * r2
-    h21 = 0.5 * (r3 - 2 * r3 * r + r3 * r2)
-    u0, u1 = grid.u[k], grid.u[k + 1]
-    return (h00 * u0 + h10 * safe * grid.u_s[k] + h20 * safe**2 * grid.u_ss[k]
-            + h01 * u1 + h11 * safe * grid.u_s[k + 1] + h21 * safe**2 * grid.u_ss_left[k + 1])
+    """Quintic Hermite interpolation of u(s) on grid interval k (PathGrid.u_of_s_poly, Horner)."""
+    h = grid.interval_mm.take(k)
+    r = (s - grid.s.take(k)) / np.where(h > 0, h, 1.0)
+    np.clip(r, 0.0, 1.0, out=r)
+    c = grid.u_of_s_poly
+    u = c[5].take(k)
+    for j in range(4, -1, -1):
+        u *= r
+        u += c[j].take(k)
+    return u
 
 
 def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
@@ -73,10 +69,10 @@ def interval_fraction(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64
 def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """s(u) - s* with s(u) = s_k + h integral_0^r p (Horner on p's coefficients / (j + 1))."""
     r, h = interval_fraction(grid, k, u)
-    coeffs = grid.speed_poly
-    integral = coeffs[-1].take(k) / len(coeffs)
+    coeffs = grid.speed_integral_poly
+    integral = coeffs[-1].take(k)
     for j in range(len(coeffs) - 2, -1, -1):
-        integral = integral * r + coeffs[j].take(k) / (j + 1)
+        integral = integral * r + coeffs[j].take(k)
     return grid.s[k] + integral * r * h - s
 
 
