@@ -37,7 +37,9 @@ class Samples:
 
 
 def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quintic Hermite interpolation of u(s) on grid interval k (PathGrid.u_of_s_poly, Horner)."""
+    """Quintic Hermite interpolation of u(s) on grid interval k (PathGrid.u_of_s_poly, Horner);
+    exactly u_k and u_k+1 at the interval's ends (a block's end point is its last control
+    point only when u is exactly its end)."""
     h = grid.interval_mm.take(k)
     r = (s - grid.s.take(k)) / np.where(h > 0, h, 1.0)
     np.clip(r, 0.0, 1.0, out=r)
@@ -46,6 +48,8 @@ def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> ND
     for j in range(4, -1, -1):
         u *= r
         u += c[j].take(k)
+    end = np.flatnonzero(r == 1.0)
+    u[end] = grid.u[k[end] + 1]
     return u
 
 
