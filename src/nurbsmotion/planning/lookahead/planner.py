@@ -260,6 +260,15 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
     return s, x
 
 
+def on_grid(grid: PathGrid, s_raw: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x = v^2 of the raw profile (s_raw, x) at the grid points: x itself when the raw profile
+    runs over the whole grid (a window starting at rest on its first point; at a junction's
+    two points the scan's x is equal, ds = 0), else interpolated."""
+    if len(s_raw) == len(grid) and np.array_equal(s_raw, grid.s):
+        return x
+    return np.interp(grid.s, s_raw, x)
+
+
 def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool) -> NDArray[np.float64]:
     """Times of the set-points of this window (t = 0 is the cursor's set-point): to rest on a
     cycle boundary at the run's end; else every cycle until the window's stop."""
@@ -310,7 +319,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
             # in turn (as in scan.speed_profile), damped by evaluating at the mean of the last
             # two scans' speeds; the peaks' plateaus only matter to the last scan
             s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f, plateaus=False)
-            planned = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            planned = np.sqrt(np.maximum(on_grid(grid, s_raw, x), 0.0))
             speeds = planned if speeds is None else 0.5 * (speeds + planned)
             jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
                                                static)
