@@ -45,7 +45,12 @@ def backward_pass(cap: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[n
 
 
 def interval_bounds(bounds: AccelBounds, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two ends."""
+    """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two
+    ends (clipped at 0: an inadmissible end, -inf in ``at``, gives 0 like any end without room)."""
+    if bounds.symmetric:
+        hi = bounds.tangential_room(x)
+        accel = np.minimum(hi[:-1], hi[1:])
+        return np.maximum(accel, 0.0, out=accel), accel
     lo, hi = bounds.at(x)
     accel = np.maximum(np.minimum(hi[:-1], hi[1:]), 0.0)
     if bounds.symmetric:

@@ -69,10 +69,28 @@ def min_table(values: NDArray[np.float64], levels: int) -> NDArray[np.float64]:
     return table
 
 
+_FLOOR_LOG2 = np.zeros(2, dtype=np.intp)  # floor(log2(w)) for w = 0 .. len - 1 (0 for w <= 1), grown on demand
+
+
+def floor_log2(width: NDArray[np.intp]) -> NDArray[np.intp]:
+    """floor(log2(max(width, 1))) of integer widths by a table lookup (np.log2 and floor cost
+    ~10x a gather on thousands of values)."""
+    global _FLOOR_LOG2
+    table = _FLOOR_LOG2  # one reference: another thread may replace the module's table meanwhile
+    top = int(width.max(initial=1))
+    if top >= len(table):
+        w = np.arange(max(2 * top, 1024))
+        table = _FLOOR_LOG2 = np.floor(np.log2(np.maximum(w, 1))).astype(np.intp)
+    return table.take(np.maximum(width, 1))
+
+
 def table_min(table: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
-    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers."""
-    level = np.floor(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.intp)
-    return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
+    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers
+    (from the flat table: one index instead of two)."""
+    level = floor_log2(hi - lo + 1)
+    row = level * table.shape[1]
+    flat = table.reshape(-1)
+    return np.minimum(flat.take(row + lo), flat.take(row + hi - (1 << level) + 1))
 
 
 def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -216,6 +234,19 @@ class AccelBounds:
         """lo = -hi at every speed: no axis acceleration limit shifts the admissible a_t."""
         return self.caps.axis_accel_mm_s2 is None or not bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
 
+    def tangential_room(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """hi of ``at`` where x is admissible (|c| x <= A), 0 where it is not: the resultant,
+        tangential and jerk caps of |a_t| (axis limits aside). Enough for the scan's interval
+        bounds, which clip at 0 (``at`` marks inadmissible points -inf and builds lo)."""
+        kappa_x = self.kappa * x
+        a = self.caps.accel_mm_s2
+        hi = np.sqrt(np.maximum(a * a - kappa_x * kappa_x, 0.0))
+        np.minimum(hi, self.tangential_cap, out=hi)
+        if self.caps.jerk_mm_s3 is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                np.minimum(hi, self.jerk_accel_numerator / np.sqrt(x), out=hi)
+        return hi
+
     def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
         t, c = self.tangent[idx], self.curv[idx]
@@ -319,8 +350,7 @@ def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
     sparse table of range_min run backwards. Each range is two blocks of 2^j points (j =
     floor(log2 of its length)); the blocks' minima are pushed down from the widest level,
     each block of 2^j into its two halves."""
-    span = np.maximum(hi - lo + 1, 1)
-    level = np.floor(np.log2(span)).astype(np.intp)
+    level = floor_log2(hi - lo + 1)
     levels = int(level.max(initial=0)) + 1
     table = np.full((levels, n), np.inf)
     flat = table.reshape(-1)
