@@ -274,6 +274,22 @@ class NurbsCurve:
             d[0] = d[0] * t + g[j]
         return [dk if isinstance(dk, np.ndarray) else np.zeros((self.dim + 1, len(u))) for dk in d]
 
+    def derivatives_by_coordinate(self, u: NDArray[np.float64], order: int) -> list[NDArray[np.float64]]:
+        """x, x', ... up to x^(order) at each u of a 1-D array, each coordinate-major
+        (dim, len(u)): ``derivatives`` without its transposes, for callers that compute on
+        whole coordinate rows (the planner's path grid)."""
+        if not 0 <= order <= 3:
+            raise ValueError("derivative order must be 0..3")
+        uu = np.asarray(u, dtype=np.float64)
+        if len(uu) <= EVALUATION_CHUNK:
+            return rational_derivatives(self.homogeneous_derivatives(uu, order))
+        out = [np.empty((self.dim, len(uu))) for _ in range(order + 1)]
+        for start in range(0, len(uu), EVALUATION_CHUNK):
+            chunk = uu[start: start + EVALUATION_CHUNK]
+            for k, x_k in enumerate(rational_derivatives(self.homogeneous_derivatives(chunk, order))):
+                out[k][:, start: start + len(chunk)] = x_k
+        return out
+
     def derivatives(self, u: ArrayLike, order: int = 2) -> NDArray[np.float64]:
         """x and its derivatives up to ``order`` at u: array (order+1, len(u), dim); (order+1, dim) for scalar u.
 

@@ -250,19 +250,24 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
 
 
 def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-    """(x, x_s, x_ss, x_sss, du/ds, d2u/ds2) at each u (module docstring)."""
-    x, d1, d2, d3 = curve.derivatives(u, 3)
-    sigma = np.maximum(row_norms(d1), TINY_SPEED)
-    t = d1 / sigma[:, None]
-    sigma1 = np.einsum("ij,ij->i", t, d2)
-    sigma2 = (np.einsum("ij,ij->i", d2, d2) + np.einsum("ij,ij->i", d1, d3) - sigma1**2) / sigma
-    n = d2 * sigma[:, None] - d1 * sigma1[:, None]
-    n1 = d3 * sigma[:, None] - d1 * sigma2[:, None]
+    """(x, x_s, x_ss, x_sss, du/ds, d2u/ds2) at each u (module docstring); the vectors as
+    (len(u), dim) views of coordinate-major arrays (computed row by row: contiguous)."""
+    x, d1, d2, d3 = curve.derivatives_by_coordinate(u, 3)
+
+    def dot(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.einsum("ij,ij->j", a, b)
+
+    sigma = np.maximum(np.sqrt(dot(d1, d1)), TINY_SPEED)
     u_s = 1.0 / sigma
+    t = d1 / sigma
+    sigma1 = dot(t, d2)
+    sigma2 = (dot(d2, d2) + dot(d1, d3) - sigma1 * sigma1) / sigma
+    n = d2 * sigma - d1 * sigma1
+    n1 = d3 * sigma - d1 * sigma2
     u_s3 = u_s * u_s * u_s  # products, not powers: numpy's pow is ~7x slower than a multiply
-    curv = n * u_s3[:, None]
-    dcurv = (n1 - 3.0 * n * (sigma1 * u_s)[:, None]) * (u_s3 * u_s)[:, None]
-    return x, t, curv, dcurv, u_s, -sigma1 * u_s3
+    curv = n * u_s3
+    dcurv = (n1 - 3.0 * n * (sigma1 * u_s)) * (u_s3 * u_s)
+    return x.T, t.T, curv.T, dcurv.T, u_s, -sigma1 * u_s3
 
 
 def to_3d(a: NDArray[np.float64]) -> NDArray[np.float64]:
