@@ -316,8 +316,8 @@ class NurbsCurve:
         numerator = np.zeros((2 * p + 1, self.dim, c.shape[2]))
         for a in range(p + 1):
             for b in range(p + 1):
-                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b
-                if a + b >= 1:
+                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b (0 for a = b)
+                if a != b:
                     numerator[a + b - 1] += (a - b) * c[a] * w[b]
         return np.ascontiguousarray(numerator[: max(2 * p - 1, 1)]), np.ascontiguousarray(w)
 
