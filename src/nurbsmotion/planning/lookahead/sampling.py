@@ -133,7 +133,10 @@ def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
     for p, sel in piece_runs(pieces):
         curve = grid.pieces[p].curve
         here = position[sel]
-        here[:] = to_3d(curve.points(u[sel]))
+        x = curve.derivatives_by_coordinate(u[sel], 0)[0]  # (dim, n): one transposed copy into place
+        axes = min(curve.dim, 3)
+        here[:, :axes] = x[:axes].T
+        here[:, axes:] = 0.0
         # a block's ends are its first and last control points exactly (clamped knots)
         here[u[sel] == curve.u_max] = to_3d(curve.control_points[-1:])[0]
         here[u[sel] == curve.u_min] = to_3d(curve.control_points[:1])[0]
