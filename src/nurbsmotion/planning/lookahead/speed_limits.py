@@ -36,7 +36,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms
-from nurbsmotion.planning.lookahead.search import search_sorted
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
@@ -130,8 +129,8 @@ def window_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np
 
 def sliding_min(s: NDArray[np.float64], values: NDArray[np.float64], half_width: NDArray[np.float64]) -> NDArray[np.float64]:
     """min of ``values`` over the grid points within +-half_width (in s) of each point."""
-    lo = search_sorted(s, s - half_width, side="left")
-    hi = search_sorted(s, s + half_width, side="right") - 1
+    lo = np.searchsorted(s, s - half_width, side="left")
+    hi = np.searchsorted(s, s + half_width, side="right") - 1
     return window_min(values, lo, np.maximum(hi, lo))
 
 
@@ -399,8 +398,8 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     levels = dip_levels(inner)
     band_level = levels[np.minimum(np.searchsorted(levels, inner[members], side="left"), len(levels) - 1)]
     half_width = DIP_WIDTH_FACTOR * band_level * averaging_s
-    lo = search_sorted(s, s[members] - half_width, side="left")
-    hi = search_sorted(s, s[members] + half_width, side="right") - 1
+    lo = np.searchsorted(s, s[members] - half_width, side="left")
+    hi = np.searchsorted(s, s[members] + half_width, side="right") - 1
     out = np.minimum(v, range_min_update(len(s), lo, hi, inner[members]))
     out[0], out[-1] = v[0], v[-1]
     return out
