@@ -189,6 +189,22 @@ class PeakSides:
                    np.minimum.accumulate(left_x, axis=1), np.minimum.accumulate(right_x, axis=1))
 
 
+ROW_SEARCH_MIN_LEVELS = 8  # from this many levels per peak, a bisection per row beats the full comparison
+
+
+def count_at_or_above(running_min: NDArray[np.float64], level: NDArray[np.float64]) -> NDArray[np.intp]:
+    """#{j: running_min[i, j] >= level[i, k]} for every peak i and level k: the running
+    minima do not increase along a row, so with many levels one bisection per row (of the
+    negated row, non-decreasing) instead of comparing every level with every column."""
+    if level.shape[1] < ROW_SEARCH_MIN_LEVELS:
+        return np.count_nonzero(running_min[:, None, :] >= level[:, :, None], axis=2)
+    out = np.empty(level.shape, dtype=np.intp)
+    rising, below = -running_min, -level
+    for i in range(len(level)):
+        out[i] = np.searchsorted(rising[i], below[i], side="right")
+    return out
+
+
 def superlevel_line(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakSides,
                     level: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Length of the stretch around every peak where x >= level (linear crossings), for
@@ -201,13 +217,13 @@ def superlevel_line(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakS
     flat = level.ndim == 1
     lv = level[:, None] if flat else level
     m = sides.left_min.shape[1]
-    k = np.count_nonzero(sides.left_min[:, None, :] >= lv[:, :, None], axis=2)
+    k = count_at_or_above(sides.left_min, lv)
     j = np.take_along_axis(sides.left, np.minimum(k, m - 1), axis=1)
     inside = (k < m) & (j < sides.peaks[:, None])
     jn = np.minimum(j + 1, len(x) - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         slope_left = np.where(inside, (s[jn] - s[j]) / (x[jn] - x[j]), 0.0)  # left = s_j + (L - x_j) slope
-    k = np.count_nonzero(sides.right_min[:, None, :] >= lv[:, :, None], axis=2)
+    k = count_at_or_above(sides.right_min, lv)
     j2 = np.take_along_axis(sides.right, np.minimum(k, m - 1), axis=1)
     inside = (k < m) & (j2 > sides.peaks[:, None])
     jp = np.maximum(j2 - 1, 0)
