@@ -35,7 +35,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms
+from nurbsmotion.planning.lookahead.path import PathGrid, row_dots, row_max, row_norms
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
@@ -174,7 +174,7 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     """v^3 (|c'| + |c|^2) <= JERK_SHARE J."""
     if caps.jerk_mm_s3 is None:
         return np.full(len(grid), np.inf)
-    k = row_norms(grid.dcurv) + np.einsum("ij,ij->i", grid.curv, grid.curv)
+    k = row_norms(grid.dcurv) + row_dots(grid.curv, grid.curv)
     with np.errstate(divide="ignore"):
         return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
 
