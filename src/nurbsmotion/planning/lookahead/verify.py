@@ -87,11 +87,17 @@ def parabola_vertex(x: NDArray[np.float64], y: NDArray[np.float64]) -> NDArray[n
 def distance_to_chord(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
     """Distance of points (m, k, 3) from segments a-b (m, 3), clamped to the segment."""
     ab = (b - a)[:, None, :]
-    l2 = (ab * ab).sum(axis=2)
+    l2 = dot3(ab, ab)
     rel = points - a[:, None, :]
-    t = np.clip((rel * ab).sum(axis=2) / np.where(l2 > 0, l2, 1.0), 0.0, 1.0)
+    t = np.clip(dot3(rel, ab) / np.where(l2 > 0, l2, 1.0), 0.0, 1.0)
     off = rel - t[..., None] * ab
-    return np.sqrt((off * off).sum(axis=2))
+    return np.sqrt(dot3(off, off))
+
+
+def dot3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """a . b over the last axis of length 3 (x, y, z), column by column: numpy's sum over a
+    last axis of 3 is ~5x slower."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
 
 
 CHORD_FRACTIONS = np.array([0.25, 0.5, 0.75])
