@@ -365,7 +365,9 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
     ends = row_norms(cat["curv"])
     kappa_max[junction] = np.maximum(ends[:-1], ends[1:])[junction]
     speed_poly = np.concatenate(polys[:-1], axis=1)
-    return PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"], speed_poly=speed_poly,
+    grid = PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"], speed_poly=speed_poly,
                     tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"],
                     position=cat["position"], pieces=tuple(pieces), curv_left=cat["curv_left"],
                     dcurv_left=cat["dcurv_left"], u_ss_left=cat["u_ss_left"], kappa_max=kappa_max)
+    grid.kappa = ends  # the cached |x_ss|, computed above
+    return grid

@@ -233,15 +233,15 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
             cursor: Cursor, end_free: bool, tau_f: float, plateaus: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
     with the jerk filter (and ``plateaus``), sharp speed peaks are flattened (jp.peak_plateau_caps)."""
-    s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
-    cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
-    if s[1] - s[0] <= 1e-12:  # start on a grid point
-        s, cap = s[1:], cap[1:]
+    points = slice(int(idx[0]), int(idx[-1]) + 1)  # scan_grid: consecutive points
+    if grid.s[points.start] - cursor.raw_offset_mm <= 1e-12:  # start on a grid point
+        s, cap = grid.s[points], x_cap[points].copy()
         cap[0] = cursor.raw_speed_mm_s**2
-        sub = bounds.subset(slice(int(idx[0]), int(idx[-1]) + 1))  # scan_grid: consecutive points
+        sub = bounds.subset(points)
     else:
-        take = np.concatenate([idx[:1], idx])
-        sub = bounds.subset(take)
+        s = np.concatenate([[cursor.raw_offset_mm], grid.s[points]])
+        cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[points]])
+        sub = bounds.subset(np.concatenate([idx[:1], idx]))
     ramp = None
     if cursor.raw_speed_mm_s > 0:
         # a running start above the caps (a lowered feed override): brake down to them

@@ -11,13 +11,16 @@ sort puts an element of ``a`` before an equal key for side="right", after it for
 
 from __future__ import annotations
 
+from typing import Literal
+
 import numpy as np
 from numpy.typing import NDArray
 
 MERGE_MIN_KEYS = 256  # fewer keys: numpy's bisection is as fast
 
 
-def search_sorted(a: NDArray[np.float64], v: NDArray[np.float64], side: str = "left") -> NDArray[np.intp]:
+def search_sorted(a: NDArray[np.float64], v: NDArray[np.float64],
+                  side: Literal["left", "right"] = "left") -> NDArray[np.intp]:
     """np.searchsorted(a, v, side) (``a`` sorted); merged when ``v`` is sorted and long."""
     if len(v) < MERGE_MIN_KEYS or not bool((v[1:] >= v[:-1]).all()):
         return np.searchsorted(a, v, side=side)
