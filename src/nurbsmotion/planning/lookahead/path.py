@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from threading import Lock
 from weakref import WeakKeyDictionary
 
 import numpy as np
@@ -164,6 +165,7 @@ def coarse_u(curve: NurbsCurve, u_start: float, u_end: float, per_span: int = CO
 
 COARSE_MEMO_ENTRIES = 4  # coarse looks kept per curve (a long block cut into windows asks for new ones)
 _COARSE_MEMO: "WeakKeyDictionary[NurbsCurve, dict[tuple[float, float, int], CoarseLook]]" = WeakKeyDictionary()
+_COARSE_LOCK = Lock()
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,15 +187,16 @@ def coarse_look(curve: NurbsCurve, u_start: float, u_end: float, per_span: int =
     """x and x' at coarse_u(curve, u_start, u_end, per_span), memoised on the curve: the
     first window of a run sizes itself on the same part that short_run_plan measured and that
     the grid starts from (the same numbers: a pure function of its arguments)."""
-    memo = _COARSE_MEMO.get(curve)
-    if memo is None:
-        memo = _COARSE_MEMO.setdefault(curve, {})
     key = (u_start, u_end, per_span)
-    look = memo.get(key)
-    if look is None:
-        u = coarse_u(curve, u_start, u_end, per_span)
-        x, dx = curve.derivatives(u, 1)
-        look = CoarseLook(u, x, dx)
+    with _COARSE_LOCK:  # plans may run in several threads (the daemon's streamed job, a CLI plan)
+        look = _COARSE_MEMO.setdefault(curve, {}).get(key)
+    if look is not None:
+        return look
+    u = coarse_u(curve, u_start, u_end, per_span)
+    x, dx = curve.derivatives(u, 1)
+    look = CoarseLook(u, x, dx)
+    with _COARSE_LOCK:
+        memo = _COARSE_MEMO.setdefault(curve, {})
         if len(memo) >= COARSE_MEMO_ENTRIES:
             del memo[next(iter(memo))]
         memo[key] = look
