@@ -6,20 +6,14 @@ process, simulated drives with a far home switch (a long search), a simulated Ci
 
 from __future__ import annotations
 
-import functools
-import tempfile
-import uuid
 from collections.abc import Iterator
-from pathlib import Path
 
 import pytest
 
-from nurbsmotion.config import parse_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from nurbsmotion.service.link import open_link
 from nurbsmotion.sim.homing import HomeSensors
-from tests.integration.daemon_helpers import wait_until
+from tests.integration.daemon_helpers import daemon_with_home_sensors, wait_until
 
 CONFIG = """\
 cycle_period_ms: 4
@@ -43,16 +37,8 @@ Y_MAX = "limit input limit_y_max (io node 10 bit 2) is active: axis Y"
 
 
 def machine(ignore: bool) -> Iterator[tuple[Daemon, Client]]:
-    folder = Path(tempfile.mkdtemp(prefix="nm-homelim-"))
-    config = parse_config(CONFIG.format(channel=f"hl-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
-                                        data_dir=folder / "data", ignore=str(ignore).lower()), "machine.yaml")
-    daemon = Daemon(config, functools.partial(open_link, home_sensors=SENSORS))
-    daemon.start()
-    try:
-        with Client(config.control.socket) as client:
-            yield daemon, client
-    finally:
-        daemon.close()
+    with daemon_with_home_sensors(CONFIG, "hl", SENSORS, ignore=str(ignore).lower()) as pair:
+        yield pair
 
 
 @pytest.fixture
