@@ -5,6 +5,7 @@ drives the daemon does not simulate) and
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import pytest
@@ -106,10 +107,18 @@ def test_home_then_jog_on_vcan(machine):
     assert daemon.request("hold")["state"] == "pausing"
     held = wait_until(lambda: (s := daemon.request("status"))["state"] == "held" and s, JOB_TIMEOUT_S,
                       "the job held", poll_s=0.05)
-    rest = _axes(daemon)
-    assert 15.0 < rest["X"][0] < 40.0 and held["job"]["id"] == job_id
-    wait_until(lambda: abs(_axes(daemon)["X"][1] - rest["X"][0]) < 0.01, JOB_TIMEOUT_S,
-               "the drive at rest where the hold ended")  # the drives' feedback, not the plan
+    assert held["job"]["id"] == job_id
+    # 'held' is the master's phase at its horizon, ahead of the wire: wait until the drive's
+    # actual position (its TPDOs) meets the commanded one, then nothing more may be commanded
+    def settled() -> dict[str, tuple[float, float]] | None:
+        before = _axes(daemon)
+        time.sleep(0.2)
+        after = _axes(daemon)
+        return after if before["X"][0] == after["X"][0] and abs(after["X"][0] - after["X"][1]) < 0.01 else None
+
+    rest = wait_until(settled, JOB_TIMEOUT_S, "the drive at rest where the hold ended", poll_s=0.05)
+    assert 15.0 < rest["X"][0] < 40.0
+    time.sleep(0.5)
     assert _axes(daemon)["X"][0] == rest["X"][0]  # held: nothing more was commanded
     assert daemon.request("resume")["state"] == "running"
     record = daemon.wait_job_end(job_id, JOB_TIMEOUT_S)
