@@ -4,13 +4,17 @@ daemon notices when the drives' process dies."""
 
 from __future__ import annotations
 
+import collections
 import csv
+import socket
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from nurbsmotion.cia402 import COB_SYNC, COB_TPDO
 from nurbsmotion.config import load_config
 from nurbsmotion.service.verify import held_plan_held, planned_counts
 from tests.integration.daemon_helpers import DaemonProcess, wait_until
@@ -73,15 +77,64 @@ def submit_wang(daemon: VcanDaemon) -> str:
     return response["job"]["id"]
 
 
-def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_and_drives):
-    daemon, sim = daemon_and_drives
+class SyncAnswers:
+    """Counts, on its own socket on vcan0, the SYNCs and each drive's TPDO1 (the drives answer
+    every SYNC with one, in order, after the RPDOs before it): a drive whose TPDO1 count reached
+    the SYNC count has handled every SYNC and set-point sent so far, however late."""
 
-    job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
-    # The drives' process may still be working through its socket's backlog (inside UML it
-    # shares one CPU with the daemon): stop it only once the drives report the end position.
-    end_mm = {a.name: 0.0 for a in daemon.config.axes}  # Wang's curve ends at the origin
-    wait_until(lambda: all(abs(a["actual_mm"] - end_mm[a["name"]]) < 0.01 for a in daemon.request("status")["axes"]),
-               timeout_s=JOB_TIMEOUT_S, what="the drives to report the end position")
+    RCVBUF_BYTES = 8 * 1024 * 1024  # room for seconds of frames while this thread waits for the CPU
+
+    def __init__(self, open_bus, node_ids: list[int]) -> None:
+        self.tpdo1 = {COB_TPDO[0] + n: n for n in node_ids}
+        self.bus = open_bus(COB_SYNC, *self.tpdo1)
+        self.bus.socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUFFORCE, self.RCVBUF_BYTES)
+        self.syncs = 0
+        self.answers: collections.Counter[int] = collections.Counter()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._count, name="sync-answers", daemon=True)
+        self._thread.start()
+
+    def _count(self) -> None:
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.1)
+            if msg is None:
+                continue
+            if msg.arbitration_id == COB_SYNC:
+                self.syncs += 1
+            else:
+                self.answers[self.tpdo1[msg.arbitration_id]] += 1
+
+    def answered(self, syncs: int, slack: int = 2) -> bool:
+        """Every drive answered at least ``syncs - slack`` SYNCs (the last may be in flight)."""
+        return all(self.answers[n] >= syncs - slack for n in self.tpdo1.values())
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+
+
+# The kernel queue holds at most 64 cycles ahead of the wire (fieldbus.bcm_queue): 1 s of SYNCs
+# after the job's end takes every SYNC of the job onto the wire.
+SYNCS_AFTER_THE_END = 250
+
+
+def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_and_drives, open_bus):
+    daemon, sim = daemon_and_drives
+    counter = SyncAnswers(open_bus, [a.node_id for a in daemon.config.axes])
+    try:
+        # before the job: the drives answer every SYNC (so the counts start level)
+        wait_until(lambda: counter.syncs > 10 and counter.answered(counter.syncs), timeout_s=JOB_TIMEOUT_S,
+                   what="the drives to answer every SYNC before the job")
+        job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
+        # The drives' process may still be working through its socket's backlog (inside UML it
+        # shares one CPU with the daemon), longer than the whole motion: Wang's curve is closed,
+        # so their position cannot tell. Stop them only once they answered every SYNC of the job.
+        end_syncs = counter.syncs + SYNCS_AFTER_THE_END
+        wait_until(lambda: counter.syncs >= end_syncs, timeout_s=JOB_TIMEOUT_S, what="1 s of SYNCs after the job")
+        wait_until(lambda: counter.answered(end_syncs), timeout_s=JOB_TIMEOUT_S,
+                   what=f"the drives to answer the job's SYNCs (answered {dict(counter.answers)} of {end_syncs})")
+    finally:
+        counter.stop()
     daemon.close()
     sim.stop()
 
