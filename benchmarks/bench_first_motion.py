@@ -27,7 +27,8 @@ drive's own CPU (docs/daemon.md, "Simulated drives in the daemon's process").
 
 Run: python benchmarks/bench_first_motion.py [--copies 8 100 460] [--results FILE]
 (``--results``: every result is also appended to FILE, and the table is written from all the
-results in FILE, so programs run by separate invocations, e.g. at the same time, share it.)
+results in FILE, so programs run by separate invocations, e.g. at the same time, share it;
+``--copies --results FILE`` runs nothing and writes the table again.)
 """
 
 from __future__ import annotations
@@ -167,12 +168,12 @@ def load_line() -> str:
 
 
 def table(results: list[dict]) -> str:
-    rows = ["| program | started | host load before / after (1/5/15 min) | cycles (motion time) | outcome | submit answered s | first motion s | first chunk planned s "
+    rows = ["| program | started | host load (1/5/15 min) before → after | cycles (motion time) | outcome | submit answered s | first motion s | first chunk planned s "
             "| planning s | missed / late cycles | daemon RSS idle MB | daemon peak RSS MB | planner worker peak RSS MB "
             "| drives' receive / ticker thread | targets (first motion < 1.0 s, daemon peak < 200 MB) |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
-        run = f"| Wang x {r['copies']} | {r.get('started', '')} | {r.get('load_before', '')} / {r.get('load_after', '')} "
+        run = f"| Wang x {r['copies']} | {r.get('started', '')} | {r.get('load_before', '')} → {r.get('load_after', '')} "
         if "error" in r:
             rows.append(f"{run}| failed: {r['error']} | | | | | | | | | | | |")
             continue
@@ -216,9 +217,10 @@ def main() -> None:
             "Host load: the load average before and after each run (2 cores shared with other sessions)."
             "\n\n" + table(results))
     command = "python benchmarks/bench_first_motion.py --copies " + " ".join(str(c) for c in args.copies)
-    if args.results is not None:
-        command = "python benchmarks/bench_first_motion.py --copies " + \
-            " ".join(str(c) for c in sorted({r["copies"] for r in results})) + " (or one invocation per program with --results FILE)"
+    if args.results is not None:  # the rows may come from several invocations sharing the file
+        command = "python benchmarks/bench_first_motion.py --copies N... --results FILE"
+        body += ("\n\nRows from one or more invocations sharing FILE (each appends its results; "
+                 "`--copies --results FILE` writes this table again from FILE).")
     write_section("first_motion", "Streamed jobs: time to first motion and daemon memory", body, command)
 
 
