@@ -4,7 +4,6 @@ daemon notices when the drives' process dies."""
 
 from __future__ import annotations
 
-import collections
 import csv
 import threading
 from pathlib import Path
@@ -13,8 +12,9 @@ import numpy as np
 import pytest
 import yaml
 
-from nurbsmotion.cia402 import COB_SYNC, COB_TPDO
+from nurbsmotion.cia402 import COB_TPDO
 from nurbsmotion.config import load_config
+from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT
 from nurbsmotion.service.verify import held_plan_held, planned_counts
 from nurbsmotion.socketcan_batch import BatchedSocketcanBus
 from tests.integration.daemon_helpers import DaemonProcess, wait_until
@@ -77,38 +77,36 @@ def submit_wang(daemon: VcanDaemon) -> str:
     return response["job"]["id"]
 
 
-class SyncAnswers:
-    """Counts, on its own socket on vcan0, the SYNCs and each drive's TPDO1 (an OPERATIONAL
-    drive answers every SYNC with one, in order, after handling the RPDOs before it): a drive
-    has handled every SYNC up to the n-th counted here once it sent n TPDO1s since the count
-    began, less those answering SYNCs from before (its lag then, a few cycles while idle).
-    (scripts/with-vcan gives the guest's sockets 8 MiB of receive buffer: seconds of frames
-    while this thread waits for the CPU.)"""
+class DriveAnswers:
+    """Each drive's TPDO1 (statusword, position actual) on vcan0, read by a thread of its own
+    (batched reads, as the other vcan listeners). An OPERATIONAL drive answers every SYNC with
+    one, in order, after handling the set-point before it; so once a drive's answers leave its
+    start position (the first moving set-point, plan row m, handled), it has handled every
+    planned row when it sent len(plan) - m more: counted from that answer, the drives' lag at
+    any earlier time does not matter. (scripts/with-vcan gives the guest's sockets 8 MiB of
+    receive buffer: seconds of frames while this thread waits for the CPU.)"""
 
     def __init__(self, channel: str, node_ids: list[int]) -> None:
         self.tpdo1 = {COB_TPDO[0] + n: n for n in node_ids}
-        filters = [{"can_id": can_id, "can_mask": 0x7FF} for can_id in (COB_SYNC, *self.tpdo1)]
+        filters = [{"can_id": can_id, "can_mask": 0x7FF} for can_id in self.tpdo1]
         # batched reads: in the guest's one CPU a listener reading frame by frame takes from the master and drives
         self.bus = BatchedSocketcanBus(channel=channel, can_filters=filters)
-        self.syncs = 0
-        self.answers: collections.Counter[int] = collections.Counter()
+        self.positions: dict[int, list[int]] = {n: [] for n in node_ids}
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._count, name="sync-answers", daemon=True)
+        self._thread = threading.Thread(target=self._read, name="drive-answers", daemon=True)
         self._thread.start()
 
-    def _count(self) -> None:
+    def _read(self) -> None:
         while not self._stop.is_set():
             msg = self.bus.recv(0.1)
-            if msg is None:
-                continue
-            if msg.arbitration_id == COB_SYNC:
-                self.syncs += 1
-            else:
-                self.answers[self.tpdo1[msg.arbitration_id]] += 1
+            if msg is not None:
+                self.positions[self.tpdo1[msg.arbitration_id]].append(TPDO1_FORMAT.unpack_from(msg.data)[1])
 
-    def answered(self, syncs: int) -> bool:
-        """Every drive sent at least ``syncs`` TPDO1s since the count began."""
-        return all(self.answers[n] >= syncs for n in self.tpdo1.values())
+    def answered_since_moving(self, node_id: int) -> int:
+        """Answers from the first one away from the drive's first reported position (0: none yet)."""
+        positions = self.positions[node_id]
+        moved = next((i for i, p in enumerate(positions) if p != positions[0]), None)
+        return 0 if moved is None else len(positions) - moved
 
     def stop(self) -> None:
         self._stop.set()
@@ -116,32 +114,35 @@ class SyncAnswers:
         self.bus.shutdown()
 
 
-# After the job, the drives must answer this many more SYNCs than the wire had carried when the
-# job ended: the kernel queue holds at most 64 cycles ahead of the wire (fieldbus.bcm_queue),
-# and a drive's lag when the count began (idle, before the submission) is counted as answered;
-# 250 SYNCs (1 s at 4 ms) cover both unless that idle lag exceeded 186 cycles (0.74 s).
-SYNCS_AFTER_THE_END = 250
+# the set-point of a SYNC is applied at the next one (lag_cycles 1) and answered after it: a few more
+ANSWERS_AFTER_THE_LAST_ROW = 5
+
+
+def rows_from_first_move(plan: np.ndarray) -> list[int]:
+    """Per axis: planned rows from the first one away from row 0 to the end."""
+    moving = plan != plan[0]
+    return [len(plan) - int(np.argmax(moving[:, j])) for j in range(plan.shape[1])]
 
 
 def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_and_drives, vcan0):
     daemon, sim = daemon_and_drives
-    counter = SyncAnswers(vcan0, [a.node_id for a in daemon.config.axes])
+    nodes = [a.node_id for a in daemon.config.axes]
+    answers = DriveAnswers(vcan0, nodes)
     try:
-        wait_until(lambda: counter.syncs > 10 and counter.answered(1), timeout_s=JOB_TIMEOUT_S,
-                   what="SYNCs and every drive's TPDO1 on vcan0 before the job")
+        wait_until(lambda: all(answers.positions.values()), timeout_s=JOB_TIMEOUT_S,
+                   what="each drive's TPDO1 on vcan0 before the job")
         job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
         # The drives' process may still be working through its socket's backlog (inside UML it
         # shares one CPU with the daemon), longer than the whole motion: Wang's curve is closed,
-        # so their position cannot tell. Stop them only once they answered every SYNC of the job.
-        end_syncs = counter.syncs + SYNCS_AFTER_THE_END
-        print(f"job ended: {counter.syncs} SYNCs, TPDO1s {dict(counter.answers)}")  # shown if the test fails
-        wait_until(lambda: counter.syncs >= end_syncs, timeout_s=JOB_TIMEOUT_S, what="1 s of SYNCs after the job")
-        print(f"1 s later: {counter.syncs} SYNCs, TPDO1s {dict(counter.answers)}")
-        wait_until(lambda: counter.answered(end_syncs), timeout_s=JOB_TIMEOUT_S,
-                   what=f"the drives to answer {end_syncs} SYNCs")
-        print(f"answered: {counter.syncs} SYNCs, TPDO1s {dict(counter.answers)}")
+        # so their position alone cannot tell. Stop them once they answered every planned row.
+        wanted = [rows + ANSWERS_AFTER_THE_LAST_ROW for rows in
+                  rows_from_first_move(planned_counts(Path(job["folder"]), daemon.config))]
+        print(f"job ended: answers since moving {[answers.answered_since_moving(n) for n in nodes]} of {wanted}")
+        wait_until(lambda: all(answers.answered_since_moving(n) >= w for n, w in zip(nodes, wanted)),
+                   timeout_s=JOB_TIMEOUT_S, what=f"the drives to answer every planned row ({wanted})")
+        print(f"answered: {[answers.answered_since_moving(n) for n in nodes]}")  # shown with -rP or a failure
     finally:
-        counter.stop()
+        answers.stop()
     daemon.close()
     sim.stop()
 
