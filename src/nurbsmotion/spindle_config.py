@@ -31,6 +31,8 @@ from nurbsmotion import drive_od
 from nurbsmotion.config import _MISSING, _Doc, _fields, _number, _optional, _string, default_eds_path
 from nurbsmotion.errors import InputError
 
+MONITOR_POLL_S = 0.05  # the master reads 0x6041 / 0x606C this often (fieldbus.spindle; counted in the bus load)
+
 if TYPE_CHECKING:
     from nurbsmotion.config import MachineConfig
 

@@ -29,12 +29,27 @@ class FakeBcmSocket:
         self.counts.append(struct.unpack_from("@III", head, 0)[2])  # opcode, flags, count (bcm_msg_head)
 
 
+class FakeEcho:
+    """SYNCs 'sent by the kernel' between the cycle thread's count and its next read."""
+
+    def __init__(self) -> None:
+        self.pending = 0
+        self.drains = 0
+
+    def drain(self, on_sync) -> None:
+        self.drains += 1
+        for _ in range(self.pending):
+            on_sync(0.0)
+        self.pending = 0
+
+
 def writer() -> tuple[BcmQueueWriter, CycleHistory, FakeBcmSocket]:
     frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)])
     history = CycleHistory(4096, N_AXES)
     queue = BcmQueueWriter("vcan-test", frames, history, PERIOD_S, 0.5 * PERIOD_S, bus=None)  # type: ignore[arg-type]
     fake = FakeBcmSocket()
     queue.bcm_sock = fake  # type: ignore[assignment]
+    queue.echo = FakeEcho()  # type: ignore[assignment]
     return queue, history, fake
 
 
@@ -103,3 +118,49 @@ def test_a_cycle_slot_frame_is_packed_with_its_cycle_in_every_ring_slot() -> Non
         can_id, dlc = struct.unpack_from("<IB", queue.buf, frame)
         assert (can_id, dlc) == (0x205, 4)
         assert struct.unpack_from("<i", queue.buf, frame + 8)[0] == 1000 * x
+
+
+def running_queue_at(c: int) -> tuple[BcmQueueWriter, CycleHistory, FakeEcho]:
+    queue, history, _ = writer()
+    echo = queue.echo
+    assert isinstance(echo, FakeEcho)
+    hold = [100, 200, 300]
+    for k in range(history.size):
+        history.store(k, [0x0F] * N_AXES, hold)
+    queue.commit(0, queue.horizon(0, 0, moving=True), 1, hold_tail(0x0F, hold))
+    echo.pending = c  # the wire reaches cycle c
+    echo.drain(queue._on_sync)
+    return queue, history, echo
+
+
+def test_a_change_the_wire_overtook_is_counted_and_widens_the_change_guard() -> None:
+    queue, history, echo = running_queue_at(10)
+    assert queue.c == 10 and queue.change_guard == 3
+    first = queue.c + queue.change_guard + 1  # a stop from cycle 14 on, as the master asks
+    echo.pending = 6  # the cycle thread was held up: the wire reached 16 before the write landed
+    queue.commit(10, queue.h, first, hold_tail(0x0F, [0, 0, 0]))
+    assert queue.c == 16
+    assert queue.overtaken == 3  # cycles 14, 15, 16 may have left with their old frames
+    assert queue.change_guard == 6 and queue.guard == 3  # the horizon's guard stays
+
+
+def test_a_change_beyond_the_wire_keeps_the_guard() -> None:
+    queue, history, echo = running_queue_at(10)
+    echo.pending = 2  # the wire moved to 12: still before the first changed cycle (14)
+    queue.commit(10, queue.h, 14, hold_tail(0x0F, [0, 0, 0]))
+    assert queue.overtaken == 0 and queue.change_guard == 3
+
+
+def test_only_changes_of_queued_cycles_read_the_echo_again() -> None:
+    queue, history, echo = running_queue_at(10)
+    drains = echo.drains
+    queue.commit(10, queue.h + 8, queue.h + 1, hold_tail(0x0F, [0, 0, 0]))  # new cycles only
+    assert echo.drains == drains
+
+
+def test_the_change_guard_never_grows_beyond_its_bound() -> None:
+    from nurbsmotion.fieldbus.bcm_queue import MAX_GUARD_CYCLES
+    queue, history, echo = running_queue_at(10)
+    echo.pending = 40
+    queue.commit(10, queue.h, 14, hold_tail(0x0F, [0, 0, 0]))
+    assert queue.change_guard == MAX_GUARD_CYCLES

@@ -128,3 +128,37 @@ def test_frames_read_but_not_handed_out_count_as_waiting(vcan0):
     finally:
         sender.shutdown()
         bus.shutdown()
+
+
+def test_the_batch_notifier_hands_out_every_frame_in_order_with_one_wake_up_per_batch(vcan0):
+    """socketcan_batch.BatchNotifier (what the master and `nurbsmotion sim` run): every frame to
+    every listener once, in order; a burst waiting in the socket is one wake-up; the read time
+    of each batch is kept (the master's arrival clock uses it instead of a clock read per frame)."""
+    from nurbsmotion.socketcan_batch import BatchNotifier
+
+    bus = BatchedSocketcanBus(channel=vcan0)
+    got: list[tuple[int, bytes, float]] = []
+    notifier = BatchNotifier(bus, [lambda m: got.append((m.arbitration_id, bytes(m.data), bus.read_perf_s))], 0.2)
+    sender = can.Bus(interface="socketcan", channel=vcan0)
+    sent = []
+    try:
+        time.sleep(0.3)  # the thread waits (at most 0.2 s per recvmmsg) and comes back empty
+        for k in range(CYCLES):
+            for can_id, data in cycle_frames(k):
+                sender.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+                sent.append((can_id, data))
+            if k % 250 == 0:
+                time.sleep(0.05)
+        deadline = time.monotonic() + 30.0
+        while len(got) < len(sent) and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        notifier.stop()
+        sender.shutdown()
+        bus.shutdown()
+    assert [(i, d) for i, d, _ in got] == sent
+    assert notifier.exception is None
+    assert bus.lag.frames == len(sent) and bus.lag.wakeups < len(sent)
+    read_times = [t for _, _, t in got]
+    assert read_times == sorted(read_times) and len(set(read_times)) == bus.lag.wakeups
+

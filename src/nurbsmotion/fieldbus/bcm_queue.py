@@ -18,6 +18,14 @@ the last 318 cycles of a job). One ring keeps the order by construction; docs/be
   may be copying them: before Linux 6.15's "extend bcm_tx_lock usage" the copy takes no
   lock). Each TX_SETUP carries the whole ring, so those slots are rewritten with identical
   bytes. Stop, feed override and abort act from c + guard + 1 on: latency (guard + 1)·T.
+  After a TX_SETUP that changed queued cycles the echo is read again: if the wire has
+  passed c + guard meanwhile (the cycle thread was held up between its count and its write
+  longer than the guard: seen inside a starved User-Mode Linux guest), those cycles went out
+  with their old frames (a stop or a velocity ramp starting late, a step in the set-points).
+  They are counted and logged (``kernel_queue_overtaken``), and the change guard (where
+  requests act from: c + change_guard + 1) grows by what was measured, up to
+  MAX_GUARD_CYCLES, so the next change lands beyond the wire; the planning horizon keeps the
+  guard of 3 (the stop tail beyond it is never adopted as sent before the wire reaches it).
 - **The lease.** Each renewal sets the op's ``count`` to (L - c)·(1 + n) frames, with
   L = c + cycles - 1 - pad (SETTIMER without STARTTIMER keeps the phase). If Python stops
   renewing, the kernel sends into cycle L and stops by itself: SYNC
@@ -71,6 +79,7 @@ SYNC_FILTER = struct.Struct("=II")
 SFF_EXACT_MASK = 0xC00007FF  # CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_SFF_MASK
 TIMESPEC = struct.Struct("@ll")
 GUARD_CYCLES = 3
+MAX_GUARD_CYCLES = 16  # the change guard grows after an overtaken change (module docstring) up to this
 BATCH_CYCLES = 8  # the planning horizon moves in steps of this many cycles (fewer tail rewrites)
 WAKE_PERIOD_S = 0.008  # the cycle thread wakes about this often (whole cycles): the queue, not it, keeps time
 TRIM_WINDOW = 64  # echoed SYNC intervals the period trim looks at
@@ -150,8 +159,6 @@ class SyncEcho:
 class BcmQueueWriter:
     """The cycle writer for SocketCAN (see the module docstring)."""
 
-    guard = GUARD_CYCLES
-
     def __init__(self, channel: str, frames: CyclicFrames, history: CycleHistory, period_s: float,
                  late_threshold_s: float, bus: can.BusABC) -> None:
         self.channel = channel
@@ -190,6 +197,9 @@ class BcmQueueWriter:
         self.wake_s = max(1, round(WAKE_PERIOD_S / period_s)) * period_s
         self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
         self.expired = 0  # lease expiries seen
+        self.guard = GUARD_CYCLES  # slots up to c + guard are never rewritten
+        self.change_guard = GUARD_CYCLES  # requests act beyond it; grows when the wire overtakes one
+        self.overtaken = 0  # changed cycles the wire sent with their old frames
         self.headroom = QueueHeadroom(self.cycles)  # while moving (at rest the horizon is a few cycles)
         self.moving = False
 
@@ -244,6 +254,7 @@ class BcmQueueWriter:
         """Write the new and recomputed cycles and the tail into the ring; renew the lease."""
         history = self.history
         end = c + self.cycles - 1  # last cycle the ring can hold ahead of c
+        changed_queued = self.running and first_new <= self.h
         if not self.running:
             first_new = self.op_base
         for x in range(max(first_new, c + 1), horizon + 1):
@@ -259,6 +270,23 @@ class BcmQueueWriter:
         self.h = horizon
         self.c_committed = c
         self._renew(c)
+        if changed_queued:
+            self._check_overtaken(c, first_new)
+
+    def _check_overtaken(self, c: int, first_changed: int) -> None:
+        """After changing queued cycles from ``first_changed`` on (>= c + change_guard + 1): the
+        SYNCs sent since the count. Changed cycles up to the wire may have gone out with their
+        old frames (at most that many: a SYNC echoed before this read may have left after the
+        write): count them and widen the change guard by as many (module docstring)."""
+        assert self.echo is not None
+        self.echo.drain(self._on_sync)
+        late = self.c - max(first_changed, c + self.guard + 1) + 1
+        if late <= 0:
+            return
+        self.overtaken += late
+        self.change_guard = min(self.change_guard + late, MAX_GUARD_CYCLES)
+        log.warning(kv("kernel_queue_overtaken", cycle=c, wire=self.c, first_changed=first_changed,
+                       cycles=late, change_guard=self.change_guard))
 
     def _pack(self, x: int, cw: list[int], sp: list[int]) -> None:
         """The RPDO data of cycle x into its ring slot (each frame packed into its scratch buffer)."""
@@ -372,7 +400,8 @@ class BcmQueueWriter:
         if self.headroom.samples:
             log.info(kv("kernel_queue_summary", wakes=self.headroom.samples, headroom_min=self.headroom.min,
                         headroom_p1=self.headroom.percentile(0.01), headroom_p50=self.headroom.percentile(0.5),
-                        into_tail=self.headroom.into_tail, lease_expiries=self.expired, ring_cycles=self.cycles))
+                        into_tail=self.headroom.into_tail, lease_expiries=self.expired, ring_cycles=self.cycles,
+                        overtaken=self.overtaken, change_guard=self.change_guard))
         self._delete()
         self.running = False
         if self.bcm_sock is not None:

@@ -55,11 +55,14 @@ class Feedback:
         # the master's own reception lag, so heartbeats are judged as they arrived (arrival_clock)
         self.arrival = ArrivalClock(lambda: False)
 
-    def watch_reception(self, pending: Callable[[], bool]) -> "ArrivalListener":
+    def watch_reception(self, pending: Callable[[], bool],
+                        read_time: Callable[[], float] | None = None) -> "ArrivalListener":
         """Judge on the arrival timeline of the bus whose waiting frames ``pending()`` reports;
-        returns the listener to add to the bus's notifier (it stamps every frame handled)."""
+        returns the listener to add to the bus's notifier (it stamps every frame handled).
+        ``read_time()``: perf_counter when the bus read the frame's batch (the batched
+        SocketCAN bus reads the clock once per batch), else the clock is read per frame."""
         self.arrival = ArrivalClock(pending)
-        return ArrivalListener(self.arrival)
+        return ArrivalListener(self.arrival, read_time or time.perf_counter)
 
     def judging_time_s(self) -> float:
         """Now on the frames' arrival timeline (perf_counter based, arrival_clock)."""
@@ -146,17 +149,21 @@ class ArrivalListener(can.Listener):
     """python-can listener on the master's notifier: every handled frame moves the arrival
     clock (after canopen's own listener has dispatched it to the callbacks).
 
-    One clock read per frame (arrival_perf_s takes three): the wall-clock to perf_counter
-    offset is read again at most every OFFSET_REFRESH_S. Every frame passes here, and inside
-    User-Mode Linux each clock read is a trapped system call (docs/vcan.md, "The drives' lag")."""
+    Handled at ``read_time()``: on the batched SocketCAN bus the time its batch was read (one
+    clock read per batch, not per frame; a frame counts as handled a little before it is,
+    which runs the judging time ahead, never behind), else a clock read per frame. The
+    wall-clock to perf_counter offset is read again at most every OFFSET_REFRESH_S. Every frame
+    passes here, and inside User-Mode Linux each clock read is a trapped system call
+    (docs/vcan.md, "The drives' lag")."""
 
-    def __init__(self, clock: ArrivalClock) -> None:
+    def __init__(self, clock: ArrivalClock, read_time: Callable[[], float] = time.perf_counter) -> None:
         self.clock = clock
+        self._read_time = read_time
         self._offset_s = 0.0  # time.time() - time.perf_counter()
         self._offset_read_s = -math.inf
 
     def on_message_received(self, msg: can.Message) -> None:
-        now = time.perf_counter()
+        now = self._read_time()
         if now - self._offset_read_s > OFFSET_REFRESH_S:
             self._offset_s, self._offset_read_s = time.time() - now, now
         stamp = msg.timestamp

@@ -61,7 +61,7 @@ from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import CycleWriter, CyclicFrames, LoopWriter
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # fewer system calls per cycle (its docstring)
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier  # fewer system calls per cycle (its docstring)
 
 log = logging.getLogger(__name__)
 
@@ -308,10 +308,13 @@ class Master:
         network = canopen.Network(self._bus)
         self._traffic_log = TrafficLog(self._traffic_path)  # paused without a path
         network.listeners.append(self._traffic_log)
-        network.listeners.append(self._fb.watch_reception(socket_pending(self._bus)))
+        read_time = (lambda bus=self._bus: bus.read_perf_s) if isinstance(self._bus, BatchedSocketcanBus) else None
+        network.listeners.append(self._fb.watch_reception(socket_pending(self._bus), read_time))
         self._wrap_network_send(network, self._traffic_log)
         self._traffic = self._traffic_log if self._traffic_path else None
-        network.connect()
+        # canopen's connect() with the bus given only starts python-can's Notifier; ours reads
+        # a batch of frames per wake-up on SocketCAN (socketcan_batch: the per-cycle TPDOs)
+        network.notifier = BatchNotifier(self._bus, network.listeners, network.NOTIFIER_CYCLE)
         self._trails = []
         for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
             assert axis.od is not None  # loaded with the configuration
@@ -780,15 +783,16 @@ class Master:
             yield requests.popleft()
 
     def _plan(self, k: int, requests: list[tuple[str, Any]]) -> None:
-        """Commands of every cycle up to the writer's horizon; requests act from k + guard + 1
-        on (queued cycles beyond that are computed again from the state kept for each)."""
+        """Commands of every cycle up to the writer's horizon; requests act from k +
+        change_guard + 1 on (queued cycles beyond that are computed again from the state kept
+        for each; the kernel queue widens its change guard when the wire overtook a change)."""
         writer, ctl, fb, snaps = self._writer, self._ctl, self._fb, self._snaps
         assert writer is not None
         if any(what in ("abort", "quick_stop") for what, _ in requests):
             writer.quick_stop_now(k, [CW_QUICK_STOP] * self._n, list(fb.pos))
-        first = k + writer.guard + 1
-        if self._horizon < first - 1:
-            self._adopt_tail(k, first - 1)
+        if self._horizon < k + writer.guard:
+            self._adopt_tail(k, k + writer.guard)
+        first = k + writer.change_guard + 1
         velocity = any(what == "cyclic_velocity" for what, _ in requests)  # a new 0x60FF target: not the axes'
         if velocity:
             requests = [r for r in requests if r[0] != "cyclic_velocity"]

@@ -41,12 +41,12 @@ from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
-from nurbsmotion.spindle_config import (PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
+from nurbsmotion.spindle_config import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
                                         TARGET_VELOCITY, VELOCITY_ACTUAL, SpindleConfig, SpindleMode)
 
 log = logging.getLogger(__name__)
 
-POLL_S = 0.05  # monitor period: 0x6041 / 0x606C reads, csv ramp steps
+POLL_S = MONITOR_POLL_S  # monitor period: 0x6041 / 0x606C reads, csv ramp steps
 CSV_WINDOW = 0.02  # csv 'at speed': within 2 % of the target (or 1 count/s)
 SDO_TIMEOUT_S = 0.5
 LOST_AFTER = 3  # monitor polls in a row without an SDO answer before the spindle counts as lost

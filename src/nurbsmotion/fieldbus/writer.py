@@ -56,7 +56,8 @@ class CyclicFrames:
 
 
 class CycleWriter(Protocol):
-    guard: int
+    guard: int  # cycles up to c + guard are never rewritten
+    change_guard: int  # requests (stop, override, a new 0x60FF target) act from c + change_guard + 1
     stats: LatenessStats
     send_errors: int
 
@@ -82,6 +83,7 @@ class LoopWriter:
     """SYNC and RPDOs sent by the cycle thread at absolute deadlines (fieldbus.cycle)."""
 
     guard = 0
+    change_guard = 0
 
     def __init__(self, bus: can.BusABC, frames: CyclicFrames, history: CycleHistory, period_s: float,
                  spin_s: float, late_threshold_s: float, on_sent: Callable[[list[can.Message]], None] | None,

@@ -99,11 +99,15 @@ class ReadOptions:
     ``coordinates``: work offsets, G92 and G28/G30 positions in effect at the start (the
     service passes the persisted ones; Program.coordinates are those at the end).
     ``tool_in_spindle``: the tool the machine holds (M6 of that tool then needs no hold).
+    ``spindle`` / ``spindle_rpm``: the spindle as the machine runs it (an earlier MDI's M3):
+    an ``S`` alone then changes its speed, as in LinuxCNC, where the modal state carries over.
     """
 
     tool_table: ToolTable | None = None
     coordinates: CoordinateState | None = None
     tool_in_spindle: int | None = None
+    spindle: SpindleDirection = SpindleDirection.OFF
+    spindle_rpm: float = 0.0
     block_delete: bool = True  # '/' lines are skipped (the switch on)
     optional_stop: bool = True  # M1 pauses like M0 (the switch on)
     max_errors: int = 50
@@ -136,8 +140,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.blend_tolerance_mm: float | None = None
         self.tool_selected: int | None = None
         self.tool_loaded: int | None = self.options.tool_in_spindle
-        self.spindle = SpindleDirection.OFF
-        self.spindle_rpm = 0.0
+        self.spindle = self.options.spindle
+        self.spindle_rpm = self.options.spindle_rpm
         self.constant_surface_speed = False  # G96: S is a surface speed (G97: rpm)
         self.coolant: set[CoolantMode] = set()
         self.saved_states: list[ModalSnapshot | None] = [None]  # M70 per call level

@@ -117,7 +117,8 @@ class Controller:
             status = self.link.status()
             start_mm = self._held_position_mm(status)
             try:
-                options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop)
+                options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop,
+                                                          self.machine.spindle_commanded_rpm())
                 plan = self.planner(name, text, start_mm, options)
             except InputError as err:
                 self._record_rejection(name, text, err)

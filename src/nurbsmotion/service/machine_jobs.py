@@ -45,6 +45,12 @@ class MachineJobs:
             devices.axis_direction = self.axis_direction
 
     # ------------------------------------------------------------------ before a job
+    def spindle_commanded_rpm(self) -> float:
+        """The spindle's commanded speed now (signed: + M3, - M4; 0 stopped or none): what
+        the next program starts from (an earlier MDI's M3 keeps it turning)."""
+        spindle = self.devices.spindle if self.devices is not None else None
+        return spindle.status().commanded_rpm if spindle is not None else 0.0
+
     def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
         return self.devices.start_refusal(jog) if self.devices is not None else None
 

@@ -22,6 +22,7 @@ from typing import Any
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.program import CoordinateState, ReadOptions, ToolTable
+from nurbsmotion.program.model import SpindleDirection
 from nurbsmotion.program.coordinates import SYSTEM_NAMES
 
 STATE_FILE = "offsets.json"
@@ -50,9 +51,13 @@ class MachineState:
         return cls(CoordinateState.from_dict(data.get("coordinates", {}), f"{where}: coordinates"), tool)
 
     def read_options(self, tool_table: ToolTable | None, block_delete: bool = True,
-                     optional_stop: bool = True) -> ReadOptions:
-        """What the G-code reader starts from for the next program on this machine."""
+                     optional_stop: bool = True, spindle_rpm: float = 0.0) -> ReadOptions:
+        """What the G-code reader starts from for the next program on this machine;
+        ``spindle_rpm``: the spindle's commanded speed now (signed: + M3, - M4; 0 stopped)."""
+        direction = SpindleDirection.CW if spindle_rpm > 0 else SpindleDirection.CCW if spindle_rpm < 0 else \
+            SpindleDirection.OFF
         return ReadOptions(tool_table=tool_table, coordinates=self.coordinates, tool_in_spindle=self.tool_in_spindle,
+                           spindle=direction, spindle_rpm=abs(spindle_rpm),
                            block_delete=block_delete, optional_stop=optional_stop)
 
     def status(self) -> dict[str, Any]:

@@ -21,7 +21,7 @@ from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
 from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
@@ -229,9 +229,11 @@ class SimNetwork:
             return self
         network = canopen.Network()
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        if self.interface == "socketcan":  # one system call per frame (nurbsmotion/socketcan_batch.py)
+        if self.interface == "socketcan":  # a batch of frames per wake-up (nurbsmotion/socketcan_batch.py)
             network.bus = BatchedSocketcanBus(channel=self.channel, batch=self.rx_batch, **self.bus_kwargs)
-        network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
+            network.notifier = BatchNotifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
+        else:
+            network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
         if self.rt_priority is not None and network.notifier is not None:
             network.notifier.add_listener(_RealtimeOnFirstFrame(self.rt_priority, self.thread_policy))
         self.network = network
