@@ -9,7 +9,9 @@ homing: {method: here, offset_mm: 0}
 manufacturer specific) or ``here`` (no drive homing: the current position becomes
 ``offset_mm``). Drive methods other than 35/37 need the two speeds and the acceleration.
 ``order`` (an integer, lower homes first) sets the sequence of ``nurbsmotion home`` without
-axis names (axes without it follow, in list order). The optional
+axis names (axes without it follow, in list order). ``ignore_limits`` (LinuxCNC's
+HOME_IGNORE_LIMITS): the axis' io limit inputs neither refuse nor stop its homing (its limit
+switch is also its home switch); any other limit input does. The optional
 ``speed_unit_counts_s``, ``accel_unit_counts_s2`` and ``home_offset_sign`` say what the
 drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
 ``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
@@ -25,7 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from nurbsmotion.config import _MISSING, _SHOWN, _Doc, _fields, _number
+from nurbsmotion.config import _MISSING, _SHOWN, _boolean, _Doc, _fields, _number
 
 HERE = "here"
 STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)
@@ -47,6 +49,7 @@ class HomingConfig:
     accel_unit_counts_s2: float = 1.0  # counts/s² one unit of 0x609A stands for
     home_offset_sign: int = -1  # -1: CiA 402 (zero = home + 0x607C, the home reads -0x607C)
     order: int | None = None  # `home` with no axis named: lower first; axes without: after, in list order
+    ignore_limits: bool = False  # the io limit inputs of this axis do not stop its homing (LinuxCNC HOME_IGNORE_LIMITS)
 
     @property
     def on_drive(self) -> bool:
@@ -92,6 +95,7 @@ _READERS = {
     "accel_unit_counts_s2": _POSITIVE,
     "home_offset_sign": (_sign, {}),
     "order": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
+    "ignore_limits": (_boolean, {}),
 }
 
 

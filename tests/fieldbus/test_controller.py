@@ -104,6 +104,19 @@ def test_abort_sends_quick_stop_with_the_actual_position():
     assert job.outcome == "aborted" and ctl.job is None
 
 
+def test_a_job_and_a_quick_stop_in_the_same_step_keep_the_job_in_its_phase_notice():
+    """The master reads the job of a STREAMING transition from the notice: a quick stop (the
+    e-stop input) handled in the same step has already ended it and cleared ctl.job (seen as
+    'cycle loop failed ... NoneType ... start_cycle' under load in test_spindle_io)."""
+    ctl, fb = holding_controller()
+    ctl.notices.clear()
+    job = FakeJob([[i, i] for i in range(100)])
+    ctl.step(2, fb, [("job", job), ("quick_stop", "e-stop")])
+    assert ctl.job is None and job.outcome == "e-stop"
+    phases = [(n[1], n[3]) for n in ctl.notices if n[0] == "phase"]
+    assert phases == [(Phase.STREAMING, job), (Phase.QUICK_STOP, job)]
+
+
 def test_tail_is_a_stop_from_the_current_state_and_leaves_the_state_alone():
     ctl, fb = holding_controller(1)
     job = FakeJob([[i * 100] for i in range(1000)])

@@ -11,6 +11,7 @@ from collections.abc import Iterator
 import canopen
 import pytest
 
+from nurbsmotion.cia402 import NmtState
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import (
     IoNode,
@@ -149,6 +150,10 @@ def test_a_restarted_node_is_lost_and_a_second_bring_up_revives_it():
                         "back to defaults)"]
         io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=300)
         assert io.lost is None and io.inputs is not None
+        # the bring-up's NMT start is not confirmed (CiA 301): the input changes once the node
+        # is OPERATIONAL (set at once, a loaded host's node could still be PRE-OPERATIONAL and
+        # never send the change: CiA 401 TPDOs are sent on a change only)
+        wait_until(lambda: sim.nmt_state is NmtState.OPERATIONAL, 2.0, "the node OPERATIONAL again")
         sim.set_input(10, True)
         wait_until(lambda: io.input("probe") is True, what="TPDO1 after the second bring-up")
         time.sleep(0.4)

@@ -162,3 +162,17 @@ def test_invalid_definitions_name_the_field(kwargs, field, fragment):
         NurbsCurve.create(**kwargs)
     assert info.value.field == field
     assert fragment in str(info.value)
+
+
+@given(random_curves(), st.integers(0, 3), st.integers(1, 5000))
+@settings(max_examples=40, deadline=None)
+def test_derivatives_by_coordinate_are_derivatives_transposed(curve, order, count):
+    """The planner's coordinate-major evaluation gives derivatives()' numbers, also across
+    evaluation chunks (counts above EVALUATION_CHUNK)."""
+    u = np.linspace(curve.u_min, curve.u_max, count)
+    rows = curve.derivatives(u, order)
+    by_coordinate = curve.derivatives_by_coordinate(u, order)
+    assert len(by_coordinate) == order + 1
+    for k in range(order + 1):
+        assert by_coordinate[k].shape == (curve.dim, count)
+        assert np.array_equal(by_coordinate[k].T, rows[k])

@@ -73,6 +73,30 @@ def daemon_in_process(data_dir: Path, extra_yaml: str, prefix: str) -> Iterator[
         daemon.close()
 
 
+@contextlib.contextmanager
+def daemon_with_home_sensors(config_template: str, prefix: str, sensors: dict[int, Any],
+                             **fields: Any) -> Iterator[tuple[Any, Any]]:
+    """The daemon (this process) on ``config_template`` formatted with a private channel,
+    socket and data dir (and ``fields``), its simulated drives given home ``sensors``, and a
+    client; both closed at the end."""
+    import functools
+
+    from nurbsmotion.config import parse_config
+    from nurbsmotion.service.daemon import Daemon
+    from nurbsmotion.service.link import open_link
+
+    folder = Path(tempfile.mkdtemp(prefix=f"nm-{prefix}-"))
+    config = parse_config(config_template.format(channel=f"{prefix}-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
+                                                 data_dir=folder / "data", **fields), "machine.yaml")
+    daemon = Daemon(config, functools.partial(open_link, home_sensors=sensors))
+    daemon.start()
+    try:
+        with Client(config.control.socket) as client:
+            yield daemon, client
+    finally:
+        daemon.close()
+
+
 def subprocess_environment(notify_socket: Path | None = None) -> dict[str, str]:
     """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if given."""
     env = dict(os.environ)

@@ -3,24 +3,18 @@ with simulated drives that have home switches and index pulses (a virtual bus)."
 
 from __future__ import annotations
 
-import functools
 import json
 import os
 import signal
 import subprocess
 import sys
-import tempfile
 import time
-import uuid
 from pathlib import Path
 
 import pytest
 
-from nurbsmotion.config import parse_config
 from nurbsmotion.service.client import Client
-from nurbsmotion.service.daemon import Daemon
-from nurbsmotion.service.link import open_link
-from tests.integration.daemon_helpers import subprocess_environment, wait_until
+from tests.integration.daemon_helpers import daemon_with_home_sensors, subprocess_environment, wait_until
 
 HomeSensors = pytest.importorskip("nurbsmotion.sim.homing").HomeSensors
 
@@ -49,16 +43,8 @@ SENSORS = {1: HomeSensors(negative_limit_counts=-3000),
 
 @pytest.fixture()
 def machine():
-    folder = Path(tempfile.mkdtemp(prefix="nm-home-"))
-    config = parse_config(CONFIG.format(channel=f"hj-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
-                                        data_dir=folder / "data"), "machine.yaml")
-    daemon = Daemon(config, functools.partial(open_link, home_sensors=SENSORS))
-    daemon.start()
-    try:
-        with Client(config.control.socket) as client:
-            yield daemon, client
-    finally:
-        daemon.close()
+    with daemon_with_home_sensors(CONFIG, "hj", SENSORS) as (daemon, client):
+        yield daemon, client
 
 
 def _home(client: Client, axes: str = "") -> dict:

@@ -334,7 +334,7 @@ class CycleController:
         self.phase_cycle = k
         if phase is not Phase.HOMING:
             self.homing = None
-        self.notices.append(("phase", phase, k))
+        self.notices.append(("phase", phase, k, self.job))  # the job as of this transition
 
     def _enter_enabling(self, k: int, fb: Feedback) -> None:
         for i in range(self.n):

@@ -854,9 +854,11 @@ class Master:
                 log.info(kv("phase", phase=phase.value, cycle=cycle))
                 self._no_rewind_before = cycle  # a rewind never undoes a phase change (bring-up, job start...)
                 if phase is Phase.STREAMING:
-                    self._job = self._ctl.job
-                    if self._job.start_cycle < 0:  # not on resume
-                        self._job.start_cycle = cycle  # the step that starts streaming computes row 0
+                    # the job of the transition: a request later in the same step (the e-stop's
+                    # quick stop, a disable) may have ended it and cleared the controller's
+                    self._job = job = notice[3]
+                    if job.start_cycle < 0:  # not on resume
+                        job.start_cycle = cycle  # the step that starts streaming computes row 0
             elif what == "ready":
                 self._ready.set()
             elif what == "enable_failed":

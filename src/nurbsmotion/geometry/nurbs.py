@@ -161,7 +161,10 @@ def rational_derivatives(homogeneous_derivs: Sequence[NDArray[np.float64]]) -> l
     for k, a_k in enumerate(homogeneous_derivs):
         numerator = a_k[:-1]
         for i in range(1, k + 1):
-            numerator = numerator - comb(k, i) * homogeneous_derivs[i][-1] * out[k - i]
+            w_i = homogeneous_derivs[i][-1]
+            if not w_i.any():  # W^(i) = 0 (past the degree, or a polynomial curve): the term is 0
+                continue
+            numerator = numerator - comb(k, i) * w_i * out[k - i]
         out.append(numerator * inv_w)
     return out
 
@@ -267,12 +270,29 @@ class NurbsCurve:
         t = u - lefts.take(i)
         g = coeffs.take(i, axis=2)
         p = self.degree
-        d: list = [g[p]] + [0.0] * order
+        d: list = [g[p]] + [None] * order
         for j in range(p - 1, -1, -1):
             for k in range(min(order, p - j), 0, -1):
-                d[k] = d[k] * t + k * d[k - 1]
+                # d_k starts at 0: its first step is k d_(k-1) (0 t + k d = k d exactly)
+                d[k] = (k * d[k - 1] if k > 1 else d[k - 1]) if d[k] is None else d[k] * t + k * d[k - 1]
             d[0] = d[0] * t + g[j]
-        return [dk if isinstance(dk, np.ndarray) else np.zeros((self.dim + 1, len(u))) for dk in d]
+        return [dk if dk is not None else np.zeros((self.dim + 1, len(u))) for dk in d]
+
+    def derivatives_by_coordinate(self, u: NDArray[np.float64], order: int) -> list[NDArray[np.float64]]:
+        """x, x', ... up to x^(order) at each u of a 1-D array, each coordinate-major
+        (dim, len(u)): ``derivatives`` without its transposes, for callers that compute on
+        whole coordinate rows (the planner's path grid)."""
+        if not 0 <= order <= 3:
+            raise ValueError("derivative order must be 0..3")
+        uu = np.asarray(u, dtype=np.float64)
+        if len(uu) <= EVALUATION_CHUNK:
+            return rational_derivatives(self.homogeneous_derivatives(uu, order))
+        out = [np.empty((self.dim, len(uu))) for _ in range(order + 1)]
+        for start in range(0, len(uu), EVALUATION_CHUNK):
+            chunk = uu[start: start + EVALUATION_CHUNK]
+            for k, x_k in enumerate(rational_derivatives(self.homogeneous_derivatives(chunk, order))):
+                out[k][:, start: start + len(chunk)] = x_k
+        return out
 
     def derivatives(self, u: ArrayLike, order: int = 2) -> NDArray[np.float64]:
         """x and its derivatives up to ``order`` at u: array (order+1, len(u), dim); (order+1, dim) for scalar u.
@@ -300,8 +320,8 @@ class NurbsCurve:
         numerator = np.zeros((2 * p + 1, self.dim, c.shape[2]))
         for a in range(p + 1):
             for b in range(p + 1):
-                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b
-                if a + b >= 1:
+                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b (0 for a = b)
+                if a != b:
                     numerator[a + b - 1] += (a - b) * c[a] * w[b]
         return np.ascontiguousarray(numerator[: max(2 * p - 1, 1)]), np.ascontiguousarray(w)
 

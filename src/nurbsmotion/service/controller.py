@@ -92,6 +92,7 @@ class Controller:
         self._faults_acknowledged = 0
         self._override = 1.0  # requested, as a fraction
         self.homing = Homing(config, link)  # homed state, `home`, require_homing (service.homing)
+        self.machine.on_homing_trip = self.homing.limit_tripped  # a limit input stops a homing too
         self.jogging = Jogging(self)  # `jog`, its lease (service.jog)
 
     # ------------------------------------------------------------------ requests
@@ -292,6 +293,8 @@ class Controller:
             status = self.link.status()
             if self.state(status) == "fault":
                 raise Refused("home", "the drives are in fault; send reset first")
+            if (refusal := self.machine.start_refusal(None, self.homing.ignoring_limits(axes))) is not None:
+                raise Refused("home", refusal)
             names = self.homing.start(axes, status.faults)
         return {"ok": True, "axes": names, "state": "homing"}
 

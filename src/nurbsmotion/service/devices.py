@@ -86,9 +86,10 @@ class MachineDevices:
         log.info(kv("io.revived", node=self.config.io.node_id))  # type: ignore[union-attr]
         return None
 
-    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
-        """Why motion may not start (e-stop, limit input unless ``jog`` moves off it), else None."""
-        return self.io.start_refusal(jog) if self.io is not None else None
+    def start_refusal(self, jog: AxisMotion | None = None, ignored_axes: frozenset[str] = frozenset()) -> str | None:
+        """Why motion may not start (e-stop, limit input unless ``jog`` moves off it or its
+        axis is in ``ignored_axes``), else None."""
+        return self.io.start_refusal(jog, ignored_axes) if self.io is not None else None
 
     def all_off(self, hard: bool) -> None:
         """Job end (``hard`` False: the spindle decelerates to 0 with its ramp) or abort, fault,

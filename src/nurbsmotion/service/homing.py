@@ -88,6 +88,7 @@ class Homing:
         self._faults_seen = 0  # master fault reports already looked at
         self._thread: threading.Thread | None = None
         self._lock = threading.Lock()
+        self._tripped: str | None = None  # the limit input that stopped the homing under way
 
     # ------------------------------------------------------------------ state
     @property
@@ -122,6 +123,27 @@ class Homing:
         return {"required": self.required, "busy": self.busy, "error": self.error,
                 "axes": {a.name: s.value for a, s in zip(self.config.axes, self.state)}}
 
+    def ignoring_limits(self, names: list[str]) -> frozenset[str]:
+        """Of the axes ``home`` would home now, those whose homing ignores their limit inputs."""
+        axes = self.config.axes
+        return frozenset(axes[i].name for i in homing_order(self.config, names)
+                         if (h := axes[i].homing) is not None and h.ignore_limits)
+
+    def limit_tripped(self, axis: str, message: str) -> None:
+        """A limit input of ``axis`` became active: a homing under way stops with a quick stop
+        of every axis (as a job would be aborted), unless ``axis`` is the one homing and its
+        homing ignores its limits (its limit switch is its home switch)."""
+        homing = [i for i, s in enumerate(self.state) if s is AxisHomed.HOMING]
+        if not self.busy or not homing:
+            return
+        current = self.config.axes[homing[0]]
+        if current.name == axis and current.homing is not None and current.homing.ignore_limits:
+            log.info(kv("homing_limit_ignored", axis=axis, reason=message))
+            return
+        with self._lock:
+            self._tripped = message
+        self.link.stop_homing(quick=True)
+
     # ------------------------------------------------------------------ homing
     def start(self, names: list[str], faults: tuple[Any, ...]) -> list[str]:
         """Start homing ``names`` (all with homing: when empty) in order on a thread; the names."""
@@ -129,6 +151,7 @@ class Homing:
         self.forget_faulted(faults)
         with self._lock:
             self.error = None
+            self._tripped = None
             for i in order:
                 self.state[i] = AxisHomed.NOT_HOMED
             self._thread = threading.Thread(target=self._home_all, args=(order,), name="homing", daemon=True)
@@ -159,6 +182,8 @@ class Homing:
             ok, reason = False, str(err)
         with self._lock:
             self.state[i] = AxisHomed.HOMED if ok else AxisHomed.NOT_HOMED
+            if not ok and self._tripped is not None:
+                reason = f"homing stopped: {self._tripped}; the axes were quick-stopped: send reset"
             if not ok:
                 self.error = reason if reason.startswith("axis ") else f"axis {axis.name}: {reason}"
         if ok:

@@ -157,15 +157,16 @@ class MachineIo:
         """The e-stop input is active, or not known yet (unknown counts as pressed)."""
         return self.has_estop() and self.node.input(ESTOP) is not False
 
-    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
+    def start_refusal(self, jog: AxisMotion | None = None, ignored_axes: frozenset[str] = frozenset()) -> str | None:
         """Why no motion may start now, else None: the e-stop is active, or a limit input is
-        and the motion is not ``jog``, a jog of that axis away from the switch."""
+        and the motion is not ``jog``, a jog of that axis away from the switch. Limit inputs
+        of ``ignored_axes`` do not count (a homing with ignore_limits)."""
         if (lost := self.lost_refusal()) is not None:
             return lost
         if self.estop_active():
             return f"e-stop input {ESTOP} ({self._describe(ESTOP)}) is active: release it first"
         for name, switch in self.switches.items():
-            if self.node.input(name):
+            if switch.axis not in ignored_axes and self.node.input(name):
                 why = self._limit_refusal(switch, jog)
                 if why is not None:
                     return why

@@ -39,6 +39,7 @@ class MachineJobs:
         self.devices = devices
         self.link = link
         self.running_job = running_job
+        self.on_homing_trip: Callable[[str, str], None] = lambda axis, message: None  # set by the controller
         if devices is not None:
             devices.on_trip = self.trip
             devices.on_spindle_fault = self.spindle_fault
@@ -51,8 +52,8 @@ class MachineJobs:
         spindle = self.devices.spindle if self.devices is not None else None
         return spindle.status().commanded_rpm if spindle is not None else 0.0
 
-    def start_refusal(self, jog: AxisMotion | None = None) -> str | None:
-        return self.devices.start_refusal(jog) if self.devices is not None else None
+    def start_refusal(self, jog: AxisMotion | None = None, ignored_axes: frozenset[str] = frozenset()) -> str | None:
+        return self.devices.start_refusal(jog, ignored_axes) if self.devices is not None else None
 
     def reset_refusal(self) -> str | None:
         """Reset brings a lost io node up again (refused, with its bring-up line, if it cannot)
@@ -124,6 +125,8 @@ class MachineJobs:
         job = self.running_job()
         if job is not None:
             self.stop_job(job, trip.message, abort=True)
+        elif trip.axis is not None:
+            self.on_homing_trip(trip.axis, trip.message)  # a homing under way stops (service.homing)
         if trip.axis is None:  # e-stop: every axis, with or without a job, then the spindle
             self.link.quick_stop(trip.message)
             if self.devices is not None:

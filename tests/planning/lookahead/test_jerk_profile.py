@@ -147,3 +147,17 @@ def test_last_below_and_flat_top_starts_match_a_walk():
         for peak, start in zip(peaks, jp.top_starts(values, peaks)):
             assert values[start:peak + 1].min() >= values[peak] * (1 - 1e-12)
             assert start == 0 or values[start - 1] < values[peak] * (1 - 1e-12)
+
+
+def test_count_at_or_above_is_the_full_comparison():
+    """The per-row bisection counts what comparing every level with every column counts,
+    ties included (levels are often running-minimum values themselves)."""
+    from nurbsmotion.planning.lookahead.jerk_profile import ROW_SEARCH_MIN_LEVELS, count_at_or_above
+
+    rng = np.random.default_rng(3)
+    for levels in (1, ROW_SEARCH_MIN_LEVELS - 1, ROW_SEARCH_MIN_LEVELS, 70):
+        running_min = np.minimum.accumulate(np.round(rng.uniform(0.0, 50.0, (9, 40)), 0), axis=1)
+        level = np.concatenate([running_min[:, rng.integers(0, 40, levels // 2)],
+                                rng.uniform(-1.0, 51.0, (9, levels - levels // 2))], axis=1)
+        expected = np.count_nonzero(running_min[:, None, :] >= level[:, :, None], axis=2)
+        assert np.array_equal(count_at_or_above(running_min, level), expected)

@@ -30,6 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.speed_limits import last_below, range_min
+from nurbsmotion.planning.lookahead.search import search_sorted
 
 MIN_SPEED = 1e-9  # mm/s, keeps the time of an interval between two stops finite
 
@@ -51,12 +52,20 @@ class RawProfile:
     @property
     def integrals(self) -> NDArray[np.float64]:
         """integral of s from t[0] to t[k] for every k."""
-        dt = np.diff(self.t)
-        piece = self.s[:-1] * dt + self.v[:-1] * dt**2 / 2.0 + self.a * dt**3 / 6.0
-        return np.concatenate([[0.0], np.cumsum(piece)])
+        dt = self.dt
+        piece = dt * (self.s[:-1] + dt * (self.v[:-1] / 2.0 + dt * (self.a / 6.0)))
+        out = np.empty(len(self.t))
+        out[0] = 0.0
+        np.cumsum(piece, out=out[1:])
+        return out
+
+    @property
+    def dt(self) -> NDArray[np.float64]:
+        """(K,) piece durations."""
+        return np.diff(self.t)
 
     def locate(self, t: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
-        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
+        k = np.clip(search_sorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
         return k, t - self.t[k]
 
     def position(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -68,15 +77,20 @@ class RawProfile:
         return np.where(t >= self.t[-1], self.s[-1] + self.v[-1] * (t - self.t[-1]), s)
 
     def integral(self, t: NDArray[np.float64], cumulative: NDArray[np.float64]) -> NDArray[np.float64]:
-        """integral of s from t[0] to t (extended as in the class docstring)."""
+        """integral of s from t[0] to t (extended as in the class docstring): on the piece k
+        holding t, cumulative[k] + s_k tau + v_k tau^2 / 2 + a_k tau^3 / 6 (Horner)."""
         k, tau = self.locate(t)
-        tau_in = np.clip(tau, 0.0, np.diff(self.t)[k])
-        inside = cumulative[k] + self.s[k] * tau_in + self.v[k] * tau_in**2 / 2.0 + self.a[k] * tau_in**3 / 6.0
-        dt0 = t - self.t[0]
-        before = self.s[0] * dt0 + self.v[0] * dt0**2 / 2.0
-        dte = t - self.t[-1]
-        after = cumulative[-1] + self.s[-1] * dte + self.v[-1] * dte**2 / 2.0
-        return np.where(t < self.t[0], before, np.where(t >= self.t[-1], after, inside))
+        np.clip(tau, 0.0, self.dt[k], out=tau)
+        out = cumulative[k] + tau * (self.s[k] + tau * (self.v[k] / 2.0 + tau * (self.a[k] / 6.0)))
+        before = np.flatnonzero(t < self.t[0])  # outside the pieces (few points): the straight extensions
+        if len(before):
+            dt0 = t[before] - self.t[0]
+            out[before] = self.s[0] * dt0 + self.v[0] * dt0 * dt0 / 2.0
+        after = np.flatnonzero(t >= self.t[-1])
+        if len(after):
+            dte = t[after] - self.t[-1]
+            out[after] = cumulative[-1] + self.s[-1] * dte + self.v[-1] * dte * dte / 2.0
+        return out
 
 
 def raw_profile(s: NDArray[np.float64], x: NDArray[np.float64], t0: float = 0.0) -> RawProfile:
@@ -175,6 +189,22 @@ class PeakSides:
                    np.minimum.accumulate(left_x, axis=1), np.minimum.accumulate(right_x, axis=1))
 
 
+ROW_SEARCH_MIN_LEVELS = 8  # from this many levels per peak, a bisection per row beats the full comparison
+
+
+def count_at_or_above(running_min: NDArray[np.float64], level: NDArray[np.float64]) -> NDArray[np.intp]:
+    """#{j: running_min[i, j] >= level[i, k]} for every peak i and level k: the running
+    minima do not increase along a row, so with many levels one bisection per row (of the
+    negated row, non-decreasing) instead of comparing every level with every column."""
+    if level.shape[1] < ROW_SEARCH_MIN_LEVELS:
+        return np.count_nonzero(running_min[:, None, :] >= level[:, :, None], axis=2)
+    out = np.empty(level.shape, dtype=np.intp)
+    rising, below = -running_min, -level
+    for i in range(len(level)):
+        out[i] = np.searchsorted(rising[i], below[i], side="right")
+    return out
+
+
 def superlevel_line(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakSides,
                     level: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Length of the stretch around every peak where x >= level (linear crossings), for
@@ -187,13 +217,13 @@ def superlevel_line(s: NDArray[np.float64], x: NDArray[np.float64], sides: PeakS
     flat = level.ndim == 1
     lv = level[:, None] if flat else level
     m = sides.left_min.shape[1]
-    k = np.count_nonzero(sides.left_min[:, None, :] >= lv[:, :, None], axis=2)
+    k = count_at_or_above(sides.left_min, lv)
     j = np.take_along_axis(sides.left, np.minimum(k, m - 1), axis=1)
     inside = (k < m) & (j < sides.peaks[:, None])
     jn = np.minimum(j + 1, len(x) - 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         slope_left = np.where(inside, (s[jn] - s[j]) / (x[jn] - x[j]), 0.0)  # left = s_j + (L - x_j) slope
-    k = np.count_nonzero(sides.right_min[:, None, :] >= lv[:, :, None], axis=2)
+    k = count_at_or_above(sides.right_min, lv)
     j2 = np.take_along_axis(sides.right, np.minimum(k, m - 1), axis=1)
     inside = (k < m) & (j2 > sides.peaks[:, None])
     jp = np.maximum(j2 - 1, 0)

@@ -233,15 +233,15 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
             cursor: Cursor, end_free: bool, tau_f: float, plateaus: bool = True) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(s, x) of the raw profile over grid points ``idx`` preceded by the raw start point;
     with the jerk filter (and ``plateaus``), sharp speed peaks are flattened (jp.peak_plateau_caps)."""
-    s = np.concatenate([[cursor.raw_offset_mm], grid.s[idx]])
-    cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[idx]])
-    if s[1] - s[0] <= 1e-12:  # start on a grid point
-        s, cap = s[1:], cap[1:]
+    points = slice(int(idx[0]), int(idx[-1]) + 1)  # scan_grid: consecutive points
+    if grid.s[points.start] - cursor.raw_offset_mm <= 1e-12:  # start on a grid point
+        s, cap = grid.s[points], x_cap[points].copy()
         cap[0] = cursor.raw_speed_mm_s**2
-        sub = bounds.subset(slice(int(idx[0]), int(idx[-1]) + 1))  # scan_grid: consecutive points
+        sub = bounds.subset(points)
     else:
-        take = np.concatenate([idx[:1], idx])
-        sub = bounds.subset(take)
+        s = np.concatenate([[cursor.raw_offset_mm], grid.s[points]])
+        cap = np.concatenate([[cursor.raw_speed_mm_s**2], x_cap[points]])
+        sub = bounds.subset(np.concatenate([idx[:1], idx]))
     ramp = None
     if cursor.raw_speed_mm_s > 0:
         # a running start above the caps (a lowered feed override): brake down to them
@@ -258,6 +258,15 @@ def raw_for(grid: PathGrid, idx: NDArray[np.intp], x_cap: NDArray[np.float64], b
                 peak_caps = np.maximum(peak_caps, ramp)
             x = speed_profile(s, np.minimum(cap, peak_caps), sub)
     return s, x
+
+
+def on_grid(grid: PathGrid, s_raw: NDArray[np.float64], x: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x = v^2 of the raw profile (s_raw, x) at the grid points: x itself when the raw profile
+    runs over the whole grid (a window starting at rest on its first point; at a junction's
+    two points the scan's x is equal, ds = 0), else interpolated."""
+    if len(s_raw) == len(grid) and np.array_equal(s_raw, grid.s):
+        return x
+    return np.interp(grid.s, s_raw, x)
 
 
 def sample_times(raw: jp.RawProfile, cursor: Cursor, settings: PlanSettings, final: bool) -> NDArray[np.float64]:
@@ -310,7 +319,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
             # in turn (as in scan.speed_profile), damped by evaluating at the mean of the last
             # two scans' speeds; the peaks' plateaus only matter to the last scan
             s_raw, x = raw_for(grid, idx, x_cap, bounds, cursor, False, settings.tau_f, plateaus=False)
-            planned = np.sqrt(np.maximum(np.interp(grid.s, s_raw, x), 0.0))
+            planned = np.sqrt(np.maximum(on_grid(grid, s_raw, x), 0.0))
             speeds = planned if speeds is None else 0.5 * (speeds + planned)
             jerk_share = tangential_jerk_share(grid, settings.caps, settings.tau_f, 2.0 * settings.spacing_mm, speeds,
                                                static)

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.lookahead.path import TINY_SPEED, PathGrid, to_3d
+from nurbsmotion.planning.lookahead.search import search_sorted
 
 ARC_TOLERANCE_SHARE = 1e-8
 ARC_TOLERANCE_FLOOR_MM = 1e-13
@@ -36,25 +37,25 @@ class Samples:
 
 
 def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Quintic Hermite interpolation of u(s) on grid interval k."""
-    h = grid.s[k + 1] - grid.s[k]
-    safe = np.where(h > 0, h, 1.0)
-    r = np.clip((s - grid.s[k]) / safe, 0.0, 1.0)
-    r2, r3 = r * r, r * r * r
-    h00 = 1 - 10 * r3 + 15 * r3 * r - 6 * r3 * r2
-    h10 = r - 6 * r3 + 8 * r3 * r - 3 * r3 * r2
-    h20 = 0.5 * (r2 - 3 * r3 + 3 * r3 * r - r3 * r2)
-    h01 = 10 * r3 - 15 * r3 * r + 6 * r3 * r2
-    h11 = -4 * r3 + 7 * r3 * r - 3 * r3 * r2
-    h21 = 0.5 * (r3 - 2 * r3 * r + r3 * r2)
-    u0, u1 = grid.u[k], grid.u[k + 1]
-    return (h00 * u0 + h10 * safe * grid.u_s[k] + h20 * safe**2 * grid.u_ss[k]
-            + h01 * u1 + h11 * safe * grid.u_s[k + 1] + h21 * safe**2 * grid.u_ss_left[k + 1])
+    """Quintic Hermite interpolation of u(s) on grid interval k (PathGrid.u_of_s_poly, Horner);
+    exactly u_k and u_k+1 at the interval's ends (a block's end point is its last control
+    point only when u is exactly its end)."""
+    h = grid.interval_mm.take(k)
+    r = (s - grid.s.take(k)) / np.where(h > 0, h, 1.0)
+    np.clip(r, 0.0, 1.0, out=r)
+    c = grid.u_of_s_poly
+    u = c[5].take(k)
+    for j in range(4, -1, -1):
+        u *= r
+        u += c[j].take(k)
+    end = np.flatnonzero(r == 1.0)
+    u[end] = grid.u[k[end] + 1]
+    return u
 
 
 def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
     """Interval k with s_k <= s < s_k+1; at a junction the interval of the later piece."""
-    k = np.clip(np.searchsorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
+    k = np.clip(search_sorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
     # a zero-length (junction) interval at the very end of the grid: step back into the piece
     while True:
         zero = grid.s[k + 1] <= grid.s[k]
@@ -72,10 +73,10 @@ def interval_fraction(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64
 def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """s(u) - s* with s(u) = s_k + h integral_0^r p (Horner on p's coefficients / (j + 1))."""
     r, h = interval_fraction(grid, k, u)
-    coeffs = grid.speed_poly
-    integral = coeffs[-1].take(k) / len(coeffs)
+    coeffs = grid.speed_integral_poly
+    integral = coeffs[-1].take(k)
     for j in range(len(coeffs) - 2, -1, -1):
-        integral = integral * r + coeffs[j].take(k) / (j + 1)
+        integral = integral * r + coeffs[j].take(k)
     return grid.s[k] + integral * r * h - s
 
 
@@ -132,7 +133,10 @@ def sample_path(grid: PathGrid, s: NDArray[np.float64]) -> Samples:
     for p, sel in piece_runs(pieces):
         curve = grid.pieces[p].curve
         here = position[sel]
-        here[:] = to_3d(curve.points(u[sel]))
+        x = curve.derivatives_by_coordinate(u[sel], 0)[0]  # (dim, n): one transposed copy into place
+        axes = min(curve.dim, 3)
+        here[:, :axes] = x[:axes].T
+        here[:, axes:] = 0.0
         # a block's ends are its first and last control points exactly (clamped knots)
         here[u[sel] == curve.u_max] = to_3d(curve.control_points[-1:])[0]
         here[u[sel] == curve.u_min] = to_3d(curve.control_points[:1])[0]

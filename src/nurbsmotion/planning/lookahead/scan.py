@@ -24,20 +24,33 @@ SCAN_ROUNDS_MAX = 41  # odd: the result is an odd iterate (see speed_profile)
 SCAN_CONVERGED = 1e-3  # relative change of x = v^2 between consecutive odd iterates
 
 
-def forward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], accel: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Largest x <= cap reachable from x_0 = cap_0 with x_{i+1} <= x_i + 2 accel_i ds_i."""
-    c = np.concatenate([[0.0], np.cumsum(2.0 * accel * ds)])
+def climb(accel: NDArray[np.float64], ds2: NDArray[np.float64]) -> NDArray[np.float64]:
+    """C_i = sum_{k<i} 2 accel_k ds_k (``ds2`` = 2 ds): the largest rise of x from point 0 to i."""
+    c = np.empty(len(accel) + 1)
+    c[0] = 0.0
+    np.cumsum(accel * ds2, out=c[1:])
+    return c
+
+
+def forward_pass(cap: NDArray[np.float64], c: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest x <= cap reachable from x_0 = cap_0 with x_{i+1} <= x_i + 2 accel_i ds_i
+    (``c`` = climb(accel, 2 ds))."""
     return c + np.minimum.accumulate(cap - c)
 
 
-def backward_pass(cap: NDArray[np.float64], ds: NDArray[np.float64], decel: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Largest x <= cap from which x_{i} <= x_{i+1} + 2 decel_i ds_i reaches the end cap."""
-    e = np.concatenate([[0.0], np.cumsum(2.0 * decel * ds)])
+def backward_pass(cap: NDArray[np.float64], e: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Largest x <= cap from which x_{i} <= x_{i+1} + 2 decel_i ds_i reaches the end cap
+    (``e`` = climb(decel, 2 ds))."""
     return np.minimum.accumulate((cap + e)[::-1])[::-1] - e
 
 
 def interval_bounds(bounds: AccelBounds, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two ends."""
+    """Deceleration and acceleration magnitudes usable on each interval: the tighter of its two
+    ends (clipped at 0: an inadmissible end, -inf in ``at``, gives 0 like any end without room)."""
+    if bounds.symmetric:
+        hi = bounds.tangential_room(x)
+        accel = np.minimum(hi[:-1], hi[1:])
+        return np.maximum(accel, 0.0, out=accel), accel
     lo, hi = bounds.at(x)
     accel = np.maximum(np.minimum(hi[:-1], hi[1:]), 0.0)
     if bounds.symmetric:
@@ -59,14 +72,15 @@ def speed_profile(s: NDArray[np.float64], cap: NDArray[np.float64], bounds: Acce
     consecutive odd iterates differ by at most SCAN_CONVERGED of the top speed^2 (at most
     SCAN_ROUNDS_MAX rounds): near a curvature peak, where the path's own acceleration leaves
     little to brake with, three rounds stay up to 7 % below x*."""
-    ds = np.diff(s)
-    x = cap.copy()
+    ds2 = 2.0 * np.diff(s)  # 2 a ds = a (2 ds) exactly: doubling does not round
     evaluate_at = cap
     previous_odd = None
     for round_index in range(SCAN_ROUNDS_MAX):
         decel, accel = interval_bounds(bounds, evaluate_at)
-        x = forward_pass(backward_pass(cap, ds, decel), ds, accel)
-        x = np.maximum(x, 0.0)
+        e = climb(decel, ds2)
+        c = e if accel is decel else climb(accel, ds2)  # symmetric bounds: one climb for both passes
+        x = forward_pass(backward_pass(cap, e), c)
+        np.maximum(x, 0.0, out=x)
         evaluate_at = x
         if round_index % 2 == 0:
             if previous_odd is not None and round_index + 1 >= SCAN_ROUNDS and \

@@ -35,7 +35,7 @@ from functools import cached_property
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms
+from nurbsmotion.planning.lookahead.path import PathGrid, row_dots, row_max, row_norms
 
 MARGIN = 0.995  # fraction of every machine limit the planner aims at
 JERK_SHARE = 0.8  # share of J each of the path's own jerk terms may use on curves (repairs check the sum)
@@ -68,10 +68,28 @@ def min_table(values: NDArray[np.float64], levels: int) -> NDArray[np.float64]:
     return table
 
 
+_FLOOR_LOG2 = np.zeros(2, dtype=np.intp)  # floor(log2(w)) for w = 0 .. len - 1 (0 for w <= 1), grown on demand
+
+
+def floor_log2(width: NDArray[np.intp]) -> NDArray[np.intp]:
+    """floor(log2(max(width, 1))) of integer widths by a table lookup (np.log2 and floor cost
+    ~10x a gather on thousands of values)."""
+    global _FLOOR_LOG2
+    table = _FLOOR_LOG2  # one reference: another thread may replace the module's table meanwhile
+    top = int(width.max(initial=1))
+    if top >= len(table):
+        w = np.arange(max(2 * top, 1024))
+        table = _FLOOR_LOG2 = np.floor(np.log2(np.maximum(w, 1))).astype(np.intp)
+    return table.take(np.maximum(width, 1))
+
+
 def table_min(table: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
-    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers."""
-    level = np.floor(np.log2(np.maximum(hi - lo + 1, 1))).astype(np.intp)
-    return np.minimum(table[level, lo], table[level, hi - (1 << level) + 1])
+    """min(values[lo_k : hi_k + 1]) from a min_table deep enough for the spans: two gathers
+    (from the flat table: one index instead of two)."""
+    level = floor_log2(hi - lo + 1)
+    row = level * table.shape[1]
+    flat = table.reshape(-1)
+    return np.minimum(flat.take(row + lo), flat.take(row + hi - (1 << level) + 1))
 
 
 def range_min(values: NDArray[np.float64], lo: NDArray[np.intp], hi: NDArray[np.intp]) -> NDArray[np.float64]:
@@ -156,7 +174,7 @@ def jerk_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     """v^3 (|c'| + |c|^2) <= JERK_SHARE J."""
     if caps.jerk_mm_s3 is None:
         return np.full(len(grid), np.inf)
-    k = row_norms(grid.dcurv) + np.einsum("ij,ij->i", grid.curv, grid.curv)
+    k = row_norms(grid.dcurv) + row_dots(grid.curv, grid.curv)
     with np.errstate(divide="ignore"):
         return np.cbrt(JERK_SHARE * caps.jerk_mm_s3 / k)
 
@@ -178,7 +196,7 @@ def tangential_jerk_share(grid: PathGrid, caps: Caps, tau_f: float, reach_mm: fl
     v = np.minimum(static, np.sqrt(caps.accel_mm_s2 / np.maximum(kappa, TINY)))
     if speed_mm_s is not None:
         v = np.minimum(v, speed_mm_s)
-    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * v**3
+    normal = 3.0 * kappa * v * caps.accel_mm_s2 + grid.dcurv_normal * (v * v * v)
     share = np.maximum(np.sqrt(np.clip(1.0 - (normal / caps.jerk_mm_s3) ** 2, 0.0, 1.0)), MIN_TANGENTIAL_SHARE)
     return sliding_min(grid.s, share, v * tau_f + reach_mm)
 
@@ -214,6 +232,19 @@ class AccelBounds:
     def symmetric(self) -> bool:
         """lo = -hi at every speed: no axis acceleration limit shifts the admissible a_t."""
         return self.caps.axis_accel_mm_s2 is None or not bool(np.isfinite(self.caps.axis_accel_mm_s2).any())
+
+    def tangential_room(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """hi of ``at`` where x is admissible (|c| x <= A), 0 where it is not: the resultant,
+        tangential and jerk caps of |a_t| (axis limits aside). Enough for the scan's interval
+        bounds, which clip at 0 (``at`` marks inadmissible points -inf and builds lo)."""
+        kappa_x = self.kappa * x
+        a = self.caps.accel_mm_s2
+        hi = np.sqrt(np.maximum(a * a - kappa_x * kappa_x, 0.0))
+        np.minimum(hi, self.tangential_cap, out=hi)
+        if self.caps.jerk_mm_s3 is not None:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                np.minimum(hi, self.jerk_accel_numerator / np.sqrt(x), out=hi)
+        return hi
 
     def at(self, x: NDArray[np.float64], idx: slice | NDArray[np.intp] = slice(None)) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """(lo, hi) of a_t at x (points ``idx``); lo > hi where x is not admissible."""
@@ -318,8 +349,7 @@ def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
     sparse table of range_min run backwards. Each range is two blocks of 2^j points (j =
     floor(log2 of its length)); the blocks' minima are pushed down from the widest level,
     each block of 2^j into its two halves."""
-    span = np.maximum(hi - lo + 1, 1)
-    level = np.floor(np.log2(span)).astype(np.intp)
+    level = floor_log2(hi - lo + 1)
     levels = int(level.max(initial=0)) + 1
     table = np.full((levels, n), np.inf)
     flat = table.reshape(-1)
