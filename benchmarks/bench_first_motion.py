@@ -21,7 +21,14 @@ Programs: Wang's Table 1 curve repeated (bench_plan_command.wang_copies), J = 50
 chord error 1 um as Wang's: 8 copies ~ 1 min, 100 copies ~ 13 min, 460 copies ~ 1 h; each
 runs for its whole motion time.
 
-Run: python benchmarks/bench_first_motion.py [--copies 8 100 460]
+The simulated drives' receive and ticker threads run SCHED_FIFO just below the master's, as
+the daemon runs them with ``simulate: true`` (service.link.open_link): each stands in for a
+drive's own CPU (docs/daemon.md, "Simulated drives in the daemon's process").
+
+Run: python benchmarks/bench_first_motion.py [--copies 8 100 460] [--results FILE]
+(``--results``: every result is also appended to FILE, and the table is written from all the
+results in FILE, so programs run by separate invocations, e.g. at the same time, share it;
+``--copies --results FILE`` runs nothing and writes the table again.)
 """
 
 from __future__ import annotations
@@ -75,7 +82,7 @@ def one_run(copies: int) -> dict:
     """The daemon in this process runs Wang x ``copies`` once (see the module docstring)."""
     from nurbsmotion.config import parse_config
     from nurbsmotion.fieldbus import Master
-    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY
+    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
     from nurbsmotion.service.client import Client
     from nurbsmotion.service.daemon import Daemon
     from nurbsmotion.service.link import SimulatedDrives
@@ -85,11 +92,13 @@ def one_run(copies: int) -> dict:
     config = parse_config(CONFIG.format(channel=f"fm-{uuid.uuid4().hex}", socket=work / "ctl.sock",
                                         data_dir=work / "var"), str(work / "machine.yaml"))
     masters: list[Master] = []
+    networks = []
 
     def open_motion(cfg):
-        drives = SimulatedDrives(cfg)
+        drives = SimulatedDrives(cfg, rt_priority=SIM_DRIVES_PRIORITY)  # as service.link.open_link
         drives.network = SimNetwork.for_machine(cfg, record=False)  # see the module docstring
         drives.start()
+        networks.append(drives.network)
         master = Master(cfg, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")
         master.bring_up()
         masters.append(master)
@@ -137,16 +146,20 @@ def one_run(copies: int) -> dict:
             "late": outcome["late_cycles"], "rss_idle_mb": rss_idle_mb,
             "rss_max_sampled_mb": max(samples), "peak_rss_mb": status_kb("VmHWM") / 1024.0,
             "worker_peak_rss_mb": worker_peak_mb,
-            "wall_s": outcome["motion_time_s"]}
+            "wall_s": outcome["motion_time_s"], "sim_threads": dict(networks[0].thread_policy)}
 
 
 def run_child(copies: int) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    load_before = load_line()
     out = subprocess.run([sys.executable, __file__, "--child", str(copies)], capture_output=True, text=True, env=env,
                          timeout=2 * 3600)
+    run = {"started": started, "load_before": load_before, "load_after": load_line()}
     if out.returncode != 0:
-        return {"copies": copies, "error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"}
-    return json.loads(out.stdout.strip().splitlines()[-1])
+        return {"copies": copies, **run,
+                "error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"}
+    return {**json.loads(out.stdout.strip().splitlines()[-1]), **run}
 
 
 def load_line() -> str:
@@ -155,19 +168,23 @@ def load_line() -> str:
 
 
 def table(results: list[dict]) -> str:
-    rows = ["| program | cycles (motion time) | outcome | submit answered s | first motion s | first chunk planned s "
+    rows = ["| program | started | host load (1/5/15 min) before → after | cycles (motion time) | outcome | submit answered s | first motion s | first chunk planned s "
             "| planning s | missed / late cycles | daemon RSS idle MB | daemon peak RSS MB | planner worker peak RSS MB "
-            "| targets (first motion < 1.0 s, daemon peak < 200 MB) |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| drives' receive / ticker thread | targets (first motion < 1.0 s, daemon peak < 200 MB) |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
+        run = f"| Wang x {r['copies']} | {r.get('started', '')} | {r.get('load_before', '')} → {r.get('load_after', '')} "
         if "error" in r:
-            rows.append(f"| Wang x {r['copies']} | failed: {r['error']} | | | | | | | | | | |")
+            rows.append(f"{run}| failed: {r['error']} | | | | | | | | | | | |")
             continue
         met = r["first_motion_s"] < TARGET_FIRST_S and r["peak_rss_mb"] < TARGET_MB
         so_far = "" if r.get("planned_all") else ", planned when it ended"
-        rows.append(f"| Wang x {r['copies']} | {r['cycles']:,} ({r['duration_s'] / 60:.1f} min{so_far}) | {r['outcome']}"
+        threads = r.get("sim_threads", {})
+        rows.append(f"{run}| {r['cycles']:,} ({r['duration_s'] / 60:.1f} min{so_far}) | {r['outcome']}"
                     f"{': ' + r['reason'] if r['reason'] else ''} | {r['submit_s']:.3f} | {r['first_motion_s']:.3f} | "
                     f"{r['first_chunk_s']:.3f} | {r['planning_time_s']:.1f} | {r['missed']} / {r['late']} | "
                     f"{r['rss_idle_mb']:.0f} | {r['peak_rss_mb']:.0f} | {r['worker_peak_rss_mb']:.0f} | "
+                    f"{threads.get('receive', '?')} / {threads.get('ticker', '?')} | "
                     f"{'met' if met else 'NOT met'} |")
     return "\n".join(rows)
 
@@ -175,25 +192,36 @@ def table(results: list[dict]) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="*", default=[8, 100, 460])
+    parser.add_argument("--results", type=Path, help="JSON lines: append each result, write the table from all")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
         print(json.dumps(one_run(args.child)))
         return
-    load_before = load_line()
     results = []
     for copies in args.copies:
         results.append(run_child(copies))
         print(json.dumps(results[-1]), flush=True)
+        if args.results is not None:
+            with args.results.open("a") as out:
+                out.write(json.dumps(results[-1]) + "\n")
+    if args.results is not None:
+        results = sorted((json.loads(line) for line in args.results.read_text().splitlines() if line.strip()),
+                         key=lambda r: (r["copies"], r.get("started", "")))
     body = ("The daemon (control socket, controller, master) and three simulated drives recording "
-            "nothing, in one process on python-can's virtual bus, the job planned in the daemon's planner worker "
+            "nothing, in one process on python-can's virtual bus (the drives' receive and ticker threads SCHED_FIFO "
+            "below the master's, as the daemon runs them), the job planned in the daemon's planner worker "
             "process, T = 1 ms, lookahead with J = 50000 mm/s^3 and "
             "1 um chord error; each program submitted through the control socket and run to its end. First motion: "
             "submit request to the first set-point that leaves the held position. Peak RSS: the process' VmHWM. "
-            f"Host load (1/5/15 min) before: {load_before}, after: {load_line()} (2 cores shared with other "
-            "sessions).\n\n" + table(results))
-    write_section("first_motion", "Streamed jobs: time to first motion and daemon memory", body,
-                  "python benchmarks/bench_first_motion.py --copies " + " ".join(str(c) for c in args.copies))
+            "Host load: the load average before and after each run (2 cores shared with other sessions)."
+            "\n\n" + table(results))
+    command = "python benchmarks/bench_first_motion.py --copies " + " ".join(str(c) for c in args.copies)
+    if args.results is not None:  # the rows may come from several invocations sharing the file
+        command = "python benchmarks/bench_first_motion.py --copies N... --results FILE"
+        body += ("\n\nRows from one or more invocations sharing FILE (each appends its results; "
+                 "`--copies --results FILE` writes this table again from FILE).")
+    write_section("first_motion", "Streamed jobs: time to first motion and daemon memory", body, command)
 
 
 if __name__ == "__main__":

@@ -44,6 +44,8 @@ def keep_freed_memory() -> bool:
 
 GC_MODES = ("freeze", "disable", "none")
 CYCLE_THREAD_PRIORITY = 20  # SCHED_FIFO priority of the master's cycle thread (its receive thread: one less)
+# simulate: true: the drives' receive and ticker threads in the daemon's process, below the master's
+SIM_DRIVES_PRIORITY = CYCLE_THREAD_PRIORITY - 2
 
 
 def cap_switch_interval(period_s: float) -> float:

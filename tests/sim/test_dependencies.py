@@ -10,9 +10,10 @@ import nurbsmotion.sim
 
 # socketcan_batch: transport only (python-can's SocketCAN bus with batched system calls), no CANopen;
 # arrival_clock: a clock on the frames' receive timestamps, no CANopen (the master judges its
-# heartbeat consumer on it too: the same rule for both judges, no protocol code shared)
+# heartbeat consumer on it too: the same rule for both judges, no protocol code shared);
+# runtime: process settings (a thread's SCHED_FIFO policy), no CANopen
 ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.cia402", "nurbsmotion.errors", "nurbsmotion.log",
-                       "nurbsmotion.socketcan_batch", "nurbsmotion.arrival_clock"}
+                       "nurbsmotion.socketcan_batch", "nurbsmotion.arrival_clock", "nurbsmotion.runtime"}
 ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
                      "logging", "math", "numpy", "pathlib", "select", "struct", "threading", "time", "typing"}
 

@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import os
+import threading
+import time
 from pathlib import Path
 from types import SimpleNamespace
 
+import can
 import pytest
 
+from nurbsmotion.cia402 import NmtState
 from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, SimNetwork
 from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
@@ -55,3 +60,53 @@ def test_write_recordings_one_file_per_drive(channel: str, tmp_path: Path) -> No
     assert [p.name for p in paths] == ["node1.csv", "node3.csv"]
     paths = net.write_recordings(tmp_path / "rec", timelines=True)
     assert [p.name for p in paths] == ["node1.csv", "node1.sync.csv", "node3.csv", "node3.sync.csv"]
+
+
+def _policy_of(thread: threading.Thread) -> int:
+    assert thread.native_id is not None
+    return os.sched_getscheduler(thread.native_id)
+
+
+def _notifier_thread(channel: str) -> threading.Thread:
+    """python-can names its receive thread after the bus (``Virtual bus channel <channel>``)."""
+    return next(t for t in threading.enumerate() if t.name.startswith("Notifier") and channel in t.name)
+
+
+def _stop_node_1(net: SimNetwork, master: can.BusABC) -> None:
+    """NMT stop node 1 and wait (5 s at most) until the drive's receive thread handled it."""
+    master.send(can.Message(arbitration_id=0x000, is_extended_id=False, data=bytes([0x02, 1])))
+    deadline = time.monotonic() + 5.0
+    while net[1].nmt_state != NmtState.STOPPED and time.monotonic() < deadline:
+        time.sleep(0.005)
+    assert net[1].nmt_state == NmtState.STOPPED
+
+
+def test_rt_priority_runs_the_receive_and_ticker_threads_as_it_reports(channel: str) -> None:
+    """The daemon's simulated drives (service.link) stand in for drives with their own CPU:
+    the receive thread (from its first frame) and the ticker take the SCHED_FIFO priority asked,
+    where the process may (root / CAP_SYS_NICE); the policy each reports is the one in force."""
+    net = SimNetwork(channel=channel)
+    net.add_drive(1)
+    net.rt_priority = 17
+    with net, can.Bus(interface="virtual", channel=channel) as master:
+        _stop_node_1(net, master)
+        deadline = time.monotonic() + 5.0
+        while "ticker" not in net.thread_policy and time.monotonic() < deadline:
+            time.sleep(0.005)
+        assert set(net.thread_policy) == {"receive", "ticker"}
+        assert net._ticker is not None
+        for name, thread in (("receive", _notifier_thread(channel)), ("ticker", net._ticker)):
+            fifo = net.thread_policy[name] == "SCHED_FIFO"
+            assert fifo or net.thread_policy[name].startswith("normal: ")
+            assert (_policy_of(thread) == os.SCHED_FIFO) == fifo
+            if fifo:
+                assert os.sched_getparam(thread.native_id).sched_priority == 17
+
+
+def test_without_rt_priority_the_threads_keep_the_normal_policy(channel: str) -> None:
+    net = SimNetwork(channel=channel)
+    net.add_drive(1)
+    with net, can.Bus(interface="virtual", channel=channel) as master:
+        _stop_node_1(net, master)  # the receive thread has handled a frame
+        assert net.thread_policy == {} and net._ticker is not None
+        assert _policy_of(net._ticker) == _policy_of(_notifier_thread(channel)) == os.SCHED_OTHER

@@ -5,14 +5,18 @@ daemon notices when the drives' process dies."""
 from __future__ import annotations
 
 import csv
+import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from nurbsmotion.cia402 import COB_TPDO
 from nurbsmotion.config import load_config
+from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT
 from nurbsmotion.service.verify import held_plan_held, planned_counts
+from nurbsmotion.socketcan_batch import BatchedSocketcanBus
 from tests.integration.daemon_helpers import DaemonProcess, wait_until
 
 pytestmark = pytest.mark.vcan
@@ -73,19 +77,88 @@ def submit_wang(daemon: VcanDaemon) -> str:
     return response["job"]["id"]
 
 
-def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_and_drives):
-    daemon, sim = daemon_and_drives
+class DriveAnswers:
+    """Each drive's TPDO1 (statusword, position actual) on vcan0, read by a thread of its own
+    (batched reads, as the other vcan listeners). An OPERATIONAL drive answers every SYNC with
+    one, in order, after handling the set-point before it; so once a drive's answers leave its
+    start position (the first moving set-point, plan row m, handled), it has handled every
+    planned row when it sent len(plan) - m more: counted from that answer, the drives' lag at
+    any earlier time does not matter. (scripts/with-vcan gives the guest's sockets 8 MiB of
+    receive buffer: seconds of these frames, so the thread drains it in bursts.)"""
 
-    job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
-    # The drives' process may still be working through its socket's backlog (inside UML it
-    # shares one CPU with the daemon): stop it only once the drives report the end position.
-    end_mm = {a.name: 0.0 for a in daemon.config.axes}  # Wang's curve ends at the origin
-    wait_until(lambda: all(abs(a["actual_mm"] - end_mm[a["name"]]) < 0.01 for a in daemon.request("status")["axes"]),
-               timeout_s=JOB_TIMEOUT_S, what="the drives to report the end position")
+    DRAIN_EVERY_S = 0.25
+
+    def __init__(self, channel: str, node_ids: list[int]) -> None:
+        self.tpdo1 = {COB_TPDO[0] + n: n for n in node_ids}
+        filters = [{"can_id": can_id, "can_mask": 0x7FF} for can_id in self.tpdo1]
+        # batched reads in bursts: in the guest's one CPU a listener waking per frame takes from the master and drives
+        self.bus = BatchedSocketcanBus(channel=channel, can_filters=filters)
+        self.positions: dict[int, list[int]] = {n: [] for n in node_ids}
+        self._moved_at: dict[int, int] = {}  # node -> index of its first answer away from the start
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, name="drive-answers", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        while not self._stop.wait(self.DRAIN_EVERY_S):  # in bursts: few system calls in the guest
+            self.drain()
+
+    def drain(self) -> None:
+        """Take every frame waiting in the socket (batched reads, no wait)."""
+        while (msg := self.bus.recv(0.0)) is not None:
+            if msg.arbitration_id in self.tpdo1:  # frames from before the socket's filter was set pass it
+                self.positions[self.tpdo1[msg.arbitration_id]].append(TPDO1_FORMAT.unpack_from(msg.data)[1])
+
+    def answered_since_moving(self, node_id: int) -> int:
+        """Answers from the first one away from the drive's first reported position (0: none yet)."""
+        positions = self.positions[node_id]
+        if node_id not in self._moved_at:
+            moved = next((i for i, p in enumerate(positions) if p != positions[0]), None)
+            if moved is None:
+                return 0
+            self._moved_at[node_id] = moved
+        return len(positions) - self._moved_at[node_id]
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+        self.bus.shutdown()
+
+
+# the set-point of a SYNC is applied at the next one (lag_cycles 1) and answered after it: a few more
+ANSWERS_AFTER_THE_LAST_ROW = 5
+
+
+def rows_from_first_move(plan: np.ndarray) -> list[int]:
+    """Per axis: planned rows from the first one away from row 0 to the end."""
+    moving = plan != plan[0]
+    return [len(plan) - int(np.argmax(moving[:, j])) for j in range(plan.shape[1])]
+
+
+def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_and_drives, vcan0):
+    daemon, sim = daemon_and_drives
+    nodes = [a.node_id for a in daemon.config.axes]
+    answers = DriveAnswers(vcan0, nodes)
+    try:
+        wait_until(lambda: all(answers.positions.values()), timeout_s=JOB_TIMEOUT_S,
+                   what="each drive's TPDO1 on vcan0 before the job", poll_s=DriveAnswers.DRAIN_EVERY_S)
+        job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
+        # The drives' process may still be working through its socket's backlog (inside UML it
+        # shares one CPU with the daemon), longer than the whole motion: Wang's curve is closed,
+        # so their position alone cannot tell. Stop them once they answered every planned row.
+        wanted = [rows + ANSWERS_AFTER_THE_LAST_ROW for rows in
+                  rows_from_first_move(planned_counts(Path(job["folder"]), daemon.config))]
+        print(f"job ended: answers since moving {[answers.answered_since_moving(n) for n in nodes]} of {wanted}")
+        wait_until(lambda: all(answers.answered_since_moving(n) >= w for n, w in zip(nodes, wanted)),
+                   timeout_s=JOB_TIMEOUT_S, what=f"the drives to answer every planned row ({wanted})",
+                   poll_s=DriveAnswers.DRAIN_EVERY_S)
+        print(f"answered: {[answers.answered_since_moving(n) for n in nodes]}")  # shown with -rP or a failure
+    finally:
+        answers.stop()
     daemon.close()
     sim.stop()
 
-    assert job["outcome"]["outcome"] == "completed", job["outcome"]
+    assert job["outcome"]["outcome"] == "completed", job["outcome"].get("reason")
     # the daemon queues the cycles in the kernel (sync_source auto on socketcan), not its loop writer
     assert "cycle_writer sync_source=kernel writer=BcmQueueWriter" in daemon.log()
     plan = planned_counts(Path(job["folder"]), daemon.config)

@@ -13,7 +13,7 @@ from typing import Any
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.log import kv
-from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY
+from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
 
 log = logging.getLogger(__name__)
 
@@ -28,7 +28,10 @@ class SimulatedDrives:
 
     IDLE_CLEAR_S = 10.0
 
-    def __init__(self, config: MachineConfig, home_sensors: dict[int, Any] | None = None) -> None:
+    def __init__(self, config: MachineConfig, home_sensors: dict[int, Any] | None = None,
+                 rt_priority: int | None = None) -> None:
+        """``rt_priority``: SCHED_FIFO priority of the drives' receive and ticker threads, for
+        drives sharing the process with a SCHED_FIFO master (sim.network.SimNetwork.rt_priority)."""
         from nurbsmotion.sim import SimNetwork
 
         from nurbsmotion.sim.machine_sensors import machine_home_sensors
@@ -39,8 +42,10 @@ class SimulatedDrives:
         self._recording = False
         self._stop = threading.Event()
         self._janitor = threading.Thread(target=self._clear_while_idle, name="sim-recording-janitor", daemon=True)
+        self.rt_priority = rt_priority
 
     def start(self) -> "SimulatedDrives":
+        self.network.rt_priority = self.rt_priority
         self.network.start()
         self._janitor.start()
         log.info(kv("simulated_drives", channel=self.network.channel, nodes=sorted(self.network.drives)))
@@ -92,7 +97,8 @@ def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
     """Start the simulated drives (if configured; their switches and index pulses from each
     axis' ``sim`` section, or ``home_sensors`` {node id: sim.HomeSensors} for a node), bring every axis up; FieldbusError names the node and the step if
     that fails (and everything started is stopped again)."""
-    simulation = SimulatedDrives(config, home_sensors).start() if config.simulate else None
+    # the drives' threads SCHED_FIFO just below the master's: each stands in for a drive's own CPU
+    simulation = SimulatedDrives(config, home_sensors, SIM_DRIVES_PRIORITY).start() if config.simulate else None
     master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze",  # the daemon's process settings
                     stuck_timeout_s=config.bus.drive_step_timeout_ms / 1000.0,
                     sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)

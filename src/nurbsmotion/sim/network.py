@@ -11,10 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import can
 import canopen
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
+from nurbsmotion.runtime import set_thread_realtime
 from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
 from nurbsmotion.sim.homing import HomeSensors
@@ -29,6 +31,23 @@ NOTIFIER_CYCLE_S = 0.1
 
 
 UNLIMITED_VELOCITY_COUNTS_S = math.inf
+
+
+class _RealtimeOnFirstFrame(can.Listener):
+    """On the notifier's receive thread: make it SCHED_FIFO ``priority`` at its first frame
+    (set_thread_realtime sets the calling thread's policy) and note the policy in ``policies``."""
+
+    def __init__(self, priority: int, policies: dict[str, str]) -> None:
+        self.priority = priority
+        self.policies = policies
+        self.done = False
+
+    def on_message_received(self, msg: can.Message) -> None:
+        if not self.done:
+            self.done = True
+            self.policies["receive"] = set_thread_realtime(self.priority)
+            log.info(kv("sim.thread_priority", thread="receive", policy=self.policies["receive"],
+                        priority=self.priority))
 
 
 class DriveSetupError(ValueError):
@@ -94,6 +113,13 @@ class SimNetwork:
         self._ticker: threading.Thread | None = None
         self.started_at = time.monotonic()
         self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (nurbsmotion/socketcan_batch.py)
+        # SCHED_FIFO priority of the drives' receive and ticker threads (None: normal). For drives
+        # sharing a process with a SCHED_FIFO master (the daemon with simulate: true): a real
+        # drive has its own CPU, so its SYNC/RPDO handling and heartbeat never wait behind the
+        # host's other processes; a normal thread preempted while it holds the GIL or a drive's
+        # lock stalls every thread of the process, master included (docs/daemon.md).
+        self.rt_priority: int | None = None
+        self.thread_policy: dict[str, str] = {}  # 'receive' / 'ticker' -> policy in force (rt_priority set)
 
     def add_drive(self, node_id: int, eds: str | Path | None = None, **drive_kwargs: Any) -> SimDrive:
         """Create drive ``node_id`` (keyword arguments as :class:`SimDrive`)."""
@@ -208,6 +234,8 @@ class SimNetwork:
             network.notifier = BatchNotifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
         else:
             network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
+        if self.rt_priority is not None and network.notifier is not None:
+            network.notifier.add_listener(_RealtimeOnFirstFrame(self.rt_priority, self.thread_policy))
         self.network = network
         self.started_at = time.monotonic()
         for drive in self.drives.values():
@@ -276,6 +304,10 @@ class SimNetwork:
         return paths
 
     def _tick_loop(self) -> None:
+        if self.rt_priority is not None:
+            self.thread_policy["ticker"] = set_thread_realtime(self.rt_priority)
+            log.info(kv("sim.thread_priority", thread="ticker", policy=self.thread_policy["ticker"],
+                        priority=self.rt_priority))
         while not self._stop.is_set():
             wait_s = 0.05
             for drive in list(self.drives.values()):
