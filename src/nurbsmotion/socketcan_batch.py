@@ -51,6 +51,7 @@ import socket
 import struct
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import can
@@ -59,7 +60,7 @@ from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, di
 
 MSG_WAITFORONE = 0x10000  # linux/socket.h: block for the first message only
 TIMEVAL = struct.Struct("@ll")  # struct timeval for SO_RCVTIMEO
-WALL_OFFSET_REFRESH_S = 1.0  # read_wall_s: the wall clock is read again after this long
+WALL_OFFSET_REFRESH_S = 1.0  # the wall clock's offset to perf_counter is read again after this long
 BATCH_FRAMES = 64  # frames per recvmmsg (a burst is 1 + n frames; a lagging reader takes 64 per call)
 FRAME_BYTES = 16  # struct can_frame (the bus is opened without CAN FD)
 TIMESPEC = struct.Struct("@qq")
@@ -232,11 +233,6 @@ class BatchedSocketcanBus(SocketcanBus):
                 return msg
         return None
 
-    def read_wall_s(self) -> float:
-        """Wall-clock time of the last batch's read (from ``read_perf_s``; SocketCAN stamps
-        frames with the wall clock)."""
-        return self.read_perf_s + self._wall_offset_s
-
     def _note_read(self, oldest_stamp_s: float) -> None:
         """One clock read per batch: ``read_perf_s`` and the reception lag of its oldest frame."""
         now = time.perf_counter()
@@ -335,9 +331,17 @@ class BatchedSocketcanBus(SocketcanBus):
 class BatchNotifier(can.Notifier):
     """python-can's Notifier whose receive thread takes a batch per wake-up from a
     :class:`BatchedSocketcanBus` (module docstring); other buses as python-can's. Listeners
-    see every frame in order, as with python-can's thread."""
+    see every frame in order, as with python-can's thread. ``on_thread_start()`` runs first
+    in each receive thread (the master and the daemon's simulated drives make it SCHED_FIFO)."""
+
+    def __init__(self, bus: can.BusABC, listeners: Any, timeout: float = 1.0,
+                 on_thread_start: Callable[[], None] | None = None) -> None:
+        self.on_thread_start = on_thread_start  # before super() starts the threads
+        super().__init__(bus, listeners, timeout)
 
     def _rx_thread(self, bus: can.BusABC) -> None:
+        if self.on_thread_start is not None:
+            self.on_thread_start()
         if not isinstance(bus, BatchedSocketcanBus) or not bus.batch or self._loop is not None:
             super()._rx_thread(bus)
             return

@@ -68,8 +68,9 @@ def _policy_of(thread: threading.Thread) -> int:
 
 
 def _notifier_thread(channel: str) -> threading.Thread:
-    """python-can names its receive thread after the bus (``Virtual bus channel <channel>``)."""
-    return next(t for t in threading.enumerate() if t.name.startswith("Notifier") and channel in t.name)
+    """python-can names its receive thread after the notifier's class and the bus
+    (``BatchNotifier for bus "Virtual bus channel <channel>"``)."""
+    return next(t for t in threading.enumerate() if "Notifier for bus" in t.name and channel in t.name)
 
 
 def _stop_node_1(net: SimNetwork, master: can.BusABC) -> None:
@@ -83,7 +84,7 @@ def _stop_node_1(net: SimNetwork, master: can.BusABC) -> None:
 
 def test_rt_priority_runs_the_receive_and_ticker_threads_as_it_reports(channel: str) -> None:
     """The daemon's simulated drives (service.link) stand in for drives with their own CPU:
-    the receive thread (from its first frame) and the ticker take the SCHED_FIFO priority asked,
+    the receive thread (from its start) and the ticker take the SCHED_FIFO priority asked,
     where the process may (root / CAP_SYS_NICE); the policy each reports is the one in force."""
     net = SimNetwork(channel=channel)
     net.add_drive(1)

@@ -68,15 +68,11 @@ class Feedback:
         """Now on the frames' arrival timeline (perf_counter based, arrival_clock)."""
         return self.arrival.judging_time(time.perf_counter())
 
-    def tpdo1_callback(self, i: int, first_call: Callable[[], None] | None = None) -> Callback:
+    def tpdo1_callback(self, i: int) -> Callback:
         size = TPDO1_FORMAT.size
         unpack = TPDO1_FORMAT.unpack_from
-        pending = [first_call]
 
         def on_tpdo1(can_id: int, data: bytearray, timestamp: float) -> None:
-            if pending[0] is not None:
-                pending[0], call = None, pending[0]
-                call()
             if len(data) != size:
                 self.bad_tpdo[i] += 1
                 self.events.append((EVENT_BAD_TPDO, i, len(data)))

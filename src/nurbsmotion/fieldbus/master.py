@@ -314,7 +314,8 @@ class Master:
         self._traffic = self._traffic_log if self._traffic_path else None
         # canopen's connect() with the bus given only starts python-can's Notifier; ours reads
         # a batch of frames per wake-up on SocketCAN (socketcan_batch: the per-cycle TPDOs)
-        network.notifier = BatchNotifier(self._bus, network.listeners, network.NOTIFIER_CYCLE)
+        network.notifier = BatchNotifier(self._bus, network.listeners, network.NOTIFIER_CYCLE,
+                                         on_thread_start=self._raise_receive_thread_priority)
         self._trails = []
         for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
             assert axis.od is not None  # loaded with the configuration
@@ -340,7 +341,7 @@ class Master:
 
     # ------------------------------------------------------------------ feedback callbacks (notifier thread)
     def _tpdo1_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
-        return self._fb.tpdo1_callback(i, self._raise_receive_thread_priority)
+        return self._fb.tpdo1_callback(i)
 
     def _tpdo2_callback(self, i: int) -> Callable[[int, bytearray, float], None]:
         return self._fb.tpdo2_callback(i)

@@ -7,6 +7,7 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -31,23 +32,6 @@ NOTIFIER_CYCLE_S = 0.1
 
 
 UNLIMITED_VELOCITY_COUNTS_S = math.inf
-
-
-class _RealtimeOnFirstFrame(can.Listener):
-    """On the notifier's receive thread: make it SCHED_FIFO ``priority`` at its first frame
-    (set_thread_realtime sets the calling thread's policy) and note the policy in ``policies``."""
-
-    def __init__(self, priority: int, policies: dict[str, str]) -> None:
-        self.priority = priority
-        self.policies = policies
-        self.done = False
-
-    def on_message_received(self, msg: can.Message) -> None:
-        if not self.done:
-            self.done = True
-            self.policies["receive"] = set_thread_realtime(self.priority)
-            log.info(kv("sim.thread_priority", thread="receive", policy=self.policies["receive"],
-                        priority=self.priority))
 
 
 class DriveSetupError(ValueError):
@@ -231,11 +215,12 @@ class SimNetwork:
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         if self.interface == "socketcan":  # a batch of frames per wake-up (nurbsmotion/socketcan_batch.py)
             network.bus = BatchedSocketcanBus(channel=self.channel, batch=self.rx_batch, **self.bus_kwargs)
-            network.notifier = BatchNotifier(network.bus, network.listeners, network.NOTIFIER_CYCLE)
         else:
-            network.connect(interface=self.interface, channel=self.channel, bitrate=self.bitrate, **self.bus_kwargs)
-        if self.rt_priority is not None and network.notifier is not None:
-            network.notifier.add_listener(_RealtimeOnFirstFrame(self.rt_priority, self.thread_policy))
+            network.bus = can.Bus(interface=self.interface, channel=self.channel, bitrate=self.bitrate,
+                                  **self.bus_kwargs)
+        # what canopen's connect() does once the bus is set, with the receive thread's priority
+        network.notifier = BatchNotifier(network.bus, network.listeners, network.NOTIFIER_CYCLE,
+                                         on_thread_start=self._realtime_thread("receive"))
         self.network = network
         self.started_at = time.monotonic()
         for drive in self.drives.values():
@@ -303,11 +288,17 @@ class SimNetwork:
                 paths.append(drive.write_timeline(directory / f"node{node_id}.sync.csv"))
         return paths
 
+    def _realtime_thread(self, name: str) -> Callable[[], None]:
+        """Make the calling thread SCHED_FIFO rt_priority (when set) and note its policy."""
+        def make_realtime() -> None:
+            if self.rt_priority is not None:
+                self.thread_policy[name] = set_thread_realtime(self.rt_priority)
+                log.info(kv("sim.thread_priority", thread=name, policy=self.thread_policy[name],
+                            priority=self.rt_priority))
+        return make_realtime
+
     def _tick_loop(self) -> None:
-        if self.rt_priority is not None:
-            self.thread_policy["ticker"] = set_thread_realtime(self.rt_priority)
-            log.info(kv("sim.thread_priority", thread="ticker", policy=self.thread_policy["ticker"],
-                        priority=self.rt_priority))
+        self._realtime_thread("ticker")()
         while not self._stop.is_set():
             wait_s = 0.05
             for drive in list(self.drives.values()):
