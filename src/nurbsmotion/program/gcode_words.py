@@ -186,16 +186,18 @@ def lex_line(number: int, raw: str, source: str) -> LexedLine:
 
 
 def read_plain_words(line: LexedLine, text: _Text, pos: int, where: str) -> None:
-    """The words of a line _PLAIN_LINE matched: what read_item gives for each, in one pass."""
-    raw, words = text.raw, line.words
-    for m in _PLAIN_WORDS.finditer(text.code, pos):
-        letter = m.group(1).upper()
-        start, end = m.span(2)
-        written = raw[start:end]
-        value = float(m.group(2))
-        if not -MAX_ABS_VALUE <= value <= MAX_ABS_VALUE:  # also NaN / inf: check_number words the error
-            check_number(value, letter, written, where)
-        words.append(RawWord(letter, Number(value), letter + written))
+    """The words of a line _PLAIN_LINE matched: what read_item gives for each, in one pass
+    (the words are contiguous from ``pos``: each one's place follows from the lengths)."""
+    raw, append = text.raw, line.words.append
+    for letter, number in _PLAIN_WORDS.findall(text.code, pos):
+        start = pos + 1
+        pos = start + len(number)
+        written = raw[start:pos]  # as written: an exponent's 'E' stays upper case
+        value = float(number)
+        upper = letter.upper()
+        if not -MAX_ABS_VALUE <= value <= MAX_ABS_VALUE:  # also inf: check_number words the error
+            check_number(value, upper, written, where)
+        append(RawWord(upper, Number(value), upper + written))
 
 
 def read_item(line: LexedLine, text: _Text, pos: int, where: str) -> int:
