@@ -242,5 +242,7 @@ def test_a_planner_worker_killed_mid_job_stops_it_on_its_tail_and_the_next_job_g
     assert outcome["settled"] and outcome["sent"] < 60 * CHUNK
     plan = planned_counts(Path(job["folder"]), machine.config)
     assert at_rest_on_path(job, plan)
-    again = ended(machine, machine.mdi("G01 X0 Y0 F3000")["job"]["id"])  # a new worker plans it
+    # a new worker plans it; X5 Y10 is off the path (the stop may end exactly at its reversal X0 Y0:
+    # a move there would be refused as no motion, as it was once under load)
+    again = ended(machine, machine.mdi("G01 X5 Y10 F3000")["job"]["id"])
     assert again["outcome"]["outcome"] == "completed" and planner_worker.alive
