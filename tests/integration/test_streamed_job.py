@@ -246,3 +246,23 @@ def test_a_planner_worker_killed_mid_job_stops_it_on_its_tail_and_the_next_job_g
     # a move there would be refused as no motion, as it was once under load)
     again = ended(machine, machine.mdi("G01 X5 Y10 F3000")["job"]["id"])
     assert again["outcome"]["outcome"] == "completed" and planner_worker.alive
+
+
+def test_the_worker_parses_with_the_collector_paused_and_restores_it():
+    import gc
+
+    from nurbsmotion.service.planner_worker import collector_paused
+
+    assert gc.isenabled()
+    with pytest.raises(InputError):
+        with collector_paused():
+            assert not gc.isenabled()
+            raise InputError("p.nc:1", "refused")
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()  # left as it was found
+    finally:
+        gc.enable()
