@@ -18,6 +18,8 @@ import ctypes.util
 import gc
 import os
 import sys
+from dataclasses import dataclass
+from pathlib import Path
 
 M_TRIM_THRESHOLD = -1  # glibc <malloc.h>
 M_MMAP_THRESHOLD = -3
@@ -92,3 +94,68 @@ class GcQuiet:
             gc.unfreeze()
         elif self.mode == "disable":
             gc.enable()
+
+
+# ---------------------------------------------------------------- the kernel's timer threads
+# The kernel queue (fieldbus.bcm_queue) is sent by the broadcast manager's hrtimers, which
+# Linux runs as soft timers: in softirq context on the way out of an interrupt, or, once
+# softirq work piles up (more than 2 ms or 10 rounds, or ksoftirqd already has work), in the
+# per-CPU thread ksoftirqd/N (PREEMPT_RT: ktimers/N). That thread is SCHED_OTHER by default
+# (PREEMPT_RT: ktimers SCHED_FIFO 1), so a machine busy with our own SCHED_FIFO threads holds
+# the SYNC back for as long as they run: measured inside User-Mode Linux, SYNC intervals of
+# 10-14 ms at T = 4 ms with ksoftirqd normal, none above 2 T with it SCHED_FIFO above the cycle
+# thread (docs/benchmarks.md, "Kernel-timed stream"; docs/fieldbus.md, "The kernel's timer
+# threads"). Raising them is the machine's set-up (as for IRQ threads on an RT machine), not
+# the daemon's business: the daemon says when they sit below its cycle thread.
+
+KERNEL_TIMER_THREAD_PREFIXES = ("ksoftirqd/", "ktimers/", "ktimersoftd/")
+_POLICY_NAMES = {0: "SCHED_OTHER", 1: "SCHED_FIFO", 2: "SCHED_RR", 3: "SCHED_BATCH", 5: "SCHED_IDLE",
+                 6: "SCHED_DEADLINE"}
+
+
+@dataclass(frozen=True)
+class KernelThread:
+    """A kernel thread's scheduling (/proc/PID/stat: comm, rt_priority (field 40), policy (41))."""
+
+    name: str
+    pid: int
+    policy: str
+    priority: int
+
+    def below(self, fifo_priority: int) -> bool:
+        """Would a SCHED_FIFO thread of ``fifo_priority`` keep this one off the CPU?"""
+        return self.policy not in ("SCHED_FIFO", "SCHED_RR", "SCHED_DEADLINE") or \
+            (self.policy != "SCHED_DEADLINE" and self.priority <= fifo_priority)
+
+
+def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:
+    """The threads that run the kernel's soft timers (ksoftirqd/N, ktimers/N), from ``proc``."""
+    threads = []
+    for entry in proc.iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            stat = (entry / "stat").read_text()
+        except OSError:
+            continue
+        name = stat[stat.find("(") + 1:stat.rfind(")")]
+        if not name.startswith(KERNEL_TIMER_THREAD_PREFIXES):
+            continue
+        fields = stat[stat.rfind(")") + 2:].split()  # fields[0] is field 3 (state)
+        try:
+            priority, policy = int(fields[37]), int(fields[38])
+        except (IndexError, ValueError):
+            continue
+        threads.append(KernelThread(name, int(entry.name), _POLICY_NAMES.get(policy, str(policy)), priority))
+    return sorted(threads, key=lambda t: t.pid)
+
+
+def timer_threads_below(fifo_priority: int | None, proc: Path = Path("/proc")) -> list[KernelThread]:
+    """The kernel's timer threads a SCHED_FIFO thread of ``fifo_priority`` can hold off (none
+    when no real-time priority is used, or /proc cannot be read)."""
+    if fifo_priority is None:
+        return []
+    try:
+        return [t for t in kernel_timer_threads(proc) if t.below(fifo_priority)]
+    except OSError:
+        return []

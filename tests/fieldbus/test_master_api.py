@@ -57,3 +57,28 @@ def test_auto_sync_source_queues_in_the_kernel_on_the_masters_own_socketcan_bus(
     assert isinstance(Master(_config(), bus=bus, sync_source="auto")._make_writer(), BcmQueueWriter)
     assert isinstance(Master(_config(), bus=bus, sync_source="loop")._make_writer(), LoopWriter)
     assert isinstance(Master(_config(), bus=object(), sync_source="auto")._make_writer(), LoopWriter)
+
+
+def test_kernel_timer_threads_below_the_cycle_thread_are_named_with_the_fix(monkeypatch, caplog):
+    from nurbsmotion.fieldbus import master as master_module
+    from nurbsmotion.runtime import KernelThread
+
+    asked = []
+    threads = [KernelThread("ksoftirqd/0", 14, "SCHED_OTHER", 0), KernelThread("ktimers/1", 30, "SCHED_FIFO", 1)]
+    monkeypatch.setattr(master_module, "timer_threads_below", lambda priority: asked.append(priority) or threads)
+    with caplog.at_level("WARNING", logger="nurbsmotion.fieldbus.master"):
+        Master(_config(), rt_priority=20)._warn_timer_threads_below()
+    assert asked == [20]
+    line = caplog.records[-1].getMessage()
+    assert line.startswith("kernel_timers_below_cycle_thread cycle_thread_priority=20")
+    assert "threads=ksoftirqd/0:SCHED_OTHER:0,ktimers/1:SCHED_FIFO:1" in line
+    assert 'fix="chrt -f -p 21 14; chrt -f -p 21 30"' in line
+
+
+def test_no_warning_when_the_timer_threads_are_above(monkeypatch, caplog):
+    from nurbsmotion.fieldbus import master as master_module
+
+    monkeypatch.setattr(master_module, "timer_threads_below", lambda priority: [])
+    with caplog.at_level("WARNING", logger="nurbsmotion.fieldbus.master"):
+        Master(_config(), rt_priority=20)._warn_timer_threads_below()
+    assert not caplog.records

@@ -60,7 +60,7 @@ from nurbsmotion.fieldbus.supervisor import CycleHistory, Supervisor
 from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import CycleWriter, CyclicFrames, LoopWriter
 from nurbsmotion.log import kv
-from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime
+from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime, timer_threads_below
 from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier  # fewer system calls per cycle (its docstring)
 
 log = logging.getLogger(__name__)
@@ -737,11 +737,23 @@ class Master:
             self._writer = self._make_writer()
             log.info(kv("cycle_writer", sync_source="kernel" if self._use_kernel_queue() else "loop",
                         writer=type(self._writer).__name__))
+            if self._use_kernel_queue():
+                self._warn_timer_threads_below()
         self._filter_received()
         self._supervisor.reset()
         self._ctl.handle("enable", None, 0, self._fb)
         self._thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
         self._thread.start()
+
+    def _warn_timer_threads_below(self) -> None:
+        """The kernel queue's SYNC leaves from the kernel's soft-timer threads when softirq
+        work piles up; below our SCHED_FIFO threads they wait for them (runtime.py)."""
+        below = timer_threads_below(self._rt_priority)
+        if below:
+            log.warning(kv("kernel_timers_below_cycle_thread", cycle_thread_priority=self._rt_priority,
+                           threads=",".join(f"{t.name}:{t.policy}:{t.priority}" for t in below),
+                           fix="; ".join(f"chrt -f -p {(self._rt_priority or 0) + 1} {t.pid}" for t in below),
+                           why="SYNC can wait for the cycle thread: docs/fieldbus.md, 'The kernel's timer threads'"))
 
     def _run(self) -> None:
         writer = self._writer

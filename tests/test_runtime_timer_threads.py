@@ -1,0 +1,53 @@
+"""runtime.kernel_timer_threads / timer_threads_below: the threads that send the kernel queue's
+SYNC under load, and whether the daemon's SCHED_FIFO threads can hold them off."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from nurbsmotion.runtime import KernelThread, kernel_timer_threads, timer_threads_below
+
+# /proc/PID/stat lines as Linux 6.x writes them (policy is field 41, rt_priority field 40)
+KSOFTIRQD_NORMAL = ("14 (ksoftirqd/0) S 2 0 0 0 -1 69238848 0 0 0 0 12 335 0 0 20 0 1 0 24 0 0 "
+                    "18446744073709551615 0 0 0 0 0 0 0 2147483647 0 1 0 0 17 0 0 0 0 0 0 0 0 0 0 0 0 0 0")
+MIGRATION_FIFO_99 = ("18 (migration/0) S 2 0 0 0 -1 69238848 0 0 0 0 0 129 0 0 -100 0 1 0 24 0 0 "
+                     "18446744073709551615 0 0 0 0 0 0 0 2147483647 0 1 0 0 17 0 99 1 0 0 0 0 0 0 0 0 0 0 0")
+
+
+def fake_proc(tmp_path: Path, threads: dict[int, str]) -> Path:
+    for pid, stat in threads.items():
+        (tmp_path / str(pid)).mkdir()
+        (tmp_path / str(pid) / "stat").write_text(stat + "\n")
+    (tmp_path / "self").mkdir()  # not a pid
+    return tmp_path
+
+
+def stat_of(pid: int, name: str, priority: int, policy: int) -> str:
+    return KSOFTIRQD_NORMAL.replace("14 (ksoftirqd/0)", f"{pid} ({name})").replace(
+        " 17 0 0 0 0 0", f" 17 0 {priority} {policy} 0 0", 1)
+
+
+def test_finds_the_soft_timer_threads_and_their_policy(tmp_path):
+    proc = fake_proc(tmp_path, {14: KSOFTIRQD_NORMAL, 18: MIGRATION_FIFO_99,
+                                22: stat_of(22, "ksoftirqd/1", 50, 1), 30: stat_of(30, "ktimers/0", 1, 1)})
+    assert kernel_timer_threads(proc) == [KernelThread("ksoftirqd/0", 14, "SCHED_OTHER", 0),
+                                          KernelThread("ksoftirqd/1", 22, "SCHED_FIFO", 50),
+                                          KernelThread("ktimers/0", 30, "SCHED_FIFO", 1)]
+
+
+def test_below_the_cycle_thread_means_normal_or_a_fifo_priority_not_above_it(tmp_path):
+    proc = fake_proc(tmp_path, {14: KSOFTIRQD_NORMAL, 22: stat_of(22, "ksoftirqd/1", 50, 1),
+                                30: stat_of(30, "ktimers/0", 20, 1), 31: stat_of(31, "ktimers/1", 21, 2)})
+    assert [t.pid for t in timer_threads_below(20, proc)] == [14, 30]  # FIFO 20 ties: the running one stays
+    assert [t.pid for t in timer_threads_below(60, proc)] == [14, 22, 30, 31]
+
+
+def test_no_real_time_priority_no_complaint(tmp_path):
+    assert timer_threads_below(None, fake_proc(tmp_path, {14: KSOFTIRQD_NORMAL})) == []
+
+
+def test_an_unreadable_or_odd_entry_is_skipped(tmp_path):
+    proc = fake_proc(tmp_path, {14: KSOFTIRQD_NORMAL, 15: "15 (ksoftirqd/9) S 2"})
+    (proc / "16").mkdir()  # a process that ended between listing and reading: no stat file
+    assert [t.pid for t in kernel_timer_threads(proc)] == [14]
+    assert timer_threads_below(20, tmp_path / "missing") == []
