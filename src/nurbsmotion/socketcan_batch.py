@@ -61,7 +61,12 @@ from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, di
 MSG_WAITFORONE = 0x10000  # linux/socket.h: block for the first message only
 TIMEVAL = struct.Struct("@ll")  # struct timeval for SO_RCVTIMEO
 WALL_OFFSET_REFRESH_S = 1.0  # the wall clock's offset to perf_counter is read again after this long
-BATCH_FRAMES = 64  # frames per recvmmsg (a burst is 1 + n frames; a lagging reader takes 64 per call)
+# Frames per recvmmsg: a cycle's burst is 1 + n frames; a reader that lags takes its backlog
+# in calls of this many. A call is one stretch of kernel work that cannot be preempted inside
+# User-Mode Linux (0.6-1.4 ms for 64 frames there, 0.1-0.6 ms for 16): 16 keeps the kernel
+# queue's soft timers from waiting behind a master catching up after a stall (five 60 ms
+# stalls at T = 4 ms: 15 of 16 jobs within 2 T against 12 of 16 with 64; docs/benchmarks.md).
+BATCH_FRAMES = 16
 FRAME_BYTES = 16  # struct can_frame (the bus is opened without CAN FD)
 TIMESPEC = struct.Struct("@qq")
 CMSG_HEAD = struct.Struct("@Qii")  # cmsg_len, cmsg_level, cmsg_type (x86_64 / aarch64 layout)

@@ -331,6 +331,18 @@ def test_drive_that_never_answers_sync_is_named_with_step_and_state():
         assert master.faults()[-1].kind == "bringup" and master.faults()[-1].node_id == 2
 
 
+def test_an_enable_phase_that_runs_out_of_time_says_so_not_only_the_step():
+    """A drive still short of OPERATION ENABLED when the whole phase's time-out runs out (a
+    slow drive, not one stuck in a state for the step time-out): the line says which limit."""
+    with rig(bring_up=False, stuck_timeout_s=5.0, enable_timeout_s=0.3) as (master, sim, _):
+        sim.inject(FaultInjection("ignore_sync", node_id=2))
+        with pytest.raises(FieldbusError) as info:
+            master.bring_up()
+        text = str(info.value)
+        assert text.startswith("node 2: bring-up step 'shutdown': no TPDO1 received")
+        assert text.endswith("when the drives' enable time-out of 0.3 s ran out") and "\n" not in text
+
+
 class FlakyBus(VirtualBus):
     """A virtual bus whose sends fail once ``failing`` is set (a cable pulled, bus-off)."""
 

@@ -239,8 +239,10 @@ class Supervisor:
                 return False
         return True
 
-    def enable_failed(self, i: int, k: int, since_cycle: int, ip_mode: bool) -> str:
-        """Message (and report) for an axis stuck on its way to OPERATION ENABLED."""
+    def enable_failed(self, i: int, k: int, since_cycle: int, ip_mode: bool, phase_timeout_s: float | None = None) -> str:
+        """Message (and report) for an axis stuck on its way to OPERATION ENABLED: in one
+        state for the step time-out, or (``phase_timeout_s``) still short of it when the
+        whole enable phase's time-out ran out."""
         fb = self.fb
         node, sw = self.node_ids[i], fb.status[i]
         state = c.state_of_statusword(sw) if sw is not None else None
@@ -248,8 +250,10 @@ class Supervisor:
         waited_ms = (k - since_cycle) * self.period_s * 1000
         where = f"no TPDO1 received (last statusword by SDO: {state_name(sw)})" if fb.cycle[i] < 0 else \
             f"stuck in {state_name(sw)} (statusword 0x{sw or 0:04X}, controlword sent 0x{self.history.cw[k % self.history.size][i]:04X})"
+        when = f"after {waited_ms:.0f} ms" if phase_timeout_s is None else \
+            f"for {waited_ms:.0f} ms when the drives' enable time-out of {phase_timeout_s:.1f} s ran out"
         emcy = fb.last_emcy[i]
-        message = (f"node {node}: bring-up step '{step}': {where} after {waited_ms:.0f} ms"
+        message = (f"node {node}: bring-up step '{step}': {where} {when}"
                    f"{f' (last EMCY 0x{emcy:04X})' if emcy else ''}")
         self.faults.append(FaultReport(node, self.names[i], "bringup", sw or 0, k, message))
         self.reported.add((node, "bringup"))

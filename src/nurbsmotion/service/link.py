@@ -92,6 +92,16 @@ class SimulatedDrives:
         self.network.stop()
 
 
+ENABLE_STEPS = 4  # CiA 402 power-up: shutdown, switch on, enable operation, enable interpolation (IP)
+MIN_ENABLE_PHASE_S = 5.0  # the master's own default for the whole enable phase
+
+
+def enable_phase_timeout_s(step_timeout_s: float) -> float:
+    """The drives' whole enable phase may take every step's time-out (``bus.drive_step_timeout_ms``):
+    a drive that answers each step within its limit must not fail the phase; at least 5 s."""
+    return max(MIN_ENABLE_PHASE_S, ENABLE_STEPS * step_timeout_s)
+
+
 def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
               ) -> tuple[Master, SimulatedDrives | None]:
     """Start the simulated drives (if configured; their switches and index pulses from each
@@ -99,8 +109,9 @@ def open_link(config: MachineConfig, home_sensors: dict[int, Any] | None = None
     that fails (and everything started is stopped again)."""
     # the drives' threads SCHED_FIFO just below the master's: each stands in for a drive's own CPU
     simulation = SimulatedDrives(config, home_sensors, SIM_DRIVES_PRIORITY).start() if config.simulate else None
+    step_timeout_s = config.bus.drive_step_timeout_ms / 1000.0
     master = Master(config, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze",  # the daemon's process settings
-                    stuck_timeout_s=config.bus.drive_step_timeout_ms / 1000.0,
+                    stuck_timeout_s=step_timeout_s, enable_timeout_s=enable_phase_timeout_s(step_timeout_s),
                     sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0)
     try:
         master.bring_up()

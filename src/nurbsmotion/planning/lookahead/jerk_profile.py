@@ -25,6 +25,7 @@ pieces (cumulative sum of per-piece integrals), relative to the window's own ori
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import NDArray
@@ -59,10 +60,10 @@ class RawProfile:
         np.cumsum(piece, out=out[1:])
         return out
 
-    @property
+    @cached_property
     def dt(self) -> NDArray[np.float64]:
-        """(K,) piece durations."""
-        return np.diff(self.t)
+        """(K,) piece durations (the pieces never change after construction)."""
+        return self.t[1:] - self.t[:-1]
 
     def locate(self, t: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.float64]]:
         k = np.clip(search_sorted(self.t, t, side="right") - 1, 0, len(self.a) - 1)
@@ -70,7 +71,7 @@ class RawProfile:
 
     def position(self, t: NDArray[np.float64]) -> NDArray[np.float64]:
         k, tau = self.locate(t)
-        tau_in = np.clip(tau, 0.0, np.diff(self.t)[k])
+        tau_in = np.clip(tau, 0.0, self.dt[k])
         s = self.s[k] + self.v[k] * tau_in + self.a[k] * tau_in**2 / 2.0
         before = t < self.t[0]
         s = np.where(before, self.s[0] + self.v[0] * (t - self.t[0]), s)

@@ -107,6 +107,16 @@ class PathGrid:
         return np.diff(self.s)
 
     @cached_property
+    def interval_u(self) -> NDArray[np.float64]:
+        """(N-1,) width of every interval in u (0 at junctions)."""
+        return self.u[1:] - self.u[:-1]
+
+    @cached_property
+    def interval_u_nonzero(self) -> NDArray[np.float64]:
+        """interval_u with 1 where it is 0 (a divisor for the place within an interval)."""
+        return np.where(self.interval_u > 0, self.interval_u, 1.0)
+
+    @cached_property
     def u_of_s_poly(self) -> NDArray[np.float64]:
         """(6, N-1) coefficients in r = (s - s_k) / h_k of the quintic Hermite of u(s) on every
         interval through u, du/ds and d2u/ds2 at both ends (left limits at the end); zero-length
@@ -234,11 +244,14 @@ def speed_polynomials(curve: NurbsCurve, u: NDArray[np.float64], sigma: NDArray[
                       dsigma: NDArray[np.float64], dsigma_left: NDArray[np.float64]) -> NDArray[np.float64]:
     """Coefficients (SPEED_DEGREE + 1, N - 1) of sigma on every interval [u_k, u_k+1] in
     r = (u - u_k) / h (module docstring); sigma' = d sigma / du at the ends (left limit at the end)."""
-    h = np.diff(u)
-    inner = u[:-1, None] + h[:, None] * ((1.0 + _GL_NODES) / 2.0)[None, :]
-    at_nodes = curve.speeds(inner.ravel()).reshape(inner.shape)
-    data = np.column_stack([sigma[:-1], h * dsigma[:-1], at_nodes, sigma[1:], h * dsigma_left[1:]])
-    return SPEED_FIT @ data.T
+    h = u[1:] - u[:-1]
+    inner = u[None, :-1] + h[None, :] * ((1.0 + _GL_NODES) / 2.0)[:, None]  # (nodes, N - 1): node by node
+    data = np.empty((len(SPEED_FIT), len(h)))  # rows: sigma(0), sigma'(0), the nodes, sigma(1), sigma'(1)
+    data[0], data[-2] = sigma[:-1], sigma[1:]
+    np.multiply(h, dsigma[:-1], out=data[1])
+    np.multiply(h, dsigma_left[1:], out=data[-1])
+    data[2:-2] = curve.speeds(inner.reshape(-1)).reshape(inner.shape)
+    return SPEED_FIT @ data
 
 
 def interval_lengths(speed_poly: NDArray[np.float64], h: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -362,12 +375,12 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float) -> PathGrid:
         parts["piece"].append(np.full(len(u), index, dtype=np.int32))
         parts["feed"].append(np.full(len(u), piece.feed_mm_s))
         offset = float(s[-1])
-    cat = {k: np.concatenate(v) for k, v in parts.items()}
+    cat = {k: np.concatenate(v) if len(v) > 1 else v[0] for k, v in parts.items()}  # one piece: no copies
     kappa_max = interval_curvature_max(cat["s"], cat["curv"], cat["dcurv"], cat["curv_left"], cat["dcurv_left"])
     junction = cat["piece"][1:] != cat["piece"][:-1]
     ends = row_norms(cat["curv"])
     kappa_max[junction] = np.maximum(ends[:-1], ends[1:])[junction]
-    speed_poly = np.concatenate(polys[:-1], axis=1)
+    speed_poly = np.concatenate(polys[:-1], axis=1) if len(polys) > 2 else polys[0]
     grid = PathGrid(s=cat["s"], piece=cat["piece"], u=cat["u"], u_s=cat["u_s"], u_ss=cat["u_ss"], speed_poly=speed_poly,
                     tangent=cat["tangent"], curv=cat["curv"], dcurv=cat["dcurv"], feed_mm_s=cat["feed"],
                     position=cat["position"], pieces=tuple(pieces), curv_left=cat["curv_left"],

@@ -43,11 +43,11 @@ def hermite_u(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64]) -> ND
     h = grid.interval_mm.take(k)
     r = (s - grid.s.take(k)) / np.where(h > 0, h, 1.0)
     np.clip(r, 0.0, 1.0, out=r)
-    c = grid.u_of_s_poly
-    u = c[5].take(k)
+    c = grid.u_of_s_poly.take(k, axis=1)  # one gather of all coefficients
+    u = c[5]
     for j in range(4, -1, -1):
         u *= r
-        u += c[j].take(k)
+        u += c[j]
     end = np.flatnonzero(r == 1.0)
     u[end] = grid.u[k[end] + 1]
     return u
@@ -58,35 +58,34 @@ def grid_interval(grid: PathGrid, s: NDArray[np.float64]) -> NDArray[np.intp]:
     k = np.clip(search_sorted(grid.s, s, side="right") - 1, 0, len(grid) - 2)
     # a zero-length (junction) interval at the very end of the grid: step back into the piece
     while True:
-        zero = grid.s[k + 1] <= grid.s[k]
+        zero = grid.interval_mm.take(k) <= 0.0  # s_k+1 <= s_k
         if not zero.any():
             return k
         k = np.where(zero, k - 1, k)
 
 
-def interval_fraction(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(r, h): where u lies on interval k, r = (u - u_k) / h, and the interval's width h in u."""
-    h = grid.u[k + 1] - grid.u[k]
-    return (u - grid.u[k]) / np.where(h > 0, h, 1.0), h
+def interval_fraction(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Where u lies on interval k: r = (u - u_k) / h, h the interval's width in u (1 where 0)."""
+    return (u - grid.u.take(k)) / grid.interval_u_nonzero.take(k)
 
 
 def arc_residuals(grid: PathGrid, k: NDArray[np.intp], s: NDArray[np.float64], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """s(u) - s* with s(u) = s_k + h integral_0^r p (Horner on p's coefficients / (j + 1))."""
-    r, h = interval_fraction(grid, k, u)
-    coeffs = grid.speed_integral_poly
-    integral = coeffs[-1].take(k)
+    r, h = interval_fraction(grid, k, u), grid.interval_u.take(k)
+    coeffs = grid.speed_integral_poly.take(k, axis=1)  # one gather of all coefficients
+    integral = coeffs[-1]
     for j in range(len(coeffs) - 2, -1, -1):
-        integral = integral * r + coeffs[j].take(k)
-    return grid.s[k] + integral * r * h - s
+        integral = integral * r + coeffs[j]
+    return grid.s.take(k) + integral * r * h - s
 
 
 def interval_speeds(grid: PathGrid, k: NDArray[np.intp], u: NDArray[np.float64]) -> NDArray[np.float64]:
     """|x'(u)| from the interval's speed polynomial."""
-    r, _ = interval_fraction(grid, k, u)
-    coeffs = grid.speed_poly
-    speed = coeffs[-1].take(k)
+    r = interval_fraction(grid, k, u)
+    coeffs = grid.speed_poly.take(k, axis=1)  # one gather of all coefficients
+    speed = coeffs[-1]
     for j in range(len(coeffs) - 2, -1, -1):
-        speed = speed * r + coeffs[j].take(k)
+        speed = speed * r + coeffs[j]
     return speed
 
 
