@@ -25,7 +25,11 @@ The simulated drives' receive and ticker threads run SCHED_FIFO just below the m
 the daemon runs them with ``simulate: true`` (service.link.open_link): each stands in for a
 drive's own CPU (docs/daemon.md, "Simulated drives in the daemon's process").
 
-Run: python benchmarks/bench_first_motion.py [--copies 8 100 460] [--results FILE]
+``--first-motion-only``: each job is stopped (the controlled stop) at its first motion and the
+row says so (memory and missed cycles then cover those seconds only): first motion of the
+one-hour program without its hour.
+
+Run: python benchmarks/bench_first_motion.py [--copies 8 100 460] [--results FILE] [--first-motion-only]
 (``--results``: every result is also appended to FILE, and the table is written from all the
 results in FILE, so programs run by separate invocations, e.g. at the same time, share it;
 ``--copies --results FILE`` runs nothing and writes the table again.)
@@ -78,7 +82,7 @@ def status_kb(field: str, pid: int | str = "self") -> float:
     return float("nan")
 
 
-def one_run(copies: int) -> dict:
+def one_run(copies: int, first_motion_only: bool = False) -> dict:
     """The daemon in this process runs Wang x ``copies`` once (see the module docstring)."""
     from nurbsmotion.config import parse_config
     from nurbsmotion.fieldbus import Master
@@ -123,6 +127,8 @@ def one_run(copies: int) -> dict:
                 time.sleep(0.0005)
                 job = master._job
             first_motion_s = time.perf_counter() - started
+            if first_motion_only:
+                client.call("stop")
             samples = []
             worker_pid = worker.pid if worker is not None else None
             worker_peak_mb = float("nan")
@@ -146,15 +152,16 @@ def one_run(copies: int) -> dict:
             "late": outcome["late_cycles"], "rss_idle_mb": rss_idle_mb,
             "rss_max_sampled_mb": max(samples), "peak_rss_mb": status_kb("VmHWM") / 1024.0,
             "worker_peak_rss_mb": worker_peak_mb,
-            "wall_s": outcome["motion_time_s"], "sim_threads": dict(networks[0].thread_policy)}
+            "wall_s": outcome["motion_time_s"], "sim_threads": dict(networks[0].thread_policy),
+            "first_motion_only": first_motion_only}
 
 
-def run_child(copies: int) -> dict:
+def run_child(copies: int, first_motion_only: bool) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     load_before = load_line()
-    out = subprocess.run([sys.executable, __file__, "--child", str(copies)], capture_output=True, text=True, env=env,
-                         timeout=2 * 3600)
+    out = subprocess.run([sys.executable, __file__, "--child", str(copies)] + ["--first-motion-only"] * first_motion_only,
+                         capture_output=True, text=True, env=env, timeout=2 * 3600)
     run = {"started": started, "load_before": load_before, "load_after": load_line()}
     if out.returncode != 0:
         return {"copies": copies, **run,
@@ -179,6 +186,8 @@ def table(results: list[dict]) -> str:
             continue
         met = r["first_motion_s"] < TARGET_FIRST_S and r["peak_rss_mb"] < TARGET_MB
         so_far = "" if r.get("planned_all") else ", planned when it ended"
+        if r.get("first_motion_only"):
+            so_far += ", stopped at first motion (--first-motion-only)"
         threads = r.get("sim_threads", {})
         rows.append(f"{run}| {r['cycles']:,} ({r['duration_s'] / 60:.1f} min{so_far}) | {r['outcome']}"
                     f"{': ' + r['reason'] if r['reason'] else ''} | {r['submit_s']:.3f} | {r['first_motion_s']:.3f} | "
@@ -193,14 +202,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="*", default=[8, 100, 460])
     parser.add_argument("--results", type=Path, help="JSON lines: append each result, write the table from all")
+    parser.add_argument("--first-motion-only", action="store_true", help="stop each job at its first motion")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
-        print(json.dumps(one_run(args.child)))
+        print(json.dumps(one_run(args.child, args.first_motion_only)))
         return
     results = []
     for copies in args.copies:
-        results.append(run_child(copies))
+        results.append(run_child(copies, args.first_motion_only))
         print(json.dumps(results[-1]), flush=True)
         if args.results is not None:
             with args.results.open("a") as out:

@@ -81,6 +81,32 @@ def test_a_streamed_job_applies_exactly_the_plan_across_its_chunks(machine):
     assert job["plan"]["measured"]["max_accel_mm_s2"] <= machine.config.interpolation.max_accel_mm_s2 * 1.001
 
 
+def test_the_path_length_reaches_plan_json_and_the_progress_after_the_first_chunk(machine):
+    """The worker measures the blocks' lengths after the first chunk (planner_worker.PathLengths):
+    the progress uses them while the job runs, plan.json has the path's length at the end."""
+    job_id = submit(machine, LONG)
+    running_at(machine, 3 * CHUNK)  # the lengths come with the second chunk at the latest
+    job = machine._job
+    first_line = np.hypot(40.0, 20.0)
+    assert job is not None and job.plan._length_before == pytest.approx([0.0, first_line, 2 * first_line], abs=1e-9)
+    info = ended(machine, job_id)
+    assert info["plan"]["length_mm"] == round(2 * first_line, 6)  # as a whole plan's plan.json
+
+
+def test_progress_before_the_lengths_is_by_block_then_by_length():
+    """The job's own arithmetic: lengths not yet sent, then sent."""
+    from nurbsmotion.service.planner_worker import PathLengths
+
+    plan = streamed_job.StreamedJob.__new__(streamed_job.StreamedJob)
+    plan.finished, plan.planned, plan._length_before, plan.summary = False, 0, None, {"length_mm": None}
+    plan.program = type("P", (), {"blocks": (0, 1, 2, 3)})()
+    plan._block_rows, plan._block_ids = [0, 10, 20], [0, 1, 2]
+    assert plan.percent_at(15) == 25.0  # block 1 of 4
+    plan._take_lengths(PathLengths(np.array([1.0, 3.0, 4.0, 2.0])))
+    assert plan.percent_at(15) == 10.0 and plan.percent_at(25) == 40.0  # 1 of 10 mm, 4 of 10 mm
+    assert plan.summary["length_mm"] == 10.0
+
+
 def test_records_are_written_while_the_job_runs(machine):
     job_id = submit(machine, LONG)
     running_at(machine, 6 * CHUNK)
@@ -216,5 +242,27 @@ def test_a_planner_worker_killed_mid_job_stops_it_on_its_tail_and_the_next_job_g
     assert outcome["settled"] and outcome["sent"] < 60 * CHUNK
     plan = planned_counts(Path(job["folder"]), machine.config)
     assert at_rest_on_path(job, plan)
-    again = ended(machine, machine.mdi("G01 X0 Y0 F3000")["job"]["id"])  # a new worker plans it
+    # a new worker plans it; X5 Y10 is off the path (the stop may end exactly at its reversal X0 Y0:
+    # a move there would be refused as no motion, as it was once under load)
+    again = ended(machine, machine.mdi("G01 X5 Y10 F3000")["job"]["id"])
     assert again["outcome"]["outcome"] == "completed" and planner_worker.alive
+
+
+def test_the_worker_parses_with_the_collector_paused_and_restores_it():
+    import gc
+
+    from nurbsmotion.service.planner_worker import collector_paused
+
+    assert gc.isenabled()
+    with pytest.raises(InputError):
+        with collector_paused():
+            assert not gc.isenabled()
+            raise InputError("p.nc:1", "refused")
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        with collector_paused():
+            pass
+        assert not gc.isenabled()  # left as it was found
+    finally:
+        gc.enable()

@@ -120,11 +120,21 @@ SPEED_SAMPLES_PER_SPAN = 64
 
 def zero_speed_problems(curve: NurbsCurve) -> list[CurveProblem]:
     """Points of (near) zero parametric speed found on a dense sample of every knot span,
-    its ends included; located at the control point with the nearest Greville abscissa."""
+    its ends included; located at the control point with the nearest Greville abscissa.
+
+    "Near zero" is below ZERO_SPEED_RATIO of the mean parametric speed L / (u_max - u_min).
+    The arc length L is computed only when a sample is slow against the bound L <= the
+    control polygon's length (positive weights: knot insertion and rational de Casteljau
+    cut corners by convex combinations, so the polygons shorten towards the curve): a sample
+    at or above that bound's threshold is at or above the exact one."""
     breaks = curve.breakpoints
-    u = np.unique(np.concatenate([np.linspace(a, b, SPEED_SAMPLES_PER_SPAN + 1) for a, b in zip(breaks[:-1], breaks[1:])]))
+    u = np.unique(span_samples(breaks, SPEED_SAMPLES_PER_SPAN))
     speed = np.linalg.norm(curve.derivatives(u, 1)[1], axis=1)
-    mean_speed = curve.length / (curve.u_max - curve.u_min)
+    u_range = curve.u_max - curve.u_min
+    polygon_mm = float(np.linalg.norm(np.diff(curve.control_points, axis=0), axis=1).sum())
+    if speed.min() >= ZERO_SPEED_RATIO * polygon_mm * (1.0 + 1e-9) / u_range:  # 1e-9: above the quadrature error of L
+        return []
+    mean_speed = curve.length / u_range
     slow = np.flatnonzero(speed < ZERO_SPEED_RATIO * mean_speed)
     if not len(slow):
         return []
@@ -134,6 +144,16 @@ def zero_speed_problems(curve: NurbsCurve) -> list[CurveProblem]:
     index = int(np.argmin(np.abs(greville - u0)))
     return [CurveProblem("control_points", f"the curve stops dead (zero speed, a cusp) at u = {u0:g} near control "
                                            f"point {index + 1}; split the curve there", index)]
+
+
+def span_samples(breaks: NDArray[np.float64], per_span: int) -> NDArray[np.float64]:
+    """np.linspace(a, b, per_span + 1) for each span [a, b] of ``breaks``, concatenated (one
+    vectorised expression: linspace's own formula a + (b - a) * i / n, its end exactly b)."""
+    a, b = breaks[:-1, None], breaks[1:, None]
+    step = (b - a) / per_span
+    samples = a + np.arange(per_span + 1)[None, :] * step
+    samples[:, -1] = breaks[1:]
+    return samples.ravel()
 
 
 def build_curve(degree: int, points: Sequence[Sequence[float] | NDArray[np.float64]], weights: Sequence[float], knots: Sequence[float],

@@ -26,6 +26,15 @@ O_KEYWORDS = ("endsub", "sub", "call", "return", "elseif", "else", "endif", "if"
               "break", "continue", "endrepeat", "repeat")
 _O_LABEL = re.compile(r"o(\d+|<[^<>]*>)")
 _PLAIN_NUMBER = re.compile(r"[+-]?(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?")
+_LINE_NUMBER = re.compile(r"n\d+(?:\.\d*)?")
+# The common line, in one match: an optional line number, then only words of a letter and a
+# plain number, each number followed by the next letter or the end. Atomic number and
+# possessive line number take exactly what read_item's greedy _PLAIN_NUMBER match and
+# lex_line's line-number skip take (no backtracking into another split of the same text);
+# any other line goes through read_item.
+_PLAIN_WORD = r"([a-z])((?>[+-]?(?:\d+\.?\d*|\.\d+)(?:e[+-]?\d+)?))"
+_PLAIN_LINE = re.compile(rf"(?:n\d+(?:\.\d*)?)?+(?:{_PLAIN_WORD})*")
+_PLAIN_WORDS = re.compile(_PLAIN_WORD)
 
 
 @dataclass(frozen=True)
@@ -162,15 +171,33 @@ def lex_line(number: int, raw: str, source: str) -> LexedLine:
         return line
     pos = 0
     if text.code.startswith("n"):  # line number first: skip it (also allowed elsewhere)
-        m = re.compile(r"n\d+(?:\.\d*)?").match(text.code)
+        m = _LINE_NUMBER.match(text.code)
         if m:
             pos = m.end()
     if text.code.startswith("o", pos):
         read_oword(line, text, pos, where)
         return line
+    if _PLAIN_LINE.fullmatch(text.code):
+        read_plain_words(line, text, pos, where)
+        return line
     while pos < len(text.code):
         pos = read_item(line, text, pos, where)
     return line
+
+
+def read_plain_words(line: LexedLine, text: _Text, pos: int, where: str) -> None:
+    """The words of a line _PLAIN_LINE matched: what read_item gives for each, in one pass
+    (the words are contiguous from ``pos``: each one's place follows from the lengths)."""
+    raw, append = text.raw, line.words.append
+    for letter, number in _PLAIN_WORDS.findall(text.code, pos):
+        start = pos + 1
+        pos = start + len(number)
+        written = raw[start:pos]  # as written: an exponent's 'E' stays upper case
+        value = float(number)
+        upper = letter.upper()
+        if not -MAX_ABS_VALUE <= value <= MAX_ABS_VALUE:  # also inf: check_number words the error
+            check_number(value, upper, written, where)
+        append(RawWord(upper, Number(value), upper + written))
 
 
 def read_item(line: LexedLine, text: _Text, pos: int, where: str) -> int:

@@ -37,8 +37,8 @@ from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.service.path_bounds import hull_box, moving_unconfigured_axis, soft_limit_violation
-from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PlanEnd, PlannedChunk, PlannerWorker,
-                                                PlanRequest, TracePath, as_error)
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
+                                                PlannerWorker, PlanRequest, TracePath, as_error)
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
@@ -120,7 +120,7 @@ class StreamedJob:
         self._block_rows: list[int] = []  # first row of each block reached, in order
         self._block_ids: list[int] = []
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
-        self._length_before = np.concatenate([[0.0], np.cumsum([b.length_mm for b in program.blocks])])
+        self._length_before: np.ndarray | None = None  # path length before each block, once the worker sent them
         self._commands, self._results = connection  # the worker got this job's PlanRequest
         self._cancel_sent = False
         self._send_lock = threading.Lock()
@@ -129,7 +129,7 @@ class StreamedJob:
         self._thread = threading.Thread(target=self._receive, name="job-receiver", daemon=True)
         start = program.blocks[0].start
         self.summary: dict[str, Any] = {
-            "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
+            "program": name, "blocks": len(program.blocks), "length_mm": None,  # set once the worker sends it
             "algorithm": "lookahead", "streamed": True, "period_s": config.cycle_period_s,
             "chunk_cycles": chunk_cycles, "first_chunk_cycles": self.first_chunk_cycles,
             "cycles": None, "duration_s": None,
@@ -204,14 +204,20 @@ class StreamedJob:
 
     def percent_at(self, index: int) -> float:
         """Progress: of the rows once all are planned, else of the path's length up to the
-        start of the block reached."""
+        start of the block reached (of the blocks, until the worker has sent their lengths:
+        the first seconds of a long program)."""
         if index < 0:
             return 0.0
         if self.finished and self.planned:
             return 100.0 * (index + 1) / self.planned
         block = self.block_at(index)
-        total = float(self._length_before[-1])
-        return 100.0 * float(self._length_before[block]) / total if block is not None and total > 0 else 0.0
+        if block is None:
+            return 0.0
+        before = self._length_before
+        if before is None:
+            return 100.0 * block / len(self.program.blocks)
+        total = float(before[-1])
+        return 100.0 * float(before[block]) / total if total > 0 else 0.0
 
     def end_reason(self, fell_behind_row: int) -> str:
         """Why a job ended before its program's end although nobody stopped it ('' if it did not)."""
@@ -248,6 +254,8 @@ class StreamedJob:
                 message = self._results.recv()
                 if isinstance(message, PlannedChunk):
                     self._take(message)
+                elif isinstance(message, PathLengths):
+                    self._take_lengths(message)
                 elif isinstance(message, PlanEnd):
                     self._finish(message)
                     return
@@ -282,6 +290,11 @@ class StreamedJob:
             self.first_chunk_s = time.monotonic() - self.submitted_s
         self.planned += len(chunk.counts)
         self._first.set()
+
+    def _take_lengths(self, message: PathLengths) -> None:
+        """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
+        self._length_before = np.concatenate([[0.0], np.cumsum(message.lengths_mm)])
+        self.summary["length_mm"] = round(float(self._length_before[-1]), 6)
 
     def _finish(self, end: PlanEnd) -> None:
         self.end = end
