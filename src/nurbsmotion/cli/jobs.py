@@ -47,6 +47,12 @@ def list_lines(response: dict[str, Any]) -> list[str]:
     return lines
 
 
+def number(value: float | None, digits: int) -> str:
+    """A figure of the record, or '-' while it is not known yet (a streamed job's plan.json
+    has no length, cycles or duration until the planner has reached them)."""
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
 def show_lines(job: dict[str, Any]) -> list[str]:
     outcome, plan = job.get("outcome") or {}, job.get("plan") or {}
     lines = [f"job {job['id']}  {outcome.get('name') or plan.get('program', '')}",
@@ -56,11 +62,12 @@ def show_lines(job: dict[str, Any]) -> list[str]:
     for error in outcome.get("errors") or []:
         lines.append(f"error       {error}")
     if plan:
-        lines.append(f"plan        {plan.get('blocks')} blocks, {plan.get('length_mm', 0):.3f} mm, "
-                     f"{plan.get('cycles')} cycles, {plan.get('duration_s', 0):.3f} s ({plan.get('algorithm')})")
+        lines.append(f"plan        {plan.get('blocks')} blocks, {number(plan.get('length_mm'), 3)} mm, "
+                     f"{plan.get('cycles') if plan.get('cycles') is not None else '-'} cycles, "
+                     f"{number(plan.get('duration_s'), 3)} s ({plan.get('algorithm')})")
     if outcome.get("started_at"):
         lines.append(f"time        {outcome['started_at']} .. {outcome.get('ended_at', '')} "
-                     f"({outcome.get('motion_time_s', 0):.2f} s)")
+                     f"({number(outcome.get('motion_time_s'), 2)} s)")
         lines.append(f"set-points  {outcome.get('sent')}/{outcome.get('planned')} sent; "
                      f"{outcome.get('late_cycles')} late, {outcome.get('missed_cycles')} missed cycles")
     reached = outcome.get("line_reached")
