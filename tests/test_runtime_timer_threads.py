@@ -1,5 +1,7 @@
-"""runtime.kernel_timer_threads / timer_threads_below: the threads that send the kernel queue's
-SYNC under load, and whether the daemon's SCHED_FIFO threads can hold them off."""
+"""runtime's CPU and priority rules for the daemon's real-time threads: the kernel's timer
+threads that send the kernel queue's SYNC under load (kernel_timer_threads /
+timer_threads_below), and the real-time CPU the SCHED_FIFO threads share while the planner
+worker keeps off it."""
 
 from __future__ import annotations
 
@@ -51,3 +53,38 @@ def test_an_unreadable_or_odd_entry_is_skipped(tmp_path):
     (proc / "16").mkdir()  # a process that ended between listing and reading: no stat file
     assert [t.pid for t in kernel_timer_threads(proc)] == [14]
     assert timer_threads_below(20, tmp_path / "missing") == []
+
+
+# ---------------------------------------------------------------- the real-time CPU
+from nurbsmotion import runtime  # noqa: E402
+
+
+def test_the_realtime_cpu_is_the_last_allowed_one_and_none_with_one_cpu():
+    assert runtime.realtime_cpu({0, 1}) == 1
+    assert runtime.realtime_cpu({2, 5, 3}) == 5
+    assert runtime.realtime_cpu({0}) is None
+
+
+def test_the_worker_keeps_off_the_realtime_cpu_and_fifo_threads_go_onto_it(monkeypatch):
+    calls = []
+    monkeypatch.setattr(runtime.os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    monkeypatch.setattr(runtime.os, "sched_setaffinity", lambda pid, cpus: calls.append((pid, set(cpus))))
+    monkeypatch.setattr(runtime.os, "sched_setscheduler", lambda pid, policy, param: None)
+    assert runtime.keep_off_realtime_cpu(4242) == {0, 1, 2}
+    assert runtime.set_thread_realtime(20) == "SCHED_FIFO"
+    assert calls == [(4242, {0, 1, 2}), (0, {3})]
+
+
+def test_nothing_is_pinned_on_one_cpu_or_without_real_time(monkeypatch):
+    calls = []
+    monkeypatch.setattr(runtime.os, "sched_getaffinity", lambda pid: {0})
+    monkeypatch.setattr(runtime.os, "sched_setaffinity", lambda pid, cpus: calls.append(pid))
+    monkeypatch.setattr(runtime.os, "sched_setscheduler", lambda pid, policy, param: None)
+    assert runtime.keep_off_realtime_cpu(4242) is None and runtime.set_thread_realtime(20) == "SCHED_FIFO"
+
+    def refused(pid, policy, param):
+        raise PermissionError("Operation not permitted")
+    monkeypatch.setattr(runtime.os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(runtime.os, "sched_setscheduler", refused)
+    assert runtime.set_thread_realtime(20).startswith("normal:")
+    assert calls == []

@@ -59,15 +59,69 @@ def cap_switch_interval(period_s: float) -> float:
 
 
 def set_thread_realtime(priority: int | None) -> str:
-    """SCHED_FIFO ``priority`` for the calling thread when allowed (root / CAP_SYS_NICE);
-    returns the policy in force ('SCHED_FIFO', or 'normal: <reason>')."""
+    """SCHED_FIFO ``priority`` for the calling thread when allowed (root / CAP_SYS_NICE), on
+    the real-time CPU (realtime_cpu) when there is one; returns the policy in force
+    ('SCHED_FIFO', or 'normal: <reason>')."""
     if priority is None or not hasattr(os, "sched_setscheduler"):
         return "normal: not requested"
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, priority)))
     except (PermissionError, OSError) as err:
         return f"normal: {err}"
+    pin_to_realtime_cpu()
     return "SCHED_FIFO"
+
+
+# ---------------------------------------------------------------- the real-time CPU
+# The daemon's SCHED_FIFO threads (cycle, receive; simulated drives) wake thousands of times a
+# second. Spread over every CPU they preempt the planner worker wherever it runs, and its
+# whole-program parse before the first motion took 0.92-1.49 s instead of 0.61-0.70 s
+# (Wang x 460 on 2 CPUs, interleaved; docs/benchmarks.md). As real-time machines isolate a CPU
+# for their real-time work, the daemon runs its SCHED_FIFO threads on the last CPU it may use
+# and keeps the planner worker off it (with one CPU nothing is pinned).
+
+
+def thread_cpus() -> set[int]:
+    """The CPUs the calling thread may run on (empty where the platform cannot tell)."""
+    return os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else set()
+
+
+def realtime_cpu(allowed: set[int] | None = None) -> int | None:
+    """The CPU for the SCHED_FIFO threads: the last of ``allowed`` (the calling thread's CPUs),
+    None when there are fewer than two."""
+    if allowed is None:
+        if not hasattr(os, "sched_getaffinity"):
+            return None
+        allowed = os.sched_getaffinity(0)
+    return max(allowed) if len(allowed) >= 2 else None
+
+
+def pin_to_realtime_cpu() -> int | None:
+    """Run the calling thread on realtime_cpu(); the CPU, or None (one CPU, or not allowed)."""
+    cpu = realtime_cpu()
+    if cpu is None:
+        return None
+    try:
+        os.sched_setaffinity(0, {cpu})
+    except OSError:
+        return None
+    return cpu
+
+
+def keep_off_realtime_cpu(pid: int) -> set[int] | None:
+    """Run process ``pid`` on every CPU but realtime_cpu(); its CPUs, or None (unchanged)."""
+    if not hasattr(os, "sched_getaffinity"):
+        return None
+    allowed = os.sched_getaffinity(0)
+    cpu = realtime_cpu(allowed)
+    if cpu is None:
+        return None
+    others = allowed - {cpu}
+    try:
+        os.sched_setaffinity(pid, others)
+    except OSError:
+        return None
+    return others
 
 
 class GcQuiet:

@@ -60,7 +60,7 @@ from nurbsmotion.fieldbus.supervisor import CycleHistory, Supervisor
 from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import CycleWriter, CyclicFrames, LoopWriter
 from nurbsmotion.log import kv
-from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime, timer_threads_below
+from nurbsmotion.runtime import GC_MODES, GcQuiet, set_thread_realtime, thread_cpus, timer_threads_below
 from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier  # fewer system calls per cycle (its docstring)
 
 log = logging.getLogger(__name__)
@@ -758,7 +758,8 @@ class Master:
     def _run(self) -> None:
         writer = self._writer
         assert writer is not None
-        log.info(kv("cycle_thread_priority", policy=set_thread_realtime(self._rt_priority)))
+        policy = set_thread_realtime(self._rt_priority)
+        log.info(kv("cycle_thread_priority", policy=policy, cpus=",".join(map(str, sorted(thread_cpus())))))
         k = 0
         try:
             self._cycle = self._horizon = self._fb.wire_cycle = self._no_rewind_before = 0

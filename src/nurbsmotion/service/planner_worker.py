@@ -51,6 +51,7 @@ from nurbsmotion.planning.limits import limits_from_config
 from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.planning.measure import MeasureStream, RowFigures
 from nurbsmotion.planning.trace import TraceWriter
+from nurbsmotion.runtime import keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program, ReadOptions
 
@@ -384,7 +385,9 @@ class PlannerWorker:
         results_write.close()
         self._ready = False
         self._started_s = time.monotonic()
-        log.debug(kv("planner_worker_started", pid=self._process.pid))
+        cpus = keep_off_realtime_cpu(self._process.pid) if self._process.pid is not None else None
+        log.debug(kv("planner_worker_started", pid=self._process.pid,
+                     cpus=",".join(map(str, sorted(cpus))) if cpus else "all"))
 
     @property
     def alive(self) -> bool:
