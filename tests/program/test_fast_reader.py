@@ -22,7 +22,7 @@ import pytest
 from nurbsmotion.errors import InputError
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.program import Program, ReadOptions, gcode_words, parse_gcode
-from nurbsmotion.program.curve_check import ZERO_SPEED_RATIO, CurveProblem, span_samples, zero_speed_problems
+from nurbsmotion.program.curve_check import CurveProblem, cusp_problems, span_samples, zero_speed_problems
 from nurbsmotion.program.reader import GCODE_SUFFIXES
 from tests.program.test_corpus import TOOLS
 
@@ -120,16 +120,7 @@ def zero_speed_problems_before(curve: NurbsCurve) -> list[CurveProblem]:
     breaks = curve.breakpoints
     u = np.unique(np.concatenate([np.linspace(a, b, 65) for a, b in zip(breaks[:-1], breaks[1:])]))
     speed = np.linalg.norm(curve.derivatives(u, 1)[1], axis=1)
-    mean_speed = curve.length / (curve.u_max - curve.u_min)
-    slow = np.flatnonzero(speed < ZERO_SPEED_RATIO * mean_speed)
-    if not len(slow):
-        return []
-    u0 = float(u[slow[0]])
-    p = curve.degree
-    greville = np.convolve(curve.knots[1:-1], np.ones(p) / p, mode="valid")
-    index = int(np.argmin(np.abs(greville - u0)))
-    return [CurveProblem("control_points", f"the curve stops dead (zero speed, a cusp) at u = {u0:g} near control "
-                                           f"point {index + 1}; split the curve there", index)]
+    return cusp_problems(curve, u, speed, curve.length / (curve.u_max - curve.u_min))
 
 
 CORPUS_CURVES = 1500  # every kind of block of the corpus, spread over its files (all: ~50 s)

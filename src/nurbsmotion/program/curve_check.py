@@ -134,7 +134,13 @@ def zero_speed_problems(curve: NurbsCurve) -> list[CurveProblem]:
     polygon_mm = float(np.linalg.norm(np.diff(curve.control_points, axis=0), axis=1).sum())
     if speed.min() >= ZERO_SPEED_RATIO * polygon_mm * (1.0 + 1e-9) / u_range:  # 1e-9: above the quadrature error of L
         return []
-    mean_speed = curve.length / u_range
+    return cusp_problems(curve, u, speed, curve.length / u_range)
+
+
+def cusp_problems(curve: NurbsCurve, u: NDArray[np.float64], speed: NDArray[np.float64],
+                  mean_speed: float) -> list[CurveProblem]:
+    """The first sample ``u`` whose ``speed`` is below ZERO_SPEED_RATIO · ``mean_speed``, at the
+    control point with the nearest Greville abscissa (none: no problem)."""
     slow = np.flatnonzero(speed < ZERO_SPEED_RATIO * mean_speed)
     if not len(slow):
         return []
