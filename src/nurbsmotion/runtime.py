@@ -129,25 +129,35 @@ class GcQuiet:
 
     'freeze' moves every object alive now (the job's rows included) out of the collector's
     reach, so collections during the job only scan what is allocated meanwhile; 'disable'
-    stops cyclic collection until :meth:`release` (reference counting still frees memory);
-    'none' changes nothing."""
+    stops cyclic collection until :meth:`release`, which leaves it as :meth:`quiet` found it
+    (reference counting still frees memory); 'none' changes nothing. Also a context manager
+    (``with GcQuiet("disable"):``, the planner worker's parse)."""
 
     def __init__(self, mode: str = "none") -> None:
         if mode not in GC_MODES:
             raise ValueError(mode)
         self.mode = mode
+        self._was_enabled = True
 
     def quiet(self) -> None:
         if self.mode == "freeze":
             gc.freeze()
         elif self.mode == "disable":
+            self._was_enabled = gc.isenabled()
             gc.disable()
 
     def release(self) -> None:
         if self.mode == "freeze":
             gc.unfreeze()
-        elif self.mode == "disable":
+        elif self.mode == "disable" and self._was_enabled:
             gc.enable()
+
+    def __enter__(self) -> "GcQuiet":
+        self.quiet()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 # ---------------------------------------------------------------- the kernel's timer threads
@@ -178,8 +188,9 @@ class KernelThread:
 
     def below(self, fifo_priority: int) -> bool:
         """Would a SCHED_FIFO thread of ``fifo_priority`` keep this one off the CPU?"""
-        return self.policy not in ("SCHED_FIFO", "SCHED_RR", "SCHED_DEADLINE") or \
-            (self.policy != "SCHED_DEADLINE" and self.priority <= fifo_priority)
+        if self.policy == "SCHED_DEADLINE":  # runs before every SCHED_FIFO thread
+            return False
+        return self.policy not in ("SCHED_FIFO", "SCHED_RR") or self.priority <= fifo_priority
 
 
 def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:

@@ -251,17 +251,17 @@ def test_a_planner_worker_killed_mid_job_stops_it_on_its_tail_and_the_next_job_g
 def test_the_worker_parses_with_the_collector_paused_and_restores_it():
     import gc
 
-    from nurbsmotion.service.planner_worker import collector_paused
+    from nurbsmotion.runtime import GcQuiet
 
     assert gc.isenabled()
     with pytest.raises(InputError):
-        with collector_paused():
+        with GcQuiet("disable"):
             assert not gc.isenabled()
             raise InputError("p.nc:1", "refused")
     assert gc.isenabled()
     gc.disable()
     try:
-        with collector_paused():
+        with GcQuiet("disable"):
             pass
         assert not gc.isenabled()  # left as it was found
     finally:
