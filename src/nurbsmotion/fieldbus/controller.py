@@ -148,7 +148,7 @@ class CycleController:
     """Phase and per-axis commands; ``sp``/``cw`` are reused lists (no allocation per cycle).
 
     ``notices`` collects what the caller must act on outside the cycle: ('ready',),
-    ('enable_failed', axis, cycle), ('quick_stop', cycle), ('refused', job), ('quit',).
+    ('enable_failed', axis, cycle, stuck in one state), ('quick_stop', cycle), ('refused', job), ('quit',).
     """
 
     def __init__(self, n_axes: int, ip_mode: list[bool], accel_limits: list[float], period_s: float,
@@ -436,8 +436,9 @@ class CycleController:
             ready = False
             if sw != self.since_status[i]:
                 self.since_status[i], self.since_cycle[i] = sw, k
-            elif k - self.since_cycle[i] > self.stuck_cycles or k - self.phase_cycle > self.enable_timeout_cycles:
-                self.notices.append(("enable_failed", i, k))
+            elif (stuck := k - self.since_cycle[i] > self.stuck_cycles) or \
+                    k - self.phase_cycle > self.enable_timeout_cycles:
+                self.notices.append(("enable_failed", i, k, stuck))  # stuck: the step's time-out, else the phase's
                 self._set_phase(Event.ENABLE_FAILED, k)
                 return
         if ready:

@@ -876,10 +876,9 @@ class Master:
             elif what == "ready":
                 self._ready.set()
             elif what == "enable_failed":
-                i, cycle = notice[1], notice[2]
-                whole_phase = cycle - self._ctl.since_cycle[i] <= self._ctl.stuck_cycles  # not the step's time-out
+                i, cycle, stuck = notice[1], notice[2], notice[3]
                 message = self._supervisor.enable_failed(i, cycle, self._ctl.since_cycle[i], self._ip[i],
-                                                         self._enable_timeout_s if whole_phase else None)
+                                                         None if stuck else self._enable_timeout_s)
                 self._enable_error = FieldbusError(message)
                 self._ready.set()
             elif what == "quick_stop":
