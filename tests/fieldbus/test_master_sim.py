@@ -79,6 +79,15 @@ def recorded(sim: SimNetwork, node: int) -> tuple[list[int], list[int]]:
     return [r.sync_index for r in records], [r.setpoint_counts for r in records]
 
 
+def distance_to_polyline(point: np.ndarray, vertices: np.ndarray) -> float:
+    """Least Euclidean distance from ``point`` to the segments joining consecutive ``vertices``."""
+    a, b = vertices[:-1], vertices[1:]
+    ab = b - a
+    length2 = np.maximum((ab * ab).sum(axis=1), 1e-12)
+    u = np.clip(((point - a) * ab).sum(axis=1) / length2, 0.0, 1.0)
+    return float(np.hypot(*(a + u[:, None] * ab - point).T).min())
+
+
 def find_run(values: list[int], planned: list[int]) -> int:
     """Start of ``planned`` as a contiguous run inside ``values`` (-1 if absent)."""
     n = len(planned)
@@ -161,14 +170,13 @@ def test_emcy_while_drives_follow_gives_a_controlled_stop_on_the_path():
         start = find_run(x, counts[:200, 0].tolist())
         tail_x = np.array(x[start:], dtype=float)
         tail_y = np.array(y[start:], dtype=float)
-        planned_x, planned_y = counts[:, 0].astype(float), counts[:, 1].astype(float)
-        s = np.arange(len(counts))
-        for px, py in zip(tail_x[-50:], tail_y[-50:]):
-            d = np.hypot(planned_x - px, planned_y - py)
-            assert d.min() <= 40.0  # within one planned step of the path (interpolated between rows)
+        planned = counts[:, :2].astype(float)
+        for point in np.column_stack([tail_x[-50:], tail_y[-50:]]):
+            # The stop interpolates between planned rows, so it rests anywhere on a segment:
+            # measure to the polyline, not to its vertices (up to half a 140-count row away).
+            assert distance_to_polyline(point, planned) <= 1.0  # set-points are rounded to counts
         steps = np.abs(np.diff(tail_x[-60:]))
         assert steps[-1] <= 1  # came to rest
-        assert s.size
 
 
 def test_heartbeat_loss_is_reported_and_stops_the_axes():
