@@ -2,6 +2,7 @@
 
 import json
 import os
+import select
 import shutil
 import socket
 import stat
@@ -110,23 +111,30 @@ def test_peer_access_rule(uid, gid, groups, allowed):
 
 
 @pytest.mark.skipif(os.getuid() != 0, reason="needs root to connect as another user")
-def test_a_peer_of_another_user_is_refused_by_its_credentials():
+@pytest.mark.parametrize("send_after_close", [False, True])
+def test_a_peer_of_another_user_is_refused_by_its_credentials(send_after_close):
+    """The refusal reaches the client even when the server has answered and closed before the
+    client sent its request (under load the server's thread can run first: the client's send
+    then fails with EPIPE, and the client must still read the line waiting for it)."""
     folder = tempfile.mkdtemp(prefix="nm-peer-")  # under /tmp: the other user must reach it
     server = ControlServer(Path(folder) / "ctl.sock", _handler)
     server.start()
     try:
         os.chmod(folder, 0o755)
         os.chmod(server.path, 0o666)  # let the file system pass it: SO_PEERCRED must still refuse
-        line = _ask_as_nobody(server.path)
+        line = _ask_as_nobody(server.path, send_after_close)
     finally:
         server.close()
         shutil.rmtree(folder, ignore_errors=True)
-    assert line.startswith(b"{"), line  # the child's error when it got no answer (once under load: b"")
+    assert line.startswith(b"{"), line  # otherwise the child's error
     response = json.loads(line)
     assert response["ok"] is False and "permission denied: uid 65534" in response["error"]
 
 
-def _ask_as_nobody(path: Path) -> bytes:
+def _ask_as_nobody(path: Path, send_after_close: bool) -> bytes:
+    """As uid 65534 in a forked child, ask ``status`` through the project's Client; return the
+    JSON response line (or the child's error). ``send_after_close``: wait until the server has
+    closed its end (POLLRDHUP) before sending."""
     read_end, write_end = os.pipe()
     pid = os.fork()
     if pid == 0:  # child: become nobody, ask, pass the answer up the pipe
@@ -134,11 +142,13 @@ def _ask_as_nobody(path: Path) -> bytes:
             os.setgroups([])
             os.setgid(65534)
             os.setuid(65534)
-            with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
-                s.settimeout(10.0)
-                s.connect(str(path))
-                s.sendall(b'{"cmd": "status"}\n')
-                os.write(write_end, s.makefile("rb").readline())
+            with Client(path, timeout_s=10.0) as client:
+                if send_after_close:
+                    waiter = select.poll()
+                    waiter.register(client._sock, select.POLLRDHUP)
+                    if not waiter.poll(10_000):
+                        raise TimeoutError("the server did not close its end")
+                os.write(write_end, json.dumps(client.request("status")).encode())
         except BaseException as err:  # noqa: BLE001 - the parent shows why the child got no answer
             os.write(write_end, f"child failed: {err!r}".encode())
         finally:

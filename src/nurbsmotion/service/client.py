@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from nurbsmotion.errors import NurbsmotionError
 from nurbsmotion.service.protocol import encode
@@ -59,16 +59,28 @@ class Client:
         if self._sock is None:
             self.connect()
         assert self._sock is not None
+        send_error: OSError | None = None
         try:
             self._sock.sendall(encode({"cmd": cmd, **fields}))
+        except (BrokenPipeError, ConnectionResetError) as err:
+            # The daemon may have answered and closed before reading (a refusal by peer
+            # credentials is sent at once): its line is still in our receive queue.
+            send_error = err
+        except OSError as err:
+            self._lost(err)
+        try:
             line = self._file.readline()
         except OSError as err:
-            self.close()
-            raise DaemonUnavailable(self.path, f"connection lost: {err.strerror or err}", lost=True) from err
+            self._lost(send_error or err)
         if not line:
-            self.close()
-            raise DaemonUnavailable(self.path, "closed without an answer", lost=True)
+            self._lost(send_error)
         return json.loads(line)
+
+    def _lost(self, err: OSError | None) -> NoReturn:
+        """Close and raise DaemonUnavailable(lost) for a connection that ended mid-request."""
+        self.close()
+        detail = f"connection lost: {err.strerror or err}" if err is not None else "closed without an answer"
+        raise DaemonUnavailable(self.path, detail, lost=True) from err
 
     def call(self, cmd: str, **fields: Any) -> dict[str, Any]:
         """``request`` that raises RequestFailed for ``ok: false``."""
