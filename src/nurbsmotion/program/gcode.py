@@ -643,21 +643,22 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             raise InputError(line.at(radius), "give either R or I J K for an arc, not both")
         if turns is not None and (turns.value != int(turns.value) or turns.value < 1):
             raise InputError(line.at(turns), f"P (turns) must be a whole number >= 1, got {turns.value:g}")
-        gword = line.g(self.motion or 0)
         inch = self.mm_per_unit != 1.0
+        start_xyz, end_xyz = start.tolist(), end.tolist()  # plain floats: arcs.py computes on them
         try:
             if radius is not None:
-                centre = centre_from_radius(plane, start, end, radius.value * self.mm_per_unit, clockwise, radius.text)
-                curve = arc_nurbs(plane, start, end, centre, clockwise, False, inch, int(turns.value) if turns else 1)
+                centre = centre_from_radius(plane, start_xyz, end_xyz, radius.value * self.mm_per_unit, clockwise, radius.text)
+                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, False, inch, int(turns.value) if turns else 1)
             elif offsets:
-                centre = start.copy()
-                origin = self.offsets.total()
+                centre = start_xyz.copy()
+                origin = self.offsets.total().tolist() if self.arc_absolute else None
                 for w in offsets:
                     axis = "IJK".index(w.letter)
                     value = w.value * self.mm_per_unit
-                    centre[axis] = value + origin[axis] if self.arc_absolute else start[axis] + value
-                curve = arc_nurbs(plane, start, end, centre, clockwise, True, inch, int(turns.value) if turns else 1)
+                    centre[axis] = value + origin[axis] if origin is not None else start_xyz[axis] + value
+                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, True, inch, int(turns.value) if turns else 1)
             else:
+                gword = line.g(self.motion or 0)
                 raise ArcError(f"an arc needs centre offsets {' '.join(plane.offset_letters)} or a radius R", gword.text if gword else "")
         except ArcError as err:
             self.position = end  # the next line starts where this one was meant to end
