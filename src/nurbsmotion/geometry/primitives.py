@@ -135,8 +135,7 @@ def _xyz(v: ArrayLike, name: str) -> tuple[float, float, float]:
 
 def _arc_weights(segments: int, w_mid: float) -> NDArray[np.float64]:
     """1, w, 1, w, ..., 1: the ends of the segments and their tangent intersections."""
-    weights = np.ones(2 * segments + 1)
-    weights[1::2] = w_mid
+    weights = np.array([1.0] + [w_mid, 1.0] * segments)
     weights.setflags(write=False)
     return weights
 
