@@ -19,6 +19,7 @@ moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_n
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -270,17 +271,19 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def system_parameter(self, key: int | str) -> float | None:
         """LinuxCNC's read-only parameters: offsets #5161-#5390, tool #5400, position #5420-#5422, #<_x> ..."""
-        program = (self.position - self.offsets.total()) / self.mm_per_unit
         if isinstance(key, int):
             if 5420 <= key <= 5422:
-                return float(program[key - 5420])
+                return float(self.program_position()[key - 5420])
             if key == 5400:
                 return float(self.tool_loaded or 0)
             if key >= 5161:
                 return self.offsets.parameter(key)
             return None
+        if not key.startswith("_"):  # a program's own named parameter
+            return None
         named: dict[str, Callable[[], float]] = {
-            "_x": lambda: float(program[0]), "_y": lambda: float(program[1]), "_z": lambda: float(program[2]),
+            "_x": lambda: float(self.program_position()[0]), "_y": lambda: float(self.program_position()[1]),
+            "_z": lambda: float(self.program_position()[2]),
             "_metric": lambda: float(self.mm_per_unit == 1.0), "_imperial": lambda: float(self.mm_per_unit != 1.0),
             "_absolute": lambda: float(self.absolute), "_incremental": lambda: float(not self.absolute),
             "_feed": lambda: (self.feed_mm_s or 0.0) * 60.0 / self.mm_per_unit, "_rpm": lambda: self.spindle_rpm,
@@ -288,6 +291,10 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             "_coord_system": lambda: float(next(c for c, s in SYSTEM_CODES.items() if s == self.offsets.active)),
         }
         return named[key]() if key in named else None
+
+    def program_position(self) -> NDArray[np.float64]:
+        """Where the tool is in the program's coordinates and units (offsets removed)."""
+        return (self.position - self.offsets.total()) / self.mm_per_unit
 
     # ---- one line ----------------------------------------------------------------------
     def run_line(self, lexed: LexedLine) -> bool:
@@ -620,7 +627,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
-        if np.linalg.norm(end - self.position) <= ZERO_MOVE_MM:
+        if math.dist(end.tolist(), self.position.tolist()) <= ZERO_MOVE_MM:
             return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 
