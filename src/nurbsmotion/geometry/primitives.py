@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import Any, Sequence, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -127,7 +128,7 @@ def arc_curve(center: ArrayLike, start: ArrayLike, sweep_rad: float, normal: Arr
 
 def _xyz(v: ArrayLike, name: str) -> tuple[float, float, float]:
     """Three floats from a point or vector (an ndarray's tolist() is the cheap path)."""
-    values = v.tolist() if isinstance(v, np.ndarray) else list(v)  # type: ignore[union-attr]
+    values: list[Any] = v.tolist() if isinstance(v, np.ndarray) else list(cast(Sequence[Any], v))
     if len(values) != 3:
         raise ValueError(f"arc {name} must have 3 coordinates, got {len(values)}")
     return float(values[0]), float(values[1]), float(values[2])

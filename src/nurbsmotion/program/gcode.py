@@ -32,7 +32,7 @@ from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
-from nurbsmotion.program.expressions import ExpressionError, Number
+from nurbsmotion.program.expressions import ExpressionError
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
@@ -336,8 +336,9 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
     def evaluate_words(self, lexed: LexedLine, line: GcodeLine) -> list[Word]:
         words = []
         for raw in lexed.words:
-            if isinstance(raw.expr, Number):  # checked by the lexer
-                words.append(Word(raw.letter, raw.expr.value, raw.text))
+            word = raw.number_word  # a plain number, checked by the lexer
+            if word is not None:
+                words.append(word)
                 continue
             value = self.evaluate(raw.expr, line.at(raw.text))
             check_number(value, raw.letter, raw.text[1:], line.where)

@@ -57,6 +57,12 @@ class RawWord:
     expr: Expr
     text: str
 
+    @cached_property
+    def number_word(self) -> Word | None:
+        """The evaluated word when the value is a plain number (the lexer checked it), else
+        None; built once, and shared like the RawWord (read_plain_words)."""
+        return Word(self.letter, self.expr.value, self.text) if isinstance(self.expr, Number) else None
+
 
 @dataclass(frozen=True)
 class Assignment:
