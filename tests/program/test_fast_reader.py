@@ -171,15 +171,15 @@ def test_span_samples_equal_linspace_per_span():
         assert np.array_equal(span_samples(breaks, 64), expected)
 
 
-def test_plain_words_are_shared_between_lines_and_the_store_stays_bounded(monkeypatch):
-    """A word read once is the same immutable object on later lines; the store empties when full."""
-    monkeypatch.setattr(gcode_words, "_PLAIN_WORDS_READ", {})
-    monkeypatch.setattr(gcode_words, "PLAIN_WORDS_KEPT", 4)
-    first, second = gcode_words.lex_line(1, "G1 X1.5 Y2", "a.nc"), gcode_words.lex_line(2, "g1 x1.5 Y3", "a.nc")
+def test_plain_words_are_shared_between_the_lines_of_one_program():
+    """A plain word read once is the same immutable object on the program's later lines;
+    a refused word is never kept; without a store every word is built anew."""
+    words_read: dict[str, gcode_words.RawWord] = {}
+    first = gcode_words.lex_line(1, "G1 X1.5 Y2", "a.nc", words_read)
+    second = gcode_words.lex_line(2, "g1 x1.5 Y3", "a.nc", words_read)
     assert first.words[0] is second.words[0] and first.words[1] is second.words[1]
     assert [w.text for w in second.words] == ["G1", "X1.5", "Y3"]
-    gcode_words.lex_line(3, "X7 Y8 Z9", "a.nc")
-    assert len(gcode_words._PLAIN_WORDS_READ) <= 4
-    with pytest.raises(InputError, match="out of range"):  # a refused word is never kept
-        gcode_words.lex_line(4, "X2e9", "a.nc")
-    assert "X2e9" not in gcode_words._PLAIN_WORDS_READ
+    with pytest.raises(InputError, match="out of range"):
+        gcode_words.lex_line(3, "X2e9", "a.nc", words_read)
+    assert "X2e9" not in words_read and set(words_read) == {"G1", "X1.5", "Y2", "Y3"}
+    assert gcode_words.lex_line(4, "G1", "a.nc").words[0] is not first.words[0]

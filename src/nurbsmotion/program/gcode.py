@@ -32,13 +32,13 @@ from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
-from nurbsmotion.program.expressions import ExpressionError
+from nurbsmotion.program.expressions import ExpressionError, Number
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_offsets import OffsetCommands
-from nurbsmotion.program.gcode_words import LexedLine, Word, check_number, lex_line
+from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
 from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
@@ -177,9 +177,10 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
         lines: list[LexedLine | InputError] = []
+        words_read: dict[str, RawWord] = {}  # the program's plain words, shared between its lines
         for number, raw in enumerate(raw_lines, start=1):
             try:
-                lines.append(lex_line(number, raw, self.source))
+                lines.append(lex_line(number, raw, self.source, words_read))
             except InputError as err:
                 lines.append(err)
         return lines
@@ -336,9 +337,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
     def evaluate_words(self, lexed: LexedLine, line: GcodeLine) -> list[Word]:
         words = []
         for raw in lexed.words:
-            word = raw.number_word  # a plain number, checked by the lexer
-            if word is not None:
-                words.append(word)
+            if isinstance(raw.expr, Number):  # checked by the lexer
+                words.append(Word(raw.letter, raw.expr.value, raw.text))
                 continue
             value = self.evaluate(raw.expr, line.at(raw.text))
             check_number(value, raw.letter, raw.text[1:], line.where)
