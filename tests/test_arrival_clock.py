@@ -59,3 +59,15 @@ def test_pending_on_the_virtual_bus_is_its_receive_queue() -> None:
         assert pending() is True
         assert reader.recv(1.0) is not None
         assert pending() is False
+
+
+def test_the_wall_clock_offset_is_read_again_only_after_its_refresh_time(monkeypatch) -> None:
+    from nurbsmotion import arrival_clock
+
+    wall = [1000.0]
+    monkeypatch.setattr(arrival_clock.time, "time", lambda: wall[0])
+    offset = arrival_clock.WallClockOffset()
+    assert offset.at(10.0) == 990.0
+    wall[0] = 1000.5  # the wall clock stepped: not seen until the refresh time has passed
+    assert offset.at(10.0 + arrival_clock.OFFSET_REFRESH_S) == 990.0
+    assert offset.at(10.001 + arrival_clock.OFFSET_REFRESH_S) == 1000.5 - 11.001

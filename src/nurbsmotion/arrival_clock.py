@@ -26,7 +26,10 @@ master share a clock, not a protocol implementation.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
+
+OFFSET_REFRESH_S = 1.0  # WallClockOffset reads the wall clock again after this long
 
 
 class ArrivalClock:
@@ -100,3 +103,22 @@ def socket_pending(bus: object) -> Callable[[], bool]:
         except (OSError, ValueError):  # closed while stopping
             return False
     return pending
+
+
+class WallClockOffset:
+    """time.time() - time.perf_counter(), read again at most every OFFSET_REFRESH_S of
+    perf_counter time: a frame's receive timestamp (wall clock) minus it is on the process's
+    clock. Refreshed, not read per frame: inside User-Mode Linux each clock read is a trapped
+    system call, and the offset moves only with NTP slewing (ppm)."""
+
+    __slots__ = ("_offset_s", "_read_s")
+
+    def __init__(self) -> None:
+        self._offset_s = 0.0
+        self._read_s = -1e18
+
+    def at(self, now_s: float) -> float:
+        """The offset, read again when ``now_s`` (perf_counter) is OFFSET_REFRESH_S past the last read."""
+        if now_s - self._read_s > OFFSET_REFRESH_S:
+            self._offset_s, self._read_s = time.time() - now_s, now_s
+        return self._offset_s

@@ -58,9 +58,10 @@ import can
 from can.interfaces.socketcan import constants
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, dissect_can_frame
 
+from nurbsmotion.arrival_clock import WallClockOffset
+
 MSG_WAITFORONE = 0x10000  # linux/socket.h: block for the first message only
 TIMEVAL = struct.Struct("@ll")  # struct timeval for SO_RCVTIMEO
-WALL_OFFSET_REFRESH_S = 1.0  # the wall clock's offset to perf_counter is read again after this long
 # Frames per recvmmsg: a cycle's burst is 1 + n frames; a reader that lags takes its backlog
 # in calls of this many. A call is one stretch of kernel work that cannot be preempted inside
 # User-Mode Linux (0.6-1.4 ms for 64 frames there, 0.1-0.6 ms for 16): 16 keeps the kernel
@@ -185,8 +186,7 @@ class BatchedSocketcanBus(SocketcanBus):
         self._rx_thread = 0
         self.lag = ReceiveLag()
         self.read_perf_s = 0.0  # perf_counter when the last batch was read (one read per batch)
-        self._wall_offset_s = 0.0  # time.time() - time.perf_counter(), refreshed every second
-        self._wall_offset_read_s = -1e9
+        self._wall_offset = WallClockOffset()
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """A frame already read in a batch is handed out at once; python-can's ``recv`` (a clock
@@ -241,10 +241,8 @@ class BatchedSocketcanBus(SocketcanBus):
     def _note_read(self, oldest_stamp_s: float) -> None:
         """One clock read per batch: ``read_perf_s`` and the reception lag of its oldest frame."""
         now = time.perf_counter()
-        if now - self._wall_offset_read_s > WALL_OFFSET_REFRESH_S:
-            self._wall_offset_s, self._wall_offset_read_s = time.time() - now, now
         self.read_perf_s = now
-        self.lag.add(now + self._wall_offset_s - oldest_stamp_s, len(self._received))
+        self.lag.add(now + self._wall_offset.at(now) - oldest_stamp_s, len(self._received))
 
     def _set_receive_timeout(self, timeout_s: float) -> None:
         """SO_RCVTIMEO bounds wait_batch's blocking recvmmsg (0 would mean for ever: >= 1 µs)."""

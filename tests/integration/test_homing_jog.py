@@ -173,10 +173,17 @@ def test_continuous_jog_ends_on_jog_stop_or_when_the_lease_is_not_renewed(machin
 def _cli(socket: Path, *args: str) -> subprocess.Popen[bytes]:
     """A CLI process, at nice 10: its start-up (imports) competes for the CPU with the daemon
     and the simulated drives of this process, whose heartbeats (300 ms consumer time) were
-    once 301 ms late on a loaded 2-core host; the daemon runs SCHED_FIFO in production."""
+    once 301 ms late on a loaded 2-core host; the daemon runs SCHED_FIFO in production.
+    SIGINT acts as Ctrl-C whatever this process inherited: a shell starts a background job with
+    SIGINT ignored, and a child keeps that across exec (the jog below then ran to its end)."""
     return subprocess.Popen([sys.executable, "-m", "nurbsmotion", *args, "--socket", str(socket)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=subprocess_environment(),
-                            preexec_fn=lambda: os.nice(10))
+                            preexec_fn=_nice_with_ctrl_c)
+
+
+def _nice_with_ctrl_c() -> None:
+    os.nice(10)
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def test_the_cli_homes_jogs_and_a_killed_continuous_jog_client_stops_the_axis(machine):

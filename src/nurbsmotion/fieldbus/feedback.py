@@ -9,19 +9,17 @@ loop; a TPDO1 is stamped with it.
 from __future__ import annotations
 
 import collections
-import math
 import time
 from typing import Any, Callable
 
 import can
 
-from nurbsmotion.arrival_clock import ArrivalClock
+from nurbsmotion.arrival_clock import ArrivalClock, WallClockOffset
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 
 EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3
 
 Callback = Callable[[int, bytearray, float], None]
-OFFSET_REFRESH_S = 1.0  # ArrivalListener reads the wall clock's offset again after this long
 
 
 def arrival_perf_s(timestamp: float) -> float:
@@ -148,19 +146,16 @@ class ArrivalListener(can.Listener):
     Handled at ``read_time()``: on the batched SocketCAN bus the time its batch was read (one
     clock read per batch, not per frame; a frame counts as handled a little before it is,
     which runs the judging time ahead, never behind), else a clock read per frame. The
-    wall-clock to perf_counter offset is read again at most every OFFSET_REFRESH_S. Every frame
+    wall-clock to perf_counter offset: arrival_clock.WallClockOffset. Every frame
     passes here, and inside User-Mode Linux each clock read is a trapped system call
     (docs/vcan.md, "The drives' lag")."""
 
     def __init__(self, clock: ArrivalClock, read_time: Callable[[], float] = time.perf_counter) -> None:
         self.clock = clock
         self._read_time = read_time
-        self._offset_s = 0.0  # time.time() - time.perf_counter()
-        self._offset_read_s = -math.inf
+        self._wall_offset = WallClockOffset()
 
     def on_message_received(self, msg: can.Message) -> None:
         now = self._read_time()
-        if now - self._offset_read_s > OFFSET_REFRESH_S:
-            self._offset_s, self._offset_read_s = time.time() - now, now
         stamp = msg.timestamp
-        self.clock.arrived(now if stamp <= 0.0 else min(now, stamp - self._offset_s), now)
+        self.clock.arrived(now if stamp <= 0.0 else min(now, stamp - self._wall_offset.at(now)), now)
