@@ -169,3 +169,17 @@ def test_span_samples_equal_linspace_per_span():
         breaks = np.unique(np.concatenate([[0.0, 1.0], rng.random(rng.integers(1, 40))])) * rng.choice([1.0, 7.3, 1e-3])
         expected = np.concatenate([np.linspace(a, b, 65) for a, b in zip(breaks[:-1], breaks[1:])])
         assert np.array_equal(span_samples(breaks, 64), expected)
+
+
+def test_plain_words_are_shared_between_the_lines_of_one_program():
+    """A plain word read once is the same immutable object on the program's later lines;
+    a refused word is never kept; without a store every word is built anew."""
+    words_read: dict[str, gcode_words.RawWord] = {}
+    first = gcode_words.lex_line(1, "G1 X1.5 Y2", "a.nc", words_read)
+    second = gcode_words.lex_line(2, "g1 x1.5 Y3", "a.nc", words_read)
+    assert first.words[0] is second.words[0] and first.words[1] is second.words[1]
+    assert [w.text for w in second.words] == ["G1", "X1.5", "Y3"]
+    with pytest.raises(InputError, match="out of range"):
+        gcode_words.lex_line(3, "X2e9", "a.nc", words_read)
+    assert "X2e9" not in words_read and set(words_read) == {"G1", "X1.5", "Y2", "Y3"}
+    assert gcode_words.lex_line(4, "G1", "a.nc").words[0] is not first.words[0]

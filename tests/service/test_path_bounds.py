@@ -9,7 +9,8 @@ import pytest
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.geometry.primitives import arc_curve
-from nurbsmotion.program import read_program
+from nurbsmotion.program import parse_gcode, read_program
+from nurbsmotion.service import path_bounds
 from nurbsmotion.service.path_bounds import BRACKET_MM, curve_extreme
 from nurbsmotion.service.streamed_job import prepare_streamed_job
 
@@ -66,3 +67,44 @@ def test_an_arc_just_inside_the_limit_is_accepted(config, planner_worker):
     program = "G21 G90 G17\nG01 X149.9999 Y-50 F3000\nG03 X149.9999 Y50 I0 J50\n"  # bulge to 199.9999
     job = prepare_streamed_job("arc.nc", program, config, planner_worker, np.zeros(3))
     job.cancel()
+
+
+def _per_block_reference(program, config, columns):
+    """The checks as one loop per block (how path_bounds computed them before block_hulls):
+    (first unconfigured column moved, first soft-limit error text, hull box)."""
+    moved = next((j for b in program.blocks for j in range(3)
+                  if j not in columns and np.ptp(b.curve.control_points[:, j]) > 1e-9), None)
+    error = None
+    for block in program.blocks:
+        for axis, col in zip(config.axes, columns):
+            low, high = axis.soft_limits_mm
+            for sign, limit in ((1.0, high), (-1.0, low)):
+                if error is None and (sign * block.curve.control_points[:, col]).max() > sign * limit:
+                    extreme = curve_extreme(block.curve, col, sign)
+                    if max(extreme.reached, extreme.bound) > sign * limit + BRACKET_MM:
+                        error = str(path_bounds._violation(block.source, axis.name, sign * extreme.reached, limit))
+    lows = np.min([b.curve.control_points[:, columns].min(axis=0) for b in program.blocks], axis=0)
+    highs = np.max([b.curve.control_points[:, columns].max(axis=0) for b in program.blocks], axis=0)
+    return moved, error, lows, highs
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_whole_program_checks_agree_with_a_loop_over_the_blocks(config, seed):
+    """block_hulls reduces all blocks at once: same first axis, same first error line, same box."""
+    rng = np.random.default_rng(seed)
+    lines = ["G21 G90 G17 F3000"]
+    for _ in range(60):
+        x, y, z = rng.uniform(-230, 230, 3) if rng.random() < 0.05 else rng.uniform(-150, 150, 3)
+        lines.append(f"G01 X{x:.3f} Y{y:.3f} Z{z:.3f}" if rng.random() < 0.6 else f"G02 X{x:.3f} Y{y:.3f} R{rng.uniform(150, 300):.3f}")
+    try:
+        program = parse_gcode("\n".join(lines), "r.nc")
+    except InputError:
+        pytest.skip("an R too small for its chord")
+    for columns in ([0, 1, 2], [0, 1]):
+        moved, error, lows, highs = _per_block_reference(program, config, columns)
+        assert path_bounds.moving_unconfigured_axis(program, columns) == moved
+        found = path_bounds.soft_limit_violation(program, config, columns)
+        assert (str(found) if found else None) == error
+        box = path_bounds.hull_box(program, columns)
+        np.testing.assert_array_equal(box[0], lows)
+        np.testing.assert_array_equal(box[1], highs)

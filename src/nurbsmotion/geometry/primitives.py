@@ -15,7 +15,9 @@ measured), so segments are made short enough to keep that below ``helix_toleranc
 
 from __future__ import annotations
 
+import functools
 import math
+from typing import Any, Sequence, cast
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -68,40 +70,82 @@ def helix_segments(sweep_rad: float, rise_mm: float, tolerance_mm: float = HELIX
 
 
 def arc_curve(center: ArrayLike, start: ArrayLike, sweep_rad: float, normal: ArrayLike = (0.0, 0.0, 1.0),
-              rise_mm: float = 0.0, helix_tolerance_mm: float = HELIX_TOLERANCE_MM) -> NurbsCurve:
+              rise_mm: float = 0.0, helix_tolerance_mm: float = HELIX_TOLERANCE_MM,
+              end: ArrayLike | None = None) -> NurbsCurve:
     """Circular arc around ``center`` from ``start``, turning ``sweep_rad`` about ``normal``.
 
     Positive sweep is counter-clockwise seen from the tip of the normal (right-hand rule).
     The radius is |start - center| measured in the plane normal to ``normal``; the end is
-    ``rise_mm`` higher along the normal than the start (a helix when not zero).
+    ``rise_mm`` higher along the normal than the start (a helix when not zero). With ``end``
+    (a G02/G03's programmed end), the first and last control points are ``start`` and
+    ``end`` themselves: the computed ones differ from them by rounding only.
+
+    Plain float arithmetic on the 3-vectors and one array per field at the end: numpy's
+    per-call overhead on 3-vectors cost more than the arithmetic (readers build one arc per
+    G02/G03 line). The result is valid by construction (degree 2, 2 s + 1 points, weights
+    1 and cos(delta / 2) >= cos 45 deg, the knots below), so only non-finite input can make
+    it invalid: NurbsCurve.create then names the problem.
     """
-    c = np.asarray(center, dtype=float)
-    n = np.asarray(normal, dtype=float)
-    n = n / np.linalg.norm(n)
-    radial = np.asarray(start, dtype=float) - c
-    height = float(radial @ n)
-    x_axis = radial - height * n
-    radius = float(np.linalg.norm(x_axis))
+    cx, cy, cz = _xyz(center, "center")
+    sx, sy, sz = _xyz(start, "start")
+    nx, ny, nz = _xyz(normal, "normal")
+    norm = math.sqrt(nx * nx + ny * ny + nz * nz)
+    if not norm > 0:
+        raise ValueError("arc normal must be a non-zero vector")
+    nx, ny, nz = nx / norm, ny / norm, nz / norm
+    rx, ry, rz = sx - cx, sy - cy, sz - cz
+    height = rx * nx + ry * ny + rz * nz
+    ux, uy, uz = rx - height * nx, ry - height * ny, rz - height * nz  # in-plane radial: the x axis
+    radius = math.sqrt(ux * ux + uy * uy + uz * uz)
     if radius <= 0 or abs(sweep_rad) <= 0:
         raise ValueError("arc needs a positive radius and a non-zero sweep")
-    x_axis /= radius
-    y_axis = np.cross(n, x_axis)
-    origin = c + height * n
+    ux, uy, uz = ux / radius, uy / radius, uz / radius
+    vx, vy, vz = ny * uz - nz * uy, nz * ux - nx * uz, nx * uy - ny * ux  # y axis = n x u
+    ox, oy, oz = cx + height * nx, cy + height * ny, cz + height * nz
     segments = helix_segments(sweep_rad, rise_mm, helix_tolerance_mm)
     delta = sweep_rad / segments
     w_mid = math.cos(delta / 2.0)
 
-    def on_circle(angle: float, scale: float = 1.0) -> NDArray[np.float64]:
+    def on_circle(angle: float, scale: float = 1.0) -> tuple[float, float, float]:
         lift = rise_mm * angle / sweep_rad
-        return origin + lift * n + scale * radius * (math.cos(angle) * x_axis + math.sin(angle) * y_axis)
+        r, c, s = scale * radius, math.cos(angle), math.sin(angle)
+        return (ox + lift * nx + r * (c * ux + s * vx), oy + lift * ny + r * (c * uy + s * vy),
+                oz + lift * nz + r * (c * uz + s * vz))
 
-    points = [on_circle(0.0)]
-    weights = [1.0]
+    points = [on_circle(0.0) if end is None else (sx, sy, sz)]
     for i in range(segments):
         a0 = i * delta
         points.append(on_circle(a0 + delta / 2.0, 1.0 / w_mid))  # tangent intersection, mid height
         points.append(on_circle(a0 + delta))
-        weights += [w_mid, 1.0]
+    if end is not None:
+        points[-1] = _xyz(end, "end")
+    if not math.isfinite(sum(sum(p) for p in points)):  # a NaN or infinity anywhere (or an overflow)
+        return NurbsCurve.create(2, points, _arc_weights(segments, w_mid), _arc_knots(segments))  # names it
+    array = np.array(points)
+    array.setflags(write=False)
+    return NurbsCurve(2, array, _arc_weights(segments, w_mid), _arc_knots(segments))
+
+
+def _xyz(v: ArrayLike, name: str) -> tuple[float, float, float]:
+    """Three floats from a point or vector (an ndarray's tolist() is the cheap path)."""
+    values: list[Any] = v.tolist() if isinstance(v, np.ndarray) else list(cast(Sequence[Any], v))
+    if len(values) != 3:
+        raise ValueError(f"arc {name} must have 3 coordinates, got {len(values)}")
+    return float(values[0]), float(values[1]), float(values[2])
+
+
+def _arc_weights(segments: int, w_mid: float) -> NDArray[np.float64]:
+    """1, w, 1, w, ..., 1: the ends of the segments and their tangent intersections."""
+    weights = np.array([1.0] + [w_mid, 1.0] * segments)
+    weights.setflags(write=False)
+    return weights
+
+
+@functools.lru_cache(maxsize=64)
+def _arc_knots(segments: int) -> NDArray[np.float64]:
+    """0 0 0, i/s twice for i = 1..s-1, 1 1 1: equal segments joined with double knots
+    (shared and read-only: a program's arcs mostly have 1 to 4 segments)."""
     inner = np.repeat(np.arange(1, segments) / segments, 2)
     knots = np.concatenate([[0.0, 0.0, 0.0], inner, [1.0, 1.0, 1.0]])
-    return NurbsCurve.create(2, points, weights, knots)
+    knots.setflags(write=False)
+    return knots

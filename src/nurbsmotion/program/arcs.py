@@ -22,12 +22,11 @@ is accepted. R format: R may be short of half the chord by 0.00005 in (0.00127 m
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
-from numpy.typing import NDArray
 
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import arc_curve, arc_sweep_rad
@@ -38,6 +37,8 @@ CENTRE_TOLERANCE_REL = 0.001
 CENTRE_TOLERANCE_CAP = 100.0  # abs_err above cap * tol is always an error
 R_TOLERANCE_MM = 0.00005 * MM_PER_INCH
 SAME_POINT_MM = 1e-9
+
+Point = Sequence[float]  # X Y Z in mm (a tuple, or an ndarray of 3)
 
 
 class ArcError(ValueError):
@@ -56,10 +57,10 @@ class Plane:
     offset_letters: tuple[str, str]  # centre offset words for the two plane axes
 
     @property
-    def normal(self) -> NDArray[np.float64]:
-        n = np.zeros(3)
+    def normal(self) -> tuple[float, float, float]:
+        n = [0.0, 0.0, 0.0]
         n[self.normal_axis] = 1.0
-        return n
+        return n[0], n[1], n[2]
 
 
 PLANES = {
@@ -70,12 +71,21 @@ PLANES = {
 AXIS_LETTERS = "XYZ"
 
 
-def _in_plane(plane: Plane, v: NDArray[np.float64]) -> NDArray[np.float64]:
-    return np.array([v[plane.axes[0]], v[plane.axes[1]]])
+def _hypot(a: float, b: float) -> float:
+    """sqrt(a^2 + b^2) by the C library's hypot (numpy's). Python's math.hypot rounds
+    differently in about 1 case in 700, and the radii at start and end are compared for
+    equality (arc_nurbs): the same function keeps every arc's geometry as it was."""
+    return float(np.hypot(a, b))
 
 
-def _angle(plane: Plane, v: NDArray[np.float64]) -> float:
-    a, b = _in_plane(plane, v)
+def _in_plane(plane: Plane, frm: Point, to: Point) -> tuple[float, float]:
+    """The plane components of the vector ``to - frm``."""
+    a, b = plane.axes
+    return to[a] - frm[a], to[b] - frm[b]
+
+
+def _angle(plane: Plane, centre: Point, point: Point) -> float:
+    a, b = _in_plane(plane, centre, point)
     return math.atan2(b, a)
 
 
@@ -87,11 +97,11 @@ def radii_agree(r_start: float, r_end: float, inch: bool) -> bool:
     return not (abs_err > CENTRE_TOLERANCE_CAP * tol or (rel_err > CENTRE_TOLERANCE_REL and abs_err > tol))
 
 
-def centre_from_radius(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64], radius_mm: float,
-                       clockwise: bool, radius_word: str) -> NDArray[np.float64]:
+def centre_from_radius(plane: Plane, start: Point, end: Point, radius_mm: float,
+                       clockwise: bool, radius_word: str) -> tuple[float, float, float]:
     """Centre of the R-format arc (module docstring), in the start's plane."""
-    chord = _in_plane(plane, end - start)
-    d = float(np.hypot(*chord))
+    chord_a, chord_b = _in_plane(plane, start, end)
+    d = _hypot(chord_a, chord_b)
     if d <= SAME_POINT_MM:
         raise ArcError("an R arc needs an end point different from the start (use I J K for a full circle)", radius_word)
     if radius_mm == 0:
@@ -101,50 +111,48 @@ def centre_from_radius(plane: Plane, start: NDArray[np.float64], end: NDArray[np
     if excess > R_TOLERANCE_MM:
         raise ArcError(f"radius {r:g} mm is too small for the chord of {d:.6g} mm between start and end", radius_word)
     h = math.sqrt(max(r * r - d * d / 4, 0.0))
-    left = np.array([-chord[1], chord[0]]) / d
     side = (1.0 if not clockwise else -1.0) * (1.0 if radius_mm > 0 else -1.0)
-    mid = _in_plane(plane, start) + chord / 2
-    centre_2d = mid + side * h * left
-    centre = start.copy()
-    centre[plane.axes[0]], centre[plane.axes[1]] = centre_2d
-    return centre
+    a, b = plane.axes
+    offset = side * h  # along the chord's left normal (-chord_b, chord_a) / d
+    centre = [float(start[0]), float(start[1]), float(start[2])]
+    centre[a] = (start[a] + chord_a / 2) + offset * (-chord_b / d)
+    centre[b] = (start[b] + chord_b / 2) + offset * (chord_a / d)
+    return centre[0], centre[1], centre[2]
 
 
-def arc_nurbs(plane: Plane, start: NDArray[np.float64], end: NDArray[np.float64], centre: NDArray[np.float64],
+def arc_nurbs(plane: Plane, start: Point, end: Point, centre: Point,
               clockwise: bool, full_circle_if_closed: bool, inch: bool = False, turns: int = 1) -> NurbsCurve:
     """Exact arc (or helix) from start to end about centre; radii must agree within tolerance.
 
     When the two radii differ (within tolerance) the centre is moved onto the chord's
     perpendicular bisector so the arc passes exactly through both programmed points.
+    Plain floats throughout (geometry.primitives.arc_curve says why).
     """
-    r_start = float(np.hypot(*_in_plane(plane, start - centre)))
-    r_end = float(np.hypot(*_in_plane(plane, end - centre)))
+    r_start = _hypot(*_in_plane(plane, centre, start))
+    r_end = _hypot(*_in_plane(plane, centre, end))
     if r_start <= SAME_POINT_MM:
         raise ArcError("arc radius is zero (the centre is at the start point)")
     if not radii_agree(r_start, r_end, inch):
         raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end "
                        f"(LinuxCNC's tolerance: {CENTRE_TOLERANCE_MM[inch]:.4g} mm, or {CENTRE_TOLERANCE_REL:g} of the radius)")
-    closed = float(np.hypot(*_in_plane(plane, end - start))) <= SAME_POINT_MM
+    chord = _in_plane(plane, start, end)
+    closed = _hypot(*chord) <= SAME_POINT_MM
     if closed and not full_circle_if_closed:
         raise ArcError("arc end equals its start")
     if not closed and r_start != r_end:
-        ccw_of_chord = _cross2(_in_plane(plane, end - start), _in_plane(plane, centre - start)) > 0
+        ccw_of_chord = _cross2(chord, _in_plane(plane, start, centre)) > 0
         radius = (r_start + r_end) / 2
         signed = radius if ccw_of_chord == (not clockwise) else -radius
         centre = centre_from_radius(plane, start, end, signed, clockwise, "")
-    sweep = arc_sweep_rad(_angle(plane, start - centre), _angle(plane, end - centre), clockwise, closed)
+    sweep = arc_sweep_rad(_angle(plane, centre, start), _angle(plane, centre, end), clockwise, closed)
     if closed:
         sweep = -2 * math.pi if clockwise else 2 * math.pi
     if sweep == 0:
         raise ArcError("arc end equals its start")
     sweep += math.copysign(2 * math.pi * (turns - 1), sweep)
     rise = float(end[plane.normal_axis] - start[plane.normal_axis])
-    curve = arc_curve(centre, start, sweep, plane.normal, rise_mm=rise)
-    points = curve.control_points.copy()
-    points[0], points[-1] = start, end  # exact programmed end points
-    points.setflags(write=False)
-    return dataclasses.replace(curve, control_points=points)  # moved by rounding only: still valid
+    return arc_curve(centre, start, sweep, plane.normal, rise_mm=rise, end=end)  # exact programmed end points
 
 
-def _cross2(a: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    return float(a[0] * b[1] - a[1] * b[0])
+def _cross2(a: tuple[float, float], b: tuple[float, float]) -> float:
+    return a[0] * b[1] - a[1] * b[0]

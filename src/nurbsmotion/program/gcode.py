@@ -19,6 +19,7 @@ moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_n
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -37,7 +38,7 @@ from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_offsets import OffsetCommands
-from nurbsmotion.program.gcode_words import LexedLine, Word, check_number, lex_line
+from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
 from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
@@ -176,9 +177,10 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
         lines: list[LexedLine | InputError] = []
+        words_read: dict[str, RawWord] = {}  # the program's plain words, shared between its lines
         for number, raw in enumerate(raw_lines, start=1):
             try:
-                lines.append(lex_line(number, raw, self.source))
+                lines.append(lex_line(number, raw, self.source, words_read))
             except InputError as err:
                 lines.append(err)
         return lines
@@ -270,17 +272,19 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def system_parameter(self, key: int | str) -> float | None:
         """LinuxCNC's read-only parameters: offsets #5161-#5390, tool #5400, position #5420-#5422, #<_x> ..."""
-        program = (self.position - self.offsets.total()) / self.mm_per_unit
         if isinstance(key, int):
             if 5420 <= key <= 5422:
-                return float(program[key - 5420])
+                return float(self.program_position()[key - 5420])
             if key == 5400:
                 return float(self.tool_loaded or 0)
             if key >= 5161:
                 return self.offsets.parameter(key)
             return None
+        if not key.startswith("_"):  # a program's own named parameter
+            return None
         named: dict[str, Callable[[], float]] = {
-            "_x": lambda: float(program[0]), "_y": lambda: float(program[1]), "_z": lambda: float(program[2]),
+            "_x": lambda: float(self.program_position()[0]), "_y": lambda: float(self.program_position()[1]),
+            "_z": lambda: float(self.program_position()[2]),
             "_metric": lambda: float(self.mm_per_unit == 1.0), "_imperial": lambda: float(self.mm_per_unit != 1.0),
             "_absolute": lambda: float(self.absolute), "_incremental": lambda: float(not self.absolute),
             "_feed": lambda: (self.feed_mm_s or 0.0) * 60.0 / self.mm_per_unit, "_rpm": lambda: self.spindle_rpm,
@@ -288,6 +292,10 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             "_coord_system": lambda: float(next(c for c, s in SYSTEM_CODES.items() if s == self.offsets.active)),
         }
         return named[key]() if key in named else None
+
+    def program_position(self) -> NDArray[np.float64]:
+        """Where the tool is in the program's coordinates and units (offsets removed)."""
+        return (self.position - self.offsets.total()) / self.mm_per_unit
 
     # ---- one line ----------------------------------------------------------------------
     def run_line(self, lexed: LexedLine) -> bool:
@@ -620,7 +628,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
-        if np.linalg.norm(end - self.position) <= ZERO_MOVE_MM:
+        if math.dist(end.tolist(), self.position.tolist()) <= ZERO_MOVE_MM:
             return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 
@@ -643,21 +651,22 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             raise InputError(line.at(radius), "give either R or I J K for an arc, not both")
         if turns is not None and (turns.value != int(turns.value) or turns.value < 1):
             raise InputError(line.at(turns), f"P (turns) must be a whole number >= 1, got {turns.value:g}")
-        gword = line.g(self.motion or 0)
         inch = self.mm_per_unit != 1.0
+        start_xyz, end_xyz = start.tolist(), end.tolist()  # plain floats: arcs.py computes on them
         try:
             if radius is not None:
-                centre = centre_from_radius(plane, start, end, radius.value * self.mm_per_unit, clockwise, radius.text)
-                curve = arc_nurbs(plane, start, end, centre, clockwise, False, inch, int(turns.value) if turns else 1)
+                centre = centre_from_radius(plane, start_xyz, end_xyz, radius.value * self.mm_per_unit, clockwise, radius.text)
+                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, False, inch, int(turns.value) if turns else 1)
             elif offsets:
-                centre = start.copy()
-                origin = self.offsets.total()
+                centre = start_xyz.copy()
+                origin = self.offsets.total().tolist() if self.arc_absolute else None
                 for w in offsets:
                     axis = "IJK".index(w.letter)
                     value = w.value * self.mm_per_unit
-                    centre[axis] = value + origin[axis] if self.arc_absolute else start[axis] + value
-                curve = arc_nurbs(plane, start, end, centre, clockwise, True, inch, int(turns.value) if turns else 1)
+                    centre[axis] = value + origin[axis] if origin is not None else start_xyz[axis] + value
+                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, True, inch, int(turns.value) if turns else 1)
             else:
+                gword = line.g(self.motion or 0)
                 raise ArcError(f"an arc needs centre offsets {' '.join(plane.offset_letters)} or a radius R", gword.text if gword else "")
         except ArcError as err:
             self.position = end  # the next line starts where this one was meant to end

@@ -86,12 +86,32 @@ def curve_extreme(curve: NurbsCurve, j: int, sign: float) -> Extreme:
     return Extreme(best, max(best, float(bounds.max(initial=best))))
 
 
-def soft_limit_violation(program: Program, config: MachineConfig, columns: list[int]) -> InputError | None:
+def block_hulls(program: Program) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(lows, highs): per block, the min and max of its control points per coordinate, arrays
+    (blocks, dim). One reduction over all the program's control points (np.*.reduceat), not
+    a few per block: a CAM program has ~10^5 blocks."""
+    points = [block.curve.control_points for block in program.blocks]
+    starts = np.cumsum([0] + [len(p) for p in points[:-1]])
+    stacked = np.concatenate(points)
+    return np.minimum.reduceat(stacked, starts, axis=0), np.maximum.reduceat(stacked, starts, axis=0)
+
+
+def soft_limit_violation(program: Program, config: MachineConfig, columns: list[int],
+                         hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> InputError | None:
     """The first block (in program order) whose path leaves an axis' soft limits, as the error
     of its program line: ``part.nc:42: X650: axis X would reach 650 mm, beyond the soft limit
-    600 mm`` (the word only when it is that position, not an arc's bulge)."""
+    600 mm`` (the word only when it is that position, not an arc's bulge). A block whose hull
+    (``hulls``: block_hulls) is inside every limit is inside: only the others are examined."""
     limited = [(j, axis, col) for j, (axis, col) in enumerate(zip(config.axes, columns)) if axis.soft_limits_mm is not None]
-    for block in program.blocks:
+    if not limited or not program.blocks:
+        return None
+    lows, highs = hulls if hulls is not None else block_hulls(program)
+    outside = np.zeros(len(program.blocks), dtype=bool)
+    for _, axis, col in limited:
+        low, high = axis.soft_limits_mm  # type: ignore[misc]
+        outside |= (highs[:, col] > high) | (-lows[:, col] > -low)
+    for i in np.flatnonzero(outside).tolist():
+        block = program.blocks[i]
         points = block.curve.control_points
         for _, axis, col in limited:
             low, high = axis.soft_limits_mm  # type: ignore[misc]
@@ -112,18 +132,21 @@ def _violation(source: SourceRef, name: str, reached: float, limit: float) -> In
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
-def moving_unconfigured_axis(program: Program, columns: list[int]) -> int | None:
-    """Column of a program axis without a machine axis that some block moves (None: none does)."""
-    for block in program.blocks:
-        points = block.curve.control_points
-        for j in range(points.shape[1]):
-            if j not in columns and np.ptp(points[:, j]) > 1e-9:
-                return j
-    return None
+def moving_unconfigured_axis(program: Program, columns: list[int],
+                             hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> int | None:
+    """Column of a program axis without a machine axis that some block moves (None: none does);
+    the first such block's first such column."""
+    if not program.blocks:
+        return None
+    lows, highs = hulls if hulls is not None else block_hulls(program)
+    moved = (highs - lows) > 1e-9
+    moved[:, [j for j in columns if j < moved.shape[1]]] = False
+    blocks = np.flatnonzero(moved.any(axis=1))
+    return int(np.flatnonzero(moved[blocks[0]])[0]) if len(blocks) else None
 
 
-def hull_box(program: Program, columns: list[int]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def hull_box(program: Program, columns: list[int],
+             hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(min, max) per configured axis over every block's control points: a box holding the path."""
-    lows = [block.curve.control_points[:, columns].min(axis=0) for block in program.blocks]
-    highs = [block.curve.control_points[:, columns].max(axis=0) for block in program.blocks]
-    return np.min(lows, axis=0), np.max(highs, axis=0)
+    lows, highs = hulls if hulls is not None else block_hulls(program)
+    return lows[:, columns].min(axis=0), highs[:, columns].max(axis=0)

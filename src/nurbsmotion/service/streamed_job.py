@@ -36,7 +36,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
-from nurbsmotion.service.path_bounds import hull_box, moving_unconfigured_axis, soft_limit_violation
+from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
                                                 PlannerWorker, PlanRequest, TracePath, as_error)
 from nurbsmotion.service.program_gate import check_machine_can_run
@@ -77,13 +77,14 @@ def check_before_motion(name: str, program: Program, config: MachineConfig, colu
     check_machine_can_run(program, config)
     if not program.blocks:
         raise InputError(name, "the program has no motion")
-    moved = moving_unconfigured_axis(program, columns)
+    hulls = block_hulls(program)
+    moved = moving_unconfigured_axis(program, columns, hulls)
     if moved is not None:
         raise InputError(name, f"the program moves {AXES[moved]}, which this machine has no axis for")
-    beyond = soft_limit_violation(program, config, columns)
+    beyond = soft_limit_violation(program, config, columns, hulls)
     if beyond is not None:
         raise beyond
-    low, high = hull_box(program, columns)
+    low, high = hull_box(program, columns, hulls)
     try:
         axis_map.to_counts(np.array([low, high]), check_limits=False)
     except InputError as err:
