@@ -159,3 +159,22 @@ def test_the_offset_moves_every_row_and_stop_tail_as_its_chunk_joins():
     expected = np.concatenate([first, second, stop_tail(second[-1], 10, 5)]) + [1000, -7]
     assert feed.end == len(expected)
     assert all(feed[i, j] == expected[i, j] for i in range(feed.end) for j in range(2))
+
+
+def test_the_window_is_read_from_another_thread_as_one_buffer_and_its_first_row():
+    """RowFeed.window pairs the buffer with its global first row in one store (the service reads
+    it off the cycle thread: the way a streamed job moves an axis, for limit inputs)."""
+    feed = RowFeed(2, max_chunks=2, keep_rows=16)
+    pb = None
+    out = [0, 0]
+    for c in range(3):
+        rows = ramp(c * 100, 100, 3)
+        assert feed.put(chunk(rows, stop_tail(rows[-1], 3, 5)), timeout_s=1.0)
+        if pb is None:
+            pb = playback(feed)
+        for _ in range(100):
+            pb.advance(out)
+    buf, base = feed.window
+    assert base > 0 and buf is feed.buf and base == feed.base
+    row = pb.index
+    assert list(buf[row - base]) == [row * 3, -(row * 3) // 2]

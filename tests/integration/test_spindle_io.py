@@ -215,3 +215,36 @@ def test_the_cli_mdi_m3_turns_the_spindle_and_m5_stops_it(machine):
     done = cli("mdi", "M5", "--no-progress")
     assert done.returncode == 0, done.stderr
     wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
+
+
+# Long enough that its events lie in later chunks than the first (streamed_job.FIRST_CHUNK_CYCLES
+# 200 rows, then CHUNK_CYCLES): each X move of 40 mm at 20 mm/s is ~500 rows at T = 4 ms.
+LONG_MILL = ("G21 G90\nS6000 M3\nG01 X40 F1200\nM8\nG01 X0\nS9000\nG01 X40\nM64 P4\nG01 X0\nM65 P4\n"
+             "G01 X40\nM5 M9\nM30\n")
+
+
+def test_a_streamed_job_does_its_events_at_the_rows_the_whole_plan_puts_them(machine):
+    """A machine with a spindle and an I/O node streams lookahead jobs from the planner worker
+    like any other (until session 8 it planned them whole in the daemon: 20 s and the GIL for a
+    long program). Its events get their rows as the chunks arrive; they must be the rows the
+    whole plan gives (chunked plans are the whole plan's rows), and the spindle waits hold
+    the axes at rest until the spindle is at speed."""
+    import numpy as np
+
+    from nurbsmotion.service.job_events import event_rows, with_spindle_waits
+    from nurbsmotion.service.planner import plan_job
+
+    controller = machine.controller
+    job = controller.submit("long.nc", LONG_MILL)["job"]["id"]
+    info = wait_job(machine, job, timeout_s=60.0)
+    assert info["outcome"]["outcome"] == "completed", info["outcome"]["reason"]
+    assert info["plan"]["streamed"] is True
+    done = [(e["code"], e["row"]) for e in info["outcome"]["machine_events"] if "code" in e]
+    whole = with_spindle_waits(plan_job("long.nc", LONG_MILL, machine.config, np.zeros(3)))
+    expected = [(e.event.code, e.row) for e in event_rows(whole)]
+    assert done == expected and max(row for _, row in done) > 1000
+    streamed_waits = [(p["row"], p["reason"]) for p in info["plan"]["pauses"]]
+    assert streamed_waits == [(p.row, p.reason) for p in whole.pauses] and len(streamed_waits) == 2
+    assert all("waiting for the spindle at speed" in reason for _, reason in streamed_waits)
+    s9000 = next(e for e in info["outcome"]["machine_events"] if e.get("code") == "S9000")
+    assert s9000["at_speed"] is True and s9000["row"] > 200

@@ -68,6 +68,7 @@ class RowFeed:
         self.buf = np.zeros((0, n_axes), np.int64)
         self.view = self.buf.data
         self.base = 0  # global row of buf[0]
+        self.window: tuple[np.ndarray, int] = (self.buf, 0)  # (buf, base) in one store: for other threads
         self.planned_end = 0  # one past the last planned row received
         self.end = 0  # one past the last row of the window (planned rows + the newest stop tail)
         self.final = False  # the planned rows are all of the job's
@@ -132,6 +133,7 @@ class RowFeed:
             np.int64, copy=False)
         self.view = self.buf.data
         self.base = keep_from
+        self.window = (self.buf, keep_from)
         self.planned_end += len(chunk.rows)
         self.end = self.planned_end + len(chunk.stop_tail)
         self.chunks_taken += 1

@@ -124,9 +124,7 @@ class Controller:
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
-            wait_rows: frozenset[int] = frozenset()
-            if isinstance(plan, PlannedJob):  # a streamed job only on a machine without spindle/I-O
-                plan, wait_rows = self.machine.prepare(plan)
+            plan = self.machine.prepare(plan)  # the spindle's at-speed waits
             try:
                 record = self._record(name, text, plan)
             except InputError:
@@ -146,7 +144,7 @@ class Controller:
                 job.overrides.append(self._override_entry(job, rate, "job_start", -1))
                 self.machine.ready()
                 job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
-                self.machine.start(job, wait_rows)
+                self.machine.start(job)
             except (InputError, FieldbusError) as err:
                 plan.cancel()
                 self._stop_traffic()

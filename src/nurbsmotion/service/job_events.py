@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -24,13 +24,14 @@ import numpy as np
 from nurbsmotion.log import kv
 from nurbsmotion.program import EventKind, ProgramEvent, SpindleDirection
 from nurbsmotion.service.devices import MachineDevices
-from nurbsmotion.service.planner import JobPause, PlannedJob
+from nurbsmotion.service.planner import JobPause, PlannedJob, spindle_wait_reason
 from nurbsmotion.service.records import now_iso
 
 log = logging.getLogger(__name__)
 
 POLL_S = 0.01
 EVENTS_FILE = "events.log"
+DEVICE_EVENTS = (EventKind.SPINDLE, EventKind.COOLANT, EventKind.OUTPUT)  # done by the job's events
 
 
 @dataclass(frozen=True)
@@ -48,9 +49,8 @@ def event_rows(plan: PlannedJob) -> tuple[RowEvent, ...]:
     program = plan.program
     if program is None:
         return ()
-    kinds = (EventKind.SPINDLE, EventKind.COOLANT, EventKind.OUTPUT)
     return tuple(RowEvent(int(np.searchsorted(plan.trajectory.block, e.before_block, side="left")), e)
-                 for e in program.events if e.kind in kinds)
+                 for e in program.events if e.kind in DEVICE_EVENTS)
 
 
 def signed_rpm(event: ProgramEvent) -> float:
@@ -59,35 +59,41 @@ def signed_rpm(event: ProgramEvent) -> float:
     return {SpindleDirection.CW: rpm, SpindleDirection.CCW: -rpm}.get(event.spindle, 0.0)  # type: ignore[arg-type]
 
 
-def with_spindle_waits(plan: PlannedJob) -> tuple[PlannedJob, frozenset[int]]:
-    """The plan with a pause row at every spindle start/change inside the job (merged with the
-    program's own pauses, one per row, sorted; the master's Playback keeps 0 <= row < last),
-    and the rows added."""
+def with_spindle_waits(plan: PlannedJob) -> PlannedJob:
+    """The plan with a pause row (``spindle_wait``) at every spindle start/change inside the job,
+    merged with the program's own pauses (one per row: the program's wins, the operator resumes
+    it), sorted; the master's Playback keeps 0 <= row < last. A streamed job gets the same
+    rows from its planner worker (service.planner_worker.pause_events)."""
     last = len(plan.counts) - 1
     rows = {p.row: p for p in plan.pauses}
-    added = set()
     for e in event_rows(plan):
         if e.waits and 0 <= e.row < last and e.row not in rows:
-            rows[e.row] = JobPause(e.row, f"{e.event.code} at {e.event.source}: waiting for the spindle at speed")
-            added.add(e.row)
-    return replace(plan, pauses=tuple(rows[r] for r in sorted(rows))), frozenset(added)
+            rows[e.row] = JobPause(e.row, spindle_wait_reason(e.event), spindle_wait=True)
+    return replace(plan, pauses=tuple(rows[r] for r in sorted(rows)))
 
 
 class JobEvents:
     """Runs one job's events on a thread; ``status()`` gives the master status (phase,
-    job_index, pause), ``resume()`` continues the held job, ``stop(reason)`` ends it."""
+    job_index, pause), ``resume()`` continues the held job, ``stop(reason)`` ends it.
 
-    def __init__(self, plan: PlannedJob, wait_rows: frozenset[int], devices: MachineDevices, folder: Path,
-                 status: Callable[[], Any], resume: Callable[[], None], stop: Callable[[str], None]) -> None:
-        """``plan`` and ``wait_rows`` as with_spindle_waits returned them."""
-        self.events = event_rows(plan)
-        self.user_pause_rows = {p.row for p in plan.pauses} - wait_rows
-        self.pause_rows = [p.row for p in plan.pauses]
+    ``events`` and ``pauses`` (the job's pause rows, in row order: the master's status.pause
+    indexes them) may grow while the job runs (a streamed job's receiver appends them as
+    chunks arrive, before the master can reach their rows); ``complete()`` says they will not
+    grow any more."""
+
+    def __init__(self, events: Sequence[RowEvent], pauses: Sequence[JobPause], complete: Callable[[], bool],
+                 devices: MachineDevices, folder: Path, status: Callable[[], Any], resume: Callable[[], None],
+                 stop: Callable[[str], None]) -> None:
+        self.events = events
+        self.pauses = pauses
+        self.complete = complete
         self.devices = devices
         self.path = folder / EVENTS_FILE
         self.status, self.resume, self.stop = status, resume, stop
         self.done: list[dict[str, Any]] = []
         self._next = 0
+        self._pause_rows: set[int] = set()  # rows of the pauses seen so far
+        self._pauses_seen = 0
         self._finished = threading.Event()
         self._thread = threading.Thread(target=self._run, name="job-events", daemon=True)
 
@@ -108,18 +114,31 @@ class JobEvents:
                 self._do(self.events[self._next - 1], wait=False)
 
     def _ready(self, e: RowEvent, index: int, held_row: int | None) -> bool:
-        """A wait row is done while the master holds there; any other event once playback is
-        about to send its row (``index``: the last row sent, -1 before the first)."""
-        if e.waits and e.row in self.pause_rows:
+        """A spindle start at a pause row is done while the master holds there; any other event
+        once playback is about to send its row (``index``: the last row sent, -1 before the first)."""
+        if e.waits and e.row in self._pause_rows:
             return held_row == e.row
         return e.row <= index + 1
 
+    def _held_pause(self, status: Any) -> JobPause | None:
+        """The pause the master holds at (None while it is not held at one)."""
+        pauses = self.pauses
+        seen = len(pauses)
+        self._pause_rows.update(p.row for p in pauses[self._pauses_seen:seen])
+        self._pauses_seen = seen
+        if status.phase == "held" and status.pause is not None and status.pause < len(pauses):
+            return pauses[status.pause]
+        return None
+
     def _run(self) -> None:
-        while not self._finished.wait(POLL_S) and self._next < len(self.events):
+        while not self._finished.wait(POLL_S):
+            complete = self.complete()  # read first: every event it covers is in the list below
+            if self._next >= len(self.events) and complete:
+                return
             status = self.status()
             index = status.job_index if status.job_index is not None else -1
-            held_row = self.pause_rows[status.pause] if status.phase == "held" and status.pause is not None \
-                and status.pause < len(self.pause_rows) else None
+            held = self._held_pause(status)
+            held_row = held.row if held is not None else None
             waited = False
             while self._next < len(self.events) and self._ready(self.events[self._next], index, held_row):
                 e = self.events[self._next]
@@ -127,7 +146,7 @@ class JobEvents:
                 if not self._do(e) or self._finished.is_set():
                     return
                 waited = waited or (e.waits and e.row == held_row)
-            if waited and held_row not in self.user_pause_rows:
+            if waited and held is not None and held.spindle_wait:
                 self.resume()
 
     def _do(self, e: RowEvent, wait: bool = True) -> bool:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -24,9 +24,12 @@ import numpy as np
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
 from nurbsmotion.service.devices import MachineDevices
-from nurbsmotion.service.job_events import JobEvents, with_spindle_waits
+from nurbsmotion.service.job_events import JobEvents, RowEvent, event_rows, with_spindle_waits
 from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
 from nurbsmotion.service.planner import JOG_NAME, MDI_NAME, PlannedJob
+from nurbsmotion.service.streamed_job import StreamedJob
+
+JobPlan = PlannedJob | StreamedJob
 
 log = logging.getLogger(__name__)
 DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
@@ -65,19 +68,26 @@ class MachineJobs:
         io = self.devices.io
         return io.start_refusal() if io is not None and io.estop_active() else None
 
-    def prepare(self, plan: PlannedJob) -> tuple[PlannedJob, frozenset[int]]:
-        """The plan with the spindle's wait rows (unchanged without devices)."""
-        return with_spindle_waits(plan) if self.devices is not None else (plan, frozenset())
+    def prepare(self, plan: JobPlan) -> JobPlan:
+        """The plan with the spindle's wait rows (unchanged without devices; a streamed job's
+        come with its chunks: the planner worker adds them, service.planner_worker)."""
+        return with_spindle_waits(plan) if self.devices is not None and isinstance(plan, PlannedJob) else plan
 
     def ready(self) -> None:
         if self.devices is not None:
             self.devices.ready_for_job()
 
     # ------------------------------------------------------------------ during and after
-    def start(self, job: Any, wait_rows: frozenset[int]) -> None:
+    def start(self, job: Any) -> None:
         if self.devices is None or job.handle is None:
             return
-        job.events = JobEvents(job.plan, wait_rows, self.devices, job.record.folder, self.link.status,
+        plan = job.plan
+        if isinstance(plan, StreamedJob):  # events and pauses arrive with the chunks
+            events: Sequence[RowEvent] = plan.row_events
+            complete: Callable[[], bool] = plan.events_complete.is_set
+        else:
+            events, complete = event_rows(plan), lambda: True
+        job.events = JobEvents(events, plan.pauses, complete, self.devices, job.record.folder, self.link.status,
                                job.handle.resume, lambda reason: self.stop_job(job, reason, abort=False))
         job.events.start()
 
@@ -140,10 +150,8 @@ class MachineJobs:
         axis_map = self.link.axis_map
         if job is None or index is None or axis not in axis_map.names:
             return 0
-        i, rows = axis_map.names.index(axis), job.plan.counts
-        last = len(rows) - 1
-        step = int(rows[min(index + DIRECTION_ROWS, last)][i]) - int(rows[min(max(index - DIRECTION_ROWS, 0), last)][i])
-        return int(np.sign(step * axis_map.sign[i]))
+        i = axis_map.names.index(axis)
+        return int(np.sign(job.plan.axis_step(i, index, DIRECTION_ROWS) * axis_map.sign[i]))
 
     def spindle_fault(self, message: str) -> None:
         """The spindle left OPERATION ENABLED on its own: the running job is aborted."""

@@ -23,7 +23,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.planning import Trajectory, plan
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
-from nurbsmotion.program import AXES, Program, ReadOptions, parse_curve_yaml, parse_gcode
+from nurbsmotion.program import AXES, Program, ProgramEvent, ReadOptions, parse_curve_yaml, parse_gcode
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
@@ -41,6 +41,7 @@ class JobPause:
     row: int  # the first row of the block the event comes before: at rest (the planner's exact stop)
     reason: str  # 'M0 at part.nc:12', 'M6 tool change to T3 at part.nc:20'
     tool: int | None = None  # the tool asked for (M6)
+    spindle_wait: bool = False  # held for the spindle at speed (M3/M4/S): resumed by the job's events, not the operator
 
 
 def pause_rows(program: Program, trajectory: Trajectory) -> tuple[JobPause, ...]:
@@ -91,6 +92,12 @@ class PlannedJob:
     def feed_at(self, index: int) -> float:
         feed = self.trajectory.feed_mm_s
         return float(feed[min(max(index, 0), len(feed) - 1)]) if len(feed) else 0.0
+
+    def axis_step(self, axis: int, index: int, rows: int) -> int:
+        """Counts axis ``axis`` moves from ``rows`` rows before row ``index`` to ``rows`` after
+        (clamped to the job's rows): the way the job moves it there."""
+        last = len(self.counts) - 1
+        return int(self.counts[min(index + rows, last)][axis]) - int(self.counts[min(max(index - rows, 0), last)][axis])
 
     def write_records(self, record: Any) -> None:
         """plan.json and the whole trace, before any motion."""
@@ -189,10 +196,20 @@ def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarra
 
 
 def needs_planner_worker(config: MachineConfig) -> bool:
-    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker),
-    except on a machine with a spindle or an I/O node: their job events read the whole plan."""
-    has_devices = isinstance(config.spindle, SpindleConfig) or config.io is not None
-    return config.interpolation.algorithm == "lookahead" and not has_devices
+    """The daemon streams lookahead jobs from a planner worker process (service.planner_worker);
+    their spindle, coolant and output events come with the chunks (service.streamed_job)."""
+    return config.interpolation.algorithm == "lookahead"
+
+
+def spindle_wait_reason(event: ProgramEvent) -> str:
+    """The pause reason of a spindle start/change the job holds at (service.job_events)."""
+    return f"{event.code} at {event.source}: waiting for the spindle at speed"
+
+
+def machine_has_devices(config: MachineConfig) -> bool:
+    """A spindle drive or an I/O node (service.devices): jobs then hold for the spindle at speed
+    after M3/M4/S (service.job_events)."""
+    return isinstance(config.spindle, SpindleConfig) or config.io is not None
 
 
 STILL_ROWS = 2  # a job without motion: the held position twice, so row 0 can be a pause row (< last)

@@ -52,6 +52,7 @@ from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program, ReadOptions
+from nurbsmotion.service.planner import machine_has_devices, spindle_wait_reason
 
 log = logging.getLogger(__name__)
 
@@ -108,7 +109,7 @@ class PlannedChunk:
     first_row: int
     counts: np.ndarray  # (m, axes) int32
     stop_tail: np.ndarray  # (t, axes) int32, (0, axes) when the chunk ends at rest
-    pauses: tuple[tuple[int, str, int | None], ...]  # (row, reason, tool) of M0/M1/M6 holds
+    pauses: tuple[tuple[int, str, int | None, bool], ...]  # (row, reason, tool, spindle wait): M0/M1/M6, M3/M4/S
     max_step: tuple[float, ...]
     max_accel: tuple[float, ...]
     block_rows: np.ndarray  # first row of each block reached in this chunk (int64)
@@ -180,7 +181,7 @@ class WorkerJob:
             program = self._checked_program()
             self.results.send(CheckedProgram(program))
             self.lengths = BlockLengths(program)
-            self.events = sorted((e for e in program.events if e.holds), key=lambda e: e.before_block)
+            self.events = pause_events(program, machine_has_devices(self.config))
             self.measure = MeasureStream(program)
             self.stream = PlanStream(program, limits_from_config(self.config), self.request.chunk_cycles,
                                      self.request.first_chunk_cycles)
@@ -264,18 +265,21 @@ class WorkerJob:
         """Set-points in counts; int32 range checked before motion (streamed_job.check_before_motion)."""
         return self.axis_map.to_counts(rows.position_mm[:, self.request.columns]).astype(np.int64)
 
-    def _pauses(self, chunk: Trajectory) -> tuple[tuple[int, str, int | None], ...]:
-        """Rows of this chunk where a holding event (M0/M1/M6) happens: the first row of the
-        block it comes before (the planner's exact stop there)."""
-        found: list[tuple[int, str, int | None]] = []
+    def _pauses(self, chunk: Trajectory) -> tuple[tuple[int, str, int | None, bool], ...]:
+        """Rows of this chunk where the job holds: the first row of the block the event comes
+        before (the planner's exact stop there). One pause a row, the program's own (M0/M1/M6,
+        the operator resumes it) before a spindle wait (job_events.with_spindle_waits)."""
+        found: dict[int, tuple[int, str, int | None, bool]] = {}
         while self.events and len(chunk.block) and int(chunk.block[-1]) >= self.events[0].before_block:
             event = self.events.pop(0)
             row = self.planned + int(np.searchsorted(chunk.block, event.before_block, side="left"))
-            if event.tool is not None and event.kind.value == "tool_change":
-                found.append((row, f"{event.code} tool change to T{event.tool} at {event.source}", int(event.tool)))
+            if event.waits_for_spindle:
+                found.setdefault(row, (row, spindle_wait_reason(event), None, True))
+            elif event.tool is not None and event.kind.value == "tool_change":
+                found[row] = (row, f"{event.code} tool change to T{event.tool} at {event.source}", int(event.tool), False)
             else:
-                found.append((row, f"{event.code} at {event.source}", None))
-        return tuple(found)
+                found[row] = (row, f"{event.code} at {event.source}", None, False)
+        return tuple(found[row] for row in sorted(found))
 
     def _read_commands(self, block: bool) -> bool:
         """Apply the commands waiting (or, ``block``, wait for one); True once cancelled."""
@@ -334,6 +338,13 @@ class BlockLengths:
             self.lengths_mm[self.done] = self.blocks[self.done].length_mm
             self.done += 1
         return self.done == len(self.blocks)
+
+
+def pause_events(program: Program, spindle_waits: bool) -> list[Any]:
+    """The program's events the job holds at, by block: M0/M1/M6, and (``spindle_waits``: a
+    machine with devices) M3/M4/S waiting for the spindle at speed."""
+    return sorted((e for e in program.events if e.holds or (spindle_waits and e.waits_for_spindle)),
+                  key=lambda e: e.before_block)
 
 
 def block_starts(blocks: np.ndarray, first_row: int) -> tuple[np.ndarray, np.ndarray]:

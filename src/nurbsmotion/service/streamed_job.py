@@ -36,6 +36,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
+from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
                                                 PlannerWorker, PlanRequest, TracePath, as_error)
@@ -112,6 +113,11 @@ class StreamedJob:
         self.max_rate = streamed_max_rate(program, self.limits, config, columns)
         self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
         self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
+        # spindle / coolant / output events with their rows (service.job_events), as the chunks
+        # are planned; events_complete once no more will come (the worker's end)
+        self.row_events: list[RowEvent] = []
+        self.events_complete = threading.Event()
+        self._device_events = [e for e in program.events if e.kind in DEVICE_EVENTS]  # program order
         self.error: InputError | None = None  # planning failed part-way (the program line) or the worker died
         self.planned = 0  # rows planned so far
         self.finished = False  # every row planned
@@ -220,6 +226,17 @@ class StreamedJob:
         total = float(before[-1])
         return 100.0 * float(before[block]) / total if total > 0 else 0.0
 
+    def axis_step(self, axis: int, index: int, rows: int) -> int:
+        """Counts axis ``axis`` moves from ``rows`` rows before row ``index`` to ``rows`` after,
+        within the rows the master holds now (RowFeed.window): the way the job moves it there."""
+        buf, base = self.feed.window
+        if not len(buf):
+            return 0
+        last = len(buf) - 1
+        ahead = min(max(index + rows - base, 0), last)
+        behind = min(max(index - rows - base, 0), last)
+        return int(buf[ahead, axis]) - int(buf[behind, axis])
+
     def end_reason(self, fell_behind_row: int) -> str:
         """Why a job ended before its program's end although nobody stopped it ('' if it did not)."""
         if self.error is not None:
@@ -265,6 +282,7 @@ class StreamedJob:
                                     f"({self.worker.exit_description()}) after {self.planned} set-points")
             log.error(kv("planner_worker_died", program=self.name, row=self.planned, error=self.error))
         finally:
+            self.events_complete.set()
             self.feed.close()
             self._ended.set()
             self._first.set()
@@ -277,20 +295,32 @@ class StreamedJob:
             return
         from nurbsmotion.service.planner import JobPause  # the shared pause record
 
-        self.pauses.extend(JobPause(row, reason, tool) for row, reason, tool in chunk.pauses)
+        self.pauses.extend(JobPause(row, reason, tool, wait) for row, reason, tool, wait in chunk.pauses)
+        self._take_events(chunk.block_rows, chunk.block_ids)
         for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
             if not self._block_ids or self._block_ids[-1] != block:
                 self._block_rows.append(row)
                 self._block_ids.append(block)
         self._feeds.append((chunk.first_row, chunk.feed_mm_s))
         rows = RowChunk(chunk.counts.astype(np.int64), chunk.stop_tail.astype(np.int64),
-                        tuple(row for row, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
+                        tuple(row for row, _, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
         if not self.feed.put(rows):
             return  # the job ended
         if self.planned == 0:
             self.first_chunk_s = time.monotonic() - self.submitted_s
         self.planned += len(chunk.counts)
         self._first.set()
+
+    def _take_events(self, block_rows: np.ndarray, block_ids: np.ndarray) -> None:
+        """The device events whose block starts in this chunk (or earlier): the first row of the
+        first block at or after the one they come before, as job_events.event_rows finds it."""
+        events = self._device_events
+        taken = 0
+        while taken < len(events) and len(block_ids) and events[taken].before_block <= int(block_ids[-1]):
+            i = int(np.searchsorted(block_ids, events[taken].before_block, side="left"))
+            self.row_events.append(RowEvent(int(block_rows[i]), events[taken]))
+            taken += 1
+        del events[:taken]
 
     def _take_lengths(self, message: PathLengths) -> None:
         """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
@@ -300,6 +330,9 @@ class StreamedJob:
     def _finish(self, end: PlanEnd) -> None:
         self.end = end
         self.finished = end.finished
+        if end.finished:  # the events after the last move (M5 M9 before M30): done at the job's end
+            self.row_events.extend(RowEvent(self.planned, e) for e in self._device_events)
+            self._device_events.clear()
         if end.errors:
             self.error = as_error(end.errors)
             log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
