@@ -8,7 +8,7 @@ daemon); each request carries the machine configuration it is planned for. One j
 - daemon -> worker (``commands``): :class:`PlanRequest` (a job), :class:`TracePath` (the job
   record exists: write the trace there), :class:`CancelPlan` (the job ended), ``None`` (quit);
 - worker -> daemon (``results``): :class:`CheckedProgram` (the parsed program passed every
-  check before motion), one :class:`PlannedChunk` per chunk (int32 counts, their verified
+  check before motion) and its blocks in :class:`ProgramBlocks` slices, one :class:`PlannedChunk` per chunk (int32 counts, their verified
   stop tail, the pauses, the block starts and the feed), one :class:`PathLengths` among
   them, then one :class:`PlanEnd` (a program refused before motion: a PlanEnd with its
   errors and nothing else).
@@ -34,6 +34,7 @@ import multiprocessing
 import multiprocessing.connection
 import threading
 import time
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -59,6 +60,7 @@ log = logging.getLogger(__name__)
 READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under heavy load) is an error
 QUIT_TIMEOUT_S = 5.0
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
+BLOCKS_PER_MESSAGE = 1000  # blocks a ProgramBlocks slice carries (~15 ms of the daemon's lock to load)
 LENGTHS_BUDGET_S = 0.02  # arc-length work between two chunks (a chunk is 2 s of motion): planning stays ahead
 
 
@@ -90,9 +92,21 @@ class CancelPlan:
 
 @dataclass(frozen=True, eq=False)
 class CheckedProgram:
-    """The request's program, parsed and checked: planning starts."""
+    """The request's program, parsed and checked: planning starts. Its blocks follow in
+    ``ProgramBlocks`` messages (``block_count`` in all): one pickle of a 100,000-block program
+    is 21.5 MB and took 1.45 s to load, holding the daemon's interpreter lock that long (its
+    cycle thread and simulated drives stopped: heartbeats lost); slices of BLOCKS_PER_MESSAGE
+    hold it about 15 ms each."""
 
-    program: Program
+    program: Program  # with blocks=()
+    block_count: int
+
+
+@dataclass(frozen=True, eq=False)
+class ProgramBlocks:
+    """The next blocks of the CheckedProgram's program, in order."""
+
+    blocks: tuple[Any, ...]
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,7 +193,7 @@ class WorkerJob:
         finished = False
         try:
             program = self._checked_program()
-            self.results.send(CheckedProgram(program))
+            send_program(self.results, program)
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
             self.measure = MeasureStream(program)
@@ -340,6 +354,28 @@ class BlockLengths:
         return self.done == len(self.blocks)
 
 
+def send_program(results: Any, program: Program) -> None:
+    """The checked program to the daemon: its outline, then its blocks in slices (CheckedProgram)."""
+    blocks = program.blocks
+    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks)))
+    for first in range(0, len(blocks), BLOCKS_PER_MESSAGE):
+        results.send(ProgramBlocks(blocks[first:first + BLOCKS_PER_MESSAGE]))
+
+
+def receive_program(results: Any, outline: CheckedProgram, timeout_s: float) -> Program:
+    """The daemon's side of send_program: the blocks joined to the outline (TimeoutError when a
+    slice is not there within ``timeout_s``; EOFError/OSError when the worker is gone)."""
+    blocks: list[Any] = []
+    while len(blocks) < outline.block_count:
+        if not results.poll(timeout_s):
+            raise TimeoutError(f"the program's blocks after {len(blocks)} of {outline.block_count}")
+        message = results.recv()  # one slice: the lock is held while it loads, then free again
+        if not isinstance(message, ProgramBlocks):
+            raise TypeError(f"expected the program's blocks, got {type(message).__name__}")
+        blocks.extend(message.blocks)
+    return dataclasses.replace(outline.program, blocks=tuple(blocks))
+
+
 def pause_events(program: Program, spindle_waits: bool) -> list[Any]:
     """The program's events the job holds at, by block: M0/M1/M6, and (``spindle_waits``: a
     machine with devices) M3/M4/S waiting for the spindle at speed."""
@@ -493,4 +529,4 @@ def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
     return found[0] if len(found) == 1 else InputErrors(found)
 
 
-__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]
+__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "ProgramBlocks", "send_program", "receive_program", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]

@@ -39,7 +39,7 @@ from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
-                                                PlannerWorker, PlanRequest, TracePath, as_error)
+                                                PlannerWorker, PlanRequest, TracePath, as_error, receive_program)
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
@@ -371,7 +371,15 @@ def checked_program(name: str, worker: PlannerWorker, results: Any, timeout_s: f
         worker.job_ended()
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
-        return answer.program
+        try:
+            return receive_program(results, answer, timeout_s)
+        except TimeoutError as err:
+            worker.abandon()
+            raise InputError(name, f"the planner worker did not send {err}") from None
+        except (EOFError, OSError, TypeError) as err:
+            worker.job_ended()
+            raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()}): "
+                                   f"{err}") from None
     worker.job_ended()
     if isinstance(answer, PlanEnd) and answer.errors:
         raise as_error(answer.errors)
