@@ -118,11 +118,13 @@ def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: floa
     current: list[BlockPiece] = []
     speeds: list[float] = []
     rest = dwell_cycles(stops.dwell_between(-1, pieces[0].block), limits.period_s, False) if pieces else 0
+    arriving = np.zeros(0)  # the end tangent of the piece before (each piece's tangents once)
     for piece in pieces:
+        leaving, end = end_tangents(piece)
         if current:
             dwell_s = stops.dwell_between(current[-1].block, piece.block)
             deviation = (stops.deviation_mm or {}).get(piece.block)
-            v = junction_speed(end_tangents(current[-1])[1], end_tangents(piece)[0], limits, min_pass_mm_s, deviation)
+            v = junction_speed(arriving, leaving, limits, min_pass_mm_s, deviation)
             if v <= 0.0 or dwell_s > 0 or current[-1].block in stops.stop_after:
                 runs.append(Run(tuple(current), tuple(speeds), rest))
                 current, speeds = [], []
@@ -130,6 +132,7 @@ def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: floa
             else:
                 speeds.append(v)
         current.append(piece)
+        arriving = end
     if current:
         runs.append(Run(tuple(current), tuple(speeds), rest))
     return runs
