@@ -25,6 +25,10 @@ The simulated drives' receive and ticker threads run SCHED_FIFO just below the m
 the daemon runs them with ``simulate: true`` (service.link.open_link): each stands in for a
 drive's own CPU (docs/daemon.md, "Simulated drives in the daemon's process").
 
+``--program FILE --copies N``: a real program instead of Wang's curve, N times in a row (its
+end M2/M30 and % lines dropped between copies; tools 1-99 as the CAM corpus test reads them):
+what a real CAM program waits before moving. With ``--first-motion-only`` for long ones.
+
 ``--first-motion-only``: each job is stopped (the controlled stop) at its first motion and the
 row says so (memory and missed cycles then cover those seconds only): first motion of the
 one-hour program without its hour.
@@ -54,6 +58,7 @@ sys.path.insert(0, str(ROOT))
 from benchmarks._report import write_section  # noqa: E402
 from benchmarks.bench_plan_command import wang_copies  # noqa: E402
 
+TOOLS_YAML = "tools:\n" + "".join(f"  - {{number: {n}, length_mm: {40 + n}, diameter_mm: 6}}\n" for n in range(1, 100))
 TARGET_FIRST_S = 1.0
 TARGET_MB = 200.0
 CONFIG = """\
@@ -72,6 +77,11 @@ axes:
 monitoring: {{traffic_log: none}}
 control: {{socket: {socket}}}
 data_dir: {data_dir}
+{extra}"""
+# A real program's machine: tools 1-99 and a spindle drive (simulated too) for its M3/S words.
+PROGRAM_MACHINE = """\
+tools: tools.yaml
+spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 24000, accel_rpm_s: 8000}
 """
 
 
@@ -82,8 +92,22 @@ def status_kb(field: str, pid: int | str = "self") -> float:
     return float("nan")
 
 
-def one_run(copies: int, first_motion_only: bool = False) -> dict:
-    """The daemon in this process runs Wang x ``copies`` once (see the module docstring)."""
+def program_copies(path: Path, copies: int) -> str:
+    """``path``'s G-code ``copies`` times in a row, ending once (its M2/M30 and % lines dropped).
+    Each copy starts where the last ended: a CAM program's first move is a positioning one."""
+    ends = ("M2", "M02", "M30", "%")
+    body = [line for line in path.read_text().splitlines()
+            if line.strip().upper().split(";")[0].strip() not in ends]
+    return "\n".join(body * copies + ["M30"]) + "\n"
+
+
+def program_label(r: dict) -> str:
+    return f"{r['program']} x {r['copies']}" if r.get("program") else f"Wang x {r['copies']}"
+
+
+def one_run(copies: int, first_motion_only: bool = False, program: Path | None = None) -> dict:
+    """The daemon in this process runs Wang x ``copies`` (or ``program`` x ``copies``) once (see
+    the module docstring)."""
     from nurbsmotion.config import parse_config
     from nurbsmotion.fieldbus import Master
     from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
@@ -93,8 +117,10 @@ def one_run(copies: int, first_motion_only: bool = False) -> dict:
     from nurbsmotion.sim import SimNetwork
 
     work = Path(tempfile.mkdtemp(prefix="fm-"))
+    (work / "tools.yaml").write_text(TOOLS_YAML)
     config = parse_config(CONFIG.format(channel=f"fm-{uuid.uuid4().hex}", socket=work / "ctl.sock",
-                                        data_dir=work / "var"), str(work / "machine.yaml"))
+                                        data_dir=work / "var", extra=PROGRAM_MACHINE if program else ""),
+                          str(work / "machine.yaml"), base_dir=work)
     masters: list[Master] = []
     networks = []
 
@@ -108,7 +134,8 @@ def one_run(copies: int, first_motion_only: bool = False) -> dict:
         masters.append(master)
         return master, drives
 
-    text = wang_copies(copies)
+    text = wang_copies(copies) if program is None else program_copies(program, copies)
+    name = f"wang_x{copies}.nc" if program is None else f"{program.stem}_x{copies}{program.suffix}"
     daemon = Daemon(config, open_motion)
     daemon.start()
     worker = getattr(daemon, "planner_worker", None)  # None: a daemon that plans in its own process
@@ -118,7 +145,7 @@ def one_run(copies: int, first_motion_only: bool = False) -> dict:
     try:
         with Client(config.control.socket) as client:
             started = time.perf_counter()
-            answer = client.call("submit", name=f"wang_x{copies}.nc", program=text)
+            answer = client.call("submit", name=name, program=text)
             submit_s = time.perf_counter() - started
             job_id = answer["job"]["id"]
             master = masters[0]
@@ -144,7 +171,8 @@ def one_run(copies: int, first_motion_only: bool = False) -> dict:
     finally:
         daemon.close()
     outcome, plan = info["outcome"], info["plan"]
-    return {"copies": copies, "cycles": plan["cycles"], "duration_s": plan["duration_s"],
+    return {"copies": copies, "program": program.name if program else None, "lines": text.count("\n"),
+            "cycles": plan["cycles"], "duration_s": plan["duration_s"],
             "planned_all": bool(plan.get("planned_all")),
             "outcome": outcome["outcome"], "reason": outcome["reason"], "sent": outcome["sent"],
             "submit_s": submit_s, "first_motion_s": first_motion_s, "first_chunk_s": plan.get("first_chunk_s"),
@@ -156,15 +184,16 @@ def one_run(copies: int, first_motion_only: bool = False) -> dict:
             "first_motion_only": first_motion_only}
 
 
-def run_child(copies: int, first_motion_only: bool) -> dict:
+def run_child(copies: int, first_motion_only: bool, program: Path | None = None) -> dict:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     load_before = load_line()
-    out = subprocess.run([sys.executable, __file__, "--child", str(copies)] + ["--first-motion-only"] * first_motion_only,
+    out = subprocess.run([sys.executable, __file__, "--child", str(copies)] + ["--first-motion-only"] * first_motion_only
+                         + (["--program", str(program)] if program else []),
                          capture_output=True, text=True, env=env, timeout=2 * 3600)
     run = {"started": started, "load_before": load_before, "load_after": load_line()}
     if out.returncode != 0:
-        return {"copies": copies, **run,
+        return {"copies": copies, "program": program.name if program else None, **run,
                 "error": out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"}
     return {**json.loads(out.stdout.strip().splitlines()[-1]), **run}
 
@@ -180,7 +209,7 @@ def table(results: list[dict]) -> str:
             "| drives' receive / ticker thread | targets (first motion < 1.0 s, daemon peak < 200 MB) |",
             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
-        run = f"| Wang x {r['copies']} | {r.get('started', '')} | {r.get('load_before', '')} → {r.get('load_after', '')} "
+        run = f"| {program_label(r)} | {r.get('started', '')} | {r.get('load_before', '')} → {r.get('load_after', '')} "
         if "error" in r:
             rows.append(f"{run}| failed: {r['error']} | | | | | | | | | | | |")
             continue
@@ -203,21 +232,22 @@ def main() -> None:
     parser.add_argument("--copies", type=int, nargs="*", default=[8, 100, 460])
     parser.add_argument("--results", type=Path, help="JSON lines: append each result, write the table from all")
     parser.add_argument("--first-motion-only", action="store_true", help="stop each job at its first motion")
+    parser.add_argument("--program", type=Path, help="a G-code file instead of Wang's curve (--copies: how many times)")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
-        print(json.dumps(one_run(args.child, args.first_motion_only)))
+        print(json.dumps(one_run(args.child, args.first_motion_only, args.program)))
         return
     results = []
     for copies in args.copies:
-        results.append(run_child(copies, args.first_motion_only))
+        results.append(run_child(copies, args.first_motion_only, args.program))
         print(json.dumps(results[-1]), flush=True)
         if args.results is not None:
             with args.results.open("a") as out:
                 out.write(json.dumps(results[-1]) + "\n")
     if args.results is not None:
         results = sorted((json.loads(line) for line in args.results.read_text().splitlines() if line.strip()),
-                         key=lambda r: (r["copies"], r.get("started", "")))
+                         key=lambda r: (r.get("program") or "", r["copies"], r.get("started", "")))
     body = ("The daemon (control socket, controller, master) and three simulated drives recording "
             "nothing, in one process on python-can's virtual bus (the drives' receive and ticker threads SCHED_FIFO "
             "below the master's, as the daemon runs them), the job planned in the daemon's planner worker "
