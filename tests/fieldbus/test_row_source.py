@@ -119,19 +119,29 @@ def test_a_stop_ramp_stays_on_the_rows_received_and_ends_at_rest():
     assert feed.waiting == 1  # no chunk joins a stop under way
 
 
-def test_the_window_is_bounded_whatever_the_job_length():
-    feed = RowFeed(2, max_chunks=2, keep_rows=256)
+def play_chunks(feed: RowFeed, chunks: int, rows_each: int, tail_rows: int, each_cycle=None) -> Playback:
+    """Put ``chunks`` ramps of ``rows_each`` rows (with stop tails) one by one, playing
+    ``rows_each`` cycles after each; ``each_cycle()`` after every cycle. The playback."""
     pb = None
     out = [0, 0]
-    longest = 0
-    for c in range(100):
-        rows = ramp(c * 1000, 1000, 3)
-        assert feed.put(chunk(rows, stop_tail(rows[-1], 3, 20)), timeout_s=1.0)
+    for c in range(chunks):
+        rows = ramp(c * rows_each, rows_each, 3)
+        assert feed.put(chunk(rows, stop_tail(rows[-1], 3, tail_rows)), timeout_s=1.0)
         if pb is None:
             pb = playback(feed)
-        for _ in range(1000):
+        for _ in range(rows_each):
             pb.advance(out)
-            longest = max(longest, len(feed.buf))
+            if each_cycle is not None:
+                each_cycle()
+    assert pb is not None
+    return pb
+
+
+def test_the_window_is_bounded_whatever_the_job_length():
+    feed = RowFeed(2, max_chunks=2, keep_rows=256)
+    sizes: list[int] = []
+    pb = play_chunks(feed, 100, 1000, 20, lambda: sizes.append(len(feed.buf)))
+    longest = max(sizes)
     assert feed.planned_end == 100 * 1000 and pb.index >= 99 * 1000
     assert longest <= 256 + 2 * 1000 + 20 + 1
 
@@ -165,15 +175,7 @@ def test_the_window_is_read_from_another_thread_as_one_buffer_and_its_first_row(
     """RowFeed.window pairs the buffer with its global first row in one store (the service reads
     it off the cycle thread: the way a streamed job moves an axis, for limit inputs)."""
     feed = RowFeed(2, max_chunks=2, keep_rows=16)
-    pb = None
-    out = [0, 0]
-    for c in range(3):
-        rows = ramp(c * 100, 100, 3)
-        assert feed.put(chunk(rows, stop_tail(rows[-1], 3, 5)), timeout_s=1.0)
-        if pb is None:
-            pb = playback(feed)
-        for _ in range(100):
-            pb.advance(out)
+    pb = play_chunks(feed, 3, 100, 5)
     buf, base = feed.window
     assert base > 0 and buf is feed.buf and base == feed.base
     row = pb.index

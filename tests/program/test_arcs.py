@@ -26,8 +26,8 @@ from nurbsmotion.geometry.primitives import arc_curve, arc_sweep_rad
 from nurbsmotion.program import ReadOptions, parse_gcode, parse_tool_table
 from nurbsmotion.program import arcs as arcs_module
 from nurbsmotion.program import gcode as gcode_module
-from nurbsmotion.program.arcs import (CENTRE_TOLERANCE_MM, CENTRE_TOLERANCE_REL, PLANES, R_TOLERANCE_MM, SAME_POINT_MM,
-                                      ArcError, Plane, arc_nurbs, centre_from_radius, radii_agree)
+from nurbsmotion.program.arcs import (PLANES, SAME_POINT_MM,
+                                      ArcError, Plane, arc_nurbs, centre_from_radius, check_radii, checked_r_radius)
 from nurbsmotion.program.reader import GCODE_SUFFIXES
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -92,14 +92,7 @@ def _old_normal(plane: Plane):
 def _old_centre_from_radius(plane, start, end, radius_mm, clockwise, radius_word):
     chord = _old_in_plane(plane, end - start)
     d = float(np.hypot(*chord))
-    if d <= SAME_POINT_MM:
-        raise ArcError("an R arc needs an end point different from the start (use I J K for a full circle)", radius_word)
-    if radius_mm == 0:
-        raise ArcError("arc radius must not be zero", radius_word)
-    r = abs(radius_mm)
-    excess = d / 2 - r
-    if excess > R_TOLERANCE_MM:
-        raise ArcError(f"radius {r:g} mm is too small for the chord of {d:.6g} mm between start and end", radius_word)
+    r = checked_r_radius(d, radius_mm, radius_word)  # the checks and their messages: shared, not the oracle's
     h = math.sqrt(max(r * r - d * d / 4, 0.0))
     left = np.array([-chord[1], chord[0]]) / d
     side = (1.0 if not clockwise else -1.0) * (1.0 if radius_mm > 0 else -1.0)
@@ -113,11 +106,7 @@ def _old_centre_from_radius(plane, start, end, radius_mm, clockwise, radius_word
 def _old_arc_nurbs(plane, start, end, centre, clockwise, full_circle_if_closed, inch=False, turns=1):
     r_start = float(np.hypot(*_old_in_plane(plane, start - centre)))
     r_end = float(np.hypot(*_old_in_plane(plane, end - centre)))
-    if r_start <= SAME_POINT_MM:
-        raise ArcError("arc radius is zero (the centre is at the start point)")
-    if not radii_agree(r_start, r_end, inch):
-        raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end "
-                       f"(LinuxCNC's tolerance: {CENTRE_TOLERANCE_MM[inch]:.4g} mm, or {CENTRE_TOLERANCE_REL:g} of the radius)")
+    check_radii(r_start, r_end, inch)
     closed = float(np.hypot(*_old_in_plane(plane, end - start))) <= SAME_POINT_MM
     if closed and not full_circle_if_closed:
         raise ArcError("arc end equals its start")

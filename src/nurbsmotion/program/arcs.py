@@ -97,19 +97,35 @@ def radii_agree(r_start: float, r_end: float, inch: bool) -> bool:
     return not (abs_err > CENTRE_TOLERANCE_CAP * tol or (rel_err > CENTRE_TOLERANCE_REL and abs_err > tol))
 
 
+def checked_r_radius(chord_mm: float, radius_mm: float, radius_word: str) -> float:
+    """|R| of an R-format arc over a chord of ``chord_mm``; ArcError (blaming ``radius_word``)
+    for a zero chord, a zero radius or a radius short of half the chord beyond R_TOLERANCE_MM."""
+    if chord_mm <= SAME_POINT_MM:
+        raise ArcError("an R arc needs an end point different from the start (use I J K for a full circle)", radius_word)
+    if radius_mm == 0:
+        raise ArcError("arc radius must not be zero", radius_word)
+    r = abs(radius_mm)
+    if chord_mm / 2 - r > R_TOLERANCE_MM:
+        raise ArcError(f"radius {r:g} mm is too small for the chord of {chord_mm:.6g} mm between start and end",
+                       radius_word)
+    return r
+
+
+def check_radii(r_start: float, r_end: float, inch: bool) -> None:
+    """ArcError for a centre at the start point or radii at start and end that disagree (radii_agree)."""
+    if r_start <= SAME_POINT_MM:
+        raise ArcError("arc radius is zero (the centre is at the start point)")
+    if not radii_agree(r_start, r_end, inch):
+        raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end "
+                       f"(LinuxCNC's tolerance: {CENTRE_TOLERANCE_MM[inch]:.4g} mm, or {CENTRE_TOLERANCE_REL:g} of the radius)")
+
+
 def centre_from_radius(plane: Plane, start: Point, end: Point, radius_mm: float,
                        clockwise: bool, radius_word: str) -> tuple[float, float, float]:
     """Centre of the R-format arc (module docstring), in the start's plane."""
     chord_a, chord_b = _in_plane(plane, start, end)
     d = _hypot(chord_a, chord_b)
-    if d <= SAME_POINT_MM:
-        raise ArcError("an R arc needs an end point different from the start (use I J K for a full circle)", radius_word)
-    if radius_mm == 0:
-        raise ArcError("arc radius must not be zero", radius_word)
-    r = abs(radius_mm)
-    excess = d / 2 - r
-    if excess > R_TOLERANCE_MM:
-        raise ArcError(f"radius {r:g} mm is too small for the chord of {d:.6g} mm between start and end", radius_word)
+    r = checked_r_radius(d, radius_mm, radius_word)
     h = math.sqrt(max(r * r - d * d / 4, 0.0))
     side = (1.0 if not clockwise else -1.0) * (1.0 if radius_mm > 0 else -1.0)
     a, b = plane.axes
@@ -130,11 +146,7 @@ def arc_nurbs(plane: Plane, start: Point, end: Point, centre: Point,
     """
     r_start = _hypot(*_in_plane(plane, centre, start))
     r_end = _hypot(*_in_plane(plane, centre, end))
-    if r_start <= SAME_POINT_MM:
-        raise ArcError("arc radius is zero (the centre is at the start point)")
-    if not radii_agree(r_start, r_end, inch):
-        raise ArcError(f"inconsistent arc radius: {r_start:.6g} mm at the start, {r_end:.6g} mm at the end "
-                       f"(LinuxCNC's tolerance: {CENTRE_TOLERANCE_MM[inch]:.4g} mm, or {CENTRE_TOLERANCE_REL:g} of the radius)")
+    check_radii(r_start, r_end, inch)
     chord = _in_plane(plane, start, end)
     closed = _hypot(*chord) <= SAME_POINT_MM
     if closed and not full_circle_if_closed:
