@@ -23,6 +23,7 @@ def setup_logging(verbosity: int = 0, stream: Any = None) -> None:
     level = logging.WARNING if verbosity <= 0 else logging.INFO if verbosity == 1 else logging.DEBUG
     handler = logging.StreamHandler(stream or sys.stderr)
     handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s %(message)s"))
+    handler.setLevel(level)  # stderr stays this quiet even where a logger is opened wider (the daemon's event stream)
     root = logging.getLogger()
     for old in list(root.handlers):
         root.removeHandler(old)
@@ -31,3 +32,37 @@ def setup_logging(verbosity: int = 0, stream: Any = None) -> None:
     # canopen and python-can are chatty at INFO; keep them at WARNING unless -vv.
     for name in ("can", "canopen"):
         logging.getLogger(name).setLevel(logging.DEBUG if verbosity >= 2 else logging.WARNING)
+
+
+def parse_kv(message: str) -> tuple[str, dict[str, str]]:
+    """The inverse of :func:`kv`: ``event key=value key2="quoted value"`` -> (event, fields).
+
+    Values come back as the text ``kv`` wrote (numbers as ``%.6g``); a token without ``=``
+    after the event is kept under its position (``_2``), so no part of a line is lost."""
+    tokens: list[str] = []
+    i, n = 0, len(message)
+    while i < n:
+        if message[i].isspace():
+            i += 1
+            continue
+        start, quoted = i, False
+        while i < n and (quoted or not message[i].isspace()):
+            if message[i] == "\\" and quoted and i + 1 < n:
+                i += 2
+                continue
+            if message[i] == '"':
+                quoted = not quoted
+            i += 1
+        tokens.append(message[start:i])
+    if not tokens:
+        return "", {}
+    fields: dict[str, str] = {}
+    for position, token in enumerate(tokens[1:], start=1):
+        key, eq, value = token.partition("=")
+        if not eq or not key:
+            fields[f"_{position}"] = token
+            continue
+        if len(value) >= 2 and value[0] == value[-1] == '"':
+            value = value[1:-1].replace('\\"', '"')
+        fields[key] = value
+    return tokens[0], fields

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, Iterator, NoReturn
 
 from nurbsmotion.errors import NurbsmotionError
 from nurbsmotion.service.protocol import encode
@@ -88,6 +88,23 @@ class Client:
         if not response.get("ok"):
             raise RequestFailed(response)
         return response
+
+    def subscribe(self, max_hz: float | None = None) -> Iterator[dict[str, Any]]:
+        """Subscribe this connection (protocol ``subscribe``): yields the answer with the full
+        status first, then every pushed line, until the daemon closes the connection.
+        RequestFailed when the daemon refuses the subscription."""
+        first = self.call("subscribe", **({} if max_hz is None else {"max_hz": max_hz}))
+        assert self._sock is not None
+        self._sock.settimeout(None)  # a quiet machine pushes nothing for a while: not a lost daemon
+        yield first
+        while True:
+            try:
+                line = self._file.readline()
+            except OSError as err:
+                self._lost(err)
+            if not line:
+                return
+            yield json.loads(line)
 
     def close(self) -> None:
         if self._file is not None:

@@ -37,6 +37,7 @@ from nurbsmotion.service.planner_worker import PlannerWorker
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
+from nurbsmotion.service.subscriptions import StatusHub, attach_event_log
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +84,8 @@ class Daemon:
         self._closing = False
         self.ownership = BusOwnership(config)
         self.planner_worker: PlannerWorker | None = None  # plans streamed jobs in its own process
+        self.hub: StatusHub | None = None  # pushes status and events to subscribed clients
+        self._detach_event_log: Callable[[], None] | None = None
 
     def start(self) -> None:
         self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
@@ -105,7 +108,9 @@ class Daemon:
             raise
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
-        self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group)
+        self.hub = StatusHub(self.controller.status)
+        self._detach_event_log = attach_event_log(self.hub)
+        self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group, hub=self.hub)
         try:
             self.server.start()
         except BaseException:
@@ -146,6 +151,7 @@ class Daemon:
         if self.server is not None:
             self.server.close()
             self.server = None
+        self._stop_hub()
         served = self.controller is not None
         self.controller = None
         self._stop_simulation()
@@ -154,7 +160,16 @@ class Daemon:
             log.info(kv("daemon_stopped"))
         self.ownership.release()
 
+    def _stop_hub(self) -> None:
+        if self._detach_event_log is not None:
+            self._detach_event_log()
+            self._detach_event_log = None
+        if self.hub is not None:
+            self.hub.close()
+            self.hub = None
+
     def _stop_motion(self) -> None:
+        self._stop_hub()
         if self.controller is not None:
             self.controller.shutdown()
             self.controller = None

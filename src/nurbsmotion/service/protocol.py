@@ -2,7 +2,8 @@
 
 Request: ``{"cmd": NAME, ...fields}``; response: ``{"ok": true, ...}`` or
 ``{"ok": false, "error": "one line naming the field"}`` (program rejections add
-``"errors": [one line per problem]``). Requests longer than :data:`MAX_REQUEST_BYTES` are
+``"errors": [one line per problem]``). After ``subscribe`` the connection only pushes
+``{"notify": ...}`` lines (service.subscriptions) until the client closes it. Requests longer than :data:`MAX_REQUEST_BYTES` are
 refused. This module is pure: it turns bytes into checked :class:`Request` records and
 records into bytes; the server and the client both use it.
 """
@@ -38,6 +39,8 @@ COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
             "direction": ("string", False), "speed": ("number", False)},
     "jog_renew": {},
     "jog_stop": {},
+    # the connection then carries pushed status changes and events (service.subscriptions)
+    "subscribe": {"max_hz": ("number", False)},
 }
 
 

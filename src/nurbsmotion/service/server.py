@@ -2,7 +2,9 @@
 
 Each line a client sends is one request (see protocol); each gets one response line.
 A malformed, oversized or refused request gets an error line and the daemon keeps serving;
-a client that disappears mid-request only ends its own thread.
+a client that disappears mid-request only ends its own thread. A ``subscribe`` request turns
+its connection into a push stream (service.subscriptions) served by that client's thread
+from its own queue, so a slow subscriber delays nobody.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.service import access
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, Request, encode, error_response, parse_request
+from nurbsmotion.service.subscriptions import DEFAULT_MAX_HZ, MAX_HZ_RANGE, StatusHub, Subscription
 
 log = logging.getLogger(__name__)
 
@@ -31,9 +34,12 @@ class ControlServer:
     """Serves ``handler`` on the Unix socket ``path`` until :meth:`close`."""
 
     def __init__(self, path: str | Path, handler: Handler, control_group: str | None = None,
-                 max_clients: int = 16, idle_timeout_s: float = 600.0) -> None:
+                 max_clients: int = 48, idle_timeout_s: float = 600.0, hub: StatusHub | None = None,
+                 max_subscribers: int = 32) -> None:
         self.path = Path(path)
         self.handler = handler
+        self.hub = hub
+        self._subscriber_slots = threading.BoundedSemaphore(max_subscribers)
         self.control_group = control_group
         try:
             self.control_gid = access.group_id(control_group)
@@ -141,8 +147,11 @@ class ControlServer:
                 return
             conn.settimeout(self.idle_timeout_s)
             for line in _request_lines(conn):
-                response = self._respond(line) if line is not None else \
-                    error_response(f"request: longer than the {MAX_REQUEST_BYTES // (1024 * 1024)} MB limit")
+                request = self._parse(line)
+                if isinstance(request, Request) and request.cmd == "subscribe":
+                    self._serve_subscription(conn, request)
+                    return
+                response = self.handle(request) if isinstance(request, Request) else request
                 if not self._send(conn, response):
                     return
         except OSError:
@@ -153,11 +162,18 @@ class ControlServer:
             conn.close()
             self._slots.release()
 
-    def _respond(self, line: bytes) -> dict[str, Any]:
+    @staticmethod
+    def _parse(line: bytes | None) -> Request | dict[str, Any]:
+        """The checked request, or the error response for a line that is not one."""
+        if line is None:
+            return error_response(f"request: longer than the {MAX_REQUEST_BYTES // (1024 * 1024)} MB limit")
         try:
-            request = parse_request(line)
+            return parse_request(line)
         except ProtocolError as err:
             return error_response(str(err))
+
+    def handle(self, request: Request) -> dict[str, Any]:
+        """The handler's response; an InputError or a bug becomes an error line."""
         try:
             return self.handler(request)
         except InputError as err:
@@ -166,6 +182,50 @@ class ControlServer:
             log.exception("control request %s failed", request.cmd)
             return error_response(f"internal error: {type(err).__name__}: {err}")
 
+    # ------------------------------------------------------------------ subscribers
+    def _serve_subscription(self, conn: socket.socket, request: Request) -> None:
+        """Answer with the full status, then push this client's lines until it closes, the
+        daemon stops, or it falls too far behind."""
+        refusal = self._subscription_refusal(request)
+        if refusal is not None:
+            self._send(conn, refusal)
+            return
+        assert self.hub is not None
+        max_hz = float(request.fields.get("max_hz", DEFAULT_MAX_HZ))
+        try:
+            try:
+                sub, status = self.hub.subscribe(max_hz)
+            except InputError as err:  # the status read refused (as a status request would be)
+                self._send(conn, error_response(str(err).splitlines()[0]))
+                return
+            try:
+                if self._send(conn, {"ok": True, "subscribed": True, "max_hz": max_hz, "status": status}):
+                    self._push(conn, sub)
+            finally:
+                self.hub.unsubscribe(sub)
+        finally:
+            self._subscriber_slots.release()
+
+    def _subscription_refusal(self, request: Request) -> dict[str, Any] | None:
+        if self.hub is None:
+            return error_response("subscribe: this daemon does not push status")
+        max_hz = float(request.fields.get("max_hz", DEFAULT_MAX_HZ))
+        low, high = MAX_HZ_RANGE
+        if not low <= max_hz <= high:
+            return error_response(f"field 'max_hz': must be within {low:g}-{high:g} status lines a second, got {max_hz:g}")
+        if not self._subscriber_slots.acquire(blocking=False):
+            return error_response("busy: too many subscribed clients")
+        return None
+
+    def _push(self, conn: socket.socket, sub: Subscription) -> None:
+        conn.setblocking(True)
+        while not self._stopping.is_set():
+            lines = sub.take(0.2)
+            if lines and not _send_lines(conn, lines):
+                return
+            if sub.dropped is not None or _peer_closed(conn):
+                return
+
     @staticmethod
     def _send(conn: socket.socket, response: dict[str, Any]) -> bool:
         try:
@@ -173,6 +233,25 @@ class ControlServer:
             return True
         except OSError:
             return False
+
+
+def _send_lines(conn: socket.socket, lines: list[bytes]) -> bool:
+    try:
+        conn.sendall(b"".join(lines))
+        return True
+    except OSError:
+        return False
+
+
+def _peer_closed(conn: socket.socket) -> bool:
+    """The subscriber hung up (EOF); anything it sends after subscribing is ignored."""
+    try:
+        data = conn.recv(4096, socket.MSG_DONTWAIT)
+    except (BlockingIOError, InterruptedError):
+        return False
+    except OSError:
+        return True
+    return not data
 
 
 def _request_lines(conn: socket.socket) -> Iterator[bytes | None]:

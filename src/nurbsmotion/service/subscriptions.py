@@ -1,0 +1,250 @@
+"""Status and events pushed to subscribed clients (Moonraker's ``notify_status_update``).
+
+After ``{"cmd": "subscribe"}`` a control connection receives, one JSON line each:
+
+- ``{"notify": "status", "seq": n, "t": epoch_s, "changes": {...}}``: only the status fields
+  that changed since the last status line this client got (nested objects by key; a list,
+  such as ``axes``, whole when any element changed), at most ``max_hz`` lines a second;
+- ``{"notify": "event", "seq": n, "t": epoch_s, "event": NAME, "level": "INFO",
+  "fields": {...}, "line": "..."}``: every daemon log line at INFO or above (job_started,
+  job_ended with outcome and line reached, fault with node, kind, EMCY code and text,
+  homing_done, override_changed, faults_reset, ...), as soon as it is logged;
+- ``{"notify": "dropped", "error": "..."}`` before the daemon closes a client that fell
+  too far behind (it never blocks the daemon: each client has its own bounded queue).
+
+One publisher thread (normal priority) reads the controller's status for all subscribers at
+the fastest rate any of them asked for, and only while someone is subscribed; a logged event
+wakes it at once, so a state change reaches clients with the event, not a period later. The
+cycle thread pays one ``deque.append`` and ``Event.set`` per log line it writes (faults), and
+the status read takes the controller's lock as a ``status`` request does.
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from nurbsmotion.log import parse_kv
+from nurbsmotion.service.protocol import encode
+
+DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
+MAX_HZ_RANGE = (0.5, 100.0)
+MAX_PENDING_LINES = 2000  # a client this far behind is dropped (events queue; status lines merge)
+Status = dict[str, Any]
+
+
+def status_changes(old: Status | None, new: Status) -> Status:
+    """The fields of ``new`` that differ from ``old``: nested dicts by key, anything else whole.
+    A key that disappeared is reported as None."""
+    if old is None:
+        return dict(new)
+    changes: Status = {}
+    for key, value in new.items():
+        before = old.get(key, _MISSING)
+        if isinstance(value, dict) and isinstance(before, dict):
+            inner = status_changes(before, value)
+            if inner:
+                changes[key] = inner
+        elif before is _MISSING or before != value:
+            changes[key] = value
+    for key in old.keys() - new.keys():
+        changes[key] = None
+    return changes
+
+
+def merge_changes(older: Status, newer: Status) -> Status:
+    """Two successive change sets as one (newer wins; nested dicts merged by key)."""
+    merged = dict(older)
+    for key, value in newer.items():
+        before = merged.get(key)
+        merged[key] = merge_changes(before, value) if isinstance(value, dict) and isinstance(before, dict) else value
+    return merged
+
+
+_MISSING = object()
+
+
+@dataclass
+class Subscription:
+    """One client's queue: encoded lines waiting to be sent, and status changes not yet due."""
+
+    period_s: float
+    lines: collections.deque[bytes] = field(default_factory=collections.deque)
+    pending: Status = field(default_factory=dict)
+    next_status_s: float = 0.0
+    dropped: str | None = None
+    seq: int = 0
+    wake: threading.Condition = field(default_factory=threading.Condition)
+
+    def put(self, body: bytes) -> None:
+        """Queue one line: ``body`` is an encoded JSON object, shared by every subscriber;
+        this connection's ``seq`` goes in front."""
+        with self.wake:
+            if self.dropped is not None:
+                return
+            self.seq += 1
+            self.lines.append(b'{"seq":%d,' % self.seq + body[1:])
+            if len(self.lines) > MAX_PENDING_LINES:
+                self.lines.clear()
+                self.dropped = f"client too slow: more than {MAX_PENDING_LINES} lines behind"
+                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
+            self.wake.notify()
+
+    def take(self, timeout_s: float) -> list[bytes]:
+        """The lines waiting now (after at most ``timeout_s``); empty when none came."""
+        with self.wake:
+            if not self.lines:
+                self.wake.wait(timeout_s)
+            lines = list(self.lines)
+            self.lines.clear()
+            return lines
+
+
+class StatusHub:
+    """Samples ``read_status`` for the subscribers and fans out status changes and events."""
+
+    def __init__(self, read_status: Callable[[], Status], clock: Callable[[], float] = time.monotonic,
+                 wall_clock: Callable[[], float] = time.time) -> None:
+        self._read_status = read_status
+        self._clock = clock
+        self._wall = wall_clock
+        self._subscribers: list[Subscription] = []
+        self._last: Status | None = None
+        self._events: collections.deque[dict[str, Any]] = collections.deque(maxlen=MAX_PENDING_LINES)
+        self._lock = threading.Lock()
+        self._wake = threading.Event()
+        self._stopping = False
+        self._thread: threading.Thread | None = None
+
+    # ------------------------------------------------------------------ clients
+    def subscribe(self, max_hz: float = DEFAULT_MAX_HZ) -> tuple[Subscription, Status]:
+        """A new subscription and the full status it starts from."""
+        status = self._read_status()
+        sub = Subscription(period_s=1.0 / max_hz)
+        with self._lock:
+            self._subscribers.append(sub)
+            if self._last is None:
+                self._last = status
+            sub.pending = status_changes(self._last, status)  # what moved since the shared sample
+            sub.next_status_s = self._clock() + sub.period_s
+            self._ensure_thread()
+        self._wake.set()
+        return sub, status
+
+    def unsubscribe(self, sub: Subscription) -> None:
+        with self._lock:
+            if sub in self._subscribers:
+                self._subscribers.remove(sub)
+            if not self._subscribers:
+                self._last = None  # the next subscriber starts from a fresh sample
+
+    @property
+    def subscribers(self) -> int:
+        with self._lock:
+            return len(self._subscribers)
+
+    def publish_event(self, event: dict[str, Any]) -> None:
+        """Queue an event for every subscriber (any thread; never blocks)."""
+        if not self._subscribers:
+            return
+        self._events.append(event)
+        self._wake.set()
+
+    def close(self) -> None:
+        self._stopping = True
+        self._wake.set()
+        if self._thread is not None:
+            self._thread.join(2.0)
+            self._thread = None
+
+    # ------------------------------------------------------------------ publisher
+    def _ensure_thread(self) -> None:
+        if self._thread is None or not self._thread.is_alive():
+            self._thread = threading.Thread(target=self._run, name="status-publisher", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stopping:
+            with self._lock:
+                subscribers = list(self._subscribers)
+            if not subscribers:
+                self._wake.wait(1.0)
+                self._wake.clear()
+                continue
+            now = self._clock()
+            wait_s = min(max(s.next_status_s - now, 0.0) for s in subscribers)
+            if wait_s > 0 and not self._events:
+                self._wake.wait(wait_s)
+            self._wake.clear()
+            self.publish_once()
+
+    def publish_once(self) -> None:
+        """Send queued events, then the status changes of every subscriber that is due (or
+        that an event just woke). The publisher thread's step; tests call it directly."""
+        with self._lock:
+            subscribers = list(self._subscribers)
+        if not subscribers:
+            return
+        events = []
+        while self._events:
+            events.append(self._events.popleft())
+        stamp = self._wall()
+        for event in events:
+            body = encode({"notify": "event", "t": stamp, **event})
+            for sub in subscribers:
+                sub.put(body)
+        status = self._read_status()
+        with self._lock:
+            changes = status_changes(self._last, status)
+            self._last = status
+        now = self._clock()
+        encoded: dict[int, bytes] = {}  # subscribers at one rate share their pending changes: encode once
+        for sub in subscribers:
+            if changes:
+                sub.pending = merge_changes(sub.pending, changes) if sub.pending else changes
+            if sub.pending and (now >= sub.next_status_s or events):
+                key = id(sub.pending)
+                if key not in encoded:
+                    encoded[key] = encode({"notify": "status", "t": stamp, "changes": sub.pending})
+                sub.put(encoded[key])
+                sub.pending = {}
+                sub.next_status_s = now + sub.period_s
+
+
+class EventLogHandler(logging.Handler):
+    """Every record of the ``nurbsmotion`` loggers at INFO or above becomes a hub event."""
+
+    def __init__(self, hub: StatusHub) -> None:
+        super().__init__(logging.INFO)
+        self.hub = hub
+
+    def emit(self, record: logging.LogRecord) -> None:
+        try:
+            line = record.getMessage()
+            name, fields = parse_kv(line)
+            self.hub.publish_event({"event": name, "level": record.levelname, "logger": record.name,
+                                    "fields": fields, "line": line, "logged_t": record.created})
+        except Exception:  # noqa: BLE001 - logging must never raise into the caller
+            self.handleError(record)
+
+
+def attach_event_log(hub: StatusHub, logger_name: str = "nurbsmotion") -> Callable[[], None]:
+    """Route the package's INFO+ log records to ``hub``; returns the function that detaches it.
+    The package logger is set to INFO if it would drop INFO records (events must not depend
+    on how verbose the daemon's stderr is)."""
+    logger = logging.getLogger(logger_name)
+    handler = EventLogHandler(hub)
+    previous_level = logger.level
+    if not logger.isEnabledFor(logging.INFO):
+        logger.setLevel(logging.INFO)
+    logger.addHandler(handler)
+
+    def detach() -> None:
+        logger.removeHandler(handler)
+        logger.setLevel(previous_level)
+
+    return detach

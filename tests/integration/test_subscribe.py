@@ -1,0 +1,89 @@
+"""Subscribed clients of a real daemon (simulated drives, Unix socket): the full status first,
+then only changes, and the job's events, for ten clients at once; a fault reaches them with
+its node; a client that hangs up ends only its own connection."""
+
+from __future__ import annotations
+
+import socket
+import threading
+from typing import Any
+
+from nurbsmotion.service.client import Client
+from tests.integration.daemon_helpers import daemon_in_process, wait_until
+
+PROGRAM = "G21 G90\nG01 X5 Y2 F3000\nG01 X0 Y0\n"
+
+
+class Listener:
+    """One subscribed connection read by its own thread until the daemon closes it."""
+
+    def __init__(self, socket_path: Any, max_hz: float | None = None) -> None:
+        self.client = Client(socket_path)
+        self.lines: list[dict[str, Any]] = []
+        self.stream = self.client.subscribe(max_hz)
+        self.first = next(self.stream)
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        for line in self.stream:
+            self.lines.append(line)
+
+    def hang_up(self) -> None:
+        """End the connection from this side, as a client that goes away does."""
+        assert self.client._sock is not None
+        self.client._sock.shutdown(socket.SHUT_RDWR)
+        self.thread.join(5.0)
+        self.client.close()
+
+    def events(self, name: str) -> list[dict[str, Any]]:
+        return [line for line in list(self.lines) if line.get("notify") == "event" and line["event"] == name]
+
+    def states(self) -> list[str]:
+        return [line["changes"]["state"] for line in list(self.lines)
+                if line.get("notify") == "status" and "state" in line["changes"]]
+
+
+def test_ten_subscribers_see_the_job_start_and_end_and_its_state_changes(tmp_path):
+    with daemon_in_process(tmp_path / "data", "", "sub") as daemon:
+        listeners = [Listener(daemon.config.control.socket) for _ in range(10)]
+        for listener in listeners:
+            assert listener.first["ok"] and listener.first["subscribed"]
+            assert listener.first["status"]["state"] == "idle" and len(listener.first["status"]["axes"]) == 3
+        with Client(daemon.config.control.socket) as client:
+            job = client.call("submit", name="sq.nc", program=PROGRAM)["job"]["id"]
+        for listener in listeners:
+            wait_until(lambda: listener.events("job_ended"), 30.0, "job_ended pushed to every subscriber")
+        for listener in listeners:
+            [started] = listener.events("job_started")
+            [ended] = listener.events("job_ended")
+            assert started["fields"]["job"] == job and started["fields"]["name"] == "sq.nc"
+            assert ended["fields"]["job"] == job and ended["fields"]["outcome"] == "completed"
+            assert "running" in listener.states()
+            seqs = [line["seq"] for line in listener.lines]
+            assert seqs == list(range(1, len(seqs) + 1))  # nothing lost, in order
+            positions = [line["changes"]["axes"] for line in listener.lines
+                         if line.get("notify") == "status" and "axes" in line["changes"]]
+            assert positions and positions[-1][0]["commanded_mm"] == 0.0
+        wait_until(lambda: all(listener.states()[-1:] == ["idle"] for listener in listeners), 10.0,
+                   "the idle state pushed after the job")
+        assert daemon.hub.subscribers == 10
+        for listener in listeners:
+            listener.hang_up()
+        wait_until(lambda: daemon.hub.subscribers == 0, 10.0, "hung-up subscribers removed")
+        with Client(daemon.config.control.socket) as client:
+            assert client.call("status")["state"] == "idle"  # the daemon serves on
+
+
+def test_a_fault_is_pushed_with_its_node_and_the_status_says_fault(tmp_path):
+    with daemon_in_process(tmp_path / "data", "", "subf") as daemon:
+        listener = Listener(daemon.config.control.socket, max_hz=5.0)
+        with Client(daemon.config.control.socket) as client:
+            client.call("submit", name="long.nc", program="G21 G90\nG01 X60 F1200\n")
+            wait_until(lambda: "running" in listener.states(), 20.0, "the job running")
+            client.call("inject_fault", spec="node=2,kind=fault,code=0x2310")
+            wait_until(lambda: listener.events("fault"), 20.0, "the fault pushed")
+            [fault, *_] = listener.events("fault")
+            assert fault["fields"]["node"] == "2" and fault["level"] == "WARNING"
+            wait_until(lambda: "fault" in listener.states(), 20.0, "state fault pushed")
+        listener.hang_up()

@@ -1,0 +1,156 @@
+"""Pushed status and events (service.subscriptions): the diffs, the rate limit, slow clients,
+the log records as events; the daemon's socket end to end in tests/integration/test_subscribe.py."""
+
+from __future__ import annotations
+
+import json
+import logging
+
+import pytest
+
+from nurbsmotion.log import kv, parse_kv
+from nurbsmotion.service.subscriptions import (MAX_PENDING_LINES, StatusHub, attach_event_log, merge_changes,
+                                               status_changes)
+
+
+class FakeClock:
+    def __init__(self) -> None:
+        self.now = 100.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+class FakeStatus:
+    def __init__(self) -> None:
+        self.value = {"state": "idle", "axes": [{"name": "X", "actual_mm": 0.0}], "override": {"requested_percent": 100.0}}
+        self.reads = 0
+
+    def __call__(self) -> dict:
+        self.reads += 1
+        return json.loads(json.dumps(self.value))  # a fresh object each read, as the controller's
+
+
+def lines(sub) -> list[dict]:
+    return [json.loads(line) for line in sub.take(0.0)]
+
+
+def test_status_changes_names_only_what_changed_nested_by_key_and_lists_whole():
+    old = {"state": "idle", "job": None, "override": {"requested_percent": 100.0, "effective_percent": 100.0},
+           "axes": [{"name": "X", "actual_mm": 0.0}, {"name": "Y", "actual_mm": 0.0}], "gone": 1}
+    new = {"state": "running", "job": {"id": "a"}, "override": {"requested_percent": 100.0, "effective_percent": 80.0},
+           "axes": [{"name": "X", "actual_mm": 0.5}, {"name": "Y", "actual_mm": 0.0}]}
+    assert status_changes(old, new) == {"state": "running", "job": {"id": "a"}, "override": {"effective_percent": 80.0},
+                                        "axes": new["axes"], "gone": None}
+    assert status_changes(new, new) == {}
+    assert status_changes(None, new) == new
+
+
+def test_merged_changes_keep_the_newest_value_of_each_field():
+    assert merge_changes({"state": "running", "override": {"a": 1, "b": 2}}, {"override": {"b": 3}, "job": None}) == \
+        {"state": "running", "override": {"a": 1, "b": 3}, "job": None}
+
+
+def test_kv_lines_read_back_as_the_event_and_its_fields():
+    line = kv("job_ended", job="a1", outcome="fault", line="x.nc:3", reason='drive "2" lost', t=1.5, empty="")
+    assert parse_kv(line) == ("job_ended", {"job": "a1", "outcome": "fault", "line": "x.nc:3",
+                                            "reason": 'drive "2" lost', "t": "1.5", "empty": ""})
+    assert parse_kv("free text here") == ("free", {"_1": "text", "_2": "here"})
+    assert parse_kv("") == ("", {})
+
+
+def test_a_subscriber_gets_the_full_status_then_only_changes_at_its_rate():
+    status, clock = FakeStatus(), FakeClock()
+    hub = StatusHub(status, clock=clock, wall_clock=lambda: 5.0)
+    sub, first = hub.subscribe(max_hz=10.0)
+    assert first["state"] == "idle"
+    hub.publish_once()
+    assert lines(sub) == []  # nothing changed
+    status.value["axes"][0]["actual_mm"] = 1.0
+    hub.publish_once()
+    assert lines(sub) == []  # changed, but its 0.1 s have not passed: merged, not sent
+    status.value["axes"][0]["actual_mm"] = 2.0
+    clock.now += 0.1
+    hub.publish_once()
+    [line] = lines(sub)
+    assert line["notify"] == "status" and line["changes"] == {"axes": [{"name": "X", "actual_mm": 2.0}]}
+    assert line["seq"] == 1 and line["t"] == 5.0
+
+
+def test_an_event_is_pushed_at_once_with_the_status_it_changed():
+    status, clock = FakeStatus(), FakeClock()
+    hub = StatusHub(status, clock=clock)
+    sub, _ = hub.subscribe(max_hz=1.0)
+    status.value["state"] = "running"
+    hub.publish_event({"event": "job_started", "fields": {"job": "j1"}})
+    hub.publish_once()  # well within the 1 s rate: the event brings its status along
+    event, change = lines(sub)
+    assert (event["notify"], event["event"], event["fields"]) == ("event", "job_started", {"job": "j1"})
+    assert (change["notify"], change["changes"]) == ("status", {"state": "running"})
+    assert (event["seq"], change["seq"]) == (1, 2)
+
+
+def test_every_subscriber_gets_every_event_and_the_status_is_read_once_for_all():
+    status = FakeStatus()
+    hub = StatusHub(status, clock=FakeClock())
+    subs = [hub.subscribe()[0] for _ in range(10)]
+    reads = status.reads
+    hub.publish_event({"event": "fault", "fields": {"node": "2"}})
+    hub.publish_once()
+    assert status.reads == reads + 1
+    for sub in subs:
+        assert [line["event"] for line in lines(sub) if line["notify"] == "event"] == ["fault"]
+
+
+def test_a_client_that_falls_behind_is_dropped_with_a_reason_and_the_others_go_on():
+    hub = StatusHub(FakeStatus(), clock=FakeClock())
+    slow, _ = hub.subscribe()
+    fast, _ = hub.subscribe()
+    for i in range(MAX_PENDING_LINES + 1):
+        hub.publish_event({"event": "tick", "fields": {"i": str(i)}})
+        hub.publish_once()
+        lines(fast)  # the fast one reads as it goes
+    assert slow.dropped and "too slow" in slow.dropped
+    [last] = lines(slow)
+    assert last["notify"] == "dropped" and "too slow" in last["error"]
+    assert fast.dropped is None
+
+
+def test_no_subscriber_no_status_read_and_no_queued_event():
+    status = FakeStatus()
+    hub = StatusHub(status, clock=FakeClock())
+    sub, _ = hub.subscribe()
+    hub.unsubscribe(sub)
+    reads = status.reads
+    hub.publish_event({"event": "ignored"})
+    hub.publish_once()
+    assert status.reads == reads and not sub.take(0.0)
+
+
+def test_package_log_records_at_info_become_events_and_stderr_stays_as_quiet(capsys):
+    hub = StatusHub(FakeStatus(), clock=FakeClock())
+    sub, _ = hub.subscribe()
+    logger = logging.getLogger("nurbsmotion.service.test_events")
+    detach = attach_event_log(hub)
+    try:
+        logger.info(kv("job_started", job="j7", name="part.nc"))
+        logger.debug(kv("not_an_event"))
+        hub.publish_once()
+    finally:
+        detach()
+    [event] = [line for line in lines(sub) if line["notify"] == "event"]
+    assert event["event"] == "job_started" and event["fields"] == {"job": "j7", "name": "part.nc"}
+    assert event["level"] == "INFO" and event["line"].startswith("job_started job=j7")
+    logger.info(kv("after_detach"))
+    hub.publish_once()
+    assert not [line for line in lines(sub) if line["notify"] == "event"]
+
+
+@pytest.mark.parametrize("bad", [0.1, 1000.0])
+def test_max_hz_outside_its_range_is_refused_by_the_server(bad, tmp_path):
+    from nurbsmotion.service.protocol import Request
+    from nurbsmotion.service.server import ControlServer
+
+    server = ControlServer(tmp_path / "s.sock", lambda r: {"ok": True}, hub=StatusHub(FakeStatus()))
+    refusal = server._subscription_refusal(Request("subscribe", {"max_hz": bad}))
+    assert refusal is not None and "max_hz" in refusal["error"]
