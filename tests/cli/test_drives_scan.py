@@ -133,3 +133,28 @@ def test_check_live_names_each_mismatch_and_exits_1(tmp_path, channel, capsys):
         f"nurbsmotion drives: error: {path}:4: axes[1] (Z, node 3): the node reports vendor 0x00000000 product "
         "0x4E4D0402, identity says vendor 0x000000FB product 0x65520000"]
     assert "warning: node 7 (CiA 402 drive, servo drive) is on the bus but not in the configuration" in captured.out
+
+
+def test_check_live_covers_the_spindle_and_the_io_node(tmp_path, channel, capsys):
+    path = tmp_path / "mill.yaml"
+    path.write_text(f"""\
+bus: {{interface: virtual, channel: {channel}}}
+axes:
+  - {{name: X, node_id: 1}}
+spindle: {{node_id: 5, mode: csv, counts_per_rev: 4096, max_rpm: 6000, accel_rpm_s: 2000}}
+io: {{node_id: 10, inputs: {{estop: {{bit: 0, active_low: true}}}}}}
+""")
+    with SimNetwork.for_machine(load_config(path)):
+        assert main(["drives", "check", "--config", str(path), "--live", *FAST]) == 0
+    out = capsys.readouterr().out
+    assert f"live    {path}:4: spindle (node 5): OK" in out
+    assert f"live    {path}:5: io (node 10): OK" in out
+
+
+def test_without_an_eds_folder_the_written_configuration_asks_for_the_eds(tmp_path, channel, capsys):
+    out = tmp_path / "machine.yaml"
+    with SimNetwork(interface="virtual", channel=channel) as sim:
+        sim.add_drive(1)
+        assert main(["drives", "scan", "--interface", "virtual", "--channel", channel, *FAST,
+                     "--write-config", str(out)]) == 0
+    assert "    eds: FILL_IN   # the drive's EDS/DCF file (no --eds-dir given)" in out.read_text().splitlines()

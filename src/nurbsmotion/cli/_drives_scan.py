@@ -104,7 +104,8 @@ def run_scan(args: argparse.Namespace) -> int:
     for report in result.reports:
         for problem in report.problems:
             print(f"node {report.node_id}: {problem}")
-    matches = {r.node_id: eds_catalog.match(r.identity, catalog) for r in result.reports if r.answered_sdo}
+    matches = {r.node_id: eds_catalog.match(r.identity, catalog) for r in result.reports
+               if r.answered_sdo and args.eds_dir}
     if args.eds_dir:
         for node_id, found in matches.items():
             if found.entry is None:

@@ -88,10 +88,10 @@ def expected_nodes(config: MachineConfig, plans: list[DrivePlan]) -> list[Expect
             tuple(PdoNeed(f.kind, f.number, len(f.fields)) for f in frames)))
     spindle = config.spindle
     if spindle is not None and not isinstance(spindle, str):
-        out.append(ExpectedNode(spindle.node_id, f"{config.where('spindle')} (spindle, node {spindle.node_id})",
+        out.append(ExpectedNode(spindle.node_id, f"{config.where('spindle')} (node {spindle.node_id})",
                                 PROFILE_DRIVE, mode_bit=SPINDLE_MODE_BITS.get(spindle.mode.number)))
     if config.io is not None:
-        out.append(ExpectedNode(config.io.node_id, f"{config.where('io')} (io, node {config.io.node_id})", PROFILE_IO))
+        out.append(ExpectedNode(config.io.node_id, f"{config.where('io')} (node {config.io.node_id})", PROFILE_IO))
     return out
 
 
