@@ -14,9 +14,10 @@ import canopen
 import pytest
 
 from nurbsmotion import cia402 as c
+from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import eds_catalog
 from nurbsmotion.fieldbus.scan import VENDOR_NAMES, DeviceType, Identity, NodeReport, ScanSettings, SdoAnswer, \
-    nmt_state_name, open_network, parse_upload_answer, scan_network, supported_modes, upload_request
+    nmt_state_name, open_network, parse_upload_answer, read_node, scan_network, supported_modes, upload_request
 from nurbsmotion.sim import SimNetwork
 from tests.fieldbus.fake_nodes import ABORT_HARDWARE, FakeNode, drive_objects
 
@@ -181,3 +182,31 @@ def test_nodes_that_answer_partly_or_not_at_all(channel, bus_side):
 
 def test_an_empty_bus_finds_nothing(channel):
     assert scan(channel, ScanSettings(listen_s=0.05, sdo_timeout_s=0.05)) == []
+
+
+def test_a_request_that_cannot_be_sent_ends_the_nodes_reads_with_one_line(channel, monkeypatch):
+    network = open_network("virtual", channel, 1_000_000)
+
+    def bus_off(can_id, data, remote=False):
+        raise can.CanOperationError("Transmit buffer full")
+
+    monkeypatch.setattr(network, "send_message", bus_off)
+    try:
+        report = read_node(network, 5, FAST, SdoAnswer(data=(0x00020192).to_bytes(4, "little")))
+    finally:
+        network.disconnect()
+    assert report.device_type == DeviceType(0x00020192) and report.identity is None
+    assert report.problems == ("0x1018:01 (vendor id): cannot send the request (Transmit buffer full); later "
+                               "objects not read",)
+
+
+def test_a_transmit_queue_that_stays_full_is_one_line(channel, monkeypatch):
+    network = open_network("virtual", channel, 1_000_000)
+    monkeypatch.setattr(network, "send_message", lambda *a, **k: (_ for _ in ()).throw(can.CanOperationError("full")))
+    try:
+        with pytest.raises(FieldbusError) as caught:
+            scan_network(network, ScanSettings(listen_s=0.01, sdo_timeout_s=0.01, send_retry_s=0.0, send_attempts=3))
+    finally:
+        network.disconnect()
+    assert str(caught.value) == ("cannot send the SDO request 0x601 after 3 attempts (full): is the interface up, "
+                                 "the bitrate right and a node acknowledging frames?")

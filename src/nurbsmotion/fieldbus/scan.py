@@ -28,6 +28,7 @@ from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
 from nurbsmotion import cia402 as c
+from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)
@@ -284,14 +285,17 @@ def probe_device_types(network: canopen.Network, node_ids: Iterable[int], settin
 
 
 def _send(network: canopen.Network, can_id: int, data: bytes, settings: ScanSettings) -> None:
-    """Send one frame; a full transmit queue is waited out (real can0 queues only 10 frames)."""
+    """Send one frame; a full transmit queue is waited out (real can0 queues only 10 frames).
+    FieldbusError (one line) when it stays full: a bus-off or down interface."""
     for attempt in range(settings.send_attempts):
         try:
             network.send_message(can_id, data)
             return
-        except can.CanError:
+        except can.CanError as err:
             if attempt == settings.send_attempts - 1:
-                raise
+                raise FieldbusError(f"cannot send the SDO request 0x{can_id:03X} after {settings.send_attempts} "
+                                    f"attempts ({' '.join(str(err).split())}): is the interface up, the bitrate "
+                                    "right and a node acknowledging frames?") from None
             time.sleep(settings.send_retry_s)
 
 
@@ -324,6 +328,10 @@ class SdoReader:
             self.silent = True
             self.problems.append(f"0x{index:04X}:{subindex:02X} ({what}): no SDO answer ({err}); "
                                  "later objects not read")
+        except can.CanError as err:  # the request could not be sent (bus-off, transmit queue full)
+            self.silent = True
+            self.problems.append(f"0x{index:04X}:{subindex:02X} ({what}): cannot send the request "
+                                 f"({' '.join(str(err).split())}); later objects not read")
         return None
 
     def u32(self, index: int, subindex: int, what: str, optional: bool = False) -> int | None:
@@ -391,10 +399,15 @@ def scan_network(network: canopen.Network, settings: ScanSettings = ScanSettings
         reports: dict[int, NodeReport] = {}
 
         def read(node_id: int) -> None:
-            if node_id in probes:
-                reports[node_id] = read_node(network, node_id, settings, probes[node_id])
-            else:  # heard, but silent to the probe: not asked again
-                reports[node_id] = NodeReport(node_id)
+            try:
+                if node_id in probes:
+                    reports[node_id] = read_node(network, node_id, settings, probes[node_id])
+                else:  # heard, but silent to the probe: not asked again
+                    reports[node_id] = NodeReport(node_id)
+            except Exception as err:  # noqa: BLE001 - listed with the reason, never dropped
+                log.debug("scan read failed", exc_info=True)
+                reports[node_id] = NodeReport(node_id, answered_sdo=node_id in probes,
+                                              problems=(f"reading failed: {type(err).__name__}: {err}",))
 
         threads = [threading.Thread(target=read, args=(node_id,), name=f"scan-{node_id}") for node_id in found]
         for thread in threads:
