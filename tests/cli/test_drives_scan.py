@@ -158,3 +158,12 @@ def test_without_an_eds_folder_the_written_configuration_asks_for_the_eds(tmp_pa
         assert main(["drives", "scan", "--interface", "virtual", "--channel", channel, *FAST,
                      "--write-config", str(out)]) == 0
     assert "    eds: FILL_IN   # the drive's EDS/DCF file (no --eds-dir given)" in out.read_text().splitlines()
+
+
+def test_check_live_refuses_a_simulated_machine_with_one_line(tmp_path, capsys):
+    path = tmp_path / "sim.yaml"
+    path.write_text("axes: [{name: X, node_id: 1}]\nsimulate: true\n")
+    assert main(["drives", "check", "--config", str(path), "--live"]) == EXIT_BAD_INPUT
+    assert capsys.readouterr().err.splitlines() == [
+        f"nurbsmotion drives: error: {path}:2: simulate: true: the drives run inside the daemon, there is no bus to "
+        "check (--live is for real drives, or `nurbsmotion sim`'s)"]

@@ -137,6 +137,9 @@ def _write_config(out_path: Path, reports: list[NodeReport], matches: dict[int, 
 def run_live_check(args: argparse.Namespace, config: MachineConfig, plans: list[DrivePlan]) -> int:
     """Compare the configuration's bus with the configuration (fieldbus/live_check.py)."""
     bus = config.bus
+    if config.simulate:
+        raise InputError(config.where("simulate"), "true: the drives run inside the daemon, there is no bus to "
+                                                   "check (--live is for real drives, or `nurbsmotion sim`'s)")
     settings = _settings(args, args.sdo_timeout_ms or bus.sdo_timeout_ms)
     expected = live_check.expected_nodes(config, plans)
     network = _open(bus.interface, bus.channel, bus.bitrate, config.where("bus.channel"))
