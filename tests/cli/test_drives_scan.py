@@ -50,6 +50,7 @@ def test_scan_lists_matches_and_writes_a_configuration_that_loads_once_filled_in
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].split()[:4] == ["node", "NMT", "device", "type"]
     assert lines[1].split()[:5] == ["1", "PRE-OPERATIONAL", "0x00020192", "CiA", "402"]
+    assert re.search(r"  \d+ ms +answers SDO$", lines[1])  # the packaged EDS's heartbeat (0x1017 = 100 ms)
     assert "0x000000FB maxon motor ag  0x65520000  0x01700000  EPOS4" in lines[2]
     assert lines[3].split()[0] == "10" and "0x00030191 CiA 401 I/O, digital in + digital out" in lines[3]
     assert f"node 1: EDS {eds_dir / SERVO.name} (nurbsmotion servo)" in lines

@@ -17,7 +17,8 @@ from nurbsmotion.fieldbus.scan import VENDOR_NAMES, NodeReport, ScanResult, Scan
     open_network, scan_network, supported_modes
 
 EXIT_OK, EXIT_FAILED = 0, 1
-COLUMNS = ("node", "NMT", "device type", "vendor", "product", "revision", "name", "hw", "sw", "modes", "answer")
+COLUMNS = ("node", "NMT", "device type", "vendor", "product", "revision", "name", "hw", "sw", "modes", "heartbeat",
+           "answer")
 
 
 def _settings(args: argparse.Namespace, sdo_timeout_ms: int) -> ScanSettings:
@@ -53,7 +54,8 @@ def table_rows(reports: list[NodeReport], names: dict[int, str]) -> list[tuple[s
         modes = " ".join(supported_modes(r.modes)) if r.modes is not None else "-"
         rows.append((str(r.node_id), nmt_state_name(r.nmt_state), device, _vendor(r, names),
                      _hex(ident.product_code if ident else None), _hex(ident.revision if ident else None),
-                     r.device_name or "-", r.hardware_version or "-", r.software_version or "-", modes, r.status()))
+                     r.device_name or "-", r.hardware_version or "-", r.software_version or "-", modes,
+                     f"{r.heartbeat_period_s * 1000:.0f} ms" if r.heartbeat_period_s else "-", r.status()))
     return rows
 
 
