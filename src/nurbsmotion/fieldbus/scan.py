@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import can
 import canopen
 from canopen.objectdictionary import ObjectDictionary
-from canopen.sdo import SdoAbortedError, SdoCommunicationError
+from canopen.sdo import SdoAbortedError, SdoClient, SdoCommunicationError
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.errors import FieldbusError
@@ -203,6 +203,12 @@ class NodeReport:
 # ------------------------------------------------------------------ listening
 
 
+# The scan's callbacks stay subscribed until the network is disconnected, switched off by a
+# flag: canopen's Network.notify looks a COB-ID up twice (``in``, then ``[]``), so removing the
+# last callback of an id while a frame of it is dispatched raises KeyError in the receive
+# thread, which stops python-can's notifier (late SDO answers and heartbeats do arrive then).
+
+
 class HeartbeatWatch:
     """Boot-up and heartbeat frames (COB-ID 0x700 + id) of the given ids, as heard."""
 
@@ -211,17 +217,18 @@ class HeartbeatWatch:
         self._ids = tuple(node_ids)
         self._lock = threading.Lock()
         self._heard: dict[int, list[tuple[float, int]]] = {}
+        self._listening = False
 
     def start(self) -> None:
+        self._listening = True
         for node_id in self._ids:
             self._network.subscribe(c.COB_HEARTBEAT + node_id, self._on_frame)
 
     def stop(self) -> None:
-        for node_id in self._ids:
-            self._network.unsubscribe(c.COB_HEARTBEAT + node_id, self._on_frame)
+        self._listening = False  # not unsubscribed: see above
 
     def _on_frame(self, can_id: int, data: bytearray, timestamp: float) -> None:
-        if len(data) >= 1:
+        if self._listening and len(data) >= 1:
             with self._lock:
                 self._heard.setdefault(can_id - c.COB_HEARTBEAT, []).append((timestamp, data[0] & 0x7F))
 
@@ -264,23 +271,25 @@ def probe_device_types(network: canopen.Network, node_ids: Iterable[int], settin
     ids = tuple(node_ids)
     answers: dict[int, SdoAnswer] = {}
     done = threading.Event()
+    lock = threading.Lock()
 
     def on_answer(can_id: int, data: bytearray, timestamp: float) -> None:
         answer = parse_upload_answer(bytes(data), c.DEVICE_TYPE, 0)
-        if answer is not None:
-            answers.setdefault(can_id - c.COB_SDO_TX, answer)
-            if len(answers) == len(ids):
-                done.set()
+        with lock:
+            if answer is not None and not done.is_set():
+                answers.setdefault(can_id - c.COB_SDO_TX, answer)
+                if len(answers) == len(ids):
+                    done.set()
 
-    for node_id in ids:
+    for node_id in ids:  # not unsubscribed afterwards (see HeartbeatWatch): switched off by ``done``
         network.subscribe(c.COB_SDO_TX + node_id, on_answer)
     try:
         for node_id in ids:
             _send(network, c.COB_SDO_RX + node_id, upload_request(c.DEVICE_TYPE, 0), settings)
         done.wait(settings.sdo_timeout_s)
     finally:
-        for node_id in ids:
-            network.unsubscribe(c.COB_SDO_TX + node_id, on_answer)
+        with lock:
+            done.set()  # later answers are ignored from here on
     return dict(answers)
 
 
@@ -300,27 +309,33 @@ def _send(network: canopen.Network, can_id: int, data: bytes, settings: ScanSett
 
 
 class SdoReader:
-    """The SDO reads of one node through canopen's client; the first silence ends the node's
-    reads (a node that stopped answering is not asked again and again)."""
+    """The SDO reads of one node through canopen's SDO client (no RemoteNode: nothing but the
+    node's SDO answers is subscribed); the first silence ends the node's reads (a node that
+    stopped answering is not asked again and again)."""
 
     def __init__(self, network: canopen.Network, node_id: int, timeout_s: float) -> None:
         self.node_id = node_id
-        self.node = canopen.RemoteNode(node_id, ObjectDictionary())
-        self.node.sdo.RESPONSE_TIMEOUT = timeout_s
-        self.node.sdo.MAX_RETRIES = 1
-        network.add_node(self.node)
-        self.network = network
+        self.sdo = SdoClient(c.COB_SDO_RX + node_id, c.COB_SDO_TX + node_id, ObjectDictionary())
+        self.sdo.network = network
+        self.sdo.RESPONSE_TIMEOUT = timeout_s
+        self.sdo.MAX_RETRIES = 1
+        self._active = True
+        network.subscribe(c.COB_SDO_TX + node_id, self._on_response)  # never unsubscribed: see HeartbeatWatch
         self.problems: list[str] = []
         self.silent = False
 
+    def _on_response(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if self._active:
+            self.sdo.on_response(can_id, data, timestamp)
+
     def close(self) -> None:
-        del self.network[self.node_id]
+        self._active = False
 
     def raw(self, index: int, subindex: int, what: str, optional: bool) -> bytes | None:
         if self.silent:
             return None
         try:
-            return self.node.sdo.upload(index, subindex)
+            return self.sdo.upload(index, subindex)
         except SdoAbortedError as err:
             if not (optional and err.code in _ABSENT):
                 self.problems.append(f"0x{index:04X}:{subindex:02X} ({what}): {abort_text(err.code)}")
