@@ -294,7 +294,7 @@ def _fields(doc: _Doc, readers: dict[str, tuple[Callable[..., Any], dict[str, An
 
 
 def _limits_pair(doc: _Doc) -> Any:
-    items = doc.sequence()
+    items = doc.sequence() if isinstance(doc.node, yaml.SequenceNode) else []  # one error for a non-list
     if len(items) != 2:
         doc.fail("must be a list [min_mm, max_mm]")
         return _MISSING
