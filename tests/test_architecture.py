@@ -17,7 +17,8 @@ FORBIDDEN = {
     "planning": ("fieldbus", "sim", "service", "cli"),
     "fieldbus": ("geometry", "program", "planning", "sim", "service", "cli"),
     "sim": ("fieldbus", "geometry", "program", "planning", "service", "cli", "axes"),
-    "service": ("cli",),
+    "service": ("cli", "web"),
+    "web": ("geometry", "program", "planning", "fieldbus", "sim", "cli", "axes"),
 }
 
 
@@ -44,4 +45,15 @@ def test_layer_imports_only_what_the_architecture_allows(layer):
         bad = imported_layers(path) & set(FORBIDDEN[layer])
         if bad:
             offenders.append(f"{path.relative_to(PACKAGE)} imports {', '.join(sorted(bad))}")
+    assert not offenders, offenders
+
+
+def test_the_web_gateway_knows_the_daemon_only_by_its_control_protocol():
+    """Moonraker beside Klippy: the gateway may use service.protocol, nothing else of the daemon."""
+    offenders = []
+    for path in sorted((PACKAGE / "web").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("nurbsmotion.service") \
+                    and node.module != "nurbsmotion.service.protocol":
+                offenders.append(f"{path.relative_to(PACKAGE)} imports {node.module}")
     assert not offenders, offenders

@@ -138,6 +138,50 @@ class ControlConfig:
 
 
 @dataclass(frozen=True)
+class WebConfig:
+    """``nurbsmotion web``: where the gateway listens and who may use it (docs/web.md)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8080
+    require_auth: bool = False  # on loopback; any other address always requires keys
+    max_upload_mb: float = 64.0
+    cors_origins: tuple[str, ...] = ()
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` (``[::1]:8080`` for IPv6) -> (host, port); ValueError names what is wrong."""
+    host, sep, port = text.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ValueError(f"must be HOST:PORT with a port 1-65535, e.g. 127.0.0.1:8080, got {text!r}")
+    return host, int(port)
+
+
+def _listen(doc: _Doc) -> Any:
+    value = _string(doc)
+    if value is _MISSING:
+        return value
+    try:
+        return parse_listen(value)
+    except ValueError as err:
+        doc.fail(str(err))
+        return _MISSING
+
+
+def _origins(doc: _Doc) -> Any:
+    items = doc.sequence()
+    origins = tuple(_string(item) for item in items)
+    return _MISSING if _MISSING in origins else origins
+
+
+def _web(doc: _Doc) -> Any:
+    found = _fields(doc, {"listen": (_listen, {}), "require_auth": (_boolean, {}),
+                          "max_upload_mb": (_number, {"minimum": 0}), "cors_origins": (_origins, {})})
+    host, port = found.pop("listen", (WebConfig.host, WebConfig.port))
+    return WebConfig(host=host, port=port, **found)
+
+
+@dataclass(frozen=True)
 class MachineConfig:
     source: str
     cycle_period_s: float
@@ -147,6 +191,7 @@ class MachineConfig:
     monitoring: MonitoringConfig
     control: ControlConfig
     data_dir: str
+    web: WebConfig = WebConfig()
     io: IoConfig | None = None
     simulate: bool = False
     master: MasterConfig = MasterConfig()
@@ -433,6 +478,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
                                                              "maximum": 127})}), {}),
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
+    "web": (_web, {}),
     "simulate": (_boolean, {}),
     "require_homing": (_boolean, {}),
     "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
@@ -496,6 +542,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         io=values.get("io"),
         monitoring=values.get("monitoring", MonitoringConfig()),
         control=values.get("control", ControlConfig()),
+        web=values.get("web", WebConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
         master=values.get("master", MasterConfig()),

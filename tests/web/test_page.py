@@ -1,0 +1,161 @@
+"""The console page in a real headless Chromium (Debian's chromium, driven by Playwright)
+against a real daemon with simulated drives: load, home, jog, choose a program (preview
+drawn), start, hold, resume, completion in the history. Screenshots (desktop and phone
+width) go to ``$NURBSMOTION_SCREENSHOTS`` or the test's tmp folder, to be looked at."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import shutil
+import socket
+import tempfile
+import threading
+import uuid
+from pathlib import Path
+from typing import Any, Iterator
+
+import pytest
+
+from nurbsmotion.config import load_config
+from nurbsmotion.web.app import WebSettings, make_app
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+pytestmark = [pytest.mark.skipif(CHROMIUM is None, reason="needs Debian's chromium (scripts/test installs it)"),
+              pytest.mark.slow]
+
+MACHINE = """\
+cycle_period_ms: 4
+simulate: true
+bus: {{interface: virtual, channel: {channel}}}
+interpolation: {{algorithm: lookahead, feed_mm_min: 3000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
+                max_jerk_mm_s3: 50000}}
+axes:
+  - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100], max_velocity_mm_s: 200,
+     homing: {{method: here, offset_mm: 0}}}}
+  - {{name: Y, node_id: 2, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100], max_velocity_mm_s: 200,
+     homing: {{method: here, offset_mm: 0}}}}
+  - {{name: Z, node_id: 3, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-100, 100], max_velocity_mm_s: 200,
+     homing: {{method: here, offset_mm: 0}}}}
+control: {{socket: {socket}}}
+data_dir: {data_dir}
+"""
+PART = """(a square pocket outline with an arc corner)
+G21 G90
+G00 Z5
+G00 X0 Y0
+G01 Z-1 F300
+G01 X30 F1200
+G01 Y20
+G03 X20 Y30 I-10 J0
+G01 X0
+G01 Y0
+G00 Z5
+M30
+"""
+BROWSER_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture(scope="module")
+def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
+    """A daemon (this process), its gateway on a loopback port (a thread's event loop), the URL."""
+    from aiohttp import web
+
+    from nurbsmotion.service.daemon import Daemon
+
+    folder = Path(tempfile.mkdtemp(prefix="nm-page-"))
+    path = folder / "machine.yaml"
+    path.write_text(MACHINE.format(channel=f"page-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
+                                   data_dir=tmp_path_factory.mktemp("page") / "data"))
+    daemon = Daemon(load_config(path))
+    daemon.start()
+    settings = WebSettings(socket=str(daemon.config.control.socket), data_dir=daemon.config.data_dir, port=free_port())
+    loop = asyncio.new_event_loop()
+    runner = web.AppRunner(make_app(settings))
+    started = threading.Event()
+
+    def serve() -> None:
+        asyncio.set_event_loop(loop)
+        loop.run_until_complete(runner.setup())
+        loop.run_until_complete(web.TCPSite(runner, settings.host, settings.port).start())
+        started.set()
+        loop.run_forever()
+
+    thread = threading.Thread(target=serve, daemon=True)
+    thread.start()
+    assert started.wait(20.0)
+    try:
+        yield f"http://{settings.host}:{settings.port}/", daemon
+    finally:
+        asyncio.run_coroutine_threadsafe(runner.cleanup(), loop).result(10.0)
+        loop.call_soon_threadsafe(loop.stop)
+        thread.join(5.0)
+        daemon.close()
+
+
+def shots_dir(tmp_path: Path) -> Path:
+    folder = Path(os.environ.get("NURBSMOTION_SCREENSHOTS") or tmp_path)
+    folder.mkdir(parents=True, exist_ok=True)
+    return folder
+
+
+def canvas_is_drawn(page: Any) -> bool:
+    """Some pixels of the preview differ from its background (a path was drawn)."""
+    return bool(page.evaluate("""() => {
+        const c = document.querySelector('[data-testid=preview]');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+        let lit = 0;  // pixels clearly unlike the background #0b0d10
+        for (let i = 0; i < d.length; i += 4) if (Math.abs(d[i] - 11) + Math.abs(d[i + 1] - 13) + Math.abs(d[i + 2] - 16) > 90) lit++;
+        return lit > 500;
+    }"""))
+
+
+def test_the_console_homes_jogs_previews_and_runs_a_program(console, tmp_path):
+    from playwright.sync_api import expect, sync_playwright
+
+    url, daemon = console
+    program = tmp_path / "pocket.nc"
+    program.write_text(PART)
+    shots = shots_dir(tmp_path)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+        page = browser.new_page(viewport={"width": 1600, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda err: errors.append(str(err)))
+        page.goto(url)
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        page.get_by_test_id("btn-home").click()
+        expect(page.locator("#homed")).to_contain_text("X homed", timeout=20000)
+        page.locator("input[name=step][value='10']").check()
+        page.get_by_test_id("jog-X+").click()
+        expect(page.get_by_test_id("dro-X")).to_have_text("10.000", timeout=20000)
+        page.get_by_test_id("jog-X-").click()
+        expect(page.get_by_test_id("dro-X")).to_have_text("0.000", timeout=20000)
+        page.locator("#file").set_input_files(str(program))
+        expect(page.get_by_test_id("program-list")).to_contain_text("pocket.nc")
+        page.screenshot(path=str(shots / "console-program-1600.png"), full_page=True)
+        assert not errors, errors
+        assert canvas_is_drawn(page)
+        page.get_by_test_id("btn-start").click()
+        expect(page.get_by_test_id("machine-state")).to_have_text("running", timeout=20000)
+        page.get_by_test_id("btn-hold").click()
+        expect(page.get_by_test_id("machine-state")).to_have_text("held", timeout=20000)
+        page.screenshot(path=str(shots / "console-held-1600.png"), full_page=True)
+        page.get_by_test_id("btn-resume").click()
+        expect(page.get_by_test_id("job-history").locator("li").first).to_contain_text("completed", timeout=60000)
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        page.screenshot(path=str(shots / "console-done-1600.png"), full_page=True)
+        phone = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
+        phone.goto(url)
+        expect(phone.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        width = phone.evaluate("() => document.documentElement.scrollWidth")
+        assert width <= 390, f"the page is {width} px wide on a 390 px phone"
+        phone.screenshot(path=str(shots / "console-phone-390.png"), full_page=True)
+        browser.close()
