@@ -9,7 +9,6 @@ import asyncio
 import os
 import shutil
 import socket
-import tempfile
 import threading
 import uuid
 from pathlib import Path
@@ -19,6 +18,7 @@ import pytest
 
 from nurbsmotion.config import load_config
 from nurbsmotion.web.app import WebSettings, make_app
+from tests.integration.daemon_helpers import DaemonProcess
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 pytestmark = [pytest.mark.skipif(CHROMIUM is None, reason="needs Debian's chromium (scripts/test installs it)"),
@@ -65,18 +65,17 @@ def free_port() -> int:
 
 @pytest.fixture(scope="module")
 def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
-    """A daemon (this process), its gateway on a loopback port (a thread's event loop), the URL."""
+    """The daemon in its own process (as in production: the browser, Playwright and the
+    gateway's event loop in this process must not share an interpreter lock with the
+    simulated drives), its gateway on a loopback port (a thread's event loop), the URL."""
     from aiohttp import web
 
-    from nurbsmotion.service.daemon import Daemon
-
-    folder = Path(tempfile.mkdtemp(prefix="nm-page-"))
-    path = folder / "machine.yaml"
-    path.write_text(MACHINE.format(channel=f"page-{uuid.uuid4().hex}", socket=folder / "ctl.sock",
-                                   data_dir=tmp_path_factory.mktemp("page") / "data"))
-    daemon = Daemon(load_config(path))
+    daemon = DaemonProcess(tmp_path_factory.mktemp("page") / "data")
+    daemon.config_path.write_text(MACHINE.format(channel=f"page-{uuid.uuid4().hex}", socket=daemon.socket,
+                                                 data_dir=daemon.data_dir))
+    daemon.config = load_config(daemon.config_path)
     daemon.start()
-    settings = WebSettings(socket=str(daemon.config.control.socket), data_dir=daemon.config.data_dir, port=free_port())
+    settings = WebSettings(socket=str(daemon.socket), data_dir=str(daemon.data_dir), port=free_port())
     loop = asyncio.new_event_loop()
     runner = web.AppRunner(make_app(settings))
     started = threading.Event()
@@ -90,11 +89,12 @@ def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
 
     thread = threading.Thread(target=serve, daemon=True)
     thread.start()
-    assert started.wait(20.0)
     try:
+        assert started.wait(20.0)
         yield f"http://{settings.host}:{settings.port}/", daemon
     finally:
-        asyncio.run_coroutine_threadsafe(runner.cleanup(), loop).result(10.0)
+        if started.is_set():
+            asyncio.run_coroutine_threadsafe(runner.cleanup(), loop).result(10.0)
         loop.call_soon_threadsafe(loop.stop)
         thread.join(5.0)
         daemon.close()
@@ -149,7 +149,8 @@ def test_the_console_homes_jogs_previews_and_runs_a_program(console, tmp_path):
         expect(page.get_by_test_id("machine-state")).to_have_text("held", timeout=20000)
         page.screenshot(path=str(shots / "console-held-1600.png"), full_page=True)
         page.get_by_test_id("btn-resume").click()
-        expect(page.get_by_test_id("job-history").locator("li").first).to_contain_text("completed", timeout=60000)
+        expect(page.get_by_test_id("job-history").locator("li", has_text="pocket.nc").first).to_contain_text(
+            "completed", timeout=60000)
         expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
         page.screenshot(path=str(shots / "console-done-1600.png"), full_page=True)
         phone = browser.new_page(viewport={"width": 390, "height": 844}, is_mobile=True, has_touch=True)
