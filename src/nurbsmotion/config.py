@@ -181,6 +181,50 @@ def _web(doc: _Doc) -> Any:
     return WebConfig(host=host, port=port, **found)
 
 
+NOTIFIED_EVENTS = ("job_ended", "fault")  # the daemon's log events a webhook can be sent for
+
+
+@dataclass(frozen=True)
+class NotifyConfig:
+    """``notify:``: webhooks POSTed at job ends and faults (service.webhooks)."""
+
+    webhooks: tuple[str, ...] = ()
+    events: tuple[str, ...] = NOTIFIED_EVENTS
+    timeout_s: float = 5.0
+    attempts: int = 5
+    retry_s: float = 2.0
+
+
+def _url(doc: _Doc) -> Any:
+    value = _string(doc)
+    if value is _MISSING:
+        return value
+    scheme, sep, rest = value.partition("://")
+    if scheme not in ("http", "https") or not sep or not rest.split("/")[0]:
+        doc.fail(f"must be an http:// or https:// URL with a host, got {value!r}")
+        return _MISSING
+    return value
+
+
+def _events(doc: _Doc) -> Any:
+    names = tuple(_string(item, choices=NOTIFIED_EVENTS) for item in doc.sequence())
+    return _MISSING if _MISSING in names else names
+
+
+def _notify(doc: _Doc) -> Any:
+    found = _fields(doc, {"webhooks": (_sequence_of(_url), {}), "events": (_events, {}),
+                          "timeout_s": (_number, {"minimum": 0}), "attempts": (_number, {"integer": True, "minimum": 0}),
+                          "retry_s": (_number, {"minimum": 0})})
+    return NotifyConfig(**found)
+
+
+def _sequence_of(reader: Callable[[_Doc], Any]) -> Callable[[_Doc], Any]:
+    def read(doc: _Doc) -> Any:
+        values = tuple(reader(item) for item in doc.sequence())
+        return _MISSING if _MISSING in values else values
+    return read
+
+
 @dataclass(frozen=True)
 class MachineConfig:
     source: str
@@ -192,6 +236,7 @@ class MachineConfig:
     control: ControlConfig
     data_dir: str
     web: WebConfig = WebConfig()
+    notify: NotifyConfig = NotifyConfig()
     io: IoConfig | None = None
     simulate: bool = False
     master: MasterConfig = MasterConfig()
@@ -479,6 +524,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
     "data_dir": (_string, {}),
     "web": (_web, {}),
+    "notify": (_notify, {}),
     "simulate": (_boolean, {}),
     "require_homing": (_boolean, {}),
     "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
@@ -543,6 +589,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         monitoring=values.get("monitoring", MonitoringConfig()),
         control=values.get("control", ControlConfig()),
         web=values.get("web", WebConfig()),
+        notify=values.get("notify", NotifyConfig()),
         data_dir=values.get("data_dir", "var/nurbsmotion"),
         simulate=values.get("simulate", False),
         master=values.get("master", MasterConfig()),

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 import sys
-from typing import Any
+from typing import Any, Callable
 
 
 def kv(event: str, **fields: Any) -> str:
@@ -32,6 +32,23 @@ def setup_logging(verbosity: int = 0, stream: Any = None) -> None:
     # canopen and python-can are chatty at INFO; keep them at WARNING unless -vv.
     for name in ("can", "canopen"):
         logging.getLogger(name).setLevel(logging.DEBUG if verbosity >= 2 else logging.WARNING)
+
+
+def attach_handler(handler: logging.Handler, logger_name: str = "nurbsmotion") -> Callable[[], None]:
+    """Add ``handler`` to the package's logger, opened to INFO if it would drop INFO records
+    (the event stream and the webhooks must not depend on how verbose stderr is: its handler
+    keeps its own level); returns the function that removes it again."""
+    logger = logging.getLogger(logger_name)
+    if not logger.isEnabledFor(logging.INFO):
+        logger.setLevel(logging.INFO)
+    logger.addHandler(handler)
+
+    def detach() -> None:
+        logger.removeHandler(handler)
+        if not logger.handlers:
+            logger.setLevel(logging.NOTSET)
+
+    return detach
 
 
 def parse_kv(message: str) -> tuple[str, dict[str, str]]:

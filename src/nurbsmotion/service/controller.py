@@ -536,7 +536,7 @@ class Controller:
             log.error(kv("outcome_not_written", job=job.record.job_id, error=err))
         finally:
             reached = outcome["line_reached"]
-            log.info(kv("job_ended", job=job.record.job_id, outcome=outcome["outcome"], sent=outcome["sent"],
+            log.info(kv("job_ended", job=job.record.job_id, name=job.name, outcome=outcome["outcome"], sent=outcome["sent"],
                         planned=outcome["planned"], line=reached["where"] if reached else "-",
                         motion_time_s=outcome["motion_time_s"], reason=outcome["reason"] or "-"))
             with self._lock:

@@ -38,6 +38,7 @@ from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
 from nurbsmotion.service.subscriptions import StatusHub, attach_event_log
+from nurbsmotion.service.webhooks import start_webhooks
 
 log = logging.getLogger(__name__)
 
@@ -86,6 +87,7 @@ class Daemon:
         self.planner_worker: PlannerWorker | None = None  # plans streamed jobs in its own process
         self.hub: StatusHub | None = None  # pushes status and events to subscribed clients
         self._detach_event_log: Callable[[], None] | None = None
+        self._stop_webhooks: Callable[[], None] | None = None
 
     def start(self) -> None:
         self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
@@ -110,6 +112,7 @@ class Daemon:
                                      devices)
         self.hub = StatusHub(self.controller.status)
         self._detach_event_log = attach_event_log(self.hub)
+        self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group, hub=self.hub)
         try:
             self.server.start()
@@ -161,6 +164,9 @@ class Daemon:
         self.ownership.release()
 
     def _stop_hub(self) -> None:
+        if self._stop_webhooks is not None:
+            self._stop_webhooks()
+            self._stop_webhooks = None
         if self._detach_event_log is not None:
             self._detach_event_log()
             self._detach_event_log = None

@@ -28,7 +28,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from nurbsmotion.log import parse_kv
+from nurbsmotion.log import attach_handler, parse_kv
 from nurbsmotion.service.protocol import encode
 
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
@@ -233,18 +233,5 @@ class EventLogHandler(logging.Handler):
 
 
 def attach_event_log(hub: StatusHub, logger_name: str = "nurbsmotion") -> Callable[[], None]:
-    """Route the package's INFO+ log records to ``hub``; returns the function that detaches it.
-    The package logger is set to INFO if it would drop INFO records (events must not depend
-    on how verbose the daemon's stderr is)."""
-    logger = logging.getLogger(logger_name)
-    handler = EventLogHandler(hub)
-    previous_level = logger.level
-    if not logger.isEnabledFor(logging.INFO):
-        logger.setLevel(logging.INFO)
-    logger.addHandler(handler)
-
-    def detach() -> None:
-        logger.removeHandler(handler)
-        logger.setLevel(previous_level)
-
-    return detach
+    """Route the package's INFO+ log records to ``hub``; returns the function that detaches it."""
+    return attach_handler(EventLogHandler(hub), logger_name)
