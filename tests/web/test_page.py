@@ -143,6 +143,15 @@ def test_the_console_homes_jogs_previews_and_runs_a_program(console, tmp_path):
         page.screenshot(path=str(shots / "console-program-1600.png"), full_page=True)
         assert not errors, errors
         assert canvas_is_drawn(page)
+        for view in ("view-top", "view-front", "view-iso"):
+            page.locator(f"#{view}").click()
+            assert canvas_is_drawn(page), view
+        box = page.get_by_test_id("preview").bounding_box()
+        page.mouse.move(box["x"] + 200, box["y"] + 200)
+        page.mouse.down()
+        page.mouse.move(box["x"] + 260, box["y"] + 230)  # turn the view by dragging
+        page.mouse.up()
+        assert canvas_is_drawn(page) and not errors, errors
         page.get_by_test_id("btn-start").click()
         expect(page.get_by_test_id("machine-state")).to_have_text("running", timeout=20000)
         page.get_by_test_id("btn-hold").click()

@@ -351,7 +351,7 @@ class Controller:
                  "commanded_mm": round(float(commanded_mm[i]), 6), "actual_mm": round(float(actual_mm[i]), 6),
                  "following_error_mm": None if a.following_error_counts is None else
                  round(a.following_error_counts * float(axis_map.sign[i]) / float(axis_map.counts_per_mm[i]), 6),
-                 "emcy_count": a.emcy_count}
+                 "emcy_count": a.emcy_count, "soft_limits_mm": _limits(self.config.axes[i].soft_limits_mm)}
                 for i, a in enumerate(status.axes)]
         t = status.timing
         job = self._job
@@ -690,3 +690,7 @@ def fault_record(fault: FaultReport, start_cycle: int | None, mm_per_count: floa
     return {"node": fault.node_id, "axis": fault.axis, "kind": fault.kind, "code": code,
             "code_hex": None if code is None else f"0x{code:04X}", "measured": measured, "cycle": cycle,
             "master_cycle": fault.cycle, "message": message}
+
+
+def _limits(pair: tuple[float, float] | None) -> list[float] | None:
+    return None if pair is None else [float(pair[0]), float(pair[1])]

@@ -7,9 +7,9 @@ const AXES = ["X", "Y", "Z"];
 const RENEW_MS = 200;            // continuous jog: renew the daemon's lease (0.5 s) this often
 let status = null;               // the daemon's status, kept current from the pushed changes
 let ws = null;
-let program = null;              // {name, text, moves}
+let program = null;              // {name, text, path: parseGcode(text)}
 let trail = [];                  // executed tool positions of the running job (machine XY)
-let view = { scale: 1, x: 0, y: 0, fitted: false };
+let view = { scale: 1, x: 0, y: 0, center: [0, 0, 0], yaw: -Math.PI / 4, pitch: Math.PI / 3.3, fitted: false };
 let renewTimer = null;
 
 // ------------------------------------------------------------------ HTTP API
@@ -82,9 +82,9 @@ function render() {
   if (job) {
     $("progress-bar").style.width = (job.percent || 0) + "%";
     $("progress").textContent = "job " + job.id + " " + job.name + ": " + (job.percent || 0).toFixed(1) + " %, at " + (job.line || "–");
-    const x = status.axes[0] ? status.axes[0].commanded_mm : 0, y = status.axes[1] ? status.axes[1].commanded_mm : 0;
+    const [x, y, z] = [0, 1, 2].map((i) => status.axes[i] ? status.axes[i].commanded_mm : 0);
     const last = trail[trail.length - 1];
-    if (!last || Math.hypot(last[0] - x, last[1] - y) > 1e-3) trail.push([x, y]);
+    if (!last || Math.hypot(last[0] - x, last[1] - y, last[2] - z) > 1e-3) trail.push([x, y, z]);
   } else {
     const done = status.last_job;
     $("progress-bar").style.width = done && done.outcome === "completed" ? "100%" : "0";
@@ -177,11 +177,14 @@ $("file").addEventListener("change", async () => {
   const file = $("file").files[0];
   if (!file) return;
   const text = await file.text();
-  program = { name: file.name.replace(/[^A-Za-z0-9._-]/g, "_"), text, moves: parseGcode(text) };
-  $("program-name").textContent = program.name + ": " + program.moves.length + " moves";
+  const started = performance.now();
+  program = { name: file.name.replace(/[^A-Za-z0-9._-]/g, "_"), text, path: parseGcode(text) };
+  $("program-name").textContent = program.name + ": " + program.path.count + " moves";
   $("check").textContent = ""; $("check").className = "check";
   view.fitted = false; trail = [];
   render();
+  drawPreview();
+  window.previewDrawnMs = performance.now() - started;  // read by the page test and the web benchmark
 });
 
 $("btn-start").addEventListener("click", async () => {
@@ -240,13 +243,18 @@ async function loadJobs() {
   }
 }
 
-// ------------------------------------------------------------------ preview (top view)
+// ------------------------------------------------------------------ preview (3-D, Canvas 2D)
+// The path as one Float32Array of segment end points (x0 y0 z0 x1 y1 z1 per move) with a
+// rapid flag each; drawn by an orthographic projection that orbits (yaw, pitch), pans and
+// zooms, so a 100,000-line program is parsed and drawn in well under a second without WebGL.
 function parseGcode(text) {
-  // G0/G1/G2/G3 in XY(Z) with G90/G91 and G20/G21; arcs by I J (or R) as short chords.
-  const moves = [];
+  // G0/G1/G2/G3 with G90/G91, G20/G21, G17 arcs by I J (or R) as chords; comments removed.
+  const segs = [], rapid = [];
   let pos = [0, 0, 0], absolute = true, scale = 1, mode = 0;
+  const push = (a, b, isRapid) => { segs.push(a[0], a[1], a[2], b[0], b[1], b[2]); rapid.push(isRapid ? 1 : 0); };
   for (const raw of text.split(/\r?\n/)) {
     const line = raw.replace(/\(.*?\)/g, "").replace(/;.*/, "").toUpperCase();
+    if (!/[XYZ]/.test(line) && !/G\s*\d/.test(line)) continue;
     const words = {}; const gs = [];
     for (const m of line.matchAll(/([A-Z])\s*([-+]?\d*\.?\d+)/g)) {
       if (m[1] === "G") gs.push(Number(m[2])); else words[m[1]] = Number(m[2]);
@@ -254,72 +262,120 @@ function parseGcode(text) {
     for (const g of gs) {
       if (g === 90) absolute = true; else if (g === 91) absolute = false;
       else if (g === 20) scale = 25.4; else if (g === 21) scale = 1;
-      else if ([0, 1, 2, 3].includes(g)) mode = g;
+      else if (g === 0 || g === 1 || g === 2 || g === 3) mode = g;
     }
     if (!("X" in words || "Y" in words || "Z" in words)) continue;
     const end = AXES.map((a, i) => a in words ? (absolute ? words[a] * scale : pos[i] + words[a] * scale) : pos[i]);
     if (mode === 2 || mode === 3) {
-      const cx = pos[0] + (words.I || 0) * scale, cy = pos[1] + (words.J || 0) * scale;
-      const a0 = Math.atan2(pos[1] - cy, pos[0] - cx); let a1 = Math.atan2(end[1] - cy, end[0] - cx);
+      let cx, cy;
+      if ("R" in words) {
+        const r = words.R * scale, dx = end[0] - pos[0], dy = end[1] - pos[1], d = Math.hypot(dx, dy);
+        const h = Math.sqrt(Math.max(r * r - d * d / 4, 0)) * ((mode === 2) === (r > 0) ? -1 : 1);
+        cx = pos[0] + dx / 2 - h * dy / d; cy = pos[1] + dy / 2 + h * dx / d;
+      } else { cx = pos[0] + (words.I || 0) * scale; cy = pos[1] + (words.J || 0) * scale; }
+      const a0 = Math.atan2(pos[1] - cy, pos[0] - cx), a1 = Math.atan2(end[1] - cy, end[0] - cx);
       let sweep = a1 - a0;
-      if (mode === 2 && sweep >= 0) sweep -= 2 * Math.PI; if (mode === 3 && sweep <= 0) sweep += 2 * Math.PI;
+      if (mode === 2 && sweep >= 0) sweep -= 2 * Math.PI;
+      if (mode === 3 && sweep <= 0) sweep += 2 * Math.PI;
       const r = Math.hypot(pos[0] - cx, pos[1] - cy), n = Math.max(4, Math.ceil(Math.abs(sweep) * 16));
       let prev = pos;
       for (let k = 1; k <= n; k++) {
         const a = a0 + sweep * k / n, p = [cx + r * Math.cos(a), cy + r * Math.sin(a), pos[2] + (end[2] - pos[2]) * k / n];
-        moves.push({ from: prev, to: p, rapid: false }); prev = p;
+        push(prev, p, false); prev = p;
       }
-    } else moves.push({ from: pos, to: end, rapid: mode === 0 });
+    } else push(pos, end, mode === 0);
     pos = end;
   }
-  return moves;
+  return { segs: new Float32Array(segs), rapid: new Uint8Array(rapid), count: rapid.length };
+}
+
+function softBox() {
+  // The soft limits from the status (machine mm), as work coordinates; null where an axis has none.
+  if (!status || !status.axes) return null;
+  const lim = AXES.map((name, i) => { const a = status.axes.find((x) => x.name === name); return a && a.soft_limits_mm ? a.soft_limits_mm.map((v) => v - workOffset(i)) : null; });
+  return lim.every((l) => l) ? lim : null;
+}
+
+function project(x, y, z) {
+  // orthographic, about the path's centre (on screen at view.x, view.y): turn by yaw about Z,
+  // then tilt by pitch (0: seen from above, Y up; pi/2: seen from the front, Z up)
+  const c = view.center, dx = x - c[0], dy = y - c[1], dz = z - c[2];
+  const cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
+  const u = cy * dx - sy * dy, w = sy * dx + cy * dy;
+  return [view.x + view.scale * u, view.y - view.scale * (cp * w + sp * dz)];
 }
 
 function fit(canvas) {
-  const pts = program.moves.flatMap((m) => [m.from, m.to]);
-  const xs = pts.map((p) => p[0]), ys = pts.map((p) => p[1]);
-  const minX = Math.min(...xs), maxX = Math.max(...xs), minY = Math.min(...ys), maxY = Math.max(...ys);
-  const w = Math.max(maxX - minX, 1e-3), h = Math.max(maxY - minY, 1e-3);
+  const s = program.path.segs, box = [[Infinity, -Infinity], [Infinity, -Infinity], [Infinity, -Infinity]];
+  for (let i = 0; i < s.length; i += 3) for (let k = 0; k < 3; k++) { box[k][0] = Math.min(box[k][0], s[i + k]); box[k][1] = Math.max(box[k][1], s[i + k]); }
+  const corners = [];
+  for (const x of box[0]) for (const y of box[1]) for (const z of box[2]) corners.push([x, y, z]);
+  view.center = box.map((b) => (b[0] + b[1]) / 2);
+  view.scale = 1; view.x = 0; view.y = 0;
+  const pts = corners.map((c) => project(c[0], c[1], c[2]));
+  const us = pts.map((p) => p[0]), vs = pts.map((p) => p[1]);
+  const w = Math.max(Math.max(...us) - Math.min(...us), 1e-3), h = Math.max(Math.max(...vs) - Math.min(...vs), 1e-3);
   view.scale = 0.9 * Math.min(canvas.width / w, canvas.height / h);
-  view.x = canvas.width / 2 - view.scale * (minX + maxX) / 2;
-  view.y = canvas.height / 2 + view.scale * (minY + maxY) / 2;
+  view.x = canvas.width / 2 - view.scale * (Math.min(...us) + Math.max(...us)) / 2;
+  view.y = canvas.height / 2 - view.scale * (Math.min(...vs) + Math.max(...vs)) / 2;
   view.fitted = true;
+}
+
+function strokeSegments(ctx, segs, rapid, wantRapid) {
+  ctx.beginPath();
+  for (let i = 0, n = rapid.length; i < n; i++) {
+    if (rapid[i] !== wantRapid) continue;
+    const o = 6 * i, a = project(segs[o], segs[o + 1], segs[o + 2]), b = project(segs[o + 3], segs[o + 4], segs[o + 5]);
+    ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]);
+  }
+  ctx.stroke();
 }
 
 function drawPreview() {
   const canvas = $("preview"), ctx = canvas.getContext("2d");
   ctx.fillStyle = "#0b0d10"; ctx.fillRect(0, 0, canvas.width, canvas.height);
-  if (!program || !program.moves.length) {
+  if (!program || !program.path.count) {
     ctx.fillStyle = "#8a94a3"; ctx.font = "16px system-ui"; ctx.fillText("choose a program to see its path", 20, 30); return;
   }
   if (!view.fitted) fit(canvas);
-  const X = (x) => view.x + view.scale * x, Y = (y) => view.y - view.scale * y;
+  const box = softBox();
+  if (box) {  // the soft-limit box, faint
+    ctx.strokeStyle = "#3a2f2f"; ctx.lineWidth = 1; ctx.setLineDash([2, 3]); ctx.beginPath();
+    const c = (i) => [box[0][i & 1], box[1][(i >> 1) & 1], box[2][(i >> 2) & 1]];
+    for (const [a, b] of [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]]) {
+      const p = project(...c(a)), q = project(...c(b)); ctx.moveTo(p[0], p[1]); ctx.lineTo(q[0], q[1]);
+    }
+    ctx.stroke();
+  }
   ctx.lineWidth = 1.5;
-  for (const rapid of [true, false]) {
-    ctx.beginPath(); ctx.setLineDash(rapid ? [4, 4] : []); ctx.strokeStyle = rapid ? "#6b7380" : "#3d8bfd";
-    for (const m of program.moves) if (m.rapid === rapid) { ctx.moveTo(X(m.from[0]), Y(m.from[1])); ctx.lineTo(X(m.to[0]), Y(m.to[1])); }
-    ctx.stroke();
-  }
-  ctx.setLineDash([]);
+  ctx.setLineDash([4, 4]); ctx.strokeStyle = "#6b7380"; strokeSegments(ctx, program.path.segs, program.path.rapid, 1);
+  ctx.setLineDash([]); ctx.strokeStyle = "#3d8bfd"; strokeSegments(ctx, program.path.segs, program.path.rapid, 0);
   if (trail.length > 1) {
-    ctx.beginPath(); ctx.strokeStyle = "#2fa36b"; ctx.lineWidth = 2;
-    trail.forEach((p, i) => { const x = X(p[0] - workOffset(0)), y = Y(p[1] - workOffset(1)); if (i) ctx.lineTo(x, y); else ctx.moveTo(x, y); });
+    ctx.beginPath(); ctx.strokeStyle = "#2fa36b"; ctx.lineWidth = 2.5;
+    trail.forEach((p, i) => { const q = project(p[0] - workOffset(0), p[1] - workOffset(1), p[2] - workOffset(2)); if (i) ctx.lineTo(q[0], q[1]); else ctx.moveTo(q[0], q[1]); });
     ctx.stroke();
   }
-  if (status && status.axes && status.axes.length >= 2) {
-    const tx = X(status.axes[0].commanded_mm - workOffset(0)), ty = Y(status.axes[1].commanded_mm - workOffset(1));
-    ctx.beginPath(); ctx.fillStyle = "#d6a11e"; ctx.arc(tx, ty, 5, 0, 2 * Math.PI); ctx.fill();
+  if (status && status.axes && status.axes.length >= 3) {
+    const t = project(status.axes[0].commanded_mm - workOffset(0), status.axes[1].commanded_mm - workOffset(1), status.axes[2].commanded_mm - workOffset(2));
+    ctx.beginPath(); ctx.fillStyle = "#d6a11e"; ctx.arc(t[0], t[1], 5, 0, 2 * Math.PI); ctx.fill();
   }
 }
 
-(function panZoom() {
+function setView(yaw, pitch) { view.yaw = yaw; view.pitch = pitch; view.fitted = false; drawPreview(); }
+
+(function orbitPanZoom() {
   const canvas = $("preview");
   let drag = null;
-  canvas.addEventListener("pointerdown", (e) => { drag = [e.offsetX, e.offsetY]; canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+  canvas.addEventListener("pointerdown", (e) => { drag = { x: e.offsetX, y: e.offsetY, pan: e.button === 2 || e.shiftKey }; canvas.setPointerCapture(e.pointerId); });
   canvas.addEventListener("pointermove", (e) => {
     if (!drag) return;
-    const k = canvas.width / canvas.clientWidth;
-    view.x += (e.offsetX - drag[0]) * k; view.y += (e.offsetY - drag[1]) * k; drag = [e.offsetX, e.offsetY]; drawPreview();
+    const k = canvas.width / canvas.clientWidth, dx = (e.offsetX - drag.x) * k, dy = (e.offsetY - drag.y) * k;
+    if (drag.pan) { view.x += dx; view.y += dy; }
+    else {  // orbit about the path's centre
+      view.yaw += dx * 0.01; view.pitch = Math.max(0, Math.min(Math.PI / 2, view.pitch + dy * 0.01));
+    }
+    drag.x = e.offsetX; drag.y = e.offsetY; drawPreview();
   });
   canvas.addEventListener("pointerup", () => { drag = null; });
   canvas.addEventListener("wheel", (e) => {
@@ -327,6 +383,9 @@ function drawPreview() {
     const k = canvas.width / canvas.clientWidth, px = e.offsetX * k, py = e.offsetY * k, f = e.deltaY < 0 ? 1.2 : 1 / 1.2;
     view.x = px - (px - view.x) * f; view.y = py - (py - view.y) * f; view.scale *= f; drawPreview();
   }, { passive: false });
+  $("view-top").addEventListener("click", () => setView(0, 0));
+  $("view-front").addEventListener("click", () => setView(0, Math.PI / 2));
+  $("view-iso").addEventListener("click", () => setView(-Math.PI / 4, Math.PI / 3.3));
 })();
 
 connect();
