@@ -101,6 +101,13 @@ function render() {
   drawPreview();
 }
 
+let renderQueued = false;
+function scheduleRender() {
+  if (renderQueued) return;
+  renderQueued = true;
+  requestAnimationFrame(() => { renderQueued = false; render(); });
+}
+
 function addLog(text, cls) {
   const li = document.createElement("li");
   li.textContent = new Date().toLocaleTimeString() + " " + text;
@@ -118,7 +125,7 @@ function connect() {
     const m = JSON.parse(message.data);
     if (m.error && m.id === undefined) { addLog("connection: " + m.error, "bad"); $("key-box").hidden = false; return; }
     if (m.subscribed) { status = m.status; trail = []; render(); return; }
-    if (m.notify === "status") { merge(status, m.changes); render(); return; }
+    if (m.notify === "status") { merge(status, m.changes); scheduleRender(); return; }
     if (m.notify === "event") {
       addLog(m.line, m.level === "WARNING" || m.level === "ERROR" ? "bad" : "");
       if (m.event === "job_started") trail = [];
@@ -252,11 +259,14 @@ function parseGcode(text) {
   const segs = [], rapid = [];
   let pos = [0, 0, 0], absolute = true, scale = 1, mode = 0;
   const push = (a, b, isRapid) => { segs.push(a[0], a[1], a[2], b[0], b[1], b[2]); rapid.push(isRapid ? 1 : 0); };
-  for (const raw of text.split(/\r?\n/)) {
-    const line = raw.replace(/\(.*?\)/g, "").replace(/;.*/, "").toUpperCase();
-    if (!/[XYZ]/.test(line) && !/G\s*\d/.test(line)) continue;
+  const word = /([A-Z])\s*([-+]?\d*\.?\d+)/g;
+  for (const raw of text.split("\n")) {
+    let line = raw.toUpperCase();
+    if (line.includes("(")) line = line.replace(/\(.*?\)/g, "");
+    if (line.includes(";")) line = line.slice(0, line.indexOf(";"));
     const words = {}; const gs = [];
-    for (const m of line.matchAll(/([A-Z])\s*([-+]?\d*\.?\d+)/g)) {
+    word.lastIndex = 0;
+    for (let m = word.exec(line); m !== null; m = word.exec(line)) {
       if (m[1] === "G") gs.push(Number(m[2])); else words[m[1]] = Number(m[2]);
     }
     for (const g of gs) {
@@ -322,25 +332,39 @@ function fit(canvas) {
 }
 
 function strokeSegments(ctx, segs, rapid, wantRapid) {
+  // project() inlined: 200,000 end points without an array each
+  const [c0, c1, c2] = view.center, k = view.scale, cy = Math.cos(view.yaw), sy = Math.sin(view.yaw);
+  const cp = Math.cos(view.pitch), sp = Math.sin(view.pitch), ox = view.x, oy = view.y;
+  let lastX = NaN, lastY = NaN;
   ctx.beginPath();
   for (let i = 0, n = rapid.length; i < n; i++) {
     if (rapid[i] !== wantRapid) continue;
-    const o = 6 * i, a = project(segs[o], segs[o + 1], segs[o + 2]), b = project(segs[o + 3], segs[o + 4], segs[o + 5]);
-    ctx.moveTo(a[0], a[1]); ctx.lineTo(b[0], b[1]);
+    const o = 6 * i;
+    let dx = segs[o] - c0, dy = segs[o + 1] - c1, dz = segs[o + 2] - c2;
+    const ax = ox + k * (cy * dx - sy * dy), ay = oy - k * (cp * (sy * dx + cy * dy) + sp * dz);
+    dx = segs[o + 3] - c0; dy = segs[o + 4] - c1; dz = segs[o + 5] - c2;
+    const bx = ox + k * (cy * dx - sy * dy), by = oy - k * (cp * (sy * dx + cy * dy) + sp * dz);
+    if (ax !== lastX || ay !== lastY) ctx.moveTo(ax, ay);  // a polyline stays one stroke
+    ctx.lineTo(bx, by);
+    lastX = bx; lastY = by;
   }
   ctx.stroke();
 }
 
-function drawPreview() {
-  const canvas = $("preview"), ctx = canvas.getContext("2d");
+let pathLayer = null;  // the path and the soft-limit box drawn once per view: status updates only add the tool
+let pathLayerKey = "";
+
+function drawPathLayer(canvas) {
+  const key = [program && program.name, program && program.path.count, view.scale, view.x, view.y, view.yaw, view.pitch,
+               JSON.stringify(softBox())].join("|");
+  if (pathLayer && key === pathLayerKey) return;
+  pathLayer = pathLayer || document.createElement("canvas");
+  pathLayer.width = canvas.width; pathLayer.height = canvas.height;
+  const ctx = pathLayer.getContext("2d");
   ctx.fillStyle = "#0b0d10"; ctx.fillRect(0, 0, canvas.width, canvas.height);
-  if (!program || !program.path.count) {
-    ctx.fillStyle = "#8a94a3"; ctx.font = "16px system-ui"; ctx.fillText("choose a program to see its path", 20, 30); return;
-  }
-  if (!view.fitted) fit(canvas);
   const box = softBox();
   if (box) {  // the soft-limit box, faint
-    ctx.strokeStyle = "#3a2f2f"; ctx.lineWidth = 1; ctx.setLineDash([2, 3]); ctx.beginPath();
+    ctx.strokeStyle = "#5a4040"; ctx.lineWidth = 1; ctx.setLineDash([2, 3]); ctx.beginPath();
     const c = (i) => [box[0][i & 1], box[1][(i >> 1) & 1], box[2][(i >> 2) & 1]];
     for (const [a, b] of [[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7], [0, 4], [1, 5], [2, 6], [3, 7]]) {
       const p = project(...c(a)), q = project(...c(b)); ctx.moveTo(p[0], p[1]); ctx.lineTo(q[0], q[1]);
@@ -350,6 +374,18 @@ function drawPreview() {
   ctx.lineWidth = 1.5;
   ctx.setLineDash([4, 4]); ctx.strokeStyle = "#6b7380"; strokeSegments(ctx, program.path.segs, program.path.rapid, 1);
   ctx.setLineDash([]); ctx.strokeStyle = "#3d8bfd"; strokeSegments(ctx, program.path.segs, program.path.rapid, 0);
+  pathLayerKey = key;
+}
+
+function drawPreview() {
+  const canvas = $("preview"), ctx = canvas.getContext("2d");
+  if (!program || !program.path.count) {
+    ctx.fillStyle = "#0b0d10"; ctx.fillRect(0, 0, canvas.width, canvas.height);
+    ctx.fillStyle = "#8a94a3"; ctx.font = "16px system-ui"; ctx.fillText("choose a program to see its path", 20, 30); return;
+  }
+  if (!view.fitted) fit(canvas);
+  drawPathLayer(canvas);
+  ctx.drawImage(pathLayer, 0, 0);
   if (trail.length > 1) {
     ctx.beginPath(); ctx.strokeStyle = "#2fa36b"; ctx.lineWidth = 2.5;
     trail.forEach((p, i) => { const q = project(p[0] - workOffset(0), p[1] - workOffset(1), p[2] - workOffset(2)); if (i) ctx.lineTo(q[0], q[1]); else ctx.moveTo(q[0], q[1]); });

@@ -1,0 +1,248 @@
+"""The web gateway as an operator meets it: the daemon and ``nurbsmotion web`` as separate
+processes (simulated drives in the daemon, T = 1 ms), WebSocket clients in this process.
+
+    python benchmarks/bench_web.py --seconds 60 --rounds 2
+
+Figures (issue 22's benchmarks):
+- latency from a daemon event (its log record's time, ``logged_t``) to a WebSocket client's
+  receipt, median and p99, with 1 and with 10 clients (the feed override is set every 0.25 s
+  during a job, so each client gets a stream of ``override_changed`` events);
+- late and missed cycles of a job with 0 and with 10 clients connected, interleaved;
+- the gateway's CPU while idle (one client connected) and while a job streams to 10 clients;
+- the console's time to parse and draw the preview of a 100,000-line program in headless
+  Chromium (``window.previewDrawnMs``), when Debian's chromium and playwright are installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import shutil
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from benchmarks._report import write_section  # noqa: E402
+
+from nurbsmotion.service.client import Client  # noqa: E402
+
+MACHINE = """\
+cycle_period_ms: 1
+simulate: true
+bus: {{interface: virtual, channel: {channel}}}
+interpolation: {{algorithm: lookahead, feed_mm_min: 6000, chord_error_mm: 0.01, max_accel_mm_s2: 1000,
+                max_jerk_mm_s3: 50000}}
+axes:
+  - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
+  - {{name: Y, node_id: 2, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
+  - {{name: Z, node_id: 3, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
+monitoring: {{feedback_log: false}}
+control: {{socket: {socket}}}
+data_dir: {data_dir}
+web: {{listen: "127.0.0.1:{port}"}}
+"""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def cpu_s(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def program_for(seconds: float) -> str:
+    strokes = max(1, int(seconds))  # 100 mm at 100 mm/s: about a second each
+    return "G21 G90\nG01 X0 F6000\n" + "".join(f"G01 X{100 if i % 2 == 0 else 0}\n" for i in range(strokes))
+
+
+async def client(url: str, latencies: list[float], stop: asyncio.Event) -> None:
+    async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
+        while not stop.is_set():
+            try:
+                message = await asyncio.wait_for(ws.receive(), 0.2)
+            except asyncio.TimeoutError:
+                continue
+            if message.type != aiohttp.WSMsgType.TEXT:
+                return
+            line = json.loads(message.data)
+            if line.get("notify") == "event" and line.get("logged_t"):
+                latencies.append(time.time() - line["logged_t"])
+
+
+async def job_round(ws_url: str, socket_path: str, clients: int, seconds: float, gateway_pid: int) -> dict[str, Any]:
+    latencies: list[float] = []
+    stop = asyncio.Event()
+    tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients)]
+    await asyncio.sleep(1.0)
+
+    def run_job() -> tuple[dict[str, Any], dict[str, Any], str]:
+        with Client(socket_path) as c:
+            before = c.call("status")["cycles"]
+            job = c.call("submit", name="bench.nc", program=program_for(seconds))["job"]["id"]
+            percent = 100
+            while c.call("status").get("job") is not None:
+                time.sleep(0.25)
+                percent = 101 if percent == 100 else 100
+                c.call("override", percent=percent)
+            after = c.call("status")["cycles"]
+            outcome = c.call("job", id=job)["job"]["outcome"]["outcome"]
+        return before, after, outcome
+
+    cpu_before, wall_before = cpu_s(gateway_pid), time.monotonic()
+    before, after, outcome = await asyncio.to_thread(run_job)
+    gateway_cpu = (cpu_s(gateway_pid) - cpu_before) / (time.monotonic() - wall_before)
+    stop.set()
+    await asyncio.gather(*tasks, return_exceptions=True)
+    latencies.sort()
+    return {"clients": clients, "outcome": outcome, "cycles": after["count"] - before["count"],
+            "late": after["late"] - before["late"], "missed": after["missed"] - before["missed"],
+            "events": len(latencies),
+            "median_ms": statistics.median(latencies) * 1e3 if latencies else float("nan"),
+            "p99_ms": latencies[int(0.99 * (len(latencies) - 1))] * 1e3 if latencies else float("nan"),
+            "gateway_cpu_percent": 100 * gateway_cpu}
+
+
+async def idle_cpu(ws_url: str, gateway_pid: int, seconds: float) -> float:
+    stop = asyncio.Event()
+    task = asyncio.create_task(client(ws_url, [], stop))
+    await asyncio.sleep(2.0)
+    start_cpu, start = cpu_s(gateway_pid), time.monotonic()
+    await asyncio.sleep(seconds)
+    used = (cpu_s(gateway_pid) - start_cpu) / (time.monotonic() - start)
+    stop.set()
+    await asyncio.gather(task, return_exceptions=True)
+    return 100 * used
+
+
+def preview_ms(page_url: str, lines: int) -> float | None:
+    chromium = shutil.which("chromium")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        return None
+    if chromium is None:
+        return None
+    folder = Path(tempfile.mkdtemp(prefix="nm-bench-web-"))
+    program = folder / "surface.nc"
+    rows = ["G21 G90 G00 Z5", "G01 Z0 F600"]
+    for i in range(lines):  # a raster of short G01 moves, as 3-D surfacing posts write them
+        row, col = divmod(i, 500)
+        x = col * 0.2 if row % 2 == 0 else (499 - col) * 0.2
+        rows.append(f"G01 X{x:.3f} Y{row * 0.2:.3f} Z{0.5 * ((x / 10) % 1):.3f} F3000")
+    program.write_text("\n".join(rows) + "\n")
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium, args=["--headless", "--no-sandbox", "--disable-gpu",
+                                                                    "--disable-background-networking"])
+        page = browser.new_page(viewport={"width": 1600, "height": 1000})
+        errors: list[str] = []
+        page.on("pageerror", lambda err: errors.append(str(err)))
+        page.goto(page_url)
+        page.locator("#file").set_input_files(str(program))
+        try:
+            page.wait_for_function("() => window.previewDrawnMs !== undefined", timeout=60000)
+        except Exception:
+            raise RuntimeError(f"the preview was not drawn; page errors: {errors}") from None
+        ms = float(page.evaluate("() => window.previewDrawnMs"))
+        browser.close()
+    return ms
+
+
+async def main_async(args: argparse.Namespace) -> str:
+    folder = Path(tempfile.mkdtemp(prefix="nm-bench-web-"))
+    port = free_port()
+    config = folder / "machine.yaml"
+    socket_path = folder / "ctl.sock"
+    config.write_text(MACHINE.format(channel=f"bench-web-{uuid.uuid4().hex}", socket=socket_path,
+                                     data_dir=folder / "data", port=port))
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+    daemon = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "daemon", "--config", str(config)], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    gateway = None
+    try:
+        for _ in range(200):
+            if socket_path.exists():
+                break
+            await asyncio.sleep(0.1)
+        gateway = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "web", "--config", str(config)], env=env,
+                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        base = f"http://127.0.0.1:{port}"
+        async with aiohttp.ClientSession() as session:
+            for _ in range(200):
+                try:
+                    async with session.get(f"{base}/api/v1/status") as r:
+                        if r.status == 200:
+                            break
+                except aiohttp.ClientError:
+                    pass
+                await asyncio.sleep(0.1)
+        ws_url = f"ws://127.0.0.1:{port}/api/v1/ws"
+        idle = await idle_cpu(ws_url, gateway.pid, args.idle_seconds)
+        rows = []
+        for _ in range(args.rounds):
+            for n in (0, args.clients):
+                rows.append(await job_round(ws_url, str(socket_path), n, args.seconds, gateway.pid))
+                print(rows[-1], flush=True)
+        for n in (1,):
+            rows.append(await job_round(ws_url, str(socket_path), n, min(args.seconds, 20.0), gateway.pid))
+            print(rows[-1], flush=True)
+        preview = await asyncio.to_thread(preview_ms, base + "/", args.preview_lines)
+    finally:
+        for proc in (gateway, daemon):
+            if proc is not None:
+                proc.terminate()
+                proc.wait(20)
+    load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
+    table = ["| WebSocket clients | job outcome | cycles | late (> 10 % T) | missed (> T) | events timed | "
+             "event -> client median ms | p99 ms | gateway CPU % |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['missed']} | "
+                     f"{r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | {r['gateway_cpu_percent']:.1f} |")
+    shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
+    return (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
+            f"WebSocket clients in the benchmark's process; {args.seconds:g} s jobs with 0 and {args.clients} clients "
+            f"interleaved, then one with 1 client; the override set every 0.25 s gives the clients events to time. "
+            f"Load average at the end: {load} (2 cores shared with other work: compare rows of one run).\n\n"
+            + "\n".join(table)
+            + f"\n\n| figure | value | target |\n|---|---|---|\n"
+              f"| gateway CPU, idle, one client connected ({args.idle_seconds:g} s) | {idle:.2f} % | < 1 % |\n"
+              f"| preview of a {args.preview_lines:,}-line program parsed and drawn (headless Chromium) | {shown} "
+              f"| <= 2000 ms |\n")
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--rounds", type=int, default=2)
+    parser.add_argument("--clients", type=int, default=10)
+    parser.add_argument("--idle-seconds", type=float, default=30.0)
+    parser.add_argument("--preview-lines", type=int, default=100_000)
+    parser.add_argument("--no-write", action="store_true")
+    args = parser.parse_args()
+    body = asyncio.run(main_async(args))
+    command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}"
+    if args.no_write:
+        print(body)
+    else:
+        write_section("web", "Web gateway: event latency, cycles with clients, CPU, preview", body, command)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
