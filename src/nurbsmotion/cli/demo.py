@@ -21,6 +21,7 @@ from nurbsmotion import data
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.service.client import Client, RequestFailed
+from nurbsmotion.fieldbus.homing_check import offered_homing
 from nurbsmotion.homing_config import HomingConfig
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.service.link import open_link
@@ -54,8 +55,8 @@ def demo_config(args: argparse.Namespace, socket_path: Path) -> MachineConfig:
         from nurbsmotion.errors import InputError
 
         raise InputError(config.where("simulate"), "the demo runs simulated drives: set simulate: true")
-    axes = tuple(a if a.homing or a.name not in DEMO_HOMING else replace(a, homing=DEMO_HOMING[a.name])
-                 for a in _with_findable_eds(config.axes))
+    axes = tuple(a if a.homing or a.name not in DEMO_HOMING else replace(a, homing=offered_homing(a, DEMO_HOMING[a.name]))
+                 for a in _with_findable_eds(config.axes))  # a drive whose EDS has no such homing: 'here'
     return replace(config, data_dir=args.data_dir or config.data_dir, axes=axes,
                    control=replace(config.control, socket=str(socket_path), group=None))
 
