@@ -99,4 +99,5 @@ def test_a_vendor_offset_object_needs_its_sign():
 
 def test_a_vendor_offset_object_is_in_the_manufacturer_area():
     assert _errors(_axis("{method: 35, home_offset_object: 0x607C, home_offset_sign: 1}")) == [
-        "m.yaml:4: axes[0].homing.home_offset_object: must be <= 24575, got 24700"]
+        "m.yaml:4: axes[0].homing.home_offset_object: must be a manufacturer-specific object 0x2000..0x5FFF, got "
+        "0x607C (0x607C is used by itself where the drive's EDS lists it)"]

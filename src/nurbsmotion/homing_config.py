@@ -89,6 +89,17 @@ def _sign(doc: _Doc) -> Any:
     return value
 
 
+def _vendor_object(doc: _Doc) -> Any:
+    value = doc.value()
+    low, high = VENDOR_OBJECTS
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        shown = f"0x{value:04X}" if isinstance(value, int) and not isinstance(value, bool) else _SHOWN.repr(value)
+        doc.fail(f"must be a manufacturer-specific object 0x{low:04X}..0x{high:04X}, got {shown} (0x607C is used "
+                 f"by itself where the drive's EDS lists it)")
+        return _MISSING
+    return value
+
+
 _POSITIVE = (_number, {"minimum": 0})
 _READERS = {
     "method": (_method, {}),
@@ -102,8 +113,7 @@ _READERS = {
     "home_offset_sign": (_sign, {}),
     "order": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
     "ignore_limits": (_boolean, {}),
-    "home_offset_object": (_number, {"integer": True, "minimum": VENDOR_OBJECTS[0], "exclusive_min": False,
-                                     "maximum": VENDOR_OBJECTS[1]}),
+    "home_offset_object": (_vendor_object, {}),
 }
 
 

@@ -93,8 +93,10 @@ def plan_homing(config: MachineConfig, i: int) -> AxisHoming | None:
     line, axis, node, EDS and object when the drive cannot do it."""
     axis = config.axes[i]
     homing = axis.homing
-    if homing is None or not homing.on_drive or axis.od is None:
+    if homing is None or not homing.on_drive:
         return None
+    if axis.od is None:
+        raise InputError(axis_where(config, i, "eds"), "no object dictionary loaded (use load_config/parse_config)")
     try:
         return _plan(axis, i, axis.od, homing)
     except _Refusal as refusal:
