@@ -10,8 +10,9 @@ LowLimit..HighLimit (CiA 306; no file of tests/data/eds gives a value list inste
   Schunk's PRL120 has none);
 - for a method that moves (not 35/37): 0x6099:01/02 speeds and 0x609A acceleration;
 - the home offset, by :class:`OffsetRoute`: ``0x607C`` value (``homing_drive_values``) 0:
-  nothing is written; else 0x607C where the file lists it; else the vendor object named by
-  ``homing.home_offset_object``; else the master applies it (LinuxCNC's HOME_OFFSET is done
+  nothing is written; else the vendor object named by ``homing.home_offset_object`` (the
+  YAML's choice, even where the file lists 0x607C); else 0x607C where the file lists it;
+  else the master applies it (LinuxCNC's HOME_OFFSET is done
   in software too): the drive's home reads 0 counts (its own home offset, 0 as shipped) and
   the axis map's ``offset_counts`` becomes ``-round(±offset_mm · counts_per_mm)``, so that
   machine position = ±(counts - offset_counts)/counts_per_mm reads ``offset_mm`` at the home.
