@@ -87,3 +87,17 @@ def test_axis_sim_errors_name_their_yaml_line():
         "positive_limit_mm, index_pitch_mm, index_phase_mm",
         "m.yaml:7: axes[0].sim.index_pitch_mm: must be > 0, got 0",
         "m.yaml:5: axes[0].sim: negative_limit_mm 5 must be below positive_limit_mm 5"]
+
+
+def test_a_vendor_offset_object_needs_its_sign():
+    assert _errors(_axis("{method: 35, offset_mm: 1, home_offset_object: 0x30B0}")) == [
+        "m.yaml:4: axes[0].homing: home_offset_object 0x30B0 needs home_offset_sign (1: the home reads the value "
+        "written, -1: it reads minus it; see the drive's manual)"]
+    homing = parse_config(_axis("{method: 35, home_offset_object: 0x30B0, home_offset_sign: 1}")).axes[0].homing
+    assert homing.home_offset_object == 0x30B0 and homing.home_offset_sign == 1
+
+
+def test_a_vendor_offset_object_is_in_the_manufacturer_area():
+    assert _errors(_axis("{method: 35, home_offset_object: 0x607C, home_offset_sign: 1}")) == [
+        "m.yaml:4: axes[0].homing.home_offset_object: must be a manufacturer-specific object 0x2000..0x5FFF, got "
+        "0x607C (0x607C is used by itself where the drive's EDS lists it)"]

@@ -15,6 +15,10 @@ switch is also its home switch); any other limit input does. The optional
 ``speed_unit_counts_s``, ``accel_unit_counts_s2`` and ``home_offset_sign`` say what the
 drive's units of 0x6099 / 0x609A are and which sign convention its 0x607C follows (see
 ``nurbsmotion.fieldbus.homing.homing_drive_values``): nothing in drive units is guessed.
+``home_offset_object`` names a vendor object (0x2000-0x5FFF, sub-index 0) that takes the home
+offset on a drive without 0x607C (maxon EPOS4: 0x30B0 "home position", the value the home
+reads, so ``home_offset_sign: 1``); with it ``home_offset_sign`` must be given. Without either
+object the master applies the offset itself (fieldbus.homing_check, docs/machine.md).
 
 config.py calls :func:`read_homing` for ``axes[i].homing`` and :func:`read_axis_sim` for
 ``axes[i].sim`` (where a simulated drive's switches and index pulses are: the sensors homing
@@ -33,6 +37,7 @@ HERE = "here"
 STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)
 DRIVE_KEYS = ("speed_search_mm_s", "speed_zero_mm_s", "accel_mm_s2")
 NO_MOTION_METHODS = (35, 37)  # the drive takes its current position as home: no speeds needed
+VENDOR_OBJECTS = (0x2000, 0x5FFF)  # CiA 301 manufacturer-specific profile area
 
 
 @dataclass(frozen=True)
@@ -50,6 +55,7 @@ class HomingConfig:
     home_offset_sign: int = -1  # -1: CiA 402 (zero = home + 0x607C, the home reads -0x607C)
     order: int | None = None  # `home` with no axis named: lower first; axes without: after, in list order
     ignore_limits: bool = False  # the io limit inputs of this axis do not stop its homing (LinuxCNC HOME_IGNORE_LIMITS)
+    home_offset_object: int | None = None  # vendor object (sub 0) for the offset where the drive has no 0x607C
 
     @property
     def on_drive(self) -> bool:
@@ -83,6 +89,17 @@ def _sign(doc: _Doc) -> Any:
     return value
 
 
+def _vendor_object(doc: _Doc) -> Any:
+    value = doc.value()
+    low, high = VENDOR_OBJECTS
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        shown = f"0x{value:04X}" if isinstance(value, int) and not isinstance(value, bool) else _SHOWN.repr(value)
+        doc.fail(f"must be a manufacturer-specific object 0x{low:04X}..0x{high:04X}, got {shown} (0x607C is used "
+                 f"by itself where the drive's EDS lists it)")
+        return _MISSING
+    return value
+
+
 _POSITIVE = (_number, {"minimum": 0})
 _READERS = {
     "method": (_method, {}),
@@ -96,6 +113,7 @@ _READERS = {
     "home_offset_sign": (_sign, {}),
     "order": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
     "ignore_limits": (_boolean, {}),
+    "home_offset_object": (_vendor_object, {}),
 }
 
 
@@ -107,6 +125,9 @@ def read_homing(doc: _Doc) -> Any:
     missing = [key for key in DRIVE_KEYS if key not in values]
     if method not in (None, HERE, *NO_MOTION_METHODS) and missing and len(doc.errors) == before:
         doc.fail(f"homing method {method} runs on the drive and needs {', '.join(missing)}")
+    if "home_offset_object" in values and "home_offset_sign" not in values and len(doc.errors) == before:
+        doc.fail(f"home_offset_object 0x{values['home_offset_object']:04X} needs home_offset_sign (1: the home reads "
+                 f"the value written, -1: it reads minus it; see the drive's manual)")
     if len(doc.errors) > before or method is None:
         return _MISSING
     return HomingConfig(**values)

@@ -34,6 +34,23 @@ def test_a_drive_without_the_mode_is_refused_with_one_line(tmp_path, capsys):
                            "position (mode 7) is not possible; it offers cyclic synchronous position (mode 8)")
 
 
+def test_check_shows_the_homing_and_refuses_one_the_eds_cannot_do(tmp_path, capsys):
+    eds = ROOT / "tests" / "data" / "eds"
+    (tmp_path / "m.yaml").write_text(
+        f"axes:\n  - {{name: X, node_id: 1, mode: csp, eds: {eds / 'maxon_epos4_50_15_node1.dcf'},\n"
+        f"     homing: {{method: 37, offset_mm: 2}}}}\n")
+    assert main(["drives", "check", "--config", str(tmp_path / "m.yaml")]) == 0
+    out = capsys.readouterr().out
+    assert "  home    method 37: write 0x6098:00 = 37, 0x6060:00 = 6; 0x6061 must read 6" in out
+    assert "  home    offset: applied by the master (the drive has no 0x607C): offset_counts -2000" in out
+    (tmp_path / "m.yaml").write_text(f"axes:\n  - {{name: X, node_id: 1, mode: ip, eds: {eds / 'schunk_PRL120.eds'},"
+                                     f"\n     homing: {{method: 35}}}}\n")
+    assert main(["drives", "check", "--config", str(tmp_path / "m.yaml")]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].endswith("m.yaml:3: axes[0].homing.method (X, node 1): schunk_PRL120.eds has no "
+                                             "0x6098:00 (homing method), needed for homing method 35; use method: here")
+
+
 def test_missing_action_is_exit_2(capsys):
     try:
         code = main(["drives"])

@@ -8,12 +8,12 @@ from nurbsmotion.fieldbus.homing import (
     Event,
     HomingDriveValues,
     HomingProcedure,
+    OffsetObject,
     Phase,
     classify,
     here_offset_counts,
     homing_drive_values,
     homing_plan,
-    homing_plan_problems,
 )
 from nurbsmotion.homing_config import HERE, HomingConfig
 
@@ -57,12 +57,21 @@ def test_values_that_do_not_fit_the_drive_are_input_errors(kw, field):
     assert "\n" not in str(info.value)
 
 
-def test_method_37_writes_no_speeds_and_plan_order():
+def test_method_37_writes_no_speeds_and_a_zero_offset_writes_nothing():
     values = homing_drive_values(HomingConfig(method=37, offset_mm=0), 1000, False, 0, "X")
     plan = homing_plan(values, c.Mode.CYCLIC_SYNC_POSITION)
-    assert [(w.index, w.subindex, w.value) for w in plan.writes] == [(0x6098, 0, 37), (0x607C, 0, 0), (0x6060, 0, 6)]
+    assert [(w.index, w.subindex, w.value) for w in plan.writes] == [(0x6098, 0, 37), (0x6060, 0, 6)]
     assert plan.mode_check == 6
     assert [(w.index, w.value) for w in plan.restore] == [(0x6060, 8)]
+
+
+def test_the_offset_goes_to_the_object_given_or_nowhere():
+    values = homing_drive_values(HomingConfig(method=37, offset_mm=2, home_offset_sign=1), 1000, False, 0, "X")
+    vendor = homing_plan(values, c.Mode.CYCLIC_SYNC_POSITION, OffsetObject(0x30B0, 0, "<i"))
+    assert [(w.index, w.value, w.fmt) for w in vendor.writes] == [(0x6098, 37, "<b"), (0x30B0, 2000, "<i"),
+                                                                  (0x6060, 6, "<b")]
+    master = homing_plan(values, c.Mode.CYCLIC_SYNC_POSITION, None)
+    assert [w.index for w in master.writes] == [0x6098, 0x6060]
 
 
 def test_plan_writes_every_homing_object_before_the_mode():
@@ -141,40 +150,6 @@ def test_classify_table():
     assert classify(OE, False) is Event.ACK_PENDING
     assert classify(ATTAINED, True) is Event.ATTAINED
     assert classify(ERROR | 1 << 12, True) is Event.HOMING_ERROR
-
-
-EDS = __import__("pathlib").Path(__file__).resolve().parents[1] / "data" / "eds"
-
-
-def _problems(eds_name, homing, mode=c.Mode.CYCLIC_SYNC_POSITION):
-    import canopen
-
-    od = canopen.import_od(str(EDS / eds_name), 1)
-    plan = homing_plan(homing_drive_values(homing, 1000, False, 0, "X"), mode)
-    return homing_plan_problems(plan, od, 1)
-
-
-def test_real_drive_descriptions_that_accept_the_plan():
-    assert _problems("technosoft_ISD860.eds", _homing()) == []
-    assert _problems("nanotec_C5-E-2-09.eds", _homing(method=35, offset_mm=0)) == []
-
-
-def test_real_drive_descriptions_that_refuse_part_of_the_plan():
-    # Maxon EPOS4: no 0x607C (its home position lives in 0x30B0)
-    assert _problems("maxon_epos4_50_15_node1.dcf", _homing()) == [
-        "node 1: homing configuration: 0x607C:00: the drive's EDS has no such object"]
-    # ZeroErr eRob: speeds limited to 1..20000 / 1..5000 (not counts/s: units must be configured)
-    assert _problems("zeroerr_eDriver_V1.5.eds", _homing(speed_search_mm_s=50.0)) == [
-        "node 1: homing configuration: 0x6099:01: the drive's EDS allows 1..20000, not 50000"]
-    # Elmo: methods up to 35 (37 came with CiA 402 v4)
-    assert _problems("elmo_Elmo.eds", HomingConfig(method=37)) == [
-        "node 1: homing configuration: 0x6098:00: the drive's EDS allows -128..35, not 37"]
-    # Pilz PRBT: 0x6098 is const; no 0x6099/0x609A at all
-    assert _problems("pilz_prbt.eds", _homing()) == [
-        "node 1: homing configuration: 0x6098:00: read-only in the drive's EDS (AccessType=const)",
-        "node 1: homing configuration: 0x6099:01: the drive's EDS has no such object",
-        "node 1: homing configuration: 0x6099:02: the drive's EDS has no such object",
-        "node 1: homing configuration: 0x609A:00: the drive's EDS has no such object"]
 
 
 def test_a_not_started_word_waits_for_the_start_allowance_before_failing():

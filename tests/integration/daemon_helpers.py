@@ -55,6 +55,15 @@ def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02
         time.sleep(poll_s)
 
 
+def home_all(client: Any, timeout_s: float) -> dict[str, Any]:
+    """``home`` every axis, wait until the homing ended; the status then, its homing without error."""
+    assert client.call("home")["ok"]
+    wait_until(lambda: not client.call("status")["homing"]["busy"], timeout_s, "the homing to end", poll_s=0.05)
+    status = client.call("status")
+    assert status["homing"]["error"] is None, status["homing"]
+    return status
+
+
 @contextlib.contextmanager
 def daemon_in_process(data_dir: Path, extra_yaml: str, prefix: str) -> Iterator[Any]:
     """A started service.daemon.Daemon (this process) on CONFIG + ``extra_yaml``, a private

@@ -14,7 +14,7 @@ import pytest
 from nurbsmotion.config import parse_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import CONFIG_HEAD, wait_until
+from tests.integration.daemon_helpers import CONFIG_HEAD, home_all
 
 CONFIG = CONFIG_HEAD + """\
 axes:
@@ -52,10 +52,7 @@ def test_drives_home_on_the_switches_and_index_pulses_of_the_yaml(tmp_path: Path
     daemon.start()
     try:
         with Client(config.control.socket) as client:
-            assert client.call("home")["ok"]
-            wait_until(lambda: not client.call("status")["homing"]["busy"], 60.0, "the homing to end", poll_s=0.05)
-            status = client.call("status")
-            assert status["homing"]["error"] is None
+            status = home_all(client, 60.0)
             assert set(status["homing"]["axes"].values()) == {"homed"}
             for i, (name, method, _, _, home_counts, exact) in enumerate(cases):
                 drive = daemon.simulation.network[i + 1]

@@ -4,6 +4,7 @@ cycle its EDS gives (see tests/data/eds/SOURCES.md for where each file comes fro
 
 from __future__ import annotations
 
+import struct
 from pathlib import Path
 
 import canopen
@@ -79,3 +80,34 @@ def test_a_drive_enables_in_csp_or_ip_only_with_a_cycle_period(bench: Bench, pat
         node.sdo.download(0x6040, 0, word.to_bytes(2, "little"))
     expected = State.OPERATION_ENABLED if drive.period_s > 0 else State.FAULT
     assert drive.state is expected, f"period {drive.period_s} s"
+
+
+# (file, object, value) -> the CiA 301 abort the simulated drive answers, as its EDS says
+HOMING_REFUSALS = [
+    ("maxon_epos4_50_15_node1.dcf", 0x607C, 0, 1000, 0x06020000),  # no home offset object
+    ("schunk_PRL120.eds", 0x6098, 0, 34, 0x06020000),  # no homing method object
+    ("elmo_Elmo.eds", 0x6098, 0, 37, 0x06090031),  # HighLimit 35
+    ("zeroerr_eDriver_V1.5.eds", 0x6099, 1, 20001, 0x06090031),  # HighLimit 20000
+    ("zeroerr_eDriver_V1.5.eds", 0x6060, 0, 6, 0x06090030),  # 0x6502 = 0x38D: no homing mode
+    ("pilz_prbt.eds", 0x6098, 0, 34, 0x06010002),  # const
+]
+
+
+@pytest.mark.parametrize("name, index, subindex, value, code", HOMING_REFUSALS)
+def test_a_drive_refuses_the_homing_writes_its_eds_refuses(bench: Bench, name: str, index: int, subindex: int,
+                                                           value: int, code: int) -> None:
+    """What fieldbus.homing_check refuses at load is what the drive itself would refuse."""
+    drive, node = bench.add(5, eds=CORPUS / name)
+    fmt = {0x6098: "<b", 0x6060: "<b", 0x607C: "<i"}.get(index, "<I")
+    with pytest.raises(SdoAbortedError) as err:
+        node.sdo.download(index, subindex, struct.pack(fmt, value))
+    assert err.value.code == code
+
+
+@pytest.mark.parametrize("name", ["elmo_Elmo.eds", "maxon_epos4_50_15_node1.dcf", "technosoft_ISD860.eds"])
+def test_a_drive_takes_the_homing_writes_its_eds_allows(bench: Bench, name: str) -> None:
+    drive, node = bench.add(5, eds=CORPUS / name)
+    for index, subindex, fmt, value in ((0x6098, 0, "<b", 34), (0x6099, 1, "<I", 20000), (0x6099, 2, "<I", 2000),
+                                        (0x609A, 0, "<I", 200000), (0x6060, 0, "<b", 6)):
+        node.sdo.download(index, subindex, struct.pack(fmt, value))
+    assert node.sdo[0x6061].raw == 6

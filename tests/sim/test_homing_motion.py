@@ -145,3 +145,14 @@ def test_setup_from_the_drive_objects():
     values = {(0x6098, 0): 17, (0x6099, 1): 20_000, (0x6099, 2): 2000, (0x609A, 0): 200_000, (0x607C, 0): -5}
     assert setup_from_objects(lambda index, sub: values[(index, sub)]) == HomingSetup(17, 20_000.0, 2000.0, 200_000.0, -5)
     assert {(i, s) for i, s, _ in HOMING_OBJECTS} == set(values)
+
+
+def test_a_vendor_home_object_replaces_0x607c():
+    """maxon EPOS4 0x30B0 "home position" (sign +1): the home reads its value, i.e. the
+    setup's home offset (the home reads minus it) is -0x30B0; 0x607C is not read."""
+    from nurbsmotion.sim.homing import setup_from_objects
+
+    values = {(0x6098, 0): 35, (0x6099, 1): 0, (0x6099, 2): 0, (0x609A, 0): 0, (0x30B0, 0): -20_000}
+    setup = setup_from_objects(lambda index, sub: values[(index, sub)], (0x30B0, 1))
+    assert setup.home_offset_counts == 20_000
+    assert setup_from_objects(lambda index, sub: values[(index, sub)], (0x30B0, -1)).home_offset_counts == -20_000

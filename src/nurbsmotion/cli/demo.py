@@ -1,8 +1,9 @@
 """``nurbsmotion demo``: the daemon and three simulated CiA-402 drives in this process on
 python-can's virtual bus: the axes are homed (the simulated drives have a limit switch and
 index pulses: X on its negative limit switch, method 17; Y on an index pulse, method 34;
-Z where it stands, ``here``), jogged (X+10) and moved by MDI, then run Wang's Table 1
-NURBS curve; prints what happened and where the record and the plot are.
+Z where it stands, ``here``; an axis whose EDS offers no such homing: ``here``), jogged
+(X+10) and moved by MDI, then run Wang's Table 1 NURBS curve; prints what happened and
+where the record and the plot are.
 """
 
 from __future__ import annotations
@@ -54,7 +55,9 @@ def demo_config(args: argparse.Namespace, socket_path: Path) -> MachineConfig:
         from nurbsmotion.errors import InputError
 
         raise InputError(config.where("simulate"), "the demo runs simulated drives: set simulate: true")
-    axes = tuple(a if a.homing or a.name not in DEMO_HOMING else replace(a, homing=DEMO_HOMING[a.name])
+    from nurbsmotion.fieldbus.homing_check import offered_homing  # a drive whose EDS lacks the homing: 'here'
+
+    axes = tuple(a if a.homing or a.name not in DEMO_HOMING else replace(a, homing=offered_homing(a, DEMO_HOMING[a.name]))
                  for a in _with_findable_eds(config.axes))
     return replace(config, data_dir=args.data_dir or config.data_dir, axes=axes,
                    control=replace(config.control, socket=str(socket_path), group=None))

@@ -85,6 +85,7 @@ def format_plan(plan: DrivePlan, od: object) -> list[str]:
             lines.append(f"  read    0x{step.index:04X}:{step.subindex:02X} must read {step.expect} - {step.step}")
         elif isinstance(step, PdoSetup) and step.frame is not None:
             lines.append(f"  map     {_frame(step.frame)}, transmission type 1 (every SYNC)")
+    lines += plan.homing.describe() if plan.homing is not None else []
     for skipped in plan.skipped:
         lines.append(f"  skip    {skipped.what}: {skipped.reason}")
     return lines

@@ -20,9 +20,9 @@ from __future__ import annotations
 
 import enum
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from canopen.objectdictionary import ObjectDictionary
 
@@ -32,6 +32,9 @@ from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.busload import HEARTBEAT_DLC, SYNC_DLC, fits_following_error_tpdo, frame_bits
 from nurbsmotion.fieldbus.pdo import interpolation_period, mapping_entry
+
+if TYPE_CHECKING:
+    from nurbsmotion.fieldbus.homing_check import AxisHoming
 
 QUICK_STOP_OPTIONS = (2, 1, 3, 4)  # preferred first: 2 = quick-stop ramp 0x6085, then SWITCH ON DISABLED
 MAX_PDO_BITS = 64
@@ -176,6 +179,7 @@ class DrivePlan:
     steps: tuple[Step, ...]
     layout: AxisPdoLayout
     skipped: tuple[Skipped, ...] = field(default=())
+    homing: AxisHoming | None = None  # the drive homing (fieldbus.homing_check), None: none or 'here'
 
 
 class _Refusal(Exception):
@@ -426,10 +430,13 @@ def plan_drive(config: MachineConfig, i: int, following_error_window_counts: int
     eds = Path(axis.eds).name if axis.eds else "(no EDS)"
     if od is None:
         raise InputError(axis_where(config, i, "eds"), "no object dictionary loaded (use load_config/parse_config)")
+    from nurbsmotion.fieldbus.homing_check import plan_homing  # it imports this module
+
     try:
-        return _plan(config, i, od, eds, following_error_window_counts, following_error_tpdo)
+        plan = _plan(config, i, od, eds, following_error_window_counts, following_error_tpdo)
     except _Refusal as refusal:
         raise InputError(axis_where(config, i, refusal.field_name), str(refusal)) from None
+    return replace(plan, homing=plan_homing(config, i))
 
 
 def _plan(config: MachineConfig, i: int, od: ObjectDictionary, eds: str, window_counts: int,

@@ -3,7 +3,7 @@
 The master runs a drive homing in three parts:
 
 1. :func:`homing_plan`: the SDO writes to do first (0x6098 method, 0x6099:01/02 speeds,
-   0x609A acceleration, 0x607C home offset, then 0x6060 = 6), the mode to read back from
+   0x609A acceleration, 0x607C home offset unless 0, then 0x6060 = 6), the mode to read back from
    0x6061, and the writes that restore the streaming mode afterwards. Values come from
    :func:`homing_drive_values`, the one place where mm become drive units.
 2. :class:`HomingProcedure`: each cycle, given the drive's statusword (TPDO1), the
@@ -34,8 +34,6 @@ import enum
 import math
 import struct
 from dataclasses import dataclass
-
-from canopen.objectdictionary import ObjectDictionary, ODVariable
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.cia402 import State
@@ -152,46 +150,32 @@ class HomingPlan:
     restore: tuple[ObjectWrite, ...]
 
 
-def homing_plan(values: HomingDriveValues, streaming_mode: c.Mode) -> HomingPlan:
-    """The SDO writes of a homing, in order (objects of CiA 402-2 homing mode)."""
+@dataclass(frozen=True)
+class OffsetObject:
+    """Where the home offset goes: 0x607C (CiA 402) or a vendor object (``fmt``: its type)."""
+
+    index: int = HOME_OFFSET
+    subindex: int = 0
+    fmt: str = "<i"
+
+
+def homing_plan(values: HomingDriveValues, streaming_mode: c.Mode,
+                offset_object: OffsetObject | None = OffsetObject()) -> HomingPlan:
+    """The SDO writes of a homing, in order (objects of CiA 402-2 homing mode). The home
+    offset goes to ``offset_object`` unless it is 0 (nothing to write) or ``offset_object``
+    is None (the master applies it: fieldbus.homing_check)."""
     step = "homing configuration"
     writes = [ObjectWrite(step, HOMING_METHOD, 0, "<b", values.method)]
     if values.speed_search:  # methods 35/37 do not move: speeds and acceleration are not written
         writes += [ObjectWrite(step, HOMING_SPEEDS, 1, "<I", values.speed_search),
                    ObjectWrite(step, HOMING_SPEEDS, 2, "<I", values.speed_zero),
                    ObjectWrite(step, HOMING_ACCELERATION, 0, "<I", values.acceleration)]
-    writes += [ObjectWrite(step, HOME_OFFSET, 0, "<i", values.home_offset),
-               ObjectWrite("set homing mode", c.MODES_OF_OPERATION, 0, "<b", MODE_HOMING)]
+    if offset_object is not None and values.home_offset != 0:
+        writes.append(ObjectWrite(step, offset_object.index, offset_object.subindex, offset_object.fmt,
+                                  values.home_offset))
+    writes.append(ObjectWrite("set homing mode", c.MODES_OF_OPERATION, 0, "<b", MODE_HOMING))
     restore = (ObjectWrite("restore streaming mode", c.MODES_OF_OPERATION, 0, "<b", int(streaming_mode)),)
     return HomingPlan(tuple(writes), MODE_HOMING, restore)
-
-
-def homing_plan_problems(plan: HomingPlan, od: ObjectDictionary, node_id: int) -> list[str]:
-    """Why a drive described by ``od`` (its EDS/DCF) would refuse the plan's writes, one line
-    each: object missing, not writable, or the value outside LowLimit..HighLimit. Real files
-    differ: Maxon's EPOS4 DCF has no 0x607C, Pilz's PRBT declares 0x6098 const, Elmo and
-    ZeroErr allow methods up to 35 only, ZeroErr limits 0x6099:01 to 20000."""
-    problems = []
-    for write in plan.writes + plan.restore:
-        var = _listed_variable(od, write.index, write.subindex)
-        where = f"node {node_id}: {write.step}: 0x{write.index:04X}:{write.subindex:02X}"
-        if var is None:
-            problems.append(f"{where}: the drive's EDS has no such object")
-        elif not var.writable:
-            problems.append(f"{where}: read-only in the drive's EDS (AccessType={var.access_type})")
-        elif (var.min is not None and write.value < var.min) or (var.max is not None and write.value > var.max):
-            problems.append(f"{where}: the drive's EDS allows {var.min}..{var.max}, not {write.value}")
-    return problems
-
-
-def _listed_variable(od: ObjectDictionary, index: int, subindex: int) -> ODVariable | None:
-    """The variable the file lists (canopen invents ARRAY sub-entries on access: not those)."""
-    if index not in od.indices:
-        return None
-    obj = od[index]
-    if isinstance(obj, ODVariable):
-        return obj if subindex == 0 else None
-    return obj.subindices.get(subindex)
 
 
 def here_offset_counts(position_counts: int, offset_mm: float, counts_per_mm: float, invert: bool) -> int:

@@ -4,7 +4,8 @@ The order (CiA 402-2 homing mode, CiA 301 SDO), each step from the caller's thre
 the cycle loop runs the controller's ``homing`` phase (fieldbus.controller.HomingSlot):
 
 1. ``home``: the axis holds with controlword bit 4 low (IP: interpolation off), 3 cycles;
-2. the plan's SDO writes (0x6098, 0x6099, 0x609A, 0x607C, 0x6060 = 6), 0x6061 read back;
+2. the plan's SDO writes (0x6098, 0x6099, 0x609A, the home offset unless 0 or applied by the
+   master: fieldbus.homing_check, 0x6060 = 6), 0x6061 read back;
 3. ``home_start``: the procedure (fieldbus.homing.HomingProcedure) steps once per cycle
    in the cycle loop, its set-point follows the position actual; wait for its outcome;
 4. 0x6064 read by SDO; ``home_hold`` there: the target the drive will follow is the

@@ -421,7 +421,7 @@ class Controller:
         record = None
         try:
             record = self.records.create(name, text)
-            record.write_config(config_dict(self.config))
+            record.write_config(config_dict(self.config, self.link.axis_map.offset_counts))
             plan.write_records(record)
             return record
         except OSError as err:
@@ -646,9 +646,12 @@ def check_program_name(name: str) -> None:
         raise InputError("field 'name'", "must be a file name of 1-255 printable characters")
 
 
-def config_dict(config: MachineConfig) -> dict[str, Any]:
-    """The configuration a job ran with, every default filled in (config.json of a record)."""
-    plain_axes = tuple(dataclasses.replace(a, od=None) for a in config.axes)  # the EDS as read: not a value
+def config_dict(config: MachineConfig, offset_counts: Any = None) -> dict[str, Any]:
+    """The configuration a job ran with, every default filled in (config.json of a record);
+    ``offset_counts``: the axis map's offsets in force (homing moves them: service.homing)."""
+    offsets = [a.offset_counts for a in config.axes] if offset_counts is None else [int(o) for o in offset_counts]
+    plain_axes = tuple(dataclasses.replace(a, od=None, offset_counts=o)  # the EDS as read: not a value
+                       for a, o in zip(config.axes, offsets))
     spindle = dataclasses.replace(config.spindle, od=None) if hasattr(config.spindle, "od") else config.spindle
     out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
     out.pop("lines", None)

@@ -2,7 +2,8 @@
 and the refusal of jobs, MDI and absolute jogs until every axis is homed.
 
 Each axis' ``homing:`` (homing_config) is either a drive method (CiA-402 mode 6, run by
-the master: fieldbus.Master.home) or ``here`` (no motion: the held position becomes
+the master: fieldbus.Master.home, planned and checked against the drive's EDS by
+fieldbus.homing_check) or ``here`` (no motion: the held position becomes
 ``offset_mm`` by moving the axis map's offset: counts = sign·mm·counts_per_mm + offset).
 Homing runs on its own thread (a homing may take a minute); ``status`` shows each axis'
 state and the last error.
@@ -26,8 +27,8 @@ import numpy as np
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
-from nurbsmotion.fieldbus.bringup_plan import mode_of
-from nurbsmotion.fieldbus.homing import HomingProcedure, here_offset_counts, homing_drive_values, homing_plan
+from nurbsmotion.fieldbus.homing import HomingProcedure, here_offset_counts
+from nurbsmotion.fieldbus.homing_check import plan_homing
 from nurbsmotion.homing_config import homing_method_name
 from nurbsmotion.log import kv
 from nurbsmotion.service.motion import MotionLink
@@ -194,13 +195,19 @@ class Homing:
         return ok
 
     def _home_on_drive(self, i: int) -> tuple[bool, str]:
+        """The drive homes (the plan checked against its EDS at load: fieldbus.homing_check);
+        when it completes, the axis map takes the offset the plan's route gives (the master's
+        own home offset on a drive without 0x607C)."""
         axis = self.config.axes[i]
         homing = axis.homing
-        assert homing is not None and isinstance(homing.method, int)
-        offset = int(self.link.axis_map.offset_counts[i])
-        values = homing_drive_values(homing, axis.counts_per_mm, axis.invert, offset, axis.name)
-        procedure = HomingProcedure(axis.node_id, homing.method, self.config.cycle_period_s, homing.timeout_s)
-        outcome = self.link.home(i, homing_plan(values, mode_of(axis)), procedure)
+        drive_homing = plan_homing(self.config, i)
+        assert homing is not None and drive_homing is not None
+        procedure = HomingProcedure(axis.node_id, drive_homing.method, self.config.cycle_period_s, homing.timeout_s)
+        outcome = self.link.home(i, drive_homing.plan, procedure)
+        if outcome.homed:
+            self.link.axis_map.offset_counts[i] = drive_homing.offset_counts_after
+            log.info(kv("homing_offset", axis=axis.name, route=drive_homing.route.name.lower(),
+                        offset_counts=drive_homing.offset_counts_after))
         return outcome.homed, outcome.reason
 
     def _home_here(self, i: int) -> bool:

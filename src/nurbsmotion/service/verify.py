@@ -6,7 +6,8 @@ the drives applied exactly the planned set-points.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -14,16 +15,29 @@ import numpy as np
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.planning.trace import read_trace
-from nurbsmotion.service.records import DRIVES_DIR, TRACE_FILE
+from nurbsmotion.service.records import CONFIG_FILE, DRIVES_DIR, TRACE_FILE
 from nurbsmotion.sim import read_csv
 
 
 def planned_counts(folder: Path, config: MachineConfig) -> np.ndarray:
-    """The job's planned set-points in counts (N, n_axes), from its trace CSV."""
+    """The job's planned set-points in counts (N, n_axes), from its trace CSV, with the axis
+    offsets the job ran with (its config.json: homing moves them)."""
     trace = read_trace(folder / TRACE_FILE)
     xyz = np.column_stack([trace["x"], trace["y"], trace["z"]])
     columns = ["XYZ".index(a.name) for a in config.axes]
-    return AxisMap.from_config(config).to_counts(xyz[:, columns], check_limits=False)
+    return AxisMap.from_config(offsets_in_force(folder, config)).to_counts(xyz[:, columns], check_limits=False)
+
+
+def offsets_in_force(folder: Path, config: MachineConfig) -> MachineConfig:
+    """``config`` with each axis' ``offset_counts`` as the record's config.json has it."""
+    try:
+        axes = json.loads((folder / CONFIG_FILE).read_text(encoding="utf-8"))["axes"]
+        offsets = [int(a["offset_counts"]) for a in axes]
+    except (OSError, ValueError, KeyError, TypeError):
+        return config
+    if len(offsets) != len(config.axes):
+        return config
+    return replace(config, axes=tuple(replace(a, offset_counts=o) for a, o in zip(config.axes, offsets)))
 
 
 def recorded_counts(folder: Path, config: MachineConfig) -> tuple[np.ndarray, np.ndarray]:

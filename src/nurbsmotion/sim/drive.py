@@ -122,6 +122,9 @@ class SimDrive:
     ``home_sensors`` (:class:`sim.homing.HomeSensors`, raw counts at power-on) are the limit
     switches and index pulses homing mode (6) finds; mode 6 exists if
     0x6502 allows it; a homing object the EDS lacks reads 0 (no speed: the homing never ends).
+    ``home_object`` (index, sign): a vendor object (sub-index 0) whose value times sign the
+    home reads instead of -0x607C, as the drive's manual says (maxon EPOS4 0x30B0: +1); an
+    EDS says nothing of what a vendor object does.
     """
 
     def __init__(
@@ -138,6 +141,7 @@ class SimDrive:
         sync: SyncSettings | None = None,
         clock: Callable[[], float] | None = None,
         home_sensors: homing.HomeSensors | None = None,
+        home_object: tuple[int, int] | None = None,
     ) -> None:
         if not 1 <= node_id <= 127:
             raise ValueError(f"node id {node_id} outside 1..127")
@@ -162,7 +166,8 @@ class SimDrive:
         self._velocity_modes_missing = frozenset(
             mode for mode, objects in velocity.REQUIRED_OBJECTS.items()
             if any(find_variable(self.od, index, 0) is None for index in objects))
-        self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self._od_value_or(index, sub, 0))
+        self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self._od_value_or(index, sub, 0),
+                                                                   home_object)
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
         self.silent = False  # power loss: nothing in, nothing out

@@ -106,15 +106,18 @@ class HomingSetup:
     speed_search_counts_s: float  # 0x6099:01
     speed_zero_counts_s: float  # 0x6099:02
     accel_counts_s2: float  # 0x609A
-    home_offset_counts: int  # 0x607C
+    home_offset_counts: int  # 0x607C: the home reads minus it
 
 
-def setup_from_objects(read: Callable[[int, int], int]) -> HomingSetup:
+def setup_from_objects(read: Callable[[int, int], int], home_object: tuple[int, int] | None = None) -> HomingSetup:
     """The drive's homing objects as a HomingSetup; ``read(index, subindex)`` is the drive's
-    object value (what an SDO upload would return)."""
+    object value (what an SDO upload would return). ``home_object`` (index, sign): a vendor
+    object whose value the home reads times sign (maxon EPOS4 0x30B0 "home position": +1),
+    in place of 0x607C (the home reads -0x607C)."""
+    home_offset = read(0x607C, 0) if home_object is None else -home_object[1] * read(home_object[0], 0)
     return HomingSetup(method=read(0x6098, 0), speed_search_counts_s=float(read(0x6099, 1)),
                        speed_zero_counts_s=float(read(0x6099, 2)), accel_counts_s2=float(read(0x609A, 0)),
-                       home_offset_counts=read(0x607C, 0))
+                       home_offset_counts=home_offset)
 
 
 class Phase(enum.Enum):

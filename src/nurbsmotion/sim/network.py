@@ -152,6 +152,8 @@ class SimNetwork:
         mode, cycle period and everything else are what the master writes, so a missing
         write shows. ``sync`` sets hold/extrapolate and the sync-loss fault of every drive;
         ``home_sensors`` {node id: HomeSensors} the switches and index pulses homing finds;
+        an axis' ``homing.home_offset_object`` / ``home_offset_sign`` say what its vendor
+        object does (SimDrive ``home_object``: an EDS does not say);
         ``spindle`` adds a spindle drive (its node id must be free); without it, the machine's
         own ``spindle`` section if it describes a drive (node_id, counts_per_rev, eds).
         """
@@ -174,6 +176,7 @@ class SimNetwork:
                     name=f"{axis.name}/node{axis.node_id}",
                     sync=sync,
                     home_sensors=sensors.get(axis.node_id),
+                    home_object=_home_object(axis),
                 )
             except Exception as err:  # noqa: BLE001 - canopen raises many kinds for a bad EDS
                 raise DriveSetupError(axis_index, f"cannot simulate axis {axis.name}: {type(err).__name__}: {err}") from err
@@ -314,3 +317,10 @@ class SimNetwork:
                     log.exception("sim ticker: I/O node %d", io_node.node_id)
             self._wake.wait(max(wait_s, 0.0))
             self._wake.clear()
+
+
+def _home_object(axis: Any) -> tuple[int, int] | None:
+    """(index, sign) of the vendor object an axis' homing names for its offset, else None."""
+    homing = getattr(axis, "homing", None)
+    index = getattr(homing, "home_offset_object", None)
+    return None if index is None else (index, homing.home_offset_sign)  # type: ignore[union-attr]
