@@ -6,10 +6,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from nurbsmotion import cia402 as c
 from nurbsmotion.cli import main
 from nurbsmotion.config import load_config
-from nurbsmotion.fieldbus.homing import homing_drive_values, homing_plan, homing_plan_problems
+from nurbsmotion.fieldbus.homing_check import plan_homing
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "config" / "can0.example.yaml"
 
@@ -31,8 +30,8 @@ def test_the_drives_check_passes_offline(capsys):
 
 
 def test_every_axis_homing_fits_its_drive():
+    """plan_homing (fieldbus.homing_check) raises the one-line refusal where an EDS cannot home."""
     config = load_config(EXAMPLE)
-    for axis in config.axes:
-        assert axis.homing is not None and axis.od is not None
-        values = homing_drive_values(axis.homing, axis.counts_per_mm, axis.invert, axis.offset_counts, axis.name)
-        assert homing_plan_problems(homing_plan(values, c.Mode.CYCLIC_SYNC_POSITION), axis.od, axis.node_id) == []
+    for i, axis in enumerate(config.axes):
+        assert axis.homing is not None and axis.homing.on_drive
+        assert plan_homing(config, i) is not None
