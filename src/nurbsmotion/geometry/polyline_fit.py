@@ -5,13 +5,17 @@ Which runs (``smoothable_runs``): consecutive segments each shorter than ``max_s
 whose direction turns by less than ``corner_deg`` at every interior vertex, at least
 ``min_segments`` of them, without a feed change or a caller's break inside. A sharper vertex
 ends the run and stays a corner (the look-ahead blends it); longer segments stay lines.
-Defaults, from the corpus in tests/data/gcode (67 324 G01 segments of 45 readable programs,
-measured 2026-11-28, docs/smoothing.md): 90 % of all segments are under 4 mm and the
+Defaults, from the corpus in tests/data/gcode (the 67,324 G01 segments of every program the
+reader accepts, measured 2026-11-28, docs/smoothing.md): 90 % of all segments are under 4 mm and the
 surface/contour programs (camotics_bear, linuxcnc_3D_Chips, LHchips4, grbl_HSM_test) have
 96-100 % under 5 mm, so ``max_segment_mm = 5``; the turning angles between consecutive
 segments are dense below 20 deg (sampled curves) and thin out from 25 deg until the real
 corners at 60-135 deg, so ``corner_deg = 30`` (Siemens recommends 36 deg for COMPCAD's
-SD42470 $SC_CRIT_SPLINE_ANGLE, "values between 10 and 40 degrees are useful").
+SD42470 $SC_CRIT_SPLINE_ANGLE, "values between 10 and 40 degrees are useful"). Given the
+tolerance, a vertex also ends runs where the polyline is a polygon at that tolerance: a smooth
+curve turning by theta over chords of length l bulges l theta / 8 from them (``coarse_vertices``).
+Runs longer than DEFAULT_MAX_RUN_SEGMENTS are cut at their straightest vertex (the dense solve
+stays small; both pieces have curvature 0 there, so the path stays G2).
 
 The fit (``fit_run``): chord-length parametrised least squares with adaptive knot insertion
 (Piegl & Tiller, The NURBS Book, ch. 9.4.1 and A9.7's idea): u is the cumulative chord length
@@ -159,10 +163,13 @@ def _turning_rad(segments: NDArray[np.float64]) -> NDArray[np.float64]:
 def smoothable_runs(points: ArrayLike, feeds_mm_s: ArrayLike | None = None, *,
                     max_segment_mm: float = DEFAULT_MAX_SEGMENT_MM, corner_deg: float = DEFAULT_CORNER_DEG,
                     min_segments: int = DEFAULT_MIN_SEGMENTS, max_run_segments: int = DEFAULT_MAX_RUN_SEGMENTS,
-                    breaks: ArrayLike | None = None) -> list[RunSpan]:
+                    breaks: ArrayLike | None = None, tolerance_mm: float | None = None) -> list[RunSpan]:
     """Maximal runs of segments shorter than ``max_segment_mm`` joined at vertices that turn by
     less than ``corner_deg``, where the feed (one per segment) does not change and ``breaks``
     (one bool per vertex: an event, exact stop, ...) is False; at least ``min_segments`` each.
+    With ``tolerance_mm``, a vertex also ends runs when a smooth curve through it would leave
+    its chords by more than that (``coarse_vertices``): there the polyline is a polygon at this
+    tolerance, and a fit would only trace its corners with many control points.
     Runs longer than ``max_run_segments`` are cut at their straightest vertex in the second half
     of each window (both pieces end with curvature 0 there, so the path stays G2)."""
     pts = _as_points(points)
@@ -187,10 +194,22 @@ def smoothable_runs(points: ArrayLike, feeds_mm_s: ArrayLike | None = None, *,
         if stop.shape != (len(pts),):
             raise FitError(f"breaks: need one flag per vertex ({len(pts)}), got shape {stop.shape}")
         joins &= ~stop[1:-1]
+    if tolerance_mm is not None:
+        joins &= ~coarse_vertices(segments, turning, tolerance_mm)
     runs = []
     for first_seg, last_seg in _chains(short, joins):
         runs += _cut_long_run(first_seg, last_seg + 1, turning, max_run_segments)
     return [r for r in runs if r.segments >= min_segments]
+
+
+def coarse_vertices(segments: NDArray[np.float64], turning_rad: NDArray[np.float64], tolerance_mm: float
+                    ) -> NDArray[np.bool_]:
+    """Interior vertices where the polyline is no sampled smooth curve at this tolerance: a
+    curve turning by theta over chords of mean length l bulges l theta / 8 from them (the chord
+    sag l^2 / (8 R) with theta = l / R), more than ``tolerance_mm``."""
+    lengths = np.linalg.norm(segments, axis=1)
+    mean_mm = (lengths[:-1] + lengths[1:]) / 2.0
+    return mean_mm * turning_rad / 8.0 > tolerance_mm
 
 
 def _chains(short: NDArray[np.bool_], joins: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -453,8 +472,9 @@ def fit_run(points: ArrayLike, tolerance_mm: float, max_control_points: int | No
     """A cubic B-spline from the first to the last vertex, G2 to the end segments (curvature 0
     at both ends), within ``tolerance_mm`` of the polyline both ways (module docstring).
 
-    FitError when the input is bad or no fit within ``max_control_points`` (default: 4 per
-    vertex + 16) and MAX_ROUNDS of knot insertion keeps the tolerance: keep the lines then."""
+    FitError when the input is bad or no fit within ``max_control_points`` and MAX_ROUNDS of
+    knot insertion keeps the tolerance: keep the lines then. The default, the run's vertices
+    + 8, refuses fits that simplify nothing (a run of a few vertices may take up to 8 more)."""
     if isinstance(tolerance_mm, bool) or not isinstance(tolerance_mm, (int, float)) \
             or not (math.isfinite(tolerance_mm) and tolerance_mm > 0):
         raise FitError(f"tolerance_mm: must be a number > 0, got {tolerance_mm!r}")
@@ -463,7 +483,7 @@ def fit_run(points: ArrayLike, tolerance_mm: float, max_control_points: int | No
         raise FitError("points: a run needs two distinct vertices")
     if len(q) == 2 or _turning_rad(np.diff(q, axis=0)).max() < 1e-12:
         return _straight_curve(q)
-    limit = 4 * len(q) + 16 if max_control_points is None else max_control_points
+    limit = len(q) + 8 if max_control_points is None else max_control_points
     s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(q, axis=0), axis=1))])
     interior = _first_knots(q, s, tolerance_mm)
     target = TARGET_FRACTION * tolerance_mm
@@ -495,6 +515,38 @@ def runs_forward(curve: NurbsCurve, points: ArrayLike, samples_per_segment: int 
     own = np.clip(np.searchsorted(u_vertex, u_sample, side="right") - 1, 0, len(q) - 2)
     tangent = curve.derivatives(u_sample, 1)[1]
     return bool(np.all(np.einsum("ij,ij->i", tangent, np.diff(q, axis=0)[own]) > 0))
+
+
+@dataclass(frozen=True)
+class FittedRun:
+    """A run of the polyline and the cubic that replaces its segments."""
+
+    span: RunSpan
+    curve: NurbsCurve
+
+
+@dataclass(frozen=True)
+class SmoothedPolyline:
+    """``fitted``: runs replaced by curves; ``kept``: runs that stay lines (no fit simplified
+    them within the tolerance, ``fit_run``'s FitError). Segments outside both stay lines too."""
+
+    fitted: list[FittedRun]
+    kept: list[RunSpan]
+
+
+def smooth_polyline(points: ArrayLike, tolerance_mm: float, feeds_mm_s: ArrayLike | None = None,
+                    breaks: ArrayLike | None = None, *, max_segment_mm: float = DEFAULT_MAX_SEGMENT_MM,
+                    corner_deg: float = DEFAULT_CORNER_DEG) -> SmoothedPolyline:
+    """``smoothable_runs`` (with the tolerance's coarse-vertex rule), then ``fit_run`` on each."""
+    pts = _as_points(points)
+    fitted, kept = [], []
+    for span in smoothable_runs(pts, feeds_mm_s, max_segment_mm=max_segment_mm, corner_deg=corner_deg,
+                                breaks=breaks, tolerance_mm=tolerance_mm):
+        try:
+            fitted.append(FittedRun(span, fit_run(span.vertices(pts), tolerance_mm)))
+        except FitError:
+            kept.append(span)
+    return SmoothedPolyline(fitted, kept)
 
 
 def curvature_report(curve: NurbsCurve, points: ArrayLike, samples_per_segment: int = SAMPLES_PER_SEGMENT) -> CurvatureReport:
