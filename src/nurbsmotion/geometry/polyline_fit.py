@@ -27,11 +27,14 @@ speed along the first segment) and x''(0) = 0 (P&T eq. 3.9: x''(0) is proportion
 both sides). With the ends fixed the unknowns separate by coordinate: one symmetric solve of
 the normal equations for all three. A small penalty on the control points' second differences
 (lambda |P_(i-1) - 2 P_i + P_(i+1)|^2, a P-spline, Eilers & Marx 1996) keeps spans without
-data determined and the control polygon free of wiggles. The data are the vertices and the
+data determined and the control polygon free of wiggles. The data are the vertices, the
 segment midpoints (the curve is held between the vertices and the chords: both must be within
-the tolerance). The first knots are spread evenly over arc length plus turning angle; after
-each solve every span where the deviation (``deviations``) exceeds TARGET_FRACTION of the
-tolerance is halved, and the fit is solved again. Least squares rather than interpolation:
+the tolerance) and DATA_PER_SPAN polyline points inside every knot span (a span that knot
+insertion made short is still held by data). The first knots are spread evenly over arc
+length plus turning angle and graded toward the ends; after each solve every span where the
+deviation exceeds TARGET_FRACTION of the tolerance is halved, and the fit is solved again
+(each round first checks the data's residuals normal to the polyline, and measures the
+deviation, ``deviations``, only when those pass). Least squares rather than interpolation:
 the curve averages the CAM's rounding noise instead of following it, and a smooth run needs
 far fewer control points than it has vertices. Local knot insertion rather than recursive
 splitting of the run: one spline, C2 at every knot, no extra curvature-0 joins.
@@ -289,34 +292,48 @@ def _fit_data(q: NDArray[np.float64], s: NDArray[np.float64], interior: NDArray[
     return u, target
 
 
-def solve_control_points(q: NDArray[np.float64], s: NDArray[np.float64], interior: NDArray[np.float64]
-                         ) -> NDArray[np.float64]:
-    """Control points of the penalised least-squares cubic on the clamped knots with these
-    interior knots: min sum |x(u_r) - X_r|^2 + lambda sum |P_(i-1) - 2 P_i + P_(i+1)|^2 over the
-    free points P_3 .. P_(n-3), the three at each end fixed (``end_control_points``)."""
+@dataclass(frozen=True)
+class LeastSquaresFit:
+    """``control``: the control points; ``u``: the data parameters; ``off_path_mm``: each
+    datum's residual |x(u) - X(u)| without its part along the polyline's segment at u, a cheap
+    estimate of how far the curve is from the polyline there (no foot points)."""
+
+    control: NDArray[np.float64]
+    u: NDArray[np.float64]
+    off_path_mm: NDArray[np.float64]
+
+
+def least_squares_fit(q: NDArray[np.float64], s: NDArray[np.float64], interior: NDArray[np.float64]) -> LeastSquaresFit:
+    """The penalised least-squares cubic on the clamped knots with these interior knots:
+    min sum |x(u_r) - X_r|^2 + lambda sum |P_(i-1) - 2 P_i + P_(i+1)|^2 over the free control
+    points P_3 .. P_(n-3), the three at each end fixed (``end_control_points``)."""
     length = float(s[-1])
     knots = _clamped_knots(interior, length)
     n_points = len(interior) + DEGREE + 1
     start, end = end_control_points(q, interior, length)
     control = np.zeros((n_points, q.shape[1]))
     control[:3], control[-3:] = start, end
-    if n_points == 6:
-        return control
     u, target = _fit_data(q, s, interior)
     span, basis = cubic_basis(knots, u)
     cols = span[:, None] - DEGREE + np.arange(DEGREE + 1)
-    normal = np.bincount((cols[:, :, None] * n_points + cols[:, None, :]).ravel(),
-                         (basis[:, :, None] * basis[:, None, :]).ravel(), n_points * n_points)
-    normal = normal.reshape(n_points, n_points)
-    rhs = np.zeros((n_points, q.shape[1]))
-    np.add.at(rhs, cols.ravel(), (basis[:, :, None] * target[:, None, :]).reshape(-1, q.shape[1]))
-    second = np.diff(np.eye(n_points), 2, axis=0)
-    normal += SMOOTHING_PENALTY * (second.T @ second)
-    free = slice(3, n_points - 3)
-    fixed = np.r_[0:3, n_points - 3:n_points]
-    rhs_free = rhs[free] - normal[free][:, fixed] @ control[fixed]
-    control[free] = np.linalg.solve(normal[free, free], rhs_free)
-    return control
+    if n_points > 6:
+        normal = np.bincount((cols[:, :, None] * n_points + cols[:, None, :]).ravel(),
+                             (basis[:, :, None] * basis[:, None, :]).ravel(), n_points * n_points)
+        normal = normal.reshape(n_points, n_points)
+        rhs = np.zeros((n_points, q.shape[1]))
+        np.add.at(rhs, cols.ravel(), (basis[:, :, None] * target[:, None, :]).reshape(-1, q.shape[1]))
+        second = np.diff(np.eye(n_points), 2, axis=0)
+        normal += SMOOTHING_PENALTY * (second.T @ second)
+        free = slice(3, n_points - 3)
+        fixed = np.r_[0:3, n_points - 3:n_points]
+        rhs_free = rhs[free] - normal[free][:, fixed] @ control[fixed]
+        control[free] = np.linalg.solve(normal[free, free], rhs_free)
+    residual = np.einsum("rk,rkd->rd", basis, control[cols]) - target
+    directions = np.diff(q, axis=0)
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    along = directions[np.clip(np.searchsorted(s, u, side="right") - 1, 0, len(q) - 2)]
+    off = residual - np.einsum("rd,rd->r", residual, along)[:, None] * along
+    return LeastSquaresFit(control, u, np.sqrt(np.einsum("rd,rd->r", off, off)))
 
 
 def _menger_curvature(q: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -489,13 +506,17 @@ def fit_run(points: ArrayLike, tolerance_mm: float, max_control_points: int | No
     target = TARGET_FRACTION * tolerance_mm
     u_guess = s
     for _ in range(MAX_ROUNDS):
-        curve = _curve(solve_control_points(q, s, interior), _clamped_knots(interior, float(s[-1])))
-        u_vertex, d_vertex, u_sample, d_sample = deviations(curve, q, u_guess=u_guess)
-        bad = np.concatenate([u_vertex[d_vertex > target], u_sample[d_sample > target]])
+        fit = least_squares_fit(q, s, interior)
+        knots = _clamped_knots(interior, float(s[-1]))
+        bad = fit.u[fit.off_path_mm > target]  # the cheap estimate first: a round it fails needs no foot points
         if not len(bad):
-            return curve
-        interior = np.unique(np.concatenate([interior, _spans_to_split(curve.knots, bad)]))
-        u_guess = u_vertex
+            curve = _curve(fit.control, knots)
+            u_vertex, d_vertex, u_sample, d_sample = deviations(curve, q, u_guess=u_guess)
+            bad = np.concatenate([u_vertex[d_vertex > target], u_sample[d_sample > target]])
+            if not len(bad):
+                return curve
+            u_guess = u_vertex
+        interior = np.unique(np.concatenate([interior, _spans_to_split(knots, bad)]))
         if len(interior) + DEGREE + 1 > limit:
             break
     raise FitError(f"no cubic within {tolerance_mm:g} mm of this run of {len(q)} vertices with at most "
