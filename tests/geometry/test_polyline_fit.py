@@ -255,7 +255,7 @@ def cam_program(name: str):
 def test_real_cam_programs_fit_every_run_within_tolerance(name, capsys):
     program = cam_program(name)
     vertices = runs = control_points = run_vertices = kept = 0
-    measured = 0.0
+    measured = kappa_curve = kappa_polyline = 0.0
     for chain in line_chains(program):
         vertices += len(chain.points)
         result = smooth_polyline(chain.points, TOLERANCE_MM, chain.feeds_mm_s, chain.breaks)
@@ -263,6 +263,8 @@ def test_real_cam_programs_fit_every_run_within_tolerance(name, capsys):
         for fit in result.fitted:
             points = fit.span.vertices(chain.points)
             measured = max(measured, max_deviation(fit.curve, points).max_mm)
+            report = curvature_report(fit.curve, points)
+            kappa_curve, kappa_polyline = max(kappa_curve, report.curve_per_mm), max(kappa_polyline, report.polyline_per_mm)
             assert ruler(fit.curve, points) <= TOLERANCE_MM, (name, fit.span)
             assert_g2_ends(fit.curve, points)
             assert runs_forward(fit.curve, points), (name, fit.span)
@@ -272,7 +274,8 @@ def test_real_cam_programs_fit_every_run_within_tolerance(name, capsys):
     with capsys.disabled():
         print(f"\n{name}: {vertices} vertices, {runs} runs of {run_vertices} vertices -> {control_points} control "
               f"points ({kept} runs kept as lines), largest deviation {measured * 1000:.2f} um (max_deviation), "
-              f"every run within {TOLERANCE_MM * 1000:g} um by the ruler")
+              f"every run within {TOLERANCE_MM * 1000:g} um by the ruler; largest curvature {kappa_curve:.2f}/mm "
+              f"(the polylines' discrete curvature: up to {kappa_polyline:.2f}/mm)")
     if runs + kept == 0:  # nothing to smooth must mean no three short segments in a row at all
         short = np.concatenate([np.linalg.norm(np.diff(c.points, axis=0), axis=1) < 5.0 for c in line_chains(program)])
         assert not np.any(short[:-2] & short[1:-1] & short[2:])
