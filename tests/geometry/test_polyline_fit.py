@@ -204,6 +204,19 @@ def test_a_polygon_coarse_for_the_tolerance_is_no_run():
         fit_run(points, TOLERANCE_MM)
 
 
+def test_a_run_no_fit_simplifies_is_kept_as_lines():
+    """A zigzag of 0.2 mm steps +-15 um across: gentle (17 deg) and fine enough for the coarse
+    rule, but any curve within 10 um of it must wiggle at every vertex."""
+    n = 40
+    points = np.column_stack([np.arange(n) * 0.2, np.where(np.arange(n) % 2, 0.015, -0.015), np.zeros(n)])
+    points[0, 1] = points[-1, 1] = 0.0
+    result = smooth_polyline(points, TOLERANCE_MM)
+    assert result.fitted == [] and [(r.first, r.last) for r in result.kept] == [(0, n - 1)]
+    circle = circle_chords(20.0, 1.0, 41)
+    result = smooth_polyline(circle, TOLERANCE_MM)
+    assert [(f.span.first, f.span.last) for f in result.fitted] == [(0, 40)] and result.kept == []
+
+
 # ---- degenerate input -----------------------------------------------------------------------
 
 def test_two_points_and_collinear_runs_are_straight_cubics():
