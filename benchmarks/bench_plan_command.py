@@ -101,8 +101,8 @@ def braid(work: Path, previous_src: str | None = None) -> str:
     for jerk in (None, JERK):
         for period in ("1", "2", "4"):
             options = ["--period-ms", period] + (["--max-jerk-mm-s3", jerk] if jerk else [])
-            r = run_plan(program, *options)
-            old = run_plan(program, *options, src=previous_src) if previous_src else None
+            r = run_plan(program, *options, *([] if jerk else ["--no-jerk-limit"]))
+            old = run_plan(program, *options, src=previous_src) if previous_src else None  # no jerk limit by default
             old_cycles, old_s = ("-", "-") if old is None else (
                 (f"{old['measured']['cycles']:,}", f"{old['planning_time_s']:.1f}") if old["exit"] == 0
                 else ("error", "-"))
