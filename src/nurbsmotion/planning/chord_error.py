@@ -34,9 +34,9 @@ from nurbsmotion.program import Program
 SAMPLES_PER_ROUND = 8  # interior samples per refinement round of the sampled search
 REFINE_ROUNDS = 3  # rounds after the first: each narrows the bracket by 4.5x
 START_SAMPLES = np.linspace(0.0, 1.0, 5)  # Newton starts from the best of these (t in [0, 1])
-NEWTON_STEPS = 4
-NEWTON_TOLERANCE = 1e-9  # the last Newton step in t: d^2 is then exact to ~1e-18 relative
-PROJECTION_SLACK_MM = 1e-12  # x(t) may project beyond the chord's ends by this much (rounding)
+NEWTON_STEPS = 3
+NEWTON_TOLERANCE = 1e-5  # the last Newton step in t: converging quadratically, t is then off by ~1e-10, d by ~1e-19 relative
+PROJECTION_SLACK_MM = 1e-11  # x(t) may project beyond the chord's ends by this much (rounding)
 
 
 # ---- the sampled search (the former method, now the fallback and the test oracle) -------------
