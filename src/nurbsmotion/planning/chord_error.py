@@ -215,6 +215,8 @@ def split_at_knots(curves: ProgramCurves, pieces: Pieces) -> SpanPieces:
         first[sel] = curves.span_offset[b] + np.clip(np.searchsorted(knots, lo[sel], side="right") - 1, 0, spans)
         last[sel] = curves.span_offset[b] + np.clip(np.searchsorted(knots, hi[sel], side="left") - 1, 0, spans)
     last = np.maximum(last, first)
+    if (last == first).all():  # no piece crosses a knot (the usual chunk)
+        return SpanPieces(first, lo, hi, pieces.row, pieces.block)
     count = last - first + 1
     index = np.repeat(np.arange(n), count)
     span = np.repeat(first, count) + (np.arange(len(index)) - np.repeat(np.cumsum(count) - count, count))
@@ -235,9 +237,11 @@ class Chords:
     length: NDArray[np.float64]
 
     @classmethod
-    def of(cls, a: NDArray[np.float64], b: NDArray[np.float64]) -> "Chords":
-        ab = np.ascontiguousarray((b - a).T)
-        return cls(np.ascontiguousarray(a.T), ab, np.sqrt(np.einsum("dn,dn->n", ab, ab)))
+    def of(cls, p_by_coordinate: NDArray[np.float64], rows: NDArray[np.intp]) -> "Chords":
+        """The chords of the steps ending at ``rows`` of the set-points (dim, N)."""
+        a = np.take(p_by_coordinate, rows - 1, axis=1)
+        ab = np.take(p_by_coordinate, rows, axis=1) - a
+        return cls(a, ab, np.sqrt(np.einsum("dn,dn->n", ab, ab)))
 
 
 def local_polynomials(curves: ProgramCurves, parts: SpanPieces, chords: Chords) -> NDArray[np.float64]:
@@ -392,15 +396,12 @@ def chord_errors(block: NDArray[np.integer], u: NDArray[np.float64], position_mm
         sampled_curve_errors(errors, program, curved, p[curved.row - 1], p[curved.row])
         return errors
     parts = split_at_knots(curves, curved)
-    a, b = p[parts.row - 1], p[parts.row]
-    chords = Chords.of(a, b)
+    chords = Chords.of(np.ascontiguousarray(p.T), parts.row)
     t, exact = vertex_parameters(local_polynomials(curves, parts, chords), chords.length)
     d, inside = distances_at(curves, parts, t, chords)
     exact &= inside
-    for end in (0.0, 1.0):  # where the curve leaves the chord's slab (by rounding), its end is farthest
-        d = np.maximum(d, distances_at(curves, parts, end, chords)[0])
     raise_at(errors, parts.row[exact], d[exact])
     if not exact.all():
-        rest = ~exact
-        sampled_curve_errors(errors, program, parts.select(rest), a[rest], b[rest])
+        rest = parts.select(~exact)
+        sampled_curve_errors(errors, program, rest, p[rest.row - 1], p[rest.row])
     return errors
