@@ -14,12 +14,14 @@ t = (u - u_lo) / (u_hi - u_lo) in [0, 1] and the chord a-b of length L, directio
   d(t) = |Q(t) - (Q(t).e) e| / W(t)  (distance from the chord's line)
   tau(t) = Q(t).e / (W(t) L)         (where x(t) projects onto the chord: 0 at a, 1 at b)
 
-d^2 = g / W^2 with g = |Q_perp|^2 is largest where F = g' W - 2 g W' = 0; Newton's method on
-F from the best of a few samples finds that vertex to rounding. Pieces where this is not a
-clean interior maximum (the best sample at a piece end, Newton leaving the sample's bracket
-or not converging, the curve projecting beyond the chord's ends, a zero-length chord) are
-measured by sampling and refining instead (sampled_distances, the former method and the
-test oracle ``sampled_chord_errors``).
+d^2 = g / W^2 with g = |Q_perp|^2 is largest where F = g' W - 2 g W' = 0 (F has the sign of
+(d^2)'); Newton's method on F from the best of a few samples finds that vertex to rounding,
+or ends at a piece end that F points out of (the largest distance there: a corner at a block
+junction). The distance at the point found is then evaluated like any curve point. Pieces
+where this is not a clean maximum (Newton leaving the sample's bracket or not converging, the
+curve projecting beyond the chord's ends by more than PROJECTION_SLACK_MM, a zero-length
+chord) are measured by sampling and refining instead (sampled_distances: the former method;
+``chord_errors(..., sampled=True)`` measures every curved piece so, the test oracle).
 """
 
 from __future__ import annotations
