@@ -8,10 +8,19 @@ Targets (issue 17):
 - no planner give-ups: grbl's braid_cut2d.nc (2,498 short lines at F7000) at T = 1, 2 and
   4 ms, with and without a jerk limit.
 
-Each run is the real command in a fresh process (`python -m nurbsmotion plan ... --json`);
-peak memory is that child's maximum resident set size (os.wait4).
+- whole-process throughput (issue 25, part 6): the whole `nurbsmotion plan` of Wang x 100
+  at T = 1 ms, start-up and parsing included, >= 1,000,000 set-points/s, with J = 50000 (the
+  daemon's default, now plan's too) and without (--no-jerk-limit), against the previous
+  version (--previous-src); and where the time goes (imports, reading, planning, measuring:
+  CPU seconds of each in one process).
 
-Run: python benchmarks/bench_plan_command.py [--copies 100 460] [--skip-braid] [--previous-src DIR]
+Each run is the real command in a fresh process (`python -m nurbsmotion plan ... --json`);
+peak memory is that child's maximum resident set size, CPU its user + system time (os.wait4).
+The children read and write bytecode caches (PYTHONDONTWRITEBYTECODE unset), as an installed
+package does.
+
+Run: python benchmarks/bench_plan_command.py [--copies 100 460] [--skip-braid] [--skip-throughput]
+     [--previous-src DIR]
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -55,7 +65,8 @@ def braid_text() -> str:
 def run_plan(program: Path, *options: str, src: str | None = None) -> dict:
     """The plan command in a fresh process (``src``: the checkout's src/ to run, this one's by
     default): its JSON, wall time and the child's peak RSS."""
-    env = dict(os.environ, PYTHONPATH=src or str(ROOT / "src"))
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = src or str(ROOT / "src")
     with tempfile.TemporaryFile("w+") as out:
         started = time.perf_counter()
         child = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "plan", str(program), "--json", *options],
@@ -66,6 +77,7 @@ def run_plan(program: Path, *options: str, src: str | None = None) -> dict:
         out.seek(0)
         result = json.loads(out.read())
     result["wall_s"] = wall
+    result["cpu_s"] = usage.ru_utime + usage.ru_stime
     result["peak_rss_mb"] = usage.ru_maxrss / 1024.0
     result["exit"] = child.returncode
     return result
@@ -101,8 +113,8 @@ def braid(work: Path, previous_src: str | None = None) -> str:
     for jerk in (None, JERK):
         for period in ("1", "2", "4"):
             options = ["--period-ms", period] + (["--max-jerk-mm-s3", jerk] if jerk else [])
-            r = run_plan(program, *options)
-            old = run_plan(program, *options, src=previous_src) if previous_src else None
+            r = run_plan(program, *options, *([] if jerk else ["--no-jerk-limit"]))
+            old = run_plan(program, *options, src=previous_src) if previous_src else None  # no jerk limit by default
             old_cycles, old_s = ("-", "-") if old is None else (
                 (f"{old['measured']['cycles']:,}", f"{old['planning_time_s']:.1f}") if old["exit"] == 0
                 else ("error", "-"))
@@ -116,14 +128,105 @@ def braid(work: Path, previous_src: str | None = None) -> str:
     return "\n".join(rows)
 
 
+THROUGHPUT_TARGET = 1_000_000  # set-points per second of the whole command
+
+
+def throughput_runs(program: Path, options: list[str], src: str | None, runs: int) -> dict:
+    """The run of median wall time among ``runs`` (after one warm-up: bytecode caches)."""
+    run_plan(program, *options, src=src)
+    results = sorted((run_plan(program, *options, src=src) for _ in range(runs)), key=lambda r: r["wall_s"])
+    best = dict(results[len(results) // 2])
+    best["cpu_median_s"] = statistics.median(r["cpu_s"] for r in results)
+    return best
+
+
+PHASES_CHILD = """
+import json, sys, time
+started = time.process_time()
+import nurbsmotion.cli.plan
+import nurbsmotion.planning.measure as measure
+from nurbsmotion.planning import PlanLimits
+from nurbsmotion.planning.lookahead import PlanStream
+from nurbsmotion.program import read_program
+imported = time.process_time()
+chord = [0.0]
+inner = measure.chord_errors
+def timed_chord(*args, **kwargs):
+    t = time.process_time()
+    try:
+        return inner(*args, **kwargs)
+    finally:
+        chord[0] += time.process_time() - t
+measure.chord_errors = timed_chord
+program = read_program(sys.argv[1])
+read = time.process_time()
+jerk = float(sys.argv[2]) if sys.argv[2] != "none" else None
+stream = PlanStream(program, PlanLimits(period_s=0.001, max_jerk_mm_s3=jerk), 20000)
+planning = measuring = 0.0
+ruler = measure.MeasureStream(program)
+t = time.process_time()
+for chunk in stream:
+    t1 = time.process_time()
+    ruler.add(chunk)
+    t2 = time.process_time()
+    planning += t1 - t
+    measuring += t2 - t1
+    t = t2
+ruler.finish()
+m = ruler.measurements()
+measuring += time.process_time() - t
+print(json.dumps({"imports_s": imported - started, "read_s": read - imported, "plan_s": planning,
+                  "measure_s": measuring, "chord_s": chord[0], "cycles": m.cycles}))
+"""
+
+
+def phases(program: Path, jerk: str | None) -> dict:
+    """CPU seconds of each phase of a plan in one fresh process (this checkout)."""
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
+    env["PYTHONPATH"] = str(ROOT / "src")
+    done = subprocess.run([sys.executable, "-c", PHASES_CHILD, str(program), jerk or "none"], capture_output=True,
+                          text=True, env=env, check=True)
+    return json.loads(done.stdout)
+
+
+def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
+    program = work / "wang_x100.nc"
+    program.write_text(wang_copies(100))
+    rows = ["| version | jerk limit | cycles | wall s | CPU s | set-points/s (whole process, wall) "
+            "| set-points/s (CPU) | planner's own set-points/s | target |", "|---|---|---|---|---|---|---|---|---|"]
+    split = ["| jerk limit | imports | reading | planning | measuring (of it chord error) | total CPU s |",
+             "|---|---|---|---|---|---|"]
+    for jerk in (JERK, None):
+        versions = [("this", ["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"], None)]
+        if previous_src:  # the previous plan had no jerk limit by default and no --no-jerk-limit
+            versions.append(("before", ["--max-jerk-mm-s3", JERK] if jerk else [], previous_src))
+        for name, options, src in versions:
+            r = throughput_runs(program, ["--period-ms", "1", *options], src, runs)
+            if r["exit"] != 0:
+                rows.append(f"| {name} | {jerk or 'none'} | failed: {r.get('error')} | | | | | | |")
+                continue
+            cycles = r["measured"]["cycles"]
+            rate = cycles / r["wall_s"]
+            rows.append(f"| {name} | {jerk or 'none'} | {cycles:,} | {r['wall_s']:.2f} | {r['cpu_median_s']:.2f} | "
+                        f"{rate:,.0f} | {cycles / r['cpu_median_s']:,.0f} | {cycles / r['planning_time_s']:,.0f} | "
+                        f">= {THROUGHPUT_TARGET:,} ({'met' if rate >= THROUGHPUT_TARGET else 'NOT met'}) |")
+        p = phases(program, jerk)
+        total = p["imports_s"] + p["read_s"] + p["plan_s"] + p["measure_s"]
+        split.append(f"| {jerk or 'none'} | {p['imports_s']:.2f} | {p['read_s']:.2f} | {p['plan_s']:.2f} | "
+                     f"{p['measure_s']:.2f} ({p['chord_s']:.2f}) | {total:.2f} |")
+    return "\n".join(rows) + "\n\nWhere the CPU time goes (this version, one process, seconds):\n\n" + "\n".join(split)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="*", default=[100, 460])
     parser.add_argument("--skip-braid", action="store_true")
+    parser.add_argument("--skip-throughput", action="store_true")
+    parser.add_argument("--runs", type=int, default=5, help="runs per whole-process throughput figure (median)")
     parser.add_argument("--previous-src", metavar="DIR", help="src/ of a checkout of the previous version: braid figures too")
     args = parser.parse_args()
     load_before = os.getloadavg()
-    body = ""
+    body = throughput = ""
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         if not args.skip_braid:
@@ -137,16 +240,29 @@ def main() -> None:
             body += ("\n### Peak memory of `nurbsmotion plan` on long programs\n\nWang's Table 1 curve repeated, "
                      f"T = 1 ms, J = {JERK} mm/s^3, `--trace` written (streamed chunk by chunk) and `--json`; the "
                      "command's own process, its peak RSS from os.wait4.\n\n" + long_programs(args.copies, work) + "\n")
+        if not args.skip_throughput:
+            throughput = whole_process(work, args.previous_src, args.runs)
     load = os.getloadavg()
-    body += (f"\nThe machine was shared with other agents' work (load average over 1 / 5 / 15 min "
-             f"{load_before[0]:.1f} / {load_before[1]:.1f} / {load_before[2]:.1f} before, {load[0]:.1f} / {load[1]:.1f} / "
-             f"{load[2]:.1f} at the end, on {os.cpu_count()} cores): times are slower than on a quiet machine; memory "
-             "and motion figures do not depend on it."
-             + ("" if not args.previous_src else " \"previous\": the planner before this change (--previous-src), "
-                "run right after each row's own run.") + "\n")
-    write_section("plan_command", "`nurbsmotion plan` on long and hard programs", body,
-                  "python benchmarks/bench_plan_command.py")
-
+    load_text = (f"load average over 1 / 5 / 15 min (`uptime`) {load_before[0]:.1f} / {load_before[1]:.1f} / "
+                 f"{load_before[2]:.1f} before, {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} at the end, on "
+                 f"{os.cpu_count()} cores")
+    if body:
+        body += (f"\nThe machine was shared with other agents' work ({load_text}): times are slower than on a quiet "
+                 "machine; memory and motion figures do not depend on it."
+                 + ("" if not args.previous_src else " \"previous\": the planner before this change (--previous-src), "
+                    "run right after each row's own run.") + "\n")
+        write_section("plan_command", "`nurbsmotion plan` on long and hard programs", body,
+                      "python benchmarks/bench_plan_command.py")
+    if throughput:
+        write_section("plan_throughput", "Whole-process plan throughput",
+                      "`nurbsmotion plan` of Wang's Table 1 curve x 100 (bench_plan_command.wang_copies) at T = 1 ms "
+                      "with `--json`, the whole command in a fresh process: start-up, reading, planning, measuring, "
+                      f"the report. The run of median wall time of {args.runs} (after a warm-up run), CPU the median "
+                      "of the child's user + system time. \"before\": the previous version (--previous-src), whose "
+                      "`plan` had no jerk limit by default.\n\n" + throughput
+                      + f"\n\nThe machine was shared with other agents' work ({load_text}): wall times are longer "
+                      "than on a quiet machine, CPU times less so.\n",
+                      "python benchmarks/bench_plan_command.py --skip-braid --copies --previous-src /tmp/base/src")
 
 if __name__ == "__main__":
     main()

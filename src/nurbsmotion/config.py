@@ -18,6 +18,7 @@ from canopen.objectdictionary import ObjectDictionary
 
 from nurbsmotion import drive_od
 from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.service.protocol import DEFAULT_SOCKET
 
 if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
     from nurbsmotion.homing_config import AxisSimSensors, HomingConfig
@@ -136,7 +137,7 @@ class MasterConfig:
 
 @dataclass(frozen=True)
 class ControlConfig:
-    socket: str = "/tmp/nurbsmotion.sock"
+    socket: str = DEFAULT_SOCKET
     group: str | None = None
 
 

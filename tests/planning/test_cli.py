@@ -130,3 +130,26 @@ def test_plan_streams_the_same_trace_and_figures_as_a_whole_plan(capsys, tmp_pat
     for column in TRACE_COLUMNS:
         assert np.allclose(streamed[column], expected[column], rtol=1e-6, atol=1e-6), column
     assert not (tmp_path / "streamed.csv.part").exists()
+
+
+def test_plan_without_config_plans_with_the_daemons_defaults(capsys):
+    """No --config: the interpolation defaults a configuration without that section gets
+    (the daemon's), the jerk limit included; --no-jerk-limit removes it."""
+    from nurbsmotion.config import InterpolationConfig
+
+    defaults = InterpolationConfig()
+    assert main(["plan", WANG_NC, "--algorithm", "taylor2", "--json"]) == 0
+    limits = json.loads(capsys.readouterr().out)["limits"]
+    assert limits["max_jerk_mm_s3"] == defaults.max_jerk_mm_s3 is not None
+    assert (limits["chord_error_mm"], limits["max_accel_mm_s2"], limits["acc_time_s"]) == \
+        (defaults.chord_error_mm, defaults.max_accel_mm_s2, defaults.acc_time_s)
+    assert main(["plan", WANG_NC, "--algorithm", "taylor2", "--no-jerk-limit", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["limits"]["max_jerk_mm_s3"] is None
+
+
+def test_a_jerk_limit_and_no_jerk_limit_are_one_line_exit_2(capsys):
+    with pytest.raises(SystemExit) as info:
+        main(["plan", WANG_NC, "--no-jerk-limit", "--max-jerk-mm-s3", "1000"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--no-jerk-limit" in err[0]

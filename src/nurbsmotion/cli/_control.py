@@ -16,8 +16,8 @@ import os
 import sys
 from typing import Any, Callable
 
-from nurbsmotion.config import ControlConfig, load_config
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
+from nurbsmotion.service.protocol import DEFAULT_SOCKET
 
 EXIT_NO_DAEMON = 3
 EXIT_REFUSED = 2
@@ -30,7 +30,7 @@ def add_socket_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--config", metavar="FILE", help=f"machine configuration (its control.socket is used; "
                                                        f"default ${CONFIG_VARIABLE})")
     group.add_argument("--socket", metavar="PATH", help=f"control socket (default ${SOCKET_VARIABLE}, "
-                                                       f"else {ControlConfig().socket})")
+                                                       f"else {DEFAULT_SOCKET})")
 
 
 def config_path(args: argparse.Namespace) -> str | None:
@@ -43,13 +43,20 @@ def socket_path(args: argparse.Namespace) -> str:
     if getattr(args, "socket", None):
         return str(args.socket)
     if getattr(args, "config", None):
-        return load_config(args.config).control.socket
+        return _configured_socket(args.config)
     if os.environ.get(SOCKET_VARIABLE):
         return os.environ[SOCKET_VARIABLE]
     config = config_path(args)
     if config:
-        return load_config(config).control.socket
-    return ControlConfig().socket
+        return _configured_socket(config)
+    return DEFAULT_SOCKET
+
+
+def _configured_socket(path: str) -> str:
+    """control.socket of the machine configuration ``path`` (the whole file is checked)."""
+    from nurbsmotion.config import load_config  # yaml, canopen and the EDS: only when a config is named
+
+    return load_config(path).control.socket
 
 
 def error_line(args: argparse.Namespace, message: str) -> None:

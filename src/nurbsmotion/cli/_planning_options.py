@@ -1,8 +1,10 @@
 """Options shared by ``plan`` and ``compare``: program, machine config, limit overrides.
 
-PlanLimits come from the machine configuration's ``interpolation`` section and axes (or the
-PlanLimits defaults without ``--config``); each CLI option overrides its field. Every bad
-value is one line naming the option (exit 2).
+PlanLimits come from the machine configuration's ``interpolation`` section and axes; without
+``--config``, from the defaults of that section (config.InterpolationConfig: what the daemon
+plans with when a configuration sets none, the jerk limit included). Each CLI option
+overrides its field; ``--no-jerk-limit`` removes the jerk limit. Every bad value is one line
+naming the option (exit 2).
 """
 
 from __future__ import annotations
@@ -11,10 +13,10 @@ import argparse
 import math
 from dataclasses import replace
 
-from nurbsmotion.config import MachineConfig, load_config
+from nurbsmotion.config import InterpolationConfig, MachineConfig, load_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.planning import DEFAULT_ALGORITHM, PlanLimits, algorithm
-from nurbsmotion.planning.limits import limits_from_config
+from nurbsmotion.planning import PlanLimits, algorithm
+from nurbsmotion.planning.limits import interpolation_limits, limits_from_config
 from nurbsmotion.program import Program, ReadOptions, load_tool_table, read_program
 
 
@@ -38,7 +40,11 @@ def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--feed-mm-min", type=positive_number, metavar="F", help="feed for every block (overrides the program's F)")
     parser.add_argument("--chord-error-mm", type=positive_number, metavar="D", help="largest chord error δ_max in mm")
     parser.add_argument("--max-accel-mm-s2", type=positive_number, metavar="A", help="largest resultant acceleration")
-    parser.add_argument("--max-jerk-mm-s3", type=positive_number, metavar="J", help="largest jerk (planners that use it)")
+    jerk = parser.add_mutually_exclusive_group()
+    jerk.add_argument("--max-jerk-mm-s3", type=positive_number, metavar="J",
+                      help=f"largest jerk (planners that use it; default the config's, else "
+                           f"{InterpolationConfig().max_jerk_mm_s3:g})")
+    jerk.add_argument("--no-jerk-limit", action="store_true", help="plan without a jerk limit")
     parser.add_argument("--acc-time-s", type=positive_number, metavar="TL", help="linear acc/dec time t_l (a_l = V0 / t_l)")
     parser.add_argument("--json", action="store_true", help="machine-readable output on stdout")
 
@@ -46,7 +52,10 @@ def add_planning_arguments(parser: argparse.ArgumentParser) -> None:
 def planning_setup(args: argparse.Namespace) -> tuple[Program, PlanLimits, str]:
     """(program, limits, default algorithm name) from the parsed options."""
     config = load_config(args.config) if args.config else None
-    limits = limits_from_config(config) if config else PlanLimits()
+    interpolation = config.interpolation if config else InterpolationConfig()
+    limits = limits_from_config(config) if config else interpolation_limits(interpolation)
+    if args.no_jerk_limit:
+        limits = replace(limits, max_jerk_mm_s3=None)
     overrides = {
         "period_s": args.period_ms / 1000.0 if args.period_ms else None,
         "feed_mm_s": args.feed_mm_min / 60.0 if args.feed_mm_min else None,
@@ -62,8 +71,7 @@ def planning_setup(args: argparse.Namespace) -> tuple[Program, PlanLimits, str]:
     except InputError as err:
         raise InputError(options.get(err.where, err.where), err.message) from None
     program = read_program(args.program, args.start, machine_read_options(config))
-    default = config.interpolation.algorithm if config else DEFAULT_ALGORITHM
-    return program, limits, default
+    return program, limits, interpolation.algorithm
 
 
 def machine_read_options(config: MachineConfig | None, tool_table: str | None = None, block_delete: bool = True,

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
-from nurbsmotion.config import MachineConfig
+from nurbsmotion.config import InterpolationConfig, MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.program.model import AXES
 
@@ -67,9 +67,16 @@ def axis_limits(config: MachineConfig, attribute: str) -> tuple[float | None, ..
 def limits_from_config(config: MachineConfig) -> PlanLimits:
     """The limits a job plans with on this machine: the configuration's interpolation
     defaults, cycle period and per-axis limits (``plan --config`` and the daemon alike)."""
-    interp = config.interpolation
+    return replace(interpolation_limits(config.interpolation), period_s=config.cycle_period_s,
+                   axis_max_velocity_mm_s=axis_limits(config, "max_velocity_mm_s"),
+                   axis_max_accel_mm_s2=axis_limits(config, "max_accel_mm_s2"))
+
+
+def interpolation_limits(interp: InterpolationConfig) -> PlanLimits:
+    """The limits of an ``interpolation`` section alone (PlanLimits' period, no per-axis limits);
+    of InterpolationConfig(): what a machine configuration that sets none plans with (``plan``
+    without --config)."""
     return PlanLimits(
-        period_s=config.cycle_period_s,
         chord_error_mm=interp.chord_error_mm,
         max_accel_mm_s2=interp.max_accel_mm_s2,
         max_jerk_mm_s3=interp.max_jerk_mm_s3,
@@ -77,6 +84,4 @@ def limits_from_config(config: MachineConfig) -> PlanLimits:
         rapid_feed_mm_s=interp.rapid_feed_mm_s,
         acc_time_s=interp.acc_time_s,
         junction_deviation_mm=interp.junction_deviation_mm,
-        axis_max_velocity_mm_s=axis_limits(config, "max_velocity_mm_s"),
-        axis_max_accel_mm_s2=axis_limits(config, "max_accel_mm_s2"),
     )

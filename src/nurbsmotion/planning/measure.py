@@ -10,7 +10,7 @@ from a planner's own estimates, so all algorithms are judged by the same ruler:
   the maxima also include the jerk of coming to rest after the last row;
 - chord error of the step ending at row i: the largest distance from the true curve between
   the two set-points to the straight chord joining them (steps across a block junction use
-  the pieces of both blocks); assigned to the step's end row, 0 for row 0;
+  the pieces of both blocks; planning.chord_error); assigned to the step's end row, 0 for row 0;
 - feed fluctuation of a step: |speed - planned feed| / planned feed, where the trajectory's
   ``feed_mm_s[i]`` is the feed the planner commanded for the step ending at row i
   (rows with no planned feed count 0).
@@ -23,12 +23,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from nurbsmotion.planning.chord_error import ProgramCurves, chord_errors
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program
-
-SAMPLES_PER_ROUND = 8  # interior samples per refinement round of the chord-error search
-REFINE_ROUNDS = 3  # rounds after the first: each narrows the bracket by 4.5x
-
 
 @dataclass(eq=False)
 class Measurements:
@@ -89,112 +86,6 @@ def rest_padded_differences(position_mm: NDArray[np.float64], period_s: float) -
     return v, a, j
 
 
-def segment_distances(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Distance of points (m, k, dim) to the segments a-b (m, dim), clamped to the segment."""
-    ab = b - a
-    length2 = np.einsum("md,md->m", ab, ab)
-    rel = points - a[:, None, :]
-    t = np.einsum("mkd,md->mk", rel, ab) / np.where(length2 > 0, length2, 1.0)[:, None]
-    t = np.clip(np.where(length2[:, None] > 0, t, 0.0), 0.0, 1.0)
-    return np.linalg.norm(rel - t[..., None] * ab[:, None, :], axis=-1)
-
-
-def max_distance_to_chords(curve, u_lo: NDArray[np.float64], u_hi: NDArray[np.float64], a: NDArray[np.float64],
-                           b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """For each piece u_lo..u_hi of ``curve``: the largest distance of the curve to chord a-b.
-
-    Samples SAMPLES_PER_ROUND interior parameters, then repeatedly re-samples the bracket
-    around the best sample (REFINE_ROUNDS times) and finishes with a parabola through the
-    best sample and its neighbours; relative accuracy about 1e-6 on smooth pieces, down to a
-    floor of about 1e-14 mm (rounding of the distances).
-    """
-    m = SAMPLES_PER_ROUND
-    lo, hi = np.asarray(u_lo, float), np.asarray(u_hi, float)
-    frac = np.arange(1, m + 1) / (m + 1)
-    best = np.zeros(len(lo))
-    for _ in range(REFINE_ROUNDS + 1):
-        u = lo[:, None] + (hi - lo)[:, None] * frac[None, :]
-        d = segment_distances(curve.points(u.ravel()).reshape(len(lo), m, -1), a, b)
-        k = np.argmax(d, axis=1)
-        rows = np.arange(len(lo))
-        best = np.maximum(best, d[rows, k])
-        step = (hi - lo) / (m + 1)
-        centre = u[rows, k]
-        # parabolic vertex through the best sample and its neighbours (when both are interior)
-        inner = (k > 0) & (k < m - 1)
-        if inner.any():
-            left, mid, right = d[rows, np.maximum(k - 1, 0)], d[rows, k], d[rows, np.minimum(k + 1, m - 1)]
-            denom = left - 2 * mid + right
-            shift = np.where(inner & (denom < 0), 0.5 * (left - right) / np.where(denom < 0, denom, -1.0), 0.0)
-            centre = centre + np.clip(shift, -1, 1) * step
-        lo, hi = np.maximum(centre - step, lo), np.minimum(centre + step, hi)
-    u = lo[:, None] + (hi - lo)[:, None] * np.array([0.0, 0.5, 1.0])[None, :]
-    d = segment_distances(curve.points(u.ravel()).reshape(len(lo), 3, -1), a, b)
-    return np.maximum(best, d.max(axis=1))
-
-
-def is_line(curve) -> bool:
-    return curve.degree == 1 and len(curve.control_points) == 2
-
-
-def line_points(program: Program, blocks: NDArray[np.int_], u: NDArray[np.float64]) -> NDArray[np.float64]:
-    """x(u) on straight (2-point, degree-1, possibly rational) blocks, all blocks at once."""
-    curves = [program.blocks[int(b)].curve for b in range(len(program.blocks))]
-    table = {b: curves[b] for b in np.unique(blocks).tolist()}
-    p0 = np.array([table[b].control_points[0] for b in blocks.tolist()])
-    p1 = np.array([table[b].control_points[1] for b in blocks.tolist()])
-    w0 = np.array([table[b].weights[0] for b in blocks.tolist()])
-    w1 = np.array([table[b].weights[1] for b in blocks.tolist()])
-    u0 = np.array([table[b].u_min for b in blocks.tolist()])
-    u1 = np.array([table[b].u_max for b in blocks.tolist()])
-    s = np.clip((u - u0) / (u1 - u0), 0.0, 1.0)
-    a, b = w0 * (1.0 - s), w1 * s
-    return (a[:, None] * p0 + b[:, None] * p1) / (a + b)[:, None]
-
-
-def chord_errors(trajectory: Trajectory, program: Program) -> NDArray[np.float64]:
-    """True chord error of every step, assigned to the step's end row (row 0: 0)."""
-    blocks, u, p = trajectory.block, trajectory.u, trajectory.position_mm
-    n = len(u)
-    errors = np.zeros(n)
-    if n < 2 or not program.blocks:  # no curve (an MDI without motion stands still): no chord
-        return errors
-    # pieces: (block, u_lo, u_hi, row); a step inside one block is one piece
-    same = blocks[1:] == blocks[:-1]
-    piece_block = [blocks[1:][same]]
-    piece_lo = [np.minimum(u[:-1], u[1:])[same]]
-    piece_hi = [np.maximum(u[:-1], u[1:])[same]]
-    piece_row = [np.flatnonzero(same) + 1]
-    for i in np.flatnonzero(~same) + 1:  # steps across junctions: the pieces of every block touched
-        b0, b1 = int(blocks[i - 1]), int(blocks[i])
-        for b in range(b0, b1 + 1):
-            curve = program.blocks[b].curve
-            lo = u[i - 1] if b == b0 else curve.u_min
-            hi = u[i] if b == b1 else curve.u_max
-            piece_block.append(np.array([b]))
-            piece_lo.append(np.array([lo]))
-            piece_hi.append(np.array([hi]))
-            piece_row.append(np.array([i]))
-    pb, plo, phi, prow = (np.concatenate(x) for x in (piece_block, piece_lo, piece_hi, piece_row))
-    straight = np.array([is_line(program.blocks[int(b)].curve) for b in range(len(program.blocks))], dtype=bool)
-    on_line = straight[pb] if len(pb) else np.zeros(0, dtype=bool)
-    if on_line.any():  # a straight piece is farthest from the chord at one of its ends
-        rows = prow[on_line]
-        for u_end in (plo[on_line], phi[on_line]):
-            ends = line_points(program, pb[on_line], u_end)
-            d = segment_distances(ends[:, None, :], p[rows - 1], p[rows])[:, 0]
-            np.maximum.at(errors, rows, d)
-    for b in np.unique(pb[~on_line]):
-        sel = (pb == b) & ~on_line
-        curve = program.blocks[int(b)].curve
-        lo = np.clip(plo[sel], curve.u_min, curve.u_max)
-        hi = np.clip(phi[sel], curve.u_min, curve.u_max)
-        rows = prow[sel]
-        d = max_distance_to_chords(curve, lo, hi, p[rows - 1], p[rows])
-        np.maximum.at(errors, rows, d)
-    return errors
-
-
 @dataclass(eq=False)
 class RowFigures:
     """Measured figures of consecutive rows ``first_row``.. of a plan (MeasureStream.add)."""
@@ -227,6 +118,7 @@ class MeasureStream:
 
     def __init__(self, program: Program, keep_rows: bool = False) -> None:
         self.program = program
+        self.curves: ProgramCurves | None = None  # gathered at the first chunk
         self.keep_rows = keep_rows
         self.kept: list[RowFigures] = []
         self.pending: Trajectory | None = None  # received rows not yet measured
@@ -281,7 +173,9 @@ class MeasureStream:
         planned = feed > 1e-12
         fluctuation = np.where(planned, np.abs(speed - feed) / np.where(planned, feed, 1.0), 0.0)
         joined = part if self.previous is None else Trajectory.concatenate([self.previous, part])
-        chord = chord_errors(joined, self.program)[len(joined) - n:]
+        if self.curves is None:
+            self.curves = ProgramCurves.of(self.program)
+        chord = chord_errors(joined.block, joined.u, joined.position_mm, self.curves)[len(joined) - n:]
         if self.previous is None:
             fluctuation[0] = 0.0
         figures = RowFigures(self.rows, part, chord, speed, np.linalg.norm(a, axis=1), jerk, fluctuation,

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 MAX_REQUEST_BYTES = 10 * 1024 * 1024
+DEFAULT_SOCKET = "/tmp/nurbsmotion.sock"  # where the daemon listens unless control.socket says otherwise
 
 # command -> {field: (type name, required)}
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
