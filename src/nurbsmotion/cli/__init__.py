@@ -56,7 +56,7 @@ COMMANDS: dict[str, Command] = {
     "compare": Command("compare", "run every interpolation algorithm on a program and compare the measured figures", computes=True),
     "daemon": Command("daemon", "run the motion service: drives up, control API on a Unix socket, until SIGTERM/SIGINT", computes=True),
     "demo": Command("demo", "run Wang's Table 1 curve on simulated drives (daemon + drives in this process) and report", computes=True),
-    "drives": Command("drives", "check the drives' descriptions (EDS) against the configuration: what bring-up writes"),
+    "drives": Command("drives", "find and identify the drives on a bus (scan), check them against the configuration (check, --live)"),
     "hold": Command("hold", "hold the running job: decelerate to rest along the path, keep the job (resume continues it)"),
     "home": Command("home", "home the axes (all with a homing: section, or those named) in the configured order"),
     "jobs": Command("jobs", "list the job records (newest first) or show one: outcome, line reached, times, faults, overrides"),
@@ -71,6 +71,7 @@ COMMANDS: dict[str, Command] = {
     "sim": Command("sim", "run simulated CiA-402 drives for the configuration's axes (and its io node) until SIGINT/SIGTERM", computes=True),
     "status": Command("status", "show the daemon's state, job progress, positions, following errors and faults"),
     "stop": Command("stop", "controlled stop of the running job (decelerates along the path, drives stay enabled)"),
+    "web": Command("web", "serve the machine's web console and HTTP/WebSocket API beside the daemon (docs/web.md)"),
 }
 
 

@@ -23,7 +23,7 @@ from nurbsmotion.fieldbus.bringup_plan import MODE_WORDS, DrivePlan, PdoFrame, P
     cyclic_load, describe_value, plan_drive, plan_within_load
 from nurbsmotion.fieldbus.busload import fits_following_error_tpdo
 
-HELP = "check the drives' descriptions (EDS) against the configuration: what bring-up writes"
+HELP = "find and identify the drives on a bus (scan), check them against the configuration (check, --live)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
