@@ -112,6 +112,7 @@ def test_the_approach_starts_tool_spindle_and_coolant_then_rises_crosses_and_fee
     np.testing.assert_allclose(across.end, (target[0], target[1], SAFE_Z_MM), atol=1e-12)
     np.testing.assert_allclose(down.end, target, atol=1e-12)
     assert down.feed_mm_s == pytest.approx(state.feed_mm_s)
+    assert all(b.exact_stop for b in approach)  # no corner of the approach blended
     np.testing.assert_allclose(program_blocks(started)[0].start, target, atol=1e-12)
     first = [e for e in started.events if e.before_block == 0]
     assert [(e.kind, e.code) for e in first] == [(EventKind.TOOL_CHANGE, "M6"), (EventKind.SPINDLE, "M3"),

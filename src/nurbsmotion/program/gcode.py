@@ -117,7 +117,7 @@ class ReadOptions:
     max_errors: int = 50
     max_loop_lines: int = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
     start_line: int | None = None  # start from this line (program.gcode_start); None: from the first
-    safe_z_mm: float | None = None  # machine Z the approach to the start line rises to (machine.safe_z_mm)
+    safe_z_mm: float | None = None  # machine Z the approach to the start line rises to (-inf: no rise)
 
 
 class _Stop(Exception):

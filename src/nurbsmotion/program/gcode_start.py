@@ -13,7 +13,8 @@ line N the reader records that state (``ResumeState``), then emits the approach 
    so the job's spindle at-speed wait applies before any motion;
 2. a rapid straight up to the clearance height ``max(safe_z_mm, Z now, Z at N)`` (machine
    mm), a rapid in X/Y to line N's start point at that height, then a feed move down to the
-   start point's Z at the program's feed at N (the machine's default feed if none).
+   start point's Z at the program's feed at N (the machine's default feed if none); each
+   comes to rest at its end (exact stop), so no corner of the approach is blended away.
 
 Refused, one line naming ``file:N``, where that is not safe or not meaningful: N inside an
 O-word loop (while, do, repeat) or subroutine body, N inside a G5.2 ... G5.3 or G06.2
@@ -26,6 +27,7 @@ are no canned-cycle repeats to start inside.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -106,7 +108,7 @@ class StartLineReading:
         if number is not None:
             if isinstance(number, bool) or not isinstance(number, int) or number < 1:
                 raise InputError(f"{self.source}: start line", f"must be a line number >= 1, got {number!r}")
-            if self.options.safe_z_mm is None or not np.isfinite(self.options.safe_z_mm):
+            if self.options.safe_z_mm is None or np.isnan(self.options.safe_z_mm):
                 raise InputError(f"{self.source}:{number}", "starting from a line needs a safe Z for the approach "
                                                             "(machine.safe_z_mm)")
 
@@ -176,6 +178,7 @@ class StartLineReading:
         for a, b, kind in ((here, up, BlockKind.RAPID), (up, across, BlockKind.RAPID), (across, target, BlockKind.LINE)):
             if float(np.linalg.norm(b - a)) > APPROACH_ZERO_MM:
                 self.add_block(kind, line_curve(a, b), None if kind is BlockKind.RAPID else self.feed_mm_s, line)
+                self.blocks[-1] = dataclasses.replace(self.blocks[-1], exact_stop=True)  # no corner blended away
         self.position = target
 
     def check_start_line_reached(self) -> None:
