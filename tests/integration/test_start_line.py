@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nurbsmotion.cli.status import format_status
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT
 from nurbsmotion.planning.trace import read_trace
 from nurbsmotion.service.client import Client
@@ -62,7 +63,9 @@ def test_a_start_line_job_starts_the_spindle_then_rises_crosses_and_feeds_down(m
     response = submit(machine, start_line=N)
     assert response["ok"], response
     job_id = response["job"]["id"]
-    assert machine.controller.status()["job"]["start_line"] == N
+    status = machine.controller.status()
+    assert status["job"]["start_line"] == N
+    assert any(line.startswith(f"job {job_id} part.nc from line {N}: ") for line in format_status(status))
     info = wait_job(machine, job_id)
     outcome = info["outcome"]
     assert outcome["outcome"] == "completed", outcome["reason"]
