@@ -238,3 +238,23 @@ def test_bad_start_line_options(options, says):
     with pytest.raises(InputError) as err:
         parse_gcode("G0 X1\nG1 X2 F100\n", "p.nc", (0, 0, 0), options)
     assert str(err.value) == says
+
+
+def test_a_line_in_an_if_branch_taken_can_be_the_start_line():
+    text = "G0 X0\n#1 = 1\no1 if [#1 GT 0]\nG1 X5 F100\nG1 Y5\no1 else\nG1 X9 F100\no1 endif\nG1 X0\n"
+    whole = parse_gcode(text, "p.nc")
+    started = parse_gcode(text, "p.nc", (0, 0, 0), ReadOptions(start_line=5, safe_z_mm=SAFE_Z_MM))
+    for a, b in zip(program_blocks(started), whole.blocks[1:], strict=True):
+        assert_same_block(a, b)
+    with pytest.raises(InputError, match=r"^p.nc:7: the program never runs this line .*start at a line it runs$"):
+        parse_gcode(text, "p.nc", (0, 0, 0), ReadOptions(start_line=7, safe_z_mm=SAFE_Z_MM))
+
+
+def test_percent_delimited_programs_start_from_their_line_too():
+    text = "%\nG0 X1 Y1\nG1 X2 F100\nG1 Y2\n%\nG1 X50\n"
+    whole = parse_gcode(text, "p.nc")
+    started = parse_gcode(text, "p.nc", (0, 0, 0), ReadOptions(start_line=4, safe_z_mm=SAFE_Z_MM))
+    assert_same_block(program_blocks(started)[0], whole.blocks[-1])
+    assert len(program_blocks(started)) == 1
+    with pytest.raises(InputError, match=r"^p.nc:6: the program never runs this line"):
+        parse_gcode(text, "p.nc", (0, 0, 0), ReadOptions(start_line=6, safe_z_mm=SAFE_Z_MM))

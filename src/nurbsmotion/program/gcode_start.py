@@ -191,7 +191,8 @@ class StartLineReading:
                 raise InputError(self.start_line_where(), f"past the end of the program: it ends at line {s.ended_at} "
                                                           f"(M2/M30)")
             raise InputError(self.start_line_where(), "the program never runs this line (an O-word branch not taken, "
-                                                      "or after the closing %)")
+                                                      "an else/endif line its flow jumps over, or after the closing "
+                                                      "%): start at a line it runs")
         if len(self.blocks) == s.blocks_at_start:
             raise InputError(self.start_line_where(), "no motion from this line on: nothing to start")
 
