@@ -651,6 +651,9 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         feed = None if rapid else self.need_feed(line)
         if math.dist(end.tolist(), self.position.tolist()) <= ZERO_MOVE_MM:
             return
+        if self.skipping:  # before the start line: no curve to build, only where it ends
+            self.position = end
+            return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 
     def straight(self, line: GcodeLine, _explicit: bool) -> None:
