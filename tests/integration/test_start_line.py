@@ -18,7 +18,7 @@ from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
 from tests.integration.daemon_helpers import daemon_in_process, wait_until
 
-SAFE_Z_MM = 30.0
+SAFE_Z_MM = 10.0
 MACHINE = f"""\
 spindle: {{node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, at_speed_timeout_s: 3.0}}
 machine: {{safe_z_mm: {SAFE_Z_MM}}}
@@ -27,7 +27,7 @@ PROGRAM = """\
 G21 G90
 G0 X10 Y5 Z5
 S3000 M3
-F600
+F1200
 G1 Z-2
 G1 X20
 G1 Y15
@@ -35,9 +35,9 @@ G1 X10
 M5
 M30
 """
-N = 7  # G1 Y15: starts at X20 Y5 Z-2 with M3 S3000 and F600 (10 mm/s) in effect
+N = 7  # G1 Y15: starts at X20 Y5 Z-2 with M3 S3000 and F1200 (20 mm/s) in effect
 START_POINT = (20.0, 5.0, -2.0)
-FEED_MM_S = 10.0
+FEED_MM_S = 20.0
 EPS_MM = 1e-6
 
 
