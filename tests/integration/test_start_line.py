@@ -105,3 +105,10 @@ def test_a_start_line_that_cannot_be_used_is_refused_with_one_line(machine, star
     assert not response["ok"]
     assert response["error"] == says
     assert machine.controller is not None and machine.controller.status()["job"] is None
+
+
+def test_a_yaml_curve_program_has_no_start_line(machine):
+    with Client(machine.config.control.socket) as client:
+        response = client.request("submit", name="curve.yaml", program="curves: []\n", start_line=3)
+    assert not response["ok"]
+    assert response["error"] == "curve.yaml: a start line is for G-code: a YAML curve program has no lines to start from"

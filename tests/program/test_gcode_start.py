@@ -258,3 +258,13 @@ def test_percent_delimited_programs_start_from_their_line_too():
     assert len(program_blocks(started)) == 1
     with pytest.raises(InputError, match=r"^p.nc:6: the program never runs this line"):
         parse_gcode(text, "p.nc", (0, 0, 0), ReadOptions(start_line=6, safe_z_mm=SAFE_Z_MM))
+
+
+def test_a_yaml_curve_file_has_no_start_line(tmp_path):
+    from nurbsmotion.program import read_program
+
+    path = tmp_path / "c.yaml"
+    path.write_text("curves: []\n")
+    with pytest.raises(InputError) as err:
+        read_program(path, options=ReadOptions(start_line=2, safe_z_mm=SAFE_Z_MM))
+    assert str(err.value) == f"{path}: a start line is for G-code: a YAML curve program has no lines to start from"

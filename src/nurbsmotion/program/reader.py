@@ -34,5 +34,7 @@ def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0), 
     except OSError as err:
         raise InputError(source, f"cannot read: {err.strerror or err}") from None
     if suffix in YAML_SUFFIXES:
+        if options is not None and options.start_line is not None:
+            raise InputError(source, "a start line is for G-code: a YAML curve program has no lines to start from")
         return parse_curve_yaml(text, source)
     return parse_gcode(text, source, start_position, options)

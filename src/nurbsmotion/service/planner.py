@@ -175,6 +175,8 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
     a G-code program starts at ``start_mm`` (where the axes hold) with ``options``."""
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
+        if options is not None and options.start_line is not None:
+            raise InputError(name, "a start line is for G-code: a YAML curve program has no lines to start from")
         return parse_curve_yaml(text, name)
     if suffix in GCODE_SUFFIXES or name in (MDI_NAME, JOG_NAME):
         return parse_gcode(text, name, start_mm, options)
