@@ -152,3 +152,22 @@ def test_interpolation_smoothing_is_a_switch_off_by_default():
     assert parse_config(axes + "interpolation: {smoothing: true}\n", "m.yaml").interpolation.smoothing is True
     assert _errors(axes + "interpolation:\n  smoothing: 0.01\n") == [
         "m.yaml:3: interpolation.smoothing: must be true or false, got 0.01"]
+
+
+SAFE_Z_AXES = "axes:\n  - {name: X, node_id: 1}\n  - {name: Z, node_id: 3, soft_limits_mm: [-80, 5]}\n"
+
+
+def test_machine_safe_z_is_read_and_checked_against_z_soft_limits():
+    assert parse_config(SAFE_Z_AXES + "machine:\n  safe_z_mm: 2.5\n", "m.yaml").safe_z_mm() == 2.5
+    assert _errors(SAFE_Z_AXES + "machine:\n  safe_z_mm: 10\n") == [
+        "m.yaml:5: machine.safe_z_mm: 10 mm is outside axis Z's soft limits [-80, 5] mm"]
+    assert _errors(SAFE_Z_AXES + "machine:\n  safe_z_mm: high\n") == [
+        "m.yaml:5: machine.safe_z_mm: must be a number, got 'high'"]
+    assert _errors(SAFE_Z_AXES + "machine:\n  safe_z: 1\n")[0].startswith("m.yaml:5: machine.safe_z")
+
+
+def test_machine_safe_z_defaults_below_z_upper_soft_limit_or_must_be_given():
+    assert parse_config(SAFE_Z_AXES, "m.yaml").safe_z_mm() == 4.0  # 5 mm - SAFE_Z_MARGIN_MM
+    assert parse_config("axes:\n  - {name: X, node_id: 1}\n", "m.yaml").safe_z_mm() is None  # no Z: no rise
+    with pytest.raises(InputError, match=r"^m.yaml: machine.safe_z_mm: not set, and axis Z has no soft_limits_mm"):
+        parse_config("axes:\n  - {name: Z, node_id: 1}\n", "m.yaml").safe_z_mm()

@@ -141,6 +141,19 @@ class ControlConfig:
     group: str | None = None
 
 
+SAFE_Z_MARGIN_MM = 1.0  # machine.safe_z_mm's default: this far below Z's upper soft limit
+
+
+@dataclass(frozen=True)
+class MachineSettings:
+    """The ``machine:`` section: settings of the machine as a whole (not of one axis or device).
+
+    ``safe_z_mm``: machine Z (mm) the approach to a program's start line rises to before it
+    moves in X/Y (program.gcode_start); default: Z's upper soft limit minus SAFE_Z_MARGIN_MM."""
+
+    safe_z_mm: float | None = None
+
+
 @dataclass(frozen=True)
 class WebConfig:
     """``nurbsmotion web``: where the gateway listens and who may use it (docs/web.md)."""
@@ -248,6 +261,7 @@ class MachineConfig:
     tool_table: Any = field(default=None, compare=False, repr=False)
     spindle: Any = None  # 'none' or absent: no spindle drive; else a spindle_config.SpindleConfig
     require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
+    machine: MachineSettings = MachineSettings()
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
 
     def axis_names(self) -> tuple[str, ...]:
@@ -257,6 +271,20 @@ class MachineConfig:
         """``file:line: path`` of a field, for errors found after loading (e.g. soft limits)."""
         line = self.lines.get(path)
         return f"{self.source}:{line}: {path}" if line else f"{self.source}: {path}"
+
+    def safe_z_mm(self) -> float | None:
+        """Where a start-line approach rises to: ``machine.safe_z_mm``, else Z's upper soft limit
+        minus SAFE_Z_MARGIN_MM; None on a machine without a Z axis (no rise). InputError naming
+        machine.safe_z_mm when neither is configured."""
+        if self.machine.safe_z_mm is not None:
+            return self.machine.safe_z_mm
+        z = next((a for a in self.axes if a.name == "Z"), None)
+        if z is None:
+            return None
+        if z.soft_limits_mm is None:
+            raise InputError(self.where("machine.safe_z_mm"), "not set, and axis Z has no soft_limits_mm to take it "
+                                                              "from: set it to start a program from a line")
+        return z.soft_limits_mm[1] - SAFE_Z_MARGIN_MM
 
 
 # --------------------------------------------------------------------------------------
@@ -532,6 +560,7 @@ _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "notify": (_notify, {}),
     "simulate": (_boolean, {}),
     "require_homing": (_boolean, {}),
+    "machine": (_section(MachineSettings, {"safe_z_mm": (_number, {})}), {}),
     "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
     "spindle": (_optional(lambda doc: _section_reader("spindle")(doc)), {}),
 }
@@ -562,6 +591,10 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     for i, axis in enumerate(cfg.axes):
         if axis.node_id == cfg.master.node_id:
             fail(f"axes[{i}].node_id", f"node id {axis.node_id} is the master's (master.node_id)")
+    safe_z = cfg.machine.safe_z_mm
+    z_limits = next((a.soft_limits_mm for a in cfg.axes if a.name == "Z"), None)
+    if safe_z is not None and z_limits is not None and not z_limits[0] <= safe_z <= z_limits[1]:
+        fail("machine.safe_z_mm", f"{safe_z:g} mm is outside axis Z's soft limits [{z_limits[0]:g}, {z_limits[1]:g}] mm")
 
 
 def parse_config(text: str, source: str = "<config>", base_dir: Path | None = None) -> MachineConfig:
@@ -601,6 +634,7 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         tools=values.get("tools"),
         spindle=values.get("spindle"),
         require_homing=values.get("require_homing"),
+        machine=values.get("machine", MachineSettings()),
         lines=lines,
     )
     _check_cross_fields(cfg, errors)

@@ -32,7 +32,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="keep the feed override in force now (default: the job starts at 100 %%)")
     parser.add_argument("--no-block-delete", action="store_true", help="run '/' lines (block delete switch off)")
     parser.add_argument("--no-optional-stop", action="store_true", help="M1 does not pause (optional stop switch off)")
+    parser.add_argument("--start-line", type=line_number, metavar="N",
+                        help="start from line N: the state there rebuilt, approached over machine.safe_z_mm")
     add_socket_arguments(parser)
+
+
+def line_number(text: str) -> int:
+    """argparse type of --start-line: a whole number >= 1."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"must be a line number >= 1, got {text!r}")
+    return int(text)
 
 
 def read_program(path: str) -> str:
@@ -198,6 +207,8 @@ def run(args: argparse.Namespace) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
         fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
                                                 ("optional_stop", args.no_optional_stop)) if off})
+        if args.start_line is not None:
+            fields["start_line"] = args.start_line
         name = Path(args.program).name
         return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **fields})
 

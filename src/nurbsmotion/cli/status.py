@@ -34,7 +34,8 @@ def format_status(s: dict[str, Any]) -> list[str]:
         lines.append(f"coordinates {coords['active']} (offset {offset} mm), G92 {g92}, tool {tool}")
     job = s.get("job")
     if job:
-        lines.append(f"job {job['id']} {job['name']}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
+        started = f" from line {job['start_line']}" if job.get("start_line") else ""
+        lines.append(f"job {job['id']} {job['name']}{started}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
                      f"feed {job['feed_mm_s']:.1f} mm/s, override {job['override_percent']:g} %, "
                      f"at {job.get('line') or '-'}")
     homing = s.get("homing") or {"axes": {}}

@@ -38,6 +38,7 @@ from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_offsets import OffsetCommands
+from nurbsmotion.program.gcode_start import StartLineReading
 from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
 from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
@@ -102,6 +103,8 @@ class ReadOptions:
     ``tool_in_spindle``: the tool the machine holds (M6 of that tool then needs no hold).
     ``spindle`` / ``spindle_rpm``: the spindle as the machine runs it (an earlier MDI's M3):
     an ``S`` alone then changes its speed, as in LinuxCNC, where the modal state carries over.
+    ``start_line`` / ``safe_z_mm``: start from that line, approaching it over ``safe_z_mm``
+    (program.gcode_start); the Program's ``resume`` then holds the state at that line.
     """
 
     tool_table: ToolTable | None = None
@@ -113,13 +116,15 @@ class ReadOptions:
     optional_stop: bool = True  # M1 pauses like M0 (the switch on)
     max_errors: int = 50
     max_loop_lines: int = 1_000_000  # lines run beyond the file's length (loops, calls): more is an endless loop
+    start_line: int | None = None  # start from this line (program.gcode_start); None: from the first
+    safe_z_mm: float | None = None  # machine Z the approach to the start line rises to (-inf: no rise)
 
 
 class _Stop(Exception):
     """Too many problems: stop reading."""
 
 
-class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands):
+class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands, StartLineReading):
     """Reads one program; ``parse`` returns the Program or raises InputError(s)."""
 
     def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> None:
@@ -154,12 +159,15 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.lines: list[LexedLine | InputError] = []
         self.top_repeats: dict[int, int] = {}
         self.init_nurbs()
+        self.init_start_line()
 
     # ---- driver ------------------------------------------------------------------------
     def parse(self, text: str) -> Program:
         text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors, CAM posts) is not part of line 1
         self.lines = lines = self.lex(text.split("\n"))
         flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
+        if not structure:
+            self.check_start_line_place(flow, len(lines) - (1 if text.endswith("\n") else 0))  # as editors count
         try:
             for err in structure:  # the program cannot run: say so, with every unreadable line
                 self.record(err_line(err), err)
@@ -172,8 +180,10 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             pass
         if self.errors:
             raise self.collected_errors()
+        self.check_start_line_reached()
         name = Path(self.source).stem or self.source
-        return Program(name, tuple(self.blocks), self.start.copy(), tuple(self.events), self.offsets.state(), self.tool_loaded)
+        return Program(name, tuple(self.blocks), self.start.copy(), tuple(self.events), self.offsets.state(),
+                       self.tool_loaded, self.start_line.state if self.start_line is not None else None)
 
     def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
         lines: list[LexedLine | InputError] = []
@@ -208,6 +218,12 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         while pc < len(lines):
             line = lines[pc]
             executed += 1
+            if self.skipping:
+                try:
+                    self.arrive_at(pc)
+                except InputError as err:
+                    self.record(pc + 1, err)
+                    raise _Stop from None
             if executed > len(lines) + self.options.max_loop_lines:
                 number = looped_to + 1  # the line the last backward jump went to: the loop's head
                 self.record(number, InputError(f"{self.source}:{number}", f"more than {self.options.max_loop_lines:,} lines run in loops and calls: "
@@ -234,6 +250,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                     pc = after
                     continue
                 if self.run_line(line):
+                    if self.start_line is not None:
+                        self.start_line.ended_at = line.number
                     break
             except InputError as err:
                 self.params.discard()
@@ -568,6 +586,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         if self.nurbs is not None:
             raise InputError(line.at(code), f"{code} inside the NURBS of line {self.nurbs.first.number}: "
                                             f"finish the NURBS first")
+        if self.skipping:  # before the start line: its state counts, not the event
+            return
         event = ProgramEvent(kind, len(self.blocks), line.source, code, **values)  # type: ignore[arg-type]
         self.events.append(event)
         if event.stops_motion and self.blocks and not self.blocks[-1].exact_stop:
@@ -623,12 +643,16 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         return point
 
     def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: GcodeLine) -> None:
-        self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm))
+        if not self.skipping:  # before the start line: only where the move ends counts
+            self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm))
         self.position = curve.end_point
 
     def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
         if math.dist(end.tolist(), self.position.tolist()) <= ZERO_MOVE_MM:
+            return
+        if self.skipping:  # before the start line: no curve to build, only where it ends
+            self.position = end
             return
         self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
 

@@ -128,6 +128,42 @@ class ProgramEvent:
         return self.kind in STOPPING_EVENTS or self.waits_for_spindle
 
 
+@dataclass(frozen=True)
+class ResumeState:
+    """The program's modal state on arrival at its start line (program.gcode_start): what a
+    whole run would have in effect just before line ``line`` runs.
+
+    ``position_mm``: machine XYZ where the move before ``line`` ends (line ``line`` starts
+    there). ``coordinates``: work offsets, active system and G92 then; ``tool`` and
+    ``tool_length_mm``: the tool in the spindle and the G43 offset in effect.
+    """
+
+    line: int
+    source: str
+    mm_per_unit: float  # 1.0 G21, 25.4 G20
+    absolute: bool  # G90 (False: G91)
+    plane: int  # 17, 18, 19
+    coordinates: CoordinateState
+    tool: int | None
+    tool_length_mm: float
+    feed_mm_s: float | None
+    spindle: SpindleDirection
+    spindle_rpm: float
+    constant_surface_speed: bool
+    coolant: frozenset[CoolantMode]
+    position_mm: tuple[float, float, float]
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready, for the job's record and status."""
+        return {"line": self.line, "units": "mm" if self.mm_per_unit == 1.0 else "inch",
+                "distance": "G90" if self.absolute else "G91", "plane": f"G{self.plane}",
+                "coordinates": self.coordinates.as_dict(), "tool": self.tool, "tool_length_mm": self.tool_length_mm,
+                "feed_mm_min": None if self.feed_mm_s is None else self.feed_mm_s * 60.0,
+                "spindle": self.spindle.value, "spindle_rpm": self.spindle_rpm,
+                "constant_surface_speed": self.constant_surface_speed,
+                "coolant": sorted(m.value for m in self.coolant), "position_mm": list(self.position_mm)}
+
+
 @dataclass(frozen=True, eq=False)
 class Program:
     """An ordered list of blocks; consecutive blocks meet (end of one = start of the next).
@@ -142,6 +178,7 @@ class Program:
     events: tuple[ProgramEvent, ...] = ()
     coordinates: CoordinateState | None = None
     tool_at_end: int | None = None  # tool in the spindle after the last M6/M61 (None: never changed)
+    resume: ResumeState | None = None  # started from a line (ReadOptions.start_line): the state there
 
     @property
     def requires_spindle(self) -> bool:

@@ -15,6 +15,12 @@ GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap")
 YAML_SUFFIXES = (".yaml", ".yml")
 
 
+def check_no_start_line(source: str, options: ReadOptions | None) -> None:
+    """A YAML curve program has no lines: a start line for one is refused, not ignored."""
+    if options is not None and options.start_line is not None:
+        raise InputError(source, "a start line is for G-code: a YAML curve program has no lines to start from")
+
+
 def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> Program:
     """Read a G-code (.nc .ngc .gcode .tap) or YAML curve (.yaml .yml) program.
 
@@ -34,5 +40,6 @@ def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0), 
     except OSError as err:
         raise InputError(source, f"cannot read: {err.strerror or err}") from None
     if suffix in YAML_SUFFIXES:
+        check_no_start_line(source, options)
         return parse_curve_yaml(text, source)
     return parse_gcode(text, source, start_position, options)

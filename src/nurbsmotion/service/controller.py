@@ -36,6 +36,7 @@ from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
 from nurbsmotion.service.planner import MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
+from nurbsmotion.service.start_line import resume_of, start_line_options
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
 log = logging.getLogger(__name__)
@@ -97,14 +98,17 @@ class Controller:
 
     # ------------------------------------------------------------------ requests
     def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
-               optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None) -> dict[str, Any]:
+               optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None,
+               start_line: int | None = None) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors.
 
         The program starts from the persisted offsets and tool with the block-delete and
         optional-stop switches given. The feed override goes back to 100 % for the new job
         unless ``keep_override``. ``needs_homing``: refused until homed when required (an
         incremental or continuous jog does not need it). ``jog``: the job is a jog of one axis in
-        that direction, which may start while a limit switch it moves away from is active."""
+        that direction, which may start while a limit switch it moves away from is active.
+        ``start_line``: start the program from that line (program.gcode_start): the state there
+        rebuilt, then the approach over ``machine.safe_z_mm``; the record and status name it."""
         check_program_name(name)
         with self._lock:
             try:
@@ -120,11 +124,16 @@ class Controller:
             try:
                 options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop,
                                                           self.machine.spindle_commanded_rpm())
+                if start_line is not None:
+                    options = start_line_options(options, start_line, self.config)
                 plan = self.planner(name, text, start_mm, options)
             except InputError as err:
                 self._record_rejection(name, text, err)
                 raise
             plan = self.machine.prepare(plan)  # the spindle's at-speed waits
+            resume = resume_of(plan.program)
+            if resume is not None:
+                plan.summary["start_line"] = resume.as_dict()  # into plan.json
             try:
                 record = self._record(name, text, plan)
             except InputError:
@@ -159,7 +168,7 @@ class Controller:
         finally:
             with self._lock:
                 self._planning = False
-        log.info(kv("job_started", job=record.job_id, name=name, cycles=plan.total_cycles,
+        log.info(kv("job_started", job=record.job_id, name=name, start_line=start_line, cycles=plan.total_cycles,
                     duration_s=plan.summary.get("duration_s"), streamed=isinstance(plan, StreamedJob),
                     override_percent=round(rate * 100.0, 3),
                     folder=record.folder))
@@ -383,6 +392,7 @@ class Controller:
                 "feed_mm_s": round(feed, 3),
                 "override_percent": round(self._effective(job) * 100.0, 3),
                 "line": reached["where"] if reached else None, "started_at": job.started_at,
+                "start_line": getattr(resume_of(job.plan.program), "line", None),
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
 
     @staticmethod
@@ -591,6 +601,7 @@ class Controller:
             outcome, reason = "stopped", cut_short
             log.warning(kv("job_cut_short", job=job.record.job_id, reason=cut_short))
         return {"outcome": outcome, "job": job.record.job_id, "name": job.name, "reason": reason,
+                "start_line": getattr(resume_of(job.plan.program), "line", None),
                 "fault": faults[0] if faults else None, "faults": faults,
                 "sent": result.sent, "planned": result.length,
                 "line_reached": self._line_reached(job, result.sent - 1),

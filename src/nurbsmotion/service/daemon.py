@@ -37,6 +37,7 @@ from nurbsmotion.service.planner_worker import PlannerWorker
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
+from nurbsmotion.service.start_line import start_line_field
 from nurbsmotion.service.subscriptions import StatusHub, attach_event_log
 from nurbsmotion.service.webhooks import start_webhooks
 
@@ -50,7 +51,8 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
     f = request.fields
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
         "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
-                                            bool(f.get("block_delete", True)), bool(f.get("optional_stop", True))),
+                                            bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
+                                            start_line=start_line_field(f.get("start_line"))),
         "mdi": lambda: controller.mdi(f["text"]),
         "offsets": lambda: controller.offsets(f),
         "status": controller.status,

@@ -24,7 +24,7 @@ from nurbsmotion.planning import Trajectory, plan
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
 from nurbsmotion.program import AXES, Program, ProgramEvent, ReadOptions, parse_curve_yaml, parse_gcode
-from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES
+from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES, check_no_start_line
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 from nurbsmotion.spindle_config import SpindleConfig
@@ -175,6 +175,7 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
     a G-code program starts at ``start_mm`` (where the axes hold) with ``options``."""
     suffix = Path(name).suffix.lower()
     if suffix in YAML_SUFFIXES:
+        check_no_start_line(name, options)
         return parse_curve_yaml(text, name)
     if suffix in GCODE_SUFFIXES or name in (MDI_NAME, JOG_NAME):
         return parse_gcode(text, name, start_mm, options)

@@ -21,7 +21,8 @@ DEFAULT_SOCKET = "/tmp/nurbsmotion.sock"  # where the daemon listens unless cont
 # command -> {field: (type name, required)}
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False),
-               "block_delete": ("boolean", False), "optional_stop": ("boolean", False)},
+               "block_delete": ("boolean", False), "optional_stop": ("boolean", False),
+               "start_line": ("number", False)},  # start from this line of the program (program.gcode_start)
     "mdi": {"text": ("string", True)},
     "status": {},
     "job": {"id": ("string", True)},
