@@ -80,7 +80,7 @@ def mutate_value(text: str, rng: random.Random) -> str:
 def check(text: str) -> bool:
     """True if accepted; otherwise asserts a proper InputError."""
     try:
-        config = parse_config(text, SOURCE)
+        config = parse_config(text, SOURCE, base_dir=CONFIG_DIR)  # the seeds' EDS paths are relative to config/
     except InputError as err:
         message = str(err)
         assert message, f"empty error for {text!r}"
