@@ -33,9 +33,10 @@ def judge_on_arrival(sdo: SdoClient, judging_time_s: Callable[[], float],
                      clock: Callable[[], float] = time.perf_counter) -> None:
     """Make ``sdo`` (one node's canopen client) time its answers out on ``judging_time_s()``
     (the ``clock`` timeline, perf_counter: Feedback.judging_time_s) from the moment each
-    request is sent (module docstring); an abort is raised as canopen raises it."""
+    request is sent, or the last answer was taken (module docstring); an abort is raised as
+    canopen raises it."""
     plain_send = sdo.send_request
-    sent_s = [0.0]  # the send time of the request under way (send_request)
+    sent_s = [0.0]  # the last request's send time, or the last answer's (a block transfer's next segment)
 
     def send_request(request: bytes) -> None:
         sent_s[0] = clock()
@@ -50,6 +51,7 @@ def judge_on_arrival(sdo: SdoClient, judging_time_s: Callable[[], float],
             except queue.Empty:
                 if judging_time_s() >= deadline_s or clock() >= deadline_s + STUCK_S:
                     raise SdoCommunicationError("No SDO response received") from None
+        sent_s[0] = clock()  # a block upload's segments come without a request each: time the next from here
         if response[0] == RESPONSE_ABORTED:  # as canopen's read_response: the server's abort code
             raise SdoAbortedError(struct.unpack_from("<L", response, 4)[0])
         return response
