@@ -92,7 +92,7 @@ def test_bring_up_passes_when_the_masters_receive_thread_hands_an_answer_over_la
     """Forced ordering: a frame queued just before the first SDO request holds the master's
     receive thread up for 3 SDO time-outs; the drive answers at once and its answer waits
     unread behind that frame. Before the fix: "node 1: bring-up step ...: no SDO answer"."""
-    sdo_timeout_s = 0.2
+    sdo_timeout_s = 0.5  # the master's default (bus.sdo_timeout_ms)
     hold_up = can.Message(arbitration_id=0x0F0, is_extended_id=False, data=b"\x00")
     with rig(bring_up=False, sdo_timeout_s=sdo_timeout_s) as (master, sim, probe):
         master.connect()
