@@ -79,6 +79,14 @@ def recorded(sim: SimNetwork, node: int) -> tuple[list[int], list[int]]:
     return [r.sync_index for r in records], [r.setpoint_counts for r in records]
 
 
+def demand_at_syncs(sim: SimNetwork, node: int, syncs: list[int]) -> np.ndarray:
+    """The set-point drive ``node`` followed at each of ``syncs``: a SYNC without a new
+    set-point records nothing and keeps the previous one (docs/sim.md), so two drives'
+    recordings need not line up index for index."""
+    recorded_syncs, setpoints = recorded(sim, node)
+    return np.asarray(setpoints, dtype=float)[np.searchsorted(recorded_syncs, syncs, side="right") - 1]
+
+
 def distance_to_polyline(point: np.ndarray, vertices: np.ndarray) -> float:
     """Least Euclidean distance from ``point`` to the segments joining consecutive ``vertices``."""
     a, b = vertices[:-1], vertices[1:]
@@ -166,10 +174,9 @@ def test_emcy_while_drives_follow_gives_a_controlled_stop_on_the_path():
         wait_for(lambda: master.status().cycle > cycle + 10)  # the drives applied the last ones
         # the stop stays on the planned polyline of axis 1 -> 2 (they move as sin(t), sin(2t))
         syncs, x = recorded(sim, 1)
-        _, y = recorded(sim, 2)
         start = find_run(x, counts[:200, 0].tolist())
         tail_x = np.array(x[start:], dtype=float)
-        tail_y = np.array(y[start:], dtype=float)
+        tail_y = demand_at_syncs(sim, 2, syncs[start:])  # paired by SYNC, not by recording index
         planned = counts[:, :2].astype(float)
         for point in np.column_stack([tail_x[-50:], tail_y[-50:]]):
             # The stop interpolates between planned rows, so it rests anywhere on a segment:

@@ -70,3 +70,31 @@ def test_the_listener_stamps_each_frame_with_its_receive_timestamp() -> None:
     listener.on_message_received(can.Message(arbitration_id=0x181, data=bytes(6), timestamp=time.time() - 0.2))
     assert 0.19 < time.perf_counter() - feedback.arrival.arrival_s < 0.3  # type: ignore[operator]
     assert 0.19 < feedback.arrival.lag_s < 0.3
+
+
+def silent_since(heartbeat_ago_s: float, tpdo1_ago_s: float) -> Supervisor:
+    """Axis X enabled and caught up; its last heartbeat and last TPDO1 arrived that long ago,
+    the TPDO1 more than the consumer time in cycles before cycle 100."""
+    feedback = Feedback(1)
+    feedback.watch_reception(lambda: False)
+    frame_handled(feedback, arrived_ago_s=heartbeat_ago_s, handled_ago_s=heartbeat_ago_s)
+    feedback.status[0] = 0x0027  # OPERATION ENABLED
+    feedback.time[0] = time.time() - tpdo1_ago_s
+    feedback.cycle[0] = 100 - int(HB_TIMEOUT_S / PERIOD_S) - 2
+    return supervisor(feedback)
+
+
+def kinds_at_cycle_100(sup: Supervisor) -> list[str]:
+    sup.check(100, Phase.HOLDING, None)
+    return [f.kind for f in sup.faults]
+
+
+def test_a_drive_silent_altogether_is_a_heartbeat_loss_not_a_missing_tpdo1() -> None:
+    """Its last heartbeat came before its last TPDO1 (a killed drives' process): the TPDO1
+    check leaves it to the heartbeat check, whatever tens of ms decide which runs out first."""
+    assert kinds_at_cycle_100(silent_since(heartbeat_ago_s=0.2, tpdo1_ago_s=0.15)) == []
+    assert kinds_at_cycle_100(silent_since(heartbeat_ago_s=0.3, tpdo1_ago_s=0.25)) == ["heartbeat"]
+
+
+def test_a_drive_whose_heartbeat_goes_on_without_tpdo1_is_reported_as_missing_tpdo1() -> None:
+    assert kinds_at_cycle_100(silent_since(heartbeat_ago_s=0.05, tpdo1_ago_s=0.3)) == ["following_error"]

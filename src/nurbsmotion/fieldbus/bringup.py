@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import canopen
 from canopen.objectdictionary import ObjectDictionary, datatypes
@@ -25,6 +25,7 @@ from nurbsmotion import drive_od
 from nurbsmotion.config import AxisConfig
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, PdoSetup, ReadBack, Write, describe_value
+from nurbsmotion.fieldbus.sdo_arrival import judge_on_arrival
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)
@@ -93,10 +94,15 @@ class SdoTrail:
         return f"writing {describe_value(od, index, subindex, value)}"
 
 
-def open_node(network: canopen.Network, node_id: int, od: ObjectDictionary, sdo_timeout_s: float
-              ) -> tuple[canopen.RemoteNode, SdoTrail]:
+def open_node(network: canopen.Network, node_id: int, od: ObjectDictionary, sdo_timeout_s: float,
+              judging_time_s: Callable[[], float] | None = None) -> tuple[canopen.RemoteNode, SdoTrail]:
+    """The node on ``network`` with its SDO time-out; given ``judging_time_s`` (the master's
+    arrival timeline), SDO answers time out on it (fieldbus.sdo_arrival), not on the waiting
+    thread's clock."""
     node = canopen.RemoteNode(node_id, od)
     node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+    if judging_time_s is not None:
+        judge_on_arrival(node.sdo, judging_time_s)
     network.add_node(node)
     return node, SdoTrail(node)
 

@@ -319,7 +319,7 @@ class Master:
         self._trails = []
         for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
             assert axis.od is not None  # loaded with the configuration
-            node, trail = bringup.open_node(network, axis.node_id, axis.od, self._sdo_timeout_s)
+            node, trail = bringup.open_node(network, axis.node_id, axis.od, self._sdo_timeout_s, self._fb.judging_time_s)
             self._trails.append(trail)
             for frame in plan.layout.tpdos:
                 network.subscribe(frame.cob_id, self._tpdo_callback(i, frame))

@@ -18,7 +18,7 @@ from typing import Any
 from nurbsmotion import cia402 as c
 from nurbsmotion.fieldbus.controller import OE_MASK, OE_VALUE, RUNNING_PHASES, Phase
 from nurbsmotion.fieldbus.drive_state import enable_step, state_name
-from nurbsmotion.fieldbus.feedback import EVENT_BAD_TPDO, EVENT_EMCY, EVENT_NMT, Feedback
+from nurbsmotion.fieldbus.feedback import EVENT_BAD_TPDO, EVENT_EMCY, EVENT_NMT, Feedback, arrival_perf_s
 from nurbsmotion.fieldbus.reports import FaultReport
 from nurbsmotion.log import kv
 
@@ -122,9 +122,17 @@ class Supervisor:
                             f"{silent_s * 1000:.0f} ms (consumer time "
                             f"{self.hb_timeout_s * 1000:.0f} ms) at cycle {k}", phase, job, reactions)
             elif running and k - fb.cycle[i] > max(self.fe_timeout_cycles[i] + 3, self.hb_timeout_s / self.period_s) \
-                    and fb.arrival.caught_up():  # a TPDO1 waiting unread in our socket is not missing
+                    and fb.arrival.caught_up() and self._heard_since_tpdo1(i):  # a TPDO1 waiting unread is not missing
                 self.report(node, name, "following_error", 0, k, f"node {node} (axis {name}): no TPDO1 (position "
                             f"actual) for {k - fb.cycle[i]} cycles at cycle {k}", phase, job, reactions)
+
+    def _heard_since_tpdo1(self, i: int) -> bool:
+        """Axis i's drive sent a heartbeat after its last TPDO1 (or never sent a TPDO1): it is
+        there but does not answer SYNC, which only this check finds. A drive silent altogether
+        is the heartbeat check's: both wait the consumer time, so which fired first turned on
+        tens of ms (a killed drives' process read as 'following_error' on vcan0)."""
+        stamp = self.fb.time[i]
+        return stamp <= 0.0 or self.fb.hb_time[i] > arrival_perf_s(stamp)
 
     def _heartbeat_silence_s(self, i: int, now_s: float) -> float:
         """How long axis i's drive has been silent, judged as its heartbeats arrived (CiA 301
