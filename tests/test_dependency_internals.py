@@ -51,3 +51,16 @@ def test_canopen_sdo_client_upload_and_download_keep_the_signatures_sdo_trail_wr
         f"canopen {canopen.__version__}: SdoClient.download{download}; port fieldbus.bringup.SdoTrail")
     assert upload == ["self", "index", "subindex"], (
         f"canopen {canopen.__version__}: SdoClient.upload{upload}; port fieldbus.bringup.SdoTrail")
+
+
+def test_canopen_sdo_client_still_has_what_sdo_arrival_replaces_and_reads():
+    """fieldbus.sdo_arrival replaces SdoClient.send_request/read_response and reads its
+    ``responses`` queue and the RESPONSE_ABORTED constant."""
+    from canopen.sdo.constants import RESPONSE_ABORTED  # noqa: F401 - an ImportError names what moved
+
+    assert callable(getattr(SdoClient, "send_request", None)), f"canopen {canopen.__version__}: SdoClient.send_request"
+    assert callable(getattr(SdoClient, "read_response", None)), f"canopen {canopen.__version__}: SdoClient.read_response"
+    network = canopen.Network()
+    client = SdoClient(0x600 + 1, 0x580 + 1, canopen.ObjectDictionary())
+    client.network = network
+    assert hasattr(client, "responses"), f"canopen {canopen.__version__}: SdoClient.responses; port fieldbus.sdo_arrival"
