@@ -14,7 +14,7 @@ import can
 
 from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.log import kv
+from nurbsmotion.log import kv, setup_logging
 from nurbsmotion.sim import FaultInjection, SimNetwork, parse_fault_spec
 from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.machine_sensors import machine_home_sensors
@@ -204,7 +204,7 @@ def run(args: argparse.Namespace) -> int:
     spindle = parse_spindle(args.spindle, machine)
     check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
     sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)
-    logging.getLogger("nurbsmotion.sim").setLevel(min(logging.getLogger().level, logging.INFO))
+    setup_logging(max(1, getattr(args, "verbose", 0)))  # a service: its INFO lines (sim.ready, faults) on stderr
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
