@@ -146,14 +146,6 @@ def test_drive_step_timeout_is_read_and_checked():
         "m.yaml:1: bus.drive_step_timeout_ms: must be >= 10, got 0"]
 
 
-def test_interpolation_smoothing_is_a_switch_off_by_default():
-    axes = "axes: [{name: X, node_id: 1}]\n"
-    assert parse_config(axes, "m.yaml").interpolation.smoothing is False
-    assert parse_config(axes + "interpolation: {smoothing: true}\n", "m.yaml").interpolation.smoothing is True
-    assert _errors(axes + "interpolation:\n  smoothing: 0.01\n") == [
-        "m.yaml:3: interpolation.smoothing: must be true or false, got 0.01"]
-
-
 SAFE_Z_AXES = "axes:\n  - {name: X, node_id: 1}\n  - {name: Z, node_id: 3, soft_limits_mm: [-80, 5]}\n"
 
 

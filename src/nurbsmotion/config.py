@@ -64,9 +64,6 @@ class InterpolationConfig:
     max_jerk_mm_s3: float | None = 50_000.0
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
-    # replace runs of short G01 moves by curvature-continuous cubics within the G64 Q tolerance
-    # (docs/smoothing.md); off by default, as Fanuc's nano smoothing and LinuxCNC's naive CAM
-    smoothing: bool = False
 
 
 @dataclass(frozen=True)
@@ -515,7 +512,6 @@ _INTERPOLATION_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "max_jerk_mm_s3": (_optional(_number), {"minimum": 0}),
     "acc_time_s": _POSITIVE,
     "junction_deviation_mm": (_number, {"minimum": 0, "exclusive_min": False}),
-    "smoothing": (_boolean, {}),
 }
 
 
