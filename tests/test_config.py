@@ -144,3 +144,15 @@ def test_drive_step_timeout_is_read_and_checked():
     assert parse_config("axes: [{name: X, node_id: 1}]\n").bus.drive_step_timeout_ms == 500
     assert _errors("bus: {drive_step_timeout_ms: 0}\naxes: [{name: X, node_id: 1}]\n") == [
         "m.yaml:1: bus.drive_step_timeout_ms: must be >= 10, got 0"]
+
+
+def test_path_tolerance_is_read_checked_and_reaches_the_plan_limits():
+    from nurbsmotion.planning.limits import limits_from_config
+    cfg = parse_config("interpolation: {path_tolerance_mm: 0.02}\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert cfg.interpolation.path_tolerance_mm == 0.02 and limits_from_config(cfg).path_tolerance_mm == 0.02
+    assert parse_config("axes: [{name: X, node_id: 1}]\n", "m.yaml").interpolation.path_tolerance_mm == 0.01
+    assert parse_config("interpolation: {path_tolerance_mm: 0}\naxes: [{name: X, node_id: 1}]\n",
+                        "m.yaml").interpolation.path_tolerance_mm == 0.0  # 0: no corner blends
+    with pytest.raises(InputError) as info:
+        parse_config("interpolation:\n  path_tolerance_mm: -1\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert str(info.value).startswith("m.yaml:2: interpolation.path_tolerance_mm")

@@ -1,0 +1,191 @@
+"""Corner blending in the look-ahead (planning/lookahead/blend.py): corners within the path
+tolerance are passed moving on G2 blends, every limit holds on every set-point, and the
+program's own stops still stop. The rulers: planning.measure against the planned pieces
+(conftest.measure_planned) and the brute-force distance of every set-point from the
+program's blocks (conftest.path_deviation_mm)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from nurbsmotion.planning import PlanLimits
+from nurbsmotion.planning.lookahead import plan_lookahead, planned_pieces
+from nurbsmotion.planning.lookahead.blend import MAX_DEFLECTION_DEG
+from nurbsmotion.program import parse_gcode
+from tests.planning.lookahead.conftest import assert_within_limits, measure_planned, path_deviation_mm, polyline
+
+LIMITS = PlanLimits(period_s=0.001, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0, default_feed_mm_s=200.0,
+                    path_tolerance_mm=0.01)
+NO_JERK = replace(LIMITS, max_jerk_mm_s3=None)
+DATA = Path(__file__).resolve().parents[2] / "data" / "gcode"
+
+
+def turn(theta_deg: float, length: float = 20.0) -> list[tuple[float, float, float]]:
+    th = np.radians(theta_deg)
+    return [(0.0, 0.0, 0.0), (length, 0.0, 0.0), (length + length * np.cos(th), length * np.sin(th), 0.0)]
+
+
+def speed_near(trajectory, point) -> float:
+    """Speed (mm/s) of the step that passes closest to ``point``."""
+    i = int(np.argmin(np.linalg.norm(trajectory.position_mm - np.asarray(point), axis=1)))
+    i = min(max(i, 1), len(trajectory.u) - 1)
+    return float(np.linalg.norm(trajectory.position_mm[i] - trajectory.position_mm[i - 1]) / trajectory.period_s)
+
+
+def assert_blended_plan_holds(trajectory, program, limits) -> None:
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)
+    deviation = path_deviation_mm(trajectory, program)
+    assert deviation <= limits.path_tolerance_mm
+    assert trajectory.notes["verified_max_path_deviation_mm"] == pytest.approx(deviation, rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.parametrize("limits", [LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+@pytest.mark.parametrize("theta_deg", [5.0, 30.0, 90.0, 135.0])
+def test_a_corner_is_passed_moving_on_a_blend_within_the_tolerance(theta_deg, limits):
+    program = polyline(turn(theta_deg))
+    trajectory = plan_lookahead(program, limits)
+    assert trajectory.notes["stops"] == 0
+    corner = turn(theta_deg)[1]
+    assert speed_near(trajectory, corner) > 0.1
+    assert not np.any(np.all(trajectory.position_mm == corner, axis=1))  # the corner itself is cut
+    assert_blended_plan_holds(trajectory, program, limits)
+    blend = next(p for p in planned_pieces(program, limits) if p.corners is not None)
+    on_blend = replace_rows(trajectory, np.ones(len(trajectory.u), dtype=bool))
+    on_blend.position_mm = blend.curve.points(np.linspace(0.0, 1.0, 4001))
+    if theta_deg >= 30.0:  # not cut short by the 20 mm lines: the blend uses its tolerance
+        assert path_deviation_mm(on_blend, program) >= 0.95 * limits.path_tolerance_mm
+
+
+def g2_joins(pieces) -> list[float]:
+    """Relative difference of the curvature vectors (and of the unit tangents) at every join."""
+    out = []
+    for a, b in zip(pieces[:-1], pieces[1:]):
+        ends = []
+        for piece, u in ((a, a.u_end), (b, b.u_start)):
+            x, d1, d2 = piece.curve.derivatives(u, 2)
+            speed = np.linalg.norm(d1)
+            t = d1 / speed
+            ends.append((x, t, (d2 - (d2 @ t) * t) / speed**2))
+        (xa, ta, ka), (xb, tb, kb) = ends
+        assert np.linalg.norm(xa - xb) <= 1e-9
+        scale = max(np.linalg.norm(ka), np.linalg.norm(kb), 1.0)
+        out.append(max(np.linalg.norm(ta - tb), np.linalg.norm(ka - kb) / scale))
+    return out
+
+
+def test_line_arc_and_arc_arc_corners_are_blended_g2_and_hold_every_limit():
+    # line-arc 45 deg, arc-arc 90 deg, arc-line 45 deg, line-line 90 deg, line-arc 90 deg
+    text = "G1 X20 F6000\nG3 X30 Y0 I5 J5\nG2 X40 Y0 I5 J5\nG1 X40 Y-20\nX20\nG2 X10 Y-30 I-10 J0\n"
+    program = parse_gcode(text, "arcs.nc")
+    pieces = planned_pieces(program, LIMITS)
+    blends = [p for p in pieces if p.corners is not None]
+    assert len(blends) == 5
+    assert max(g2_joins(pieces)) <= 1e-9
+    for limits in (LIMITS, NO_JERK):
+        trajectory = plan_lookahead(program, limits)
+        assert trajectory.notes["stops"] == 0
+        assert_blended_plan_holds(trajectory, program, limits)
+
+
+def test_a_blend_takes_at_most_half_of_each_neighbour():
+    """Short segments (0.05 mm) with 90 deg corners: every blend is cut short by the segments
+    (its ends at most half a segment from the corner; two blends may meet at a middle, the
+    segment then keeps no piece of its own), and every block is still on the path."""
+    points = [(0.05 * i, 0.05 * (i % 2), 0.0) for i in range(12)]
+    program = polyline(points)
+    pieces = planned_pieces(program, LIMITS)
+    for piece in pieces:
+        if piece.corners is None:
+            continue
+        start, end = piece.curve.points(np.array([0.0, 1.0]))
+        inc, out = piece.corners.incoming, piece.corners.outgoing
+        k = piece.corner
+        assert (start - inc.start[k]) @ inc.direction[k] >= 0.5 * inc.length_mm[k] - 1e-12
+        assert (end - out.start[k]) @ out.direction[k] <= 0.5 * out.length_mm[k] + 1e-12
+    assert {p.block for p in pieces} == set(range(len(program.blocks)))
+    trajectory = plan_lookahead(program, LIMITS)
+    assert_blended_plan_holds(trajectory, program, LIMITS)
+
+
+def rests_at(trajectory, point) -> bool:
+    """Two consecutive set-points exactly at ``point`` (the stop's corner, held a cycle)."""
+    at = np.flatnonzero(np.all(trajectory.position_mm == np.asarray(point, float), axis=1))
+    return len(at) >= 2 and bool(np.any(np.diff(at) == 1))
+
+
+@pytest.mark.parametrize("stop", ["G61", "G4 P0.01", "M0", "T2 M6"])
+def test_program_stops_still_stop_at_the_corner(stop):
+    line = {"G61": "G61 X20\nG64", "G4 P0.01": "X20\nG4 P0.01", "M0": "X20\nM0", "T2 M6": "X20\nT2 M6"}[stop]
+    program = parse_gcode(f"G1 X10 F6000\n{line}\nY10\nX30\n", "stops.nc")  # G61 is modal: G64 after it
+    trajectory = plan_lookahead(program, LIMITS)
+    assert rests_at(trajectory, (20.0, 0.0, 0.0))
+    assert not rests_at(trajectory, (20.0, 10.0, 0.0))  # the corner after it is blended
+    assert_blended_plan_holds(trajectory, program, LIMITS)
+
+
+def test_a_reversal_stays_a_stop():
+    program = polyline(turn(MAX_DEFLECTION_DEG + 10.0))
+    assert not any(p.corners is not None for p in planned_pieces(program, LIMITS))
+    trajectory = plan_lookahead(program, LIMITS)
+    assert rests_at(trajectory, turn(MAX_DEFLECTION_DEG + 10.0)[1])
+
+
+def test_a_zero_path_tolerance_keeps_the_corners_as_junctions():
+    program = polyline(turn(30.0))
+    assert not any(p.corners is not None for p in planned_pieces(program, replace(LIMITS, path_tolerance_mm=0.0)))
+
+
+def test_g64_p_sets_the_tolerance_of_the_corner_into_its_block():
+    program = parse_gcode("G1 X20 F6000\nG64 P0.002\nY20\nG64 P0.02\nX40\n", "p.nc")
+    trajectory = plan_lookahead(program, LIMITS)
+    near_first = np.linalg.norm(trajectory.position_mm - [20.0, 0.0, 0.0], axis=1) < 1.0
+    first = polyline([(0, 0, 0), (20, 0, 0), (20, 20, 0)])
+    assert path_deviation_mm(replace_rows(trajectory, near_first), first) <= 0.002
+    assert trajectory.notes["verified_max_path_deviation_mm"] > 0.01  # the second corner uses its 0.02
+
+
+def replace_rows(trajectory, rows):
+    from nurbsmotion.planning import Trajectory
+    return Trajectory(trajectory.algorithm, trajectory.period_s, trajectory.block[rows], trajectory.u[rows],
+                      trajectory.position_mm[rows], trajectory.feed_mm_s[rows])
+
+
+def zigzag(n: int = 60, step: float = 0.5) -> list[tuple[float, float, float]]:
+    """Short segments turning 20 deg either way: a CAM-like polyline."""
+    points, heading, p = [(0.0, 0.0, 0.0)], 0.0, np.zeros(3)
+    for i in range(n):
+        heading += np.radians(20.0) * (1 if (i // 3) % 2 == 0 else -1)
+        p = p + step * np.array([np.cos(heading), np.sin(heading), 0.0])
+        points.append(tuple(p))
+    return points
+
+
+def test_motion_time_falls_as_the_jerk_limit_grows():
+    program = polyline(zigzag())
+    times = [len(plan_lookahead(program, replace(LIMITS, max_jerk_mm_s3=j)).u) for j in (5e4, 5e5, 5e6, 1e12, None)]
+    assert all(a >= b for a, b in zip(times[:-1], times[1:])), times
+    assert times[-2] <= 1.05 * times[-1]  # an unlimited jerk plans like no jerk limit
+
+
+def test_a_short_segment_program_holds_every_limit_and_the_tolerance():
+    program = polyline(zigzag())
+    for limits in (LIMITS, NO_JERK):
+        trajectory = plan_lookahead(program, limits)
+        assert trajectory.notes["stops"] == 0
+        assert_blended_plan_holds(trajectory, program, limits)
+
+
+def cam_head(path: Path, lines: int) -> str:
+    return "\n".join(path.read_text().splitlines()[:lines]) + "\n"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("limits", [LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+def test_the_first_lines_of_grbl_hsm_test_hold_every_limit_and_the_tolerance(limits):
+    program = parse_gcode(cam_head(DATA / "grbl_HSM_test.nc", 300), "grbl_HSM_test.nc")
+    trajectory = plan_lookahead(program, limits)
+    assert_blended_plan_holds(trajectory, program, limits)
