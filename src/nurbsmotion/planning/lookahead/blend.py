@@ -13,7 +13,8 @@ that ends at rest: G61, a dwell, M0/M1/M6, a spindle wait), where the tolerance 
 P0, or ``path_tolerance_mm`` 0), at a sharp corner (deflection above MAX_DEFLECTION_DEG:
 within 0.01 mm the blend of a 90 deg corner is passed at ~2 mm/s with J = 50000 and ~8 mm/s
 without, and crawling through it cost more than a stop: grbl's braid 43.7 s with blends up to
-90 deg, 36.9 s with 60, HSM_test 22.2 s and 21.6 s; the same at 45), where a piece is not a
+90 deg, 36.9 s up to 30, 45 or 60 deg, HSM_test 22.2 s and 21.6 s; examples/mixed.nc's 40 deg
+corner of a line into an arc made it 4.5 % slower with J, none up to 30), where a piece is not a
 line or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
 (corner_blend.trim_distances, monotone). The tolerance of a corner is the outgoing block's
 G64 P, else the machine's ``path_tolerance_mm``.
@@ -35,7 +36,7 @@ from nurbsmotion.planning.lookahead.runs import ProgramStops
 
 SHARE_LIMIT = cb.SHARE_LIMIT
 
-MAX_DEFLECTION_DEG = 60.0  # corners turning more than this stay junctions (module docstring)
+MAX_DEFLECTION_DEG = 30.0  # corners turning more than this stay junctions (module docstring)
 MIN_DEFLECTION_RAD = 1e-9  # tangent already: nothing to blend
 MAX_JOIN_ROUNDS = 8  # rounds of CornerPlan.join_short_lines before it gives up joining
 JOIN_SMOOTHING = 4  # passes of smoothed() over the joins' curvatures
@@ -179,8 +180,11 @@ class CornerPlan:
             points = self.blend_points(touched)
             deviation = cb.sampled_deviation(shapes.take(corners[touched]), shapes.take(corners[touched] + 1), points)
             bad = (deviation > cb.TOLERANCE_SHARE * self.tolerance[touched]) | ~cb.monotone(points)
-            self.points[touched[~bad]] = points[~bad]
             if not bad.any():
+                # every blend from the final trims: those with a joined end were just checked,
+                # the others are the plain blends again (a blend whose neighbour was un-joined
+                # in an earlier round must not keep points made for the joined trims)
+                self.points = self.blend_points(np.arange(len(corners)))
                 return
             failed = corners[touched[bad]]
             self.joined[failed] = False
