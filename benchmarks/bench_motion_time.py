@@ -40,7 +40,8 @@ from nurbsmotion.planning import PlanLimits  # noqa: E402
 from nurbsmotion.planning.lookahead import plan_lookahead  # noqa: E402
 from nurbsmotion.planning.lookahead.path import build_grid  # noqa: E402
 from nurbsmotion.planning.lookahead.planner import settings_for  # noqa: E402
-from nurbsmotion.planning.lookahead.runs import program_pieces, split_runs  # noqa: E402
+from nurbsmotion.planning.lookahead.api import planned_pieces  # noqa: E402
+from nurbsmotion.planning.lookahead.runs import ProgramStops, split_runs  # noqa: E402
 from nurbsmotion.planning.measure import measure  # noqa: E402
 from nurbsmotion.program import Program, parse_gcode, read_program  # noqa: E402
 
@@ -85,9 +86,10 @@ def run_lower_bound(run, limits: PlanLimits) -> float:
 
 
 def lower_bound(program: Program, limits: PlanLimits) -> float:
-    pieces = program_pieces(program, limits)
+    pieces = planned_pieces(program, limits)  # the path the planner plans along (corners blended)
     settings = settings_for(limits, max(p.feed_mm_s for p in pieces), 20000)
-    return sum(run_lower_bound(run, limits) for run in split_runs(pieces, limits, settings.min_pass_mm_s))
+    runs = split_runs(pieces, limits, settings.min_pass_mm_s, ProgramStops.of(program, limits))
+    return sum(run_lower_bound(run, limits) for run in runs)
 
 
 JERK_MM_S3 = 50000.0

@@ -163,3 +163,15 @@ def test_machine_safe_z_defaults_below_z_upper_soft_limit_or_must_be_given():
     assert parse_config("axes:\n  - {name: X, node_id: 1}\n", "m.yaml").safe_z_mm() is None  # no Z: no rise
     with pytest.raises(InputError, match=r"^m.yaml: machine.safe_z_mm: not set, and axis Z has no soft_limits_mm"):
         parse_config("axes:\n  - {name: Z, node_id: 1}\n", "m.yaml").safe_z_mm()
+
+
+def test_path_tolerance_is_read_checked_and_reaches_the_plan_limits():
+    from nurbsmotion.planning.limits import limits_from_config
+    cfg = parse_config("interpolation: {path_tolerance_mm: 0.02}\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert cfg.interpolation.path_tolerance_mm == 0.02 and limits_from_config(cfg).path_tolerance_mm == 0.02
+    assert parse_config("axes: [{name: X, node_id: 1}]\n", "m.yaml").interpolation.path_tolerance_mm == 0.01
+    assert parse_config("interpolation: {path_tolerance_mm: 0}\naxes: [{name: X, node_id: 1}]\n",
+                        "m.yaml").interpolation.path_tolerance_mm == 0.0  # 0: no corner blends
+    with pytest.raises(InputError) as info:
+        parse_config("interpolation:\n  path_tolerance_mm: -1\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert str(info.value).startswith("m.yaml:2: interpolation.path_tolerance_mm")

@@ -64,6 +64,7 @@ class InterpolationConfig:
     max_jerk_mm_s3: float | None = 50_000.0
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
+    path_tolerance_mm: float = 0.01  # corner blends stay this close to the programmed path (G64 P overrides)
 
 
 @dataclass(frozen=True)
@@ -512,6 +513,7 @@ _INTERPOLATION_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "max_jerk_mm_s3": (_optional(_number), {"minimum": 0}),
     "acc_time_s": _POSITIVE,
     "junction_deviation_mm": (_number, {"minimum": 0, "exclusive_min": False}),
+    "path_tolerance_mm": (_number, {"minimum": 0, "exclusive_min": False}),
 }
 
 

@@ -19,6 +19,7 @@ together). The rational derivatives follow from the quotient rule (reference §1
 from __future__ import annotations
 
 import bisect
+import functools
 from dataclasses import dataclass
 from functools import cached_property
 from math import comb
@@ -176,6 +177,26 @@ _GAUSS_16 = np.polynomial.legendre.leggauss(16)
 EVALUATION_CHUNK = 2048
 
 
+@functools.lru_cache(maxsize=16)
+def _bernstein_to_power(p: int) -> NDArray[np.float64]:
+    """M[k, i] = (-1)^(k-i) C(p, k) C(k, i) (i <= k): the degree-p Bernstein basis in powers of t."""
+    out = np.zeros((p + 1, p + 1))
+    for k in range(p + 1):
+        for i in range(k + 1):
+            out[k, i] = (-1.0) ** (k - i) * comb(p, k) * comb(k, i)
+    out.setflags(write=False)
+    return out
+
+
+def bezier_taylor(homogeneous: NDArray[np.float64], width: float) -> NDArray[np.float64]:
+    """Taylor coefficients (p+1, dim+1, 1) at the start of a one-span curve (a Bezier of width
+    ``width`` in u): c_k = width^-k sum_i M[k, i] H_i (_bernstein_to_power): de Boor's result
+    without its per-order passes."""
+    p = len(homogeneous) - 1
+    scale = width ** -np.arange(p + 1.0)
+    return np.ascontiguousarray(((_bernstein_to_power(p) @ homogeneous) * scale[:, None])[:, :, None])
+
+
 @dataclass(frozen=True, eq=False)
 class NurbsCurve:
     """An immutable, validated NURBS curve. Construct it through ``NurbsCurve.create``.
@@ -252,6 +273,8 @@ class NurbsCurve:
         """(lefts, c): the left knot of every non-empty span and c[k, :, i] = A^(k)(lefts[i]) / k!,
         shape (p+1, dim+1, spans), from de Boor on the derivative control points."""
         lefts = self.breakpoints[:-1]
+        if len(lefts) == 1 and self.degree >= 3:
+            return lefts, bezier_taylor(self.homogeneous, float(self.breakpoints[1] - lefts[0]))
         spans = np.searchsorted(self.knots, lefts, side="right") - 1
         points = self._derivative_points
         coeffs = []

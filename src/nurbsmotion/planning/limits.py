@@ -29,6 +29,7 @@ class PlanLimits:
     rapid_feed_mm_s: float = 200.0
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
+    path_tolerance_mm: float = 0.01  # corner blends' largest distance from the program (G64 P overrides; 0: no blends)
     # Per-axis X, Y, Z limits; a None entry is an axis the configuration gives no limit for.
     axis_max_velocity_mm_s: tuple[float | None, ...] | None = None
     axis_max_accel_mm_s2: tuple[float | None, ...] | None = None
@@ -42,9 +43,9 @@ class PlanLimits:
                     continue
                 if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                     raise InputError(f.name, f"must be a finite number, got {v!r}")
-                lower_ok = v >= 0 if f.name == "junction_deviation_mm" else v > 0
-                if not lower_ok:
-                    raise InputError(f.name, f"must be {'>= 0' if f.name == 'junction_deviation_mm' else '> 0'}, got {v!r}")
+                zero_ok = f.name in ("junction_deviation_mm", "path_tolerance_mm")
+                if not (v >= 0 if zero_ok else v > 0):
+                    raise InputError(f.name, f"must be {'>= 0' if zero_ok else '> 0'}, got {v!r}")
         if self.period_s > 0.1:
             raise InputError("period_s", f"interpolation period {self.period_s * 1000:g} ms is longer than 100 ms")
 
@@ -84,4 +85,5 @@ def interpolation_limits(interp: InterpolationConfig) -> PlanLimits:
         rapid_feed_mm_s=interp.rapid_feed_mm_s,
         acc_time_s=interp.acc_time_s,
         junction_deviation_mm=interp.junction_deviation_mm,
+        path_tolerance_mm=interp.path_tolerance_mm,
     )

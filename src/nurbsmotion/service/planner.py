@@ -156,7 +156,10 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
         return None
     cycle, j, limit = first
     block = int(trajectory.block[cycle])
-    in_block = positions[trajectory.block == block, j]
+    # the block's set-points and its programmed end: a corner blend (planning.lookahead.blend)
+    # passes within the path tolerance of the end, the program asked for the end itself
+    end = program.blocks[block].end[axis_columns(config)[j]]
+    in_block = np.append(positions[trajectory.block == block, j], end)
     reached = float(in_block.max() if limit == config.axes[j].soft_limits_mm[1] else in_block.min())
     source = program.blocks[block].source
     name = config.axes[j].name

@@ -15,10 +15,9 @@ import pytest
 
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import plan_lookahead
-from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import parse_gcode, read_program
 
-from .conftest import EXAMPLES, TOLERANCE
+from .conftest import EXAMPLES, TOLERANCE, measure_planned
 
 BUTTERFLY = Path(__file__).resolve().parents[2] / "data" / "gcode" / "linuxcnc_nurbs_G5_butterfly-xy.ngc"
 USED_AT_LEAST = 0.8
@@ -39,7 +38,7 @@ def test_the_plan_uses_most_of_the_chord_error_where_it_limits_the_speed(name, p
     limits = PlanLimits(period_s=period_s, chord_error_mm=chord_mm, max_accel_mm_s2=accel, feed_mm_s=200.0,
                         max_jerk_mm_s3=jerk)
     trajectory = plan_lookahead(program(name), limits)
-    measured = measure(trajectory, program(name)).max_chord_error_mm
+    measured = measure_planned(trajectory, program(name), limits).max_chord_error_mm
     verified = trajectory.notes["verified_max_chord_error_mm"]
     assert USED_AT_LEAST * chord_mm <= measured <= verified * (1 + 1e-6)
     assert verified <= chord_mm * (1 + TOLERANCE)

@@ -11,21 +11,22 @@ from nurbsmotion.planning import Trajectory
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.lookahead import (PlanningError, PlanState, plan_from_state, plan_lookahead,
                                             plan_lookahead_chunks, plan_lookahead_resumable)
-from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import read_program
-from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits, polyline
+from tests.planning.lookahead.conftest import measure_planned, planned_arc_lengths, EXAMPLES, WANG_LIMITS, assert_within_limits, polyline
 
 NO_JERK = replace(WANG_LIMITS, max_jerk_mm_s3=None)
 
 
 @pytest.mark.parametrize("limits", [WANG_LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
 def test_a_right_angle_corner_is_an_exact_stop(limits):
-    """Two lines at 90 deg: the corner is a set-point, held for one cycle (speed 0 there)."""
+    """Two lines at 90 deg without corner blending (path tolerance 0): the corner is a
+    set-point, held for one cycle (speed 0 there)."""
+    limits = replace(limits, path_tolerance_mm=0.0)
     program = polyline([(0, 0, 0), (50, 0, 0), (50, 50, 0)])
     trajectory = plan_lookahead(program, limits)
     at_corner = np.flatnonzero(np.all(trajectory.position_mm == [50.0, 0.0, 0.0], axis=1))
     assert len(at_corner) == 2 and at_corner[1] == at_corner[0] + 1
-    assert_within_limits(measure(trajectory, program), limits)
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)
 
 
 @pytest.mark.parametrize("limits", [WANG_LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
@@ -34,7 +35,7 @@ def test_a_shallow_corner_is_passed_moving_within_limits(limits):
     angle = np.radians(3.0)
     program = polyline([(0, 0, 0), (50, 0, 0), (50 + 50 * np.cos(angle), 50 * np.sin(angle), 0)])
     trajectory = plan_lookahead(program, limits)
-    m = measure(trajectory, program)
+    m = measure_planned(trajectory, program, limits)
     near = np.argmin(np.linalg.norm(trajectory.position_mm - [50.0, 0.0, 0.0], axis=1))
     assert m.speed_mm_s[near] > 1.0
     assert_within_limits(m, limits)
@@ -44,7 +45,7 @@ def test_chunks_hold_the_limits_across_their_joins(wang_program):
     chunks = list(plan_lookahead_chunks(wang_program, WANG_LIMITS, chunk_cycles=150))
     assert len(chunks) >= 3
     trajectory = Trajectory.concatenate(chunks)
-    assert_within_limits(measure(trajectory, wang_program), WANG_LIMITS)
+    assert_within_limits(measure_planned(trajectory, wang_program, WANG_LIMITS), WANG_LIMITS)
 
 
 @pytest.mark.parametrize("limits", [WANG_LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
@@ -60,16 +61,10 @@ def test_replanning_from_a_moving_state_with_a_lower_feed(wang_program, limits):
     head = Trajectory(first.algorithm, period, first.block[: i + 1], first.u[: i + 1], first.position_mm[: i + 1],
                       first.feed_mm_s[: i + 1])
     joined = Trajectory.concatenate([head, rest])
-    assert_within_limits(measure(joined, wang_program), limits)
+    assert_within_limits(measure_planned(joined, wang_program, limits), limits)
     assert np.linalg.norm(rest.position_mm[0] - first.position_mm[i]) <= state.v_mm_s * period * 1.1
     late = rest.feed_mm_s[len(rest) // 2:]
     assert late.max() <= 120.0 * (1 + 1e-9)
-
-
-def program_arc_lengths(program, trajectory) -> np.ndarray:
-    """Arc length along the whole program of every set-point (from the curves themselves)."""
-    starts = np.concatenate([[0.0], np.cumsum([b.curve.length for b in program.blocks])])
-    return np.array([starts[b] + program.blocks[b].curve.arc_length(u) for b, u in zip(trajectory.block, trajectory.u)])
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +73,7 @@ def mixed_plans():
     plans = {}
     for name, limits in (("jerk", WANG_LIMITS), ("no-jerk", NO_JERK)):
         trajectory = plan_lookahead(program, limits)
-        plans[name] = (limits, trajectory, program_arc_lengths(program, trajectory))
+        plans[name] = (limits, trajectory, planned_arc_lengths(trajectory, program, limits))
     return program, plans
 
 
@@ -94,7 +89,7 @@ def test_replanning_mixed_program_from_states_along_it(mixed_plans, name, where)
     rest = Trajectory.concatenate(list(plan_from_state(program, replace(limits, feed_mm_s=150.0), state)))
     head = Trajectory(first.algorithm, period, first.block[: i + 1], first.u[: i + 1], first.position_mm[: i + 1],
                       first.feed_mm_s[: i + 1])
-    assert_within_limits(measure(Trajectory.concatenate([head, rest]), program), limits)
+    assert_within_limits(measure_planned(Trajectory.concatenate([head, rest]), program, limits), limits)
 
 
 def test_replanning_too_close_to_the_end_is_a_clear_error(wang_program):
@@ -122,7 +117,7 @@ def test_feed_override_resumes_exactly_at_a_chunk_boundary(mixed_plans, limits, 
                                                            head[-1][1])]
     assert tail
     joined = Trajectory.concatenate([chunk for chunk, _ in head] + tail)
-    assert_within_limits(measure(joined, program), limits)
+    assert_within_limits(measure_planned(joined, program, limits), limits)
 
 
 def test_resuming_with_other_acceleration_limits_is_refused(mixed_plans):

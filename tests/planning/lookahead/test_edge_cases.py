@@ -9,8 +9,7 @@ import pytest
 
 from nurbsmotion.geometry.primitives import arc_curve
 from nurbsmotion.planning.lookahead import plan_lookahead
-from nurbsmotion.planning.measure import measure
-from tests.planning.lookahead.conftest import WANG_LIMITS, assert_within_limits, polyline, single_block
+from tests.planning.lookahead.conftest import measure_planned, WANG_LIMITS, assert_within_limits, polyline, single_block
 
 PROGRAMS = {
     "0.1 um line": lambda: polyline([(0, 0, 0), (1e-4, 0, 0)]),
@@ -26,7 +25,7 @@ PROGRAMS = {
 def test_edge_program_holds_every_limit(name, limits):
     program = PROGRAMS[name]()
     trajectory = plan_lookahead(program, limits)
-    assert_within_limits(measure(trajectory, program), limits)
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)
     assert trajectory.duration_s < 5.0  # a short program is not planned as a crawl
 
 
@@ -37,7 +36,7 @@ def test_limits_on_some_axes_hold_on_those_axes(axis_v, axis_a):
     (limits.axis_limits: None for the others): the given ones hold, the others are free."""
     program = polyline([(0, 0, 0), (50, 0, 0), (50, 50, 0), (0, 50, 10)])
     limits = replace(WANG_LIMITS, axis_max_velocity_mm_s=axis_v, axis_max_accel_mm_s2=axis_a)
-    m = measure(plan_lookahead(program, limits), program)
+    m = measure_planned(plan_lookahead(program, limits), program, limits)
     assert_within_limits(m, limits)
     if axis_v is not None:
         assert m.axis_max_velocity_mm_s[1] > axis_v[0]  # Y is free: it runs faster than X may

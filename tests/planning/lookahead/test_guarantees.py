@@ -10,7 +10,7 @@ import pytest
 from nurbsmotion.planning import plan
 from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import read_program
-from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits
+from tests.planning.lookahead.conftest import measure_planned, EXAMPLES, WANG_LIMITS, assert_within_limits
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +31,7 @@ def test_lookahead_is_the_default_algorithm(wang_program, wang_plan):
 def test_every_cycle_holds_every_limit(name, request, wang_program, sharp_program):
     trajectory = request.getfixturevalue(name)
     program = wang_program if name == "wang_plan" else sharp_program
-    assert_within_limits(measure(trajectory, program), WANG_LIMITS)
+    assert_within_limits(measure_planned(trajectory, program, WANG_LIMITS), WANG_LIMITS)
 
 
 @pytest.mark.parametrize("name", ["wang_plan", "sharp_plan"])
@@ -83,12 +83,12 @@ def test_lookahead_finishes_wangs_experiment_sooner_than_wang(wang_program):
     ours = plan(wang_program, limits, "lookahead")
     theirs = plan(wang_program, limits, "wang")
     assert ours.duration_s < theirs.duration_s
-    assert_within_limits(measure(ours, wang_program), limits)
+    assert_within_limits(measure_planned(ours, wang_program, limits), limits)
 
 
 def test_a_mixed_program_of_lines_arcs_and_nurbs_holds_every_limit():
     program = read_program(EXAMPLES / "mixed.nc")
     trajectory = plan(program, WANG_LIMITS, "lookahead")
-    m = measure(trajectory, program)
+    m = measure_planned(trajectory, program, WANG_LIMITS)
     assert_within_limits(m, WANG_LIMITS)
     assert trajectory.notes["verified_max_arc_fluctuation"] <= 1e-6

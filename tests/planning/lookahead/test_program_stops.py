@@ -63,7 +63,7 @@ def test_g64_p_tighter_than_the_machine_slows_a_corner():
     loose = plan(parse_gcode(corner, "t.nc"), LIMITS)
     tight = plan(parse_gcode("G64 P0.0001\n" + corner, "t.nc"), LIMITS)
     assert tight.duration_s > loose.duration_s
-    assert plan(parse_gcode("G64 P1\n" + corner, "t.nc"), LIMITS).duration_s == pytest.approx(loose.duration_s)
+    assert plan(parse_gcode("G64 P1\n" + corner, "t.nc"), LIMITS).duration_s <= loose.duration_s  # a wider blend
 
 
 def test_chunked_plan_holds_the_same_dwell():

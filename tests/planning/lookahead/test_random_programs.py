@@ -10,9 +10,8 @@ from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import arc_curve, line_curve
 from nurbsmotion.planning import PlanLimits, Trajectory
 from nurbsmotion.planning.lookahead import plan_lookahead, plan_lookahead_chunks
-from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import Block, BlockKind, Program, SourceRef
-from tests.planning.lookahead.conftest import assert_within_limits
+from tests.planning.lookahead.conftest import measure_planned, assert_within_limits
 
 
 def random_program(rng: np.random.Generator) -> Program:
@@ -48,7 +47,7 @@ def random_limits(rng: np.random.Generator) -> PlanLimits:
 def test_random_program_holds_every_limit(seed):
     rng = np.random.default_rng(seed)
     program, limits = random_program(rng), random_limits(rng)
-    assert_within_limits(measure(plan_lookahead(program, limits), program), limits)
+    assert_within_limits(measure_planned(plan_lookahead(program, limits), program, limits), limits)
 
 
 @pytest.mark.parametrize("seed", range(100, 104))
@@ -56,4 +55,4 @@ def test_random_program_in_small_chunks_holds_every_limit(seed):
     rng = np.random.default_rng(seed)
     program, limits = random_program(rng), random_limits(rng)
     chunks = list(plan_lookahead_chunks(program, limits, chunk_cycles=int(rng.integers(50, 300))))
-    assert_within_limits(measure(Trajectory.concatenate(chunks), program), limits)
+    assert_within_limits(measure_planned(Trajectory.concatenate(chunks), program, limits), limits)

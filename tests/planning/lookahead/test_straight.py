@@ -11,7 +11,7 @@ from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import plan_lookahead
 from nurbsmotion.planning.lookahead.straight import ROUNDING_MARGIN, phase_times, positions, scurve
 from nurbsmotion.planning.measure import measure
-from tests.planning.lookahead.conftest import assert_within_limits, polyline
+from tests.planning.lookahead.conftest import measure_planned, assert_within_limits, polyline
 
 V, A, J = 200.0, 2500.0, 50_000.0
 
@@ -79,10 +79,12 @@ def test_axis_limits_scale_with_the_direction():
 
 
 def test_polyline_corners_are_stops_and_every_segment_is_optimal():
-    limits = PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=A, max_jerk_mm_s3=J, feed_mm_s=V)
+    """Without corner blending (path tolerance 0) a 90 deg corner is a stop."""
+    limits = PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=A, max_jerk_mm_s3=J, feed_mm_s=V,
+                        path_tolerance_mm=0.0)
     program = polyline([(0.0, 0.0, 0.0), (10.0, 0.0, 0.0), (10.0, 10.0, 0.0)])
     trajectory = plan_lookahead(program, limits)
-    assert_within_limits(measure(trajectory, program), limits)
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)
     assert trajectory.notes["stops"] == 1
     one = math.ceil(optimal_duration(10.0) / limits.period_s / ROUNDING_MARGIN ** (1 / 3) - 1e-9)
     assert len(trajectory) - 1 <= 2 * one + 1  # the corner is held for one cycle

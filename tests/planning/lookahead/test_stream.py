@@ -8,25 +8,26 @@ import numpy as np
 
 from nurbsmotion.planning import Trajectory
 from nurbsmotion.planning.lookahead import PlanStream, plan_lookahead
-from nurbsmotion.planning.measure import measure
 from nurbsmotion.program import parse_gcode, read_program
-from tests.planning.lookahead.conftest import EXAMPLES, WANG_LIMITS, assert_within_limits
+from tests.planning.lookahead.conftest import measure_planned, EXAMPLES, WANG_LIMITS, assert_within_limits
 
 LIMITS = replace(WANG_LIMITS, period_s=0.001)
 
 
 def test_the_stream_is_the_whole_plan_and_states_its_guarantees():
     program = read_program(EXAMPLES / "mixed.nc")
-    stream = PlanStream(program, LIMITS, chunk_cycles=300)
+    stream = PlanStream(program, LIMITS, chunk_cycles=200)
     chunks = list(stream)
     assert len(chunks) > 5
     streamed = Trajectory.concatenate(chunks)
-    assert_within_limits(measure(streamed, program), LIMITS)
+    assert_within_limits(measure_planned(streamed, program, LIMITS), LIMITS)
     notes = stream.notes
     assert notes["verified_max_jerk_mm_s3"] <= LIMITS.max_jerk_mm_s3 * (1 + 1e-9)
     assert notes["windows"] >= len(chunks) and stream.planning_time_s > 0
     whole = plan_lookahead(program, LIMITS)
-    assert abs(len(whole) - len(streamed)) <= 0.01 * len(whole)  # other windows, nearly the same motion
+    # other windows, nearly the same motion: never slower (a repair in the whole plan lowers a
+    # wider stretch than the chunks' shorter windows do, so the stream may be faster)
+    assert len(streamed) <= 1.01 * len(whole)
 
 
 def test_every_chunk_can_stop_along_the_path_within_the_limits():
@@ -40,7 +41,7 @@ def test_every_chunk_can_stop_along_the_path_within_the_limits():
     for k in moving[:: max(len(moving) // 4, 1)]:
         stop = pairs[k][1].stop
         joined = Trajectory.concatenate([chunk for chunk, _ in pairs[: k + 1]] + [stop])
-        m = measure(joined, program)
+        m = measure_planned(joined, program, LIMITS)
         ok = 1.0 + 1e-9
         assert m.max_accel_mm_s2 <= LIMITS.max_accel_mm_s2 * ok and m.max_jerk_mm_s3 <= LIMITS.max_jerk_mm_s3 * ok
         assert m.max_chord_error_mm <= LIMITS.chord_error_mm * ok
@@ -58,12 +59,12 @@ def test_a_short_first_window_gives_a_short_first_chunk_and_the_same_guarantees_
     whole_first = next(PlanStream(program, LIMITS, chunk_cycles=2000).chunks())[0]
     assert len(pairs[0][0]) < len(whole_first) / 4  # Wang's whole curve is one chunk otherwise
     streamed = Trajectory.concatenate([chunk for chunk, _ in pairs])
-    assert_within_limits(measure(streamed, program), LIMITS)
+    assert_within_limits(measure_planned(streamed, program, LIMITS), LIMITS)
     assert np.allclose(streamed.position_mm[-1], program.end_position[:3], atol=1e-9)
     assert stream.notes["windows"] >= len(pairs)
     stop = pairs[0][1].stop
     assert stop is not None
-    m = measure(Trajectory.concatenate([pairs[0][0], stop]), program)
+    m = measure_planned(Trajectory.concatenate([pairs[0][0], stop]), program, LIMITS)
     assert m.max_accel_mm_s2 <= LIMITS.max_accel_mm_s2 * (1 + 1e-9) and m.max_jerk_mm_s3 <= LIMITS.max_jerk_mm_s3 * (1 + 1e-9)
 
 
@@ -86,7 +87,7 @@ def test_chunked_planning_of_wangs_curve_throws_no_window_away():
     streamed = Trajectory.concatenate(list(stream))
     notes = stream.notes
     assert notes["discarded_windows"] == 0 and notes["windows"] >= 2
-    assert_within_limits(measure(streamed, program), limits)
+    assert_within_limits(measure_planned(streamed, program, limits), limits)
     whole = plan_lookahead(program, limits)
     assert whole.notes["discarded_windows"] == 0
     assert abs(len(whole) - len(streamed)) <= 0.002 * len(whole)

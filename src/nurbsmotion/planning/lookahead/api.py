@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
+from nurbsmotion.planning.lookahead.blend import blend_pieces
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
 from nurbsmotion.planning.lookahead.planner import (FALLBACK_SLOWER, FALLBACK_SPLIT, FALLBACK_STOP, Cursor,
                                                     PlanSettings, PlanningError, WindowPlan, plan_run, settings_for)
@@ -30,7 +31,8 @@ GUARANTEES = ("chord_error", "accel", "jerk", "axis_velocity", "axis_accel", "ar
 
 @dataclass(frozen=True)
 class PlanState:
-    """A moving state along the program: arc length from the program start, speed, acceleration."""
+    """A moving state along the program: arc length along the planned path (corners blended,
+    blend.py) from the program start, speed, acceleration."""
 
     s_mm: float
     v_mm_s: float = 0.0
@@ -105,6 +107,7 @@ class Resume:
     cursor: Cursor | None  # None: at rest there
     tau_f: float
     stop: Trajectory | None = None  # verified set-points from here to rest along the path (None: at rest)
+    ordinal: int = -1  # the piece (BlockPiece.ordinal): a corner blend shares its block with the piece after it
 
 
 def stop_path(plan: WindowPlan, period_s: float) -> Trajectory | None:
@@ -126,11 +129,12 @@ def resume_after(plan: WindowPlan, before: NDArray[np.float64], tau_f: float, pe
     run = plan.run
     assert run is not None
     if plan.cursor is not None:
-        return Resume(run.pieces[plan.cursor.piece_index].block, plan.cursor.u, before, plan.cursor, tau_f,
-                      stop_path(plan, period_s))
+        piece = run.pieces[plan.cursor.piece_index]
+        return Resume(piece.block, plan.cursor.u, before, plan.cursor, tau_f, stop_path(plan, period_s), piece.ordinal)
     if plan.early_stop:
-        return Resume(int(plan.blocks[-1]), float(plan.samples.u[-1]), before, None, tau_f)
-    return Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, tau_f)
+        piece = run.pieces[plan.start_piece + int(plan.samples.piece[-1])]
+        return Resume(int(plan.blocks[-1]), float(plan.samples.u[-1]), before, None, tau_f, ordinal=piece.ordinal)
+    return Resume(run.pieces[-1].block, run.pieces[-1].u_end, before, None, tau_f, ordinal=run.pieces[-1].ordinal)
 
 
 def rest_chunk(piece: BlockPiece, u: float, point: NDArray[np.float64], cycles: int, period_s: float) -> Trajectory:
@@ -150,7 +154,7 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
             piece = run.pieces[0]
             point = to_3d(piece.curve.points(np.array([piece.u_start])))[0]
             yield (rest_chunk(piece, piece.u_start, point, run.rest_cycles_before, period),
-                   Resume(piece.block, piece.u_start, before, None, settings.tau_f))
+                   Resume(piece.block, piece.u_start, before, None, settings.tau_f, ordinal=piece.ordinal))
         for plan in plan_run(run, settings, before, cursor):
             figures.add(plan)
             if len(plan.samples.u):
@@ -160,14 +164,21 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
     if trailing_rest and runs:
         piece = runs[-1].pieces[-1]
         yield (rest_chunk(piece, piece.u_end, before[-1], trailing_rest, period),
-               Resume(piece.block, piece.u_end, before, None, settings.tau_f))
+               Resume(piece.block, piece.u_end, before, None, settings.tau_f, ordinal=piece.ordinal))
+
+
+def planned_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
+    """The path the planner plans along: the program's blocks with motion, their corners
+    blended within the path tolerance (blend.py). A set-point's (block, u) is on the piece of
+    that block (the blend into it, or the block's own piece) whose curve passes through it."""
+    return blend_pieces(program_pieces(program, limits), limits, ProgramStops.of(program, limits))
 
 
 def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings, int]:
     """Runs, settings, and the set-points of a dwell after the last move."""
-    pieces = program_pieces(program, limits)
-    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
     stops = ProgramStops.of(program, limits)
+    pieces = blend_pieces(program_pieces(program, limits), limits, stops)
+    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
     return split_runs(pieces, limits, settings.min_pass_mm_s, stops), settings, trailing_dwell_cycles(pieces, stops, limits.period_s)
 
 
@@ -235,11 +246,19 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     yield from _named_lines(program, _chunks(runs, settings, first, _Figures(), resume.before, trailing))
 
 
+def is_resumed_piece(piece: BlockPiece, resume: Resume) -> bool:
+    """The piece a Resume stands on: by its ordinal when known (a blend shares its block and
+    its range of u with the piece after it), else by block and u."""
+    if resume.ordinal >= 0 and piece.ordinal >= 0:
+        return piece.ordinal == resume.ordinal
+    return piece.block == resume.block and piece.u_start <= resume.u <= piece.u_end
+
+
 def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | None]:
     """The runs from a Resume on, and the cursor that starts the first of them."""
     for r, run in enumerate(runs):
         for p, piece in enumerate(run.pieces):
-            if piece.block != resume.block or not piece.u_start <= resume.u <= piece.u_end:
+            if not is_resumed_piece(piece, resume):
                 continue
             at_piece_end = resume.u >= piece.u_end
             if resume.cursor is None and at_piece_end and p + 1 == len(run.pieces):
@@ -334,13 +353,15 @@ def plan_from_state(program: Program, limits: PlanLimits, state: PlanState,
 
 
 def path_point(runs: list[Run], s_mm: float) -> tuple[int, int, float]:
-    """(run, piece, u) at arc length s_mm along the runs (clamped to the path)."""
+    """(run, piece, u) at arc length s_mm along the runs' pieces (the planned path: corners
+    blended; clamped to the path)."""
     remaining = max(s_mm, 0.0)
     for r, run in enumerate(runs):
         for p, piece in enumerate(run.pieces):
-            length = piece.curve.length
+            s_start = float(piece.curve.arc_length(piece.u_start))
+            length = float(piece.curve.arc_length(piece.u_end)) - s_start
             if remaining <= length or (r == len(runs) - 1 and p == len(run.pieces) - 1):
-                return r, p, float(piece.curve.u_at_arc_length(min(remaining, length)))
+                return r, p, float(piece.curve.u_at_arc_length(s_start + min(remaining, length)))
             remaining -= length
     raise AssertionError("unreachable")
 

@@ -36,6 +36,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.geometry import NurbsCurve
+from nurbsmotion.geometry.corner_blend import Pieces
 
 MAX_TURN_RAD = 0.02  # tangent turn per grid interval
 COARSE_PER_SPAN = 32  # first look at each knot span
@@ -47,14 +48,30 @@ TINY_SPEED = 1e-300
 
 
 @dataclass(frozen=True, eq=False)
+class BlendCorners:
+    """The corners a program's blends replace (blend.py): per corner the original incoming and
+    outgoing pieces (lines or arcs, exact) and the path tolerance there."""
+
+    incoming: Pieces
+    outgoing: Pieces
+    tolerance_mm: NDArray[np.float64]
+
+
+@dataclass(frozen=True, eq=False)
 class BlockPiece:
-    """Part [u_start, u_end] of one program block inside a planning window."""
+    """Part [u_start, u_end] of one program block inside a planning window; or a corner blend
+    (``corners`` set: its curve replaces corner ``corner`` of them; ``block`` is the outgoing
+    block's). ``ordinal``: the piece's place in the program's list of pieces (-1: not known),
+    which names it where (block, u) does not (a blend and its outgoing block share a block)."""
 
     block: int
     curve: NurbsCurve
     u_start: float
     u_end: float
     feed_mm_s: float
+    ordinal: int = -1
+    corners: BlendCorners | None = None
+    corner: int = -1
 
 
 @dataclass(eq=False)

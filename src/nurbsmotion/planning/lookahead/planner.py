@@ -26,7 +26,7 @@ from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead import straight
 from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths
-from nurbsmotion.planning.lookahead.runs import Run
+from nurbsmotion.planning.lookahead.runs import Run, planned_jerk_mm_s3
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
 from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
@@ -79,12 +79,14 @@ def axis_limit_array(values: tuple[float | None, ...] | None, scale: float = 1.0
 
 
 def caps_for(limits: PlanLimits) -> Caps:
+    jerk = planned_jerk_mm_s3(limits)
+
     def axis(values: tuple[float | None, ...] | None) -> NDArray[np.float64] | None:
         return axis_limit_array(values, MARGIN)
 
     return Caps(period_s=limits.period_s, chord_error_mm=MARGIN * limits.chord_error_mm,
                 accel_mm_s2=MARGIN * limits.max_accel_mm_s2,
-                jerk_mm_s3=None if limits.max_jerk_mm_s3 is None else MARGIN * limits.max_jerk_mm_s3,
+                jerk_mm_s3=None if jerk is None else MARGIN * jerk,
                 axis_velocity_mm_s=axis(limits.axis_max_velocity_mm_s), axis_accel_mm_s2=axis(limits.axis_max_accel_mm_s2))
 
 
@@ -94,8 +96,10 @@ def machine_for(limits: PlanLimits) -> MachineLimits:
 
 
 def averaging_time_s(limits: PlanLimits) -> float:
-    """tau_f = A / J of the jerk filter (0 without a jerk limit)."""
-    return 0.0 if limits.max_jerk_mm_s3 is None else limits.max_accel_mm_s2 / limits.max_jerk_mm_s3
+    """tau_f = A / J of the jerk filter (0 without a jerk limit, or one the acceleration limit
+    already implies: runs.planned_jerk_mm_s3)."""
+    jerk = planned_jerk_mm_s3(limits)
+    return 0.0 if jerk is None else limits.max_accel_mm_s2 / jerk
 
 
 Carry = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]  # run s, speed caps, accel scales
@@ -186,9 +190,9 @@ def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[Blo
         u, along = coarse_lengths(piece.curve, u_start, piece.u_end)
         if total + along[-1] > WINDOW_CUT_FACTOR * length_mm:
             u_cut = float(np.interp(max(length_mm - total, MIN_SPACING_MM), along, u))
-            pieces.append(BlockPiece(piece.block, piece.curve, u_start, u_cut, piece.feed_mm_s))
+            pieces.append(replace(piece, u_start=u_start, u_end=u_cut))
             return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], False
-        pieces.append(BlockPiece(piece.block, piece.curve, u_start, piece.u_end, piece.feed_mm_s))
+        pieces.append(replace(piece, u_start=u_start))
         total += along[-1]
         if i + 1 == len(run.pieces):
             return tuple(pieces), run.junction_speed_mm_s[cursor.piece_index:i], True

@@ -9,8 +9,13 @@ At the junction of two blocks with tangent deflection theta the speed is limited
 Tangent-continuous joins (theta = 0) pass without slowing. A junction speed at or below
 what one cycle of acceleration (A T) or, with a jerk limit, of jerk (J T^2) gives is an
 exact stop (passing that slowly gains nothing: it is the speed of the first cycles after a
-stop), and so, with the jerk filter, is a junction speed whose plateau (v tau) would be
-shorter than the path grid spacing; so are zero junction deviation and reversals. An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
+stop; with a jerk limit the smaller of the two); so are zero junction deviation and
+reversals. With the jerk filter, a junction speed whose plateau (0.75 v tau either side) would
+be shorter than the path grid spacing cannot be held by the filtered motion: the moving
+average passes such a point dip about A tau / 4 faster (raw acceleration A either side), so
+the junction speed is lowered by that (a stop when nothing is left). As J grows, tau = A / J
+and with it the correction vanish: the junction speeds approach those without a jerk limit.
+(Before, such a junction was a stop whatever J: with J = 1e12, every corner.) An exact stop splits the program into runs, each planned from rest to rest, and the stop lands on a cycle boundary.
 
 The program adds stops of its own: a block marked ``exact_stop`` (G61, or a dwell, pause or
 tool change after it) ends its run, and a G4 dwell before a block holds the axes at rest
@@ -43,6 +48,17 @@ class Run:
     rest_cycles_before: int = 0  # set-points held at the run's start before it moves (G4 dwell)
 
 
+def planned_jerk_mm_s3(limits: PlanLimits) -> float | None:
+    """The jerk limit the plan is shaped for: None when the acceleration limit already implies
+    it. Consecutive second differences within A T^2 each differ by at most 2 A T^2, a jerk of
+    2 A / T (5e6 mm/s^3 at A = 2500 mm/s^2, T = 1 ms), so a larger J never binds; the
+    set-points are still checked against it (verify.py)."""
+    jerk = limits.max_jerk_mm_s3
+    if jerk is None or jerk * limits.period_s >= 2.0 * limits.max_accel_mm_s2 * (1.0 + 1e-6):
+        return None
+    return jerk
+
+
 def end_tangents(piece: BlockPiece) -> tuple[np.ndarray, np.ndarray]:
     """Unit tangents at the start and the end of a piece."""
     d = piece.curve.derivatives(np.array([piece.u_start, piece.u_end]), 1)[1]
@@ -64,11 +80,14 @@ def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits, min_
     deviation = math.sqrt(accel * d * cos_half / (1.0 - cos_half)) if cos_half < 1 else math.inf
     v = min(deviation, accel * limits.period_s / (2.0 * sin_half))
     stop_below = accel * limits.period_s
-    if limits.max_jerk_mm_s3 is not None:
-        jerk = MARGIN * limits.max_jerk_mm_s3
+    planned_jerk = planned_jerk_mm_s3(limits)
+    if planned_jerk is not None:
+        jerk = MARGIN * planned_jerk
         v = min(v, jerk * limits.period_s**2 / (2.0 * sin_half))
-        stop_below = jerk * limits.period_s**2
-    return v if v > max(stop_below, min_pass_mm_s) and d > 0 else 0.0
+        stop_below = min(stop_below, jerk * limits.period_s**2)
+        if v < min_pass_mm_s:  # no plateau: the filter's average passes the dip A tau / 4 faster
+            v -= accel * (limits.max_accel_mm_s2 / planned_jerk) / 4.0
+    return v if v > stop_below and d > 0 else 0.0
 
 
 def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
@@ -89,12 +108,14 @@ class ProgramStops:
     stop_after: frozenset[int] = frozenset()  # block indices that end at rest
     dwell_s_before: dict[int, float] | None = None  # block index -> G4 dwell before it
     deviation_mm: dict[int, float] | None = None  # block index -> junction deviation into it
+    tolerance_mm: dict[int, float] | None = None  # block index -> its G64 P (path tolerance of the corner into it)
 
     @classmethod
     def of(cls, program: Program, limits: PlanLimits) -> "ProgramStops":
-        tolerances = {i: min(b.blend_tolerance_mm, limits.junction_deviation_mm) for i, b in enumerate(program.blocks)
-                      if b.blend_tolerance_mm is not None}
-        return cls(frozenset(i for i, b in enumerate(program.blocks) if b.exact_stop), program.dwell_s_before(), tolerances)
+        given = {i: b.blend_tolerance_mm for i, b in enumerate(program.blocks) if b.blend_tolerance_mm is not None}
+        deviations = {i: min(p, limits.junction_deviation_mm) for i, p in given.items()}
+        return cls(frozenset(i for i, b in enumerate(program.blocks) if b.exact_stop), program.dwell_s_before(),
+                   deviations, given)
 
     def dwell_between(self, after_block: int, up_to_block: int) -> float:
         """Dwell before the blocks after_block + 1 .. up_to_block."""

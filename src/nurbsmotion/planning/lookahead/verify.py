@@ -14,7 +14,10 @@ stretch of set-points so violations can be located and repaired:
   |p_n+1 - 3 p_n + 3 p_n-1 - p_n-2| / T^3 (jerk), with the positions before the stretch
   (history, or the start held at rest) and after it (the end held at rest) included;
 - per-axis velocity |p_n - p_n-1| / T;
-- feed fluctuation on the arc: |arc(step) - planned ds| / planned ds.
+- feed fluctuation on the arc: |arc(step) - planned ds| / planned ds;
+- path deviation: the distance of every set-point on a corner blend from the two program
+  pieces it replaces (blend.py; elsewhere the set-points lie on the program's curves), reported
+  as ``max_path_deviation_mm``: the blends are sized within the tolerance, so no repair applies.
 Every figure is compared with the machine's full limit; a set-point passes when
 figure <= limit * (1 + TOLERANCE).
 """
@@ -60,6 +63,7 @@ class Check:
     arc_fluctuation: NDArray[np.float64]  # absolute figure (not a ratio)
     chord_fluctuation: NDArray[np.float64]  # |chord - planned ds| / planned ds, for the report
     figures: dict[str, float]
+    path_deviation: NDArray[np.float64] | None = None  # distance from the program / the corner's tolerance (blends)
 
     def violations(self) -> dict[str, NDArray[np.intp]]:
         """Set-point indices where a figure exceeds its limit (beyond the tolerance)."""
@@ -188,9 +192,31 @@ def step_chord_errors(grid: PathGrid, samples: Samples, s: NDArray[np.float64],
     polyline = crossing[polyline_steps(grid, piece[crossing], piece[crossing + 1])]
     if len(polyline):
         chord[polyline] = grid_chord_errors(grid, s[polyline], s[polyline + 1], p[polyline], p[polyline + 1])
-    for i in np.setdiff1d(crossing, polyline, assume_unique=True):
+    rest = np.setdiff1d(crossing, polyline, assume_unique=True)
+    kink = junction_kinks(grid)
+    turned = kink[piece[rest + 1]] - kink[piece[rest]]  # the kinks crossed (sum of their angles)
+    smooth = turned <= SMOOTH_KINK_RAD
+    # tangent joins (corner blends): the bound of a smooth step, plus what a kink of the
+    # angles crossed could add (at most angle x L / 2)
+    chord[rest[smooth]] += turned[smooth] * arc[rest[smooth]] / 2.0
+    for i in rest[~smooth]:
         chord[i] = junction_chord_error(grid, piece, u, p, s, int(i))
     return chord if start else np.concatenate([[0.0], chord])
+
+
+SMOOTH_KINK_RAD = 1e-7  # junctions turning less than this (summed over a step) are tangent joins
+
+
+def junction_kinks(grid: PathGrid) -> NDArray[np.float64]:
+    """(len(grid.pieces),) cumulative tangent turn at the junctions: entry q is the sum of the
+    angles 2 asin(|t_after - t_before| / 2) at the junctions before piece q. A step across
+    tangent joins only is bounded like a step inside a block: the chord is the linear
+    interpolant of x(s), and |x - chord| <= max|x_ss| s (L - s) / 2 needs x(s) C1 with bounded
+    x_ss, not one curve."""
+    ends = np.flatnonzero(grid.junction)
+    jump = row_norms(grid.tangent[ends + 1] - grid.tangent[ends])
+    angle = 2.0 * np.arcsin(np.minimum(0.5 * jump, 1.0))
+    return np.concatenate([[0.0], np.cumsum(angle)])
 
 
 def polyline_steps(grid: PathGrid, first: NDArray[np.int32], last: NDArray[np.int32]) -> NDArray[np.bool_]:
@@ -202,6 +228,24 @@ def polyline_steps(grid: PathGrid, first: NDArray[np.int32], last: NDArray[np.in
     curved = np.array([not (q.curve.degree == 1 and len(q.curve.control_points) == 2) for q in grid.pieces])
     curved_before = np.concatenate([[0], np.cumsum(curved)])
     return curved_before[last + 1] - curved_before[first] == 0
+
+
+def path_deviations(grid: PathGrid, samples: Samples) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(distance of every set-point from the programmed path, that / its corner's path
+    tolerance): 0 off the corner blends (the set-points lie on the program's own curves);
+    on a blend, the distance to the two original pieces it replaces (exact for lines and arcs)."""
+    n = len(samples.u)
+    distance, ratio = np.zeros(n), np.zeros(n)
+    sets = {id(p.corners): p.corners for p in grid.pieces if p.corners is not None}
+    for corners in sets.values():
+        corner = np.array([p.corner if p.corners is corners else -1 for p in grid.pieces])[samples.piece]
+        rows = np.flatnonzero(corner >= 0)
+        c = corner[rows]
+        q = samples.position_mm[rows][:, None, :]
+        d = np.minimum(corners.incoming.take(c).distance(q), corners.outgoing.take(c).distance(q))[:, 0]
+        distance[rows] = d
+        ratio[rows] = d / corners.tolerance_mm[c]
+    return distance, ratio
 
 
 def rows_max(values: NDArray[np.float64], first_row: int, n: int) -> NDArray[np.float64]:
@@ -260,6 +304,8 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
         "max_arc_fluctuation": float(arc_fl.max(initial=0.0)),
         "max_chord_fluctuation": float(chord_fl.max(initial=0.0)),
     }
+    deviation, deviation_ratio = path_deviations(grid, samples)
+    figures["max_path_deviation_mm"] = float(deviation.max(initial=0.0))
     for i, name in enumerate("xyz"):  # column by column: numpy's reduction over axis 0 of (n, 3) is ~15x slower
         figures[f"max_{name}_velocity_mm_s"] = float(np.abs(step[:, i]).max(initial=0.0) / period)
         figures[f"max_{name}_accel_mm_s2"] = float(np.abs(accel_vec[:, i]).max(initial=0.0))
@@ -272,4 +318,5 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
         arc_fluctuation=arc_fl,
         chord_fluctuation=chord_fl,
         figures=figures,
+        path_deviation=deviation_ratio,
     )

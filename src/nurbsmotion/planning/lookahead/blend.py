@@ -1,0 +1,286 @@
+"""Corners of the program replaced by curvature-continuous blends within the path tolerance.
+
+Between consecutive pieces that are lines or planar circular arcs (geometry/corner_blend.py),
+each corner the machine passes moving becomes a quintic blend: both neighbours are trimmed
+by the trim distance d (their u_start / u_end) and the blend piece goes between them, with
+the outgoing block's index (source lines and program events still map to blocks in order)
+and the smaller of the two feeds. The joins are tangent and curvature-continuous, so
+split_runs passes them without slowing; the speed on the blend comes from its own curvature
+and jerk terms (speed_limits.py).
+
+A corner stays a junction (as before blending) where the program asks for a stop (a block
+that ends at rest: G61, a dwell, M0/M1/M6, a spindle wait), where the tolerance is 0 (G64
+P0, or ``path_tolerance_mm`` 0), at a sharp corner (deflection above MAX_DEFLECTION_DEG:
+within 0.01 mm the blend of a 90 deg corner is passed at ~2 mm/s with J = 50000 and ~8 mm/s
+without, and crawling through it cost more than a stop: grbl's braid 43.7 s with blends up to
+90 deg, 36.9 s up to 30, 45 or 60 deg, HSM_test 22.2 s and 21.6 s; examples/mixed.nc's 40 deg
+corner of a line into an arc made it 4.5 % slower with J, none up to 30), where a piece is not a
+line or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
+(corner_blend.trim_distances, monotone). The tolerance of a corner is the outgoing block's
+G64 P, else the machine's ``path_tolerance_mm``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+from numpy.typing import NDArray
+
+from nurbsmotion.geometry import corner_blend as cb
+from nurbsmotion.geometry.nurbs import NurbsCurve
+from nurbsmotion.planning.limits import PlanLimits
+from nurbsmotion.planning.lookahead.path import BlendCorners, BlockPiece
+from nurbsmotion.planning.lookahead.runs import ProgramStops
+
+SHARE_LIMIT = cb.SHARE_LIMIT
+
+MAX_DEFLECTION_DEG = 30.0  # corners turning more than this stay junctions (module docstring)
+MIN_DEFLECTION_RAD = 1e-9  # tangent already: nothing to blend
+MAX_JOIN_ROUNDS = 8  # rounds of CornerPlan.join_short_lines before it gives up joining
+JOIN_SMOOTHING = 4  # passes of smoothed() over the joins' curvatures
+JOIN_SAME_WAY = 0.5  # cosine between the two corners' binormals above which a joined line turns one way
+
+
+def is_line(curve: NurbsCurve) -> bool:
+    return curve.degree == 1 and len(curve.control_points) == 2
+
+
+def piece_shapes(pieces: list[BlockPiece]) -> tuple[cb.Pieces, NDArray[np.bool_]]:
+    """Every piece as a line or arc (corner_blend.Pieces, in the pieces' order) and which are
+    (whole blocks that are lines or planar circular arcs; the others get placeholder lines)."""
+    n = len(pieces)
+    start, end = np.zeros((n, 3)), np.zeros((n, 3))
+    known = np.zeros(n, dtype=bool)
+    arcs: dict[int, cb.Arc] = {}
+    for i, piece in enumerate(pieces):
+        curve = piece.curve
+        if piece.u_start != curve.u_min or piece.u_end != curve.u_max or curve.dim > 3:
+            continue
+        if is_line(curve):
+            start[i, :curve.dim], end[i, :curve.dim] = curve.control_points[0], curve.control_points[1]
+            known[i] = True
+        else:
+            arc = cb.arc_of(curve)
+            if arc is not None:
+                arcs[i] = arc
+                known[i] = True
+    shapes = cb.line_pieces(start, end)
+    if arcs:
+        index = np.fromiter(arcs, dtype=np.intp, count=len(arcs))
+        arc_shapes = cb.arc_pieces(list(arcs.values()))
+        shapes = cb.Pieces(*(_put(getattr(shapes, f), index, getattr(arc_shapes, f)) for f in cb.PIECE_FIELDS))
+    return shapes, known
+
+
+def _put(a: NDArray, index: NDArray[np.intp], values: NDArray) -> NDArray:
+    out = a.copy()
+    out[index] = values
+    return out
+
+
+def corner_tolerances(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramStops) -> NDArray[np.float64]:
+    """(n - 1,) path tolerance of every corner between consecutive pieces: the outgoing block's
+    G64 P, else the machine's; 0 where the corner must stay a junction for the program
+    (a stop or dwell after the incoming block, or between the two)."""
+    given = stops.tolerance_mm or {}
+    out = np.empty(max(len(pieces) - 1, 0))
+    for i in range(len(out)):
+        before, after = pieces[i].block, pieces[i + 1].block
+        stop = any(b in stops.stop_after for b in range(before, after)) or stops.dwell_between(before, after) > 0
+        out[i] = 0.0 if stop else given.get(after, limits.path_tolerance_mm)
+    return out
+
+
+def blend_pieces(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramStops) -> list[BlockPiece]:
+    """The pieces with their corners blended (module docstring); every piece's ``ordinal`` set."""
+    if len(pieces) < 2:
+        return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
+    shapes, known = piece_shapes(pieces)
+    tolerance = corner_tolerances(pieces, limits, stops)
+    n = len(pieces)
+    _, t_in, _ = shapes.take(np.arange(n - 1)).state_at(shapes.length_mm[:-1])
+    _, t_out, _ = shapes.take(np.arange(1, n)).state_at(np.zeros(n - 1))
+    deflection = np.arccos(np.clip(np.einsum("ij,ij->i", t_in, t_out), -1.0, 1.0))
+    candidate = (known[:-1] & known[1:] & (tolerance > 0) & (deflection > MIN_DEFLECTION_RAD)
+                 & (deflection <= math.radians(MAX_DEFLECTION_DEG)))
+    corners = np.flatnonzero(candidate)
+    if len(corners) == 0:
+        return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
+    d = cb.trim_distances(shapes.take(corners), shapes.take(corners + 1), tolerance[corners])
+    good = (d > 0) & cb.monotone(cb.blend_points(shapes.take(corners), shapes.take(corners + 1), d))
+    plan = CornerPlan(shapes, corners[good], d[good], tolerance[corners[good]], t_in, t_out, deflection)
+    plan.join_short_lines()
+    blends = BlendCorners(shapes.take(plan.corners), shapes.take(plan.corners + 1), plan.tolerance)
+    return assembled(pieces, plan, blends)
+
+
+class CornerPlan:
+    """The blended corners and where each blend meets its neighbours.
+
+    A blend trims d from both pieces (corner_blend.trim_distances). Where both corners of a
+    line are cut short by the lines (SHARE_LIMIT), not by the tolerance, the two blends meet
+    at its middle instead
+    (``join_short_lines``): the line keeps no piece of its own and both blends share there
+    the line's tangent and a curvature vector of their own choice, the smaller of the two
+    corners' turn rates (deflection / the mean length of their lines) towards the turn, or 0
+    where the path turns the other way after it (an inflection). So a polyline of short lines
+    along a curve becomes a G2 chain of blends whose curvature follows the curve, not one
+    that returns to 0 on every line. Every such blend is checked like the others (sampled
+    distance from its two pieces within the tolerance, monotone); a line next to one that
+    fails is not joined (repeated until all pass: then they are the plain blends)."""
+
+    def __init__(self, shapes: cb.Pieces, corners: NDArray[np.intp], d: NDArray[np.float64],
+                 tolerance: NDArray[np.float64], t_in: NDArray[np.float64], t_out: NDArray[np.float64],
+                 deflection: NDArray[np.float64]) -> None:
+        self.shapes, self.corners, self.d, self.tolerance = shapes, corners, d, tolerance
+        self.t_in, self.t_out, self.deflection = t_in, t_out, deflection
+        n = len(shapes.length_mm)
+        self.joined = np.zeros(n, dtype=bool)  # lines whose two blends meet at their middle
+        self.curvature = np.zeros((n, 3))  # the blends' curvature vector there
+        self.points = cb.blend_points(shapes.take(corners), shapes.take(corners + 1), d)
+
+    def trims(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(cut from the incoming piece's end, cut from the outgoing piece's start) per blend."""
+        half = 0.5 * self.shapes.length_mm
+        d_in = np.where(self.joined[self.corners], half[self.corners], self.d)
+        d_out = np.where(self.joined[self.corners + 1], half[self.corners + 1], self.d)
+        return d_in, d_out
+
+    def blend_points(self, index: NDArray[np.intp]) -> NDArray[np.float64]:
+        """Control points of blends ``index`` with the current trims and join curvatures."""
+        c = self.corners[index]
+        d_in, d_out = (v[index] for v in self.trims())
+        incoming, outgoing = self.shapes.take(c), self.shapes.take(c + 1)
+        p0, t0, k0 = incoming.state_at(incoming.length_mm - d_in)
+        p1, t1, k1 = outgoing.state_at(d_out)
+        k0 = np.where(self.joined[c][:, None], self.curvature[c], k0)
+        k1 = np.where(self.joined[c + 1][:, None], self.curvature[c + 1], k1)
+        return cb.control_points(p0, t0, k0, p1, t1, k1)
+
+    def join_short_lines(self) -> None:
+        shapes, corners = self.shapes, self.corners
+        n = len(shapes.length_mm)
+        at = np.full(n, -1)  # blend index of the corner after piece i
+        at[corners] = np.arange(len(corners))
+        line = ~shapes.is_arc
+        length = shapes.length_mm
+        capped = self.d >= SHARE_LIMIT * np.minimum(length[corners], length[corners + 1]) * (1.0 - 1e-9)
+        inner = np.arange(1, n - 1)
+        before, after = at[inner - 1], at[inner]
+        ok = line[inner] & (before >= 0) & (after >= 0)
+        ok &= capped[np.maximum(before, 0)] & capped[np.maximum(after, 0)]  # the lines, not the tolerance, limit both
+        self.joined[inner[ok]] = True
+        self.curvature = self.join_curvatures()
+        for _ in range(MAX_JOIN_ROUNDS):
+            touched = np.flatnonzero(self.joined[corners] | self.joined[corners + 1])
+            if len(touched) == 0:
+                break
+            points = self.blend_points(touched)
+            deviation = cb.sampled_deviation(shapes.take(corners[touched]), shapes.take(corners[touched] + 1), points)
+            bad = (deviation > cb.TOLERANCE_SHARE * self.tolerance[touched]) | ~cb.monotone(points)
+            if not bad.any():
+                # every blend from the final trims: those with a joined end were just checked,
+                # the others are the plain blends again (a blend whose neighbour was un-joined
+                # in an earlier round must not keep points made for the joined trims)
+                self.points = self.blend_points(np.arange(len(corners)))
+                return
+            failed = corners[touched[bad]]
+            self.joined[failed] = False
+            self.joined[failed + 1] = False
+        self.joined[:] = False  # not settled: the plain blends (each checked on its own)
+        self.points = cb.blend_points(shapes.take(corners), shapes.take(corners + 1), self.d)
+
+    def join_curvatures(self) -> NDArray[np.float64]:
+        """(n, 3) curvature vector at the middle of every joined line (class docstring)."""
+        length = self.shapes.length_mm
+        turn = np.cross(self.t_in, self.t_out)  # along the binormal, |.| = sin(deflection)
+        norm = np.linalg.norm(turn, axis=1)
+        binormal = turn / np.maximum(norm, 1e-300)[:, None]
+        rate = self.deflection / (0.5 * (length[:-1] + length[1:]))  # turn per length at each corner
+        out = np.zeros((len(length), 3))
+        k = np.flatnonzero(self.joined)
+        same_way = np.einsum("ij,ij->i", binormal[k - 1], binormal[k]) > JOIN_SAME_WAY
+        k = k[same_way]
+        axis = binormal[k - 1] + binormal[k]
+        axis /= np.linalg.norm(axis, axis=1)[:, None]
+        direction = np.cross(axis, self.shapes.direction[k])
+        size = np.zeros(len(length))
+        size[k] = np.minimum(rate[k - 1], rate[k])
+        out[k] = smoothed(size, k)[:, None] * direction
+        return out
+
+
+def smoothed(size: NDArray[np.float64], k: NDArray[np.intp]) -> NDArray[np.float64]:
+    """size at lines k after JOIN_SMOOTHING passes of (1, 2, 1) / 4 along consecutive
+    curved joins (a line whose neighbour is not one keeps its share): a CAM polyline's
+    noisy turn rates would otherwise step the curvature from blend to blend, and the
+    curvature's slope caps the speed with a jerk limit (v^3 |dk/ds| <= J)."""
+    curved = np.zeros(len(size) + 2, dtype=bool)
+    curved[k + 1] = size[k] > 0
+    for _ in range(JOIN_SMOOTHING):
+        left = np.where(curved[k], size[k - 1], size[k])
+        right = np.where(curved[k + 2], size[np.minimum(k + 1, len(size) - 1)], size[k])
+        size = size.copy()
+        size[k] = 0.25 * left + 0.5 * size[k] + 0.25 * right
+    return size[k]
+
+
+def trimmed_u(piece: BlockPiece, shape_length_mm: float, sigma_mm: float) -> float:
+    """u of the point at arc length sigma along a whole line or arc block."""
+    curve = piece.curve
+    if is_line(curve):
+        return curve.u_min + (curve.u_max - curve.u_min) * sigma_mm / shape_length_mm
+    return float(curve.u_at_arc_length(sigma_mm))
+
+
+def assembled(pieces: list[BlockPiece], plan: CornerPlan, blends: BlendCorners) -> list[BlockPiece]:
+    """The pieces trimmed at the blended corners with the blends between them (a joined line
+    keeps no piece: its two blends meet at its middle)."""
+    shapes = plan.shapes
+    d_in, d_out = plan.trims()
+    u_start = [p.u_start for p in pieces]
+    u_end = [p.u_end for p in pieces]
+    for k, c in enumerate(plan.corners.tolist()):
+        u_end[c] = trimmed_u(pieces[c], float(shapes.length_mm[c]), float(shapes.length_mm[c] - d_in[k]))
+        u_start[c + 1] = trimmed_u(pieces[c + 1], float(shapes.length_mm[c + 1]), float(d_out[k]))
+    blend_at = {c: k for k, c in enumerate(plan.corners.tolist())}
+    out: list[BlockPiece] = []
+    for i, piece in enumerate(pieces):
+        if not plan.joined[i]:
+            out.append(replace(piece, u_start=u_start[i], u_end=u_end[i], ordinal=len(out)))
+        b = blend_at.get(i)
+        if b is not None:
+            after = pieces[i + 1]
+            points = plan.points[b]
+            if shapes.is_arc[i] or shapes.is_arc[i + 1]:
+                points = exact_ends(points, pieces[i], u_end[i], shapes.is_arc[i], after, u_start[i + 1],
+                                    shapes.is_arc[i + 1])
+            out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, min(piece.feed_mm_s, after.feed_mm_s),
+                                  ordinal=len(out), corners=blends, corner=b))
+    return out
+
+
+def exact_ends(points: NDArray[np.float64], before: BlockPiece, u_before: float, arc_before: bool,
+               after: BlockPiece, u_after: float, arc_after: bool) -> NDArray[np.float64]:
+    """Control points of a blend at an arc, the arc's end of it from the arc's own evaluation
+    at the trim point (position, unit tangent, curvature vector of the NURBS there), so the
+    join is G2 to rounding (the analytic arc and the arc's u_at_arc_length agree to ~1e-10
+    mm only); a line's end as planned (its point, direction and join curvature)."""
+    p0, t0, k0 = cb.end_state(points, start=True)
+    p1, t1, k1 = cb.end_state(points, start=False)
+    if arc_before:
+        p0, t0, k0 = frame(before.curve, u_before)
+    if arc_after:
+        p1, t1, k1 = frame(after.curve, u_after)
+    return cb.control_points(p0[None], t0[None], k0[None], p1[None], t1[None], k1[None])[0]
+
+
+def frame(curve: NurbsCurve, u: float) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """(point, unit tangent, curvature vector) of a curve at u, in 3-D."""
+    x, d1, d2 = (np.pad(v, (0, 3 - curve.dim)) for v in curve.derivatives(u, 2))
+    speed = float(np.linalg.norm(d1))
+    t = d1 / speed
+    k = (d2 - np.dot(d2, t) * t) / (speed * speed)
+    return x, t, k
