@@ -14,6 +14,7 @@ import sys
 from nurbsmotion.cli._planning_options import add_planning_arguments, limits_summary, planner, planning_setup
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import ALGORITHM_MODULES
+from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 from nurbsmotion.planning.measure import measure
 
 HELP = "run every interpolation algorithm on a program and compare the measured figures"
@@ -60,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
             skipped[name] = err.message
             continue
         trajectory = plan_fn(program, limits)
-        m = measure(trajectory, program)
+        path = PlannedPath.for_algorithm(program, limits, name)  # lookahead blends corners
+        m = measure(path.rows(trajectory), path.program)
         rows.append({"algorithm": name, "cycles": m.cycles, "motion s": m.duration_s,
                      "planning ms": trajectory.planning_time_s * 1000.0,
                      "max chord um": m.max_chord_error_mm * 1000.0, "min chord um": m.min_chord_error_mm * 1000.0,

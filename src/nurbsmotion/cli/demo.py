@@ -194,6 +194,7 @@ def _plot(folder: Path, config: MachineConfig) -> Path | None:
 
     from nurbsmotion.planning.limits import limits_from_config
     from nurbsmotion.planning import Trajectory
+    from nurbsmotion.planning.lookahead.planned_path import PlannedPath
     from nurbsmotion.planning.measure import measure
     from nurbsmotion.planning.plot import plot_run
     from nurbsmotion.planning.trace import read_trace
@@ -205,5 +206,6 @@ def _plot(folder: Path, config: MachineConfig) -> Path | None:
     trajectory = Trajectory(plan["algorithm"], plan["period_s"], trace["block"].astype(np.int32), trace["u"],
                             np.column_stack([trace["x"], trace["y"], trace["z"]]), trace["feed"])
     path = folder / "plot.png"
-    plot_run(path, program, trajectory, measure(trajectory, program), limits_from_config(config))
+    planned = PlannedPath.for_algorithm(program, limits_from_config(config), plan["algorithm"])
+    plot_run(path, program, trajectory, measure(planned.rows(trajectory), planned.program), limits_from_config(config))
     return path

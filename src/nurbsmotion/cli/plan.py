@@ -139,14 +139,17 @@ def streamed_plan(name: str, program: Program, limits: PlanLimits,
 def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits,
                   name: str) -> tuple[PlanSummary, Measurements, Trajectory | None]:
     """Plan, measure and write the trace chunk by chunk; the whole trajectory is kept only for --plot."""
-    stream = MeasureStream(program, keep_rows=bool(args.plot))
+    from nurbsmotion.planning.lookahead.planned_path import PlannedPath
+
+    path = PlannedPath.for_algorithm(program, limits, name)  # set-points measured on the path planned (blends)
+    stream = MeasureStream(path.program, keep_rows=bool(args.plot))
     trace = TraceWriter(args.trace) if args.trace else None
     kept: list[Trajectory] = []
 
     def consume(chunk: Trajectory) -> None:
-        figures = stream.add(chunk)
+        figures = stream.add(path.rows(chunk))
         if figures is not None and trace is not None:
-            trace.write(figures)
+            trace.write(path.on_program(figures))
         if args.plot:
             kept.append(chunk)
 
@@ -154,7 +157,7 @@ def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits
         summary = streamed_plan(name, program, limits, consume)
         last = stream.finish()
         if last is not None and trace is not None:
-            trace.write(last)
+            trace.write(path.on_program(last))
     except BaseException:
         if trace is not None:
             trace.discard()

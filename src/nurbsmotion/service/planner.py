@@ -21,6 +21,7 @@ from nurbsmotion.planning.limits import limits_from_config
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import Trajectory, plan
+from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
 from nurbsmotion.program import AXES, Program, ProgramEvent, ReadOptions, parse_curve_yaml, parse_gcode
@@ -256,7 +257,8 @@ def plan_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray |
         counts = axis_map.to_counts(positions)
     except InputError as err:
         raise InputError(f"{name}: {err.where}", err.message) from None
-    measured = measure(trajectory, program)
+    path = PlannedPath.for_algorithm(program, limits_from_config(config), config.interpolation.algorithm)
+    measured = measure(path.rows(trajectory), path.program)  # on the path planned: corner blends
     columns = axis_columns(config)
     v_peak = np.array(measured.axis_max_velocity_mm_s)[columns]
     a_peak = np.array(measured.axis_max_accel_mm_s2)[columns]

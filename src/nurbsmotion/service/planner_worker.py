@@ -48,6 +48,7 @@ from nurbsmotion.fieldbus.row_source import chunk_figures
 from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import limits_from_config
 from nurbsmotion.planning.lookahead import PlanStream
+from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 from nurbsmotion.planning.measure import MeasureStream, RowFigures
 from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
@@ -186,6 +187,7 @@ class WorkerJob:
         self.events: list[Any] = []
         self.stream: PlanStream | None = None
         self.measure: MeasureStream | None = None
+        self.path: PlannedPath | None = None
         self.lengths: BlockLengths | None = None
 
     def run(self) -> PlanEnd:
@@ -196,12 +198,13 @@ class WorkerJob:
             send_program(self.results, program)
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
-            self.measure = MeasureStream(program)
-            self.stream = PlanStream(program, limits_from_config(self.config), self.request.chunk_cycles,
-                                     self.request.first_chunk_cycles)
+            limits = limits_from_config(self.config)
+            self.path = PlannedPath.of(program, limits)  # the trace measures set-points on the blended path
+            self.measure = MeasureStream(self.path.program)
+            self.stream = PlanStream(program, limits, self.request.chunk_cycles, self.request.first_chunk_cycles)
             finished = self._plan_all()
             if finished:
-                self._trace_rows(self.measure.finish())
+                self._trace_rows(self._on_program(self.measure.finish()))
                 self._wait_for_record()
         except InputError as err:
             errors = tuple(self._named(e) for e in (err.errors if isinstance(err, InputErrors) else [err]))
@@ -221,6 +224,9 @@ class WorkerJob:
                        stream.planning_time_s if stream else 0.0, dict(stream.notes) if stream else {},
                        self.measure.measurements().summary() if self.measure and self.planned else {}, self.trace_rows,
                        self.max_feed_mm_s)
+
+    def _on_program(self, figures: RowFigures | None) -> RowFigures | None:
+        return figures if figures is None or self.path is None else self.path.on_program(figures)
 
     def _checked_program(self) -> Program:
         """The request's program, parsed and checked before motion (InputError otherwise)."""
@@ -245,7 +251,7 @@ class WorkerJob:
 
     def _plan_all(self) -> bool:
         """Plan and send every chunk; False when the job was cancelled first."""
-        assert self.stream is not None and self.measure is not None
+        assert self.stream is not None and self.measure is not None and self.path is not None
         before = np.zeros((0, len(self.request.columns)), np.int64)
         for chunk, resume in self.stream.chunks():
             counts = self._counts(chunk)
@@ -260,7 +266,7 @@ class WorkerJob:
                 self.max_feed_mm_s = max(self.max_feed_mm_s, float(np.max(chunk.feed_mm_s)))
             self.planned += len(counts)
             before = counts[-2:]
-            self._trace_rows(self.measure.add(chunk))
+            self._trace_rows(self._on_program(self.measure.add(self.path.rows(chunk))))
             self._send_lengths(budget_s=LENGTHS_BUDGET_S)
             if self._read_commands(block=False):
                 return False

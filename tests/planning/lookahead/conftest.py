@@ -7,10 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsmotion.geometry.corner_blend import arc_of
-from nurbsmotion.geometry.primitives import arc_curve, line_curve
-from nurbsmotion.planning import PlanLimits, Trajectory
-from nurbsmotion.planning.lookahead import planned_pieces
+from nurbsmotion.geometry.primitives import line_curve
+from nurbsmotion.planning import PlanLimits
+from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.program import Block, BlockKind, Program, SourceRef, read_program
 
@@ -57,47 +56,12 @@ def assert_within_limits(m: Measurements, limits: PlanLimits) -> None:
     assert m.end_error_mm == 0.0
 
 
-def trimmed_curve(piece):
-    """(curve of just the piece's part, u on the block's curve -> u on it) for a planned piece:
-    a trimmed line or arc as a line or arc of its own; blends and whole blocks as they are."""
-    curve = piece.curve
-    if piece.corners is not None or (piece.u_start == curve.u_min and piece.u_end == curve.u_max):
-        return curve, lambda u: u
-    start, end = curve.points(np.array([piece.u_start, piece.u_end]))
-    if curve.degree == 1:
-        span = piece.u_end - piece.u_start
-        return line_curve(start, end), lambda u: (np.asarray(u) - piece.u_start) / span
-    arc = arc_of(curve)
-    assert arc is not None, "only lines and arcs are trimmed"
-    s0 = float(curve.arc_length(piece.u_start))
-    sweep = (float(curve.arc_length(piece.u_end)) - s0) / arc.radius
-    part = arc_curve(arc.center, start, sweep, np.cross(arc.e1, arc.e2), end=end)
-    return part, lambda u: part.u_at_arc_length(np.asarray(curve.arc_length(u)) - s0)
-
-
-def planned_rows(trajectory, pieces) -> np.ndarray:
-    """Index into ``pieces`` of every set-point: the piece of the row's block whose range holds
-    its u, and where a blend into that block holds it too, the one whose curve passes through
-    the set-point (a blend and its outgoing block share the block)."""
-    blocks = np.array([p.block for p in pieces])
-    own = {p.block: k for k, p in enumerate(pieces) if p.corners is None}
-    blend = {p.block: k for k, p in enumerate(pieces) if p.corners is not None}
-    rows = np.array([own.get(b, blend.get(b, -1)) for b in trajectory.block.tolist()], dtype=np.intp)
-    assert np.all(rows >= 0) and np.all(blocks[rows] == trajectory.block)
-    for b, k in blend.items():
-        at = np.flatnonzero(trajectory.block == b)
-        if not len(at):
-            continue
-        on = np.linalg.norm(pieces[k].curve.points(trajectory.u[at])[:, :3] - trajectory.position_mm[at], axis=1) <= 1e-9
-        rows[at[on]] = k
-    return rows
-
-
 def planned_arc_lengths(trajectory, program, limits) -> np.ndarray:
     """Arc length along the planned path (planned_pieces: corners blended) of every set-point:
     what PlanState.s_mm means."""
-    pieces = planned_pieces(program, limits)
-    rows = planned_rows(trajectory, pieces)
+    path = PlannedPath.of(program, limits)
+    pieces = path.pieces
+    rows = path.piece_rows(trajectory)
     first = np.array([float(p.curve.arc_length(p.u_start)) for p in pieces])
     lengths = np.array([float(p.curve.arc_length(p.u_end)) for p in pieces]) - first
     starts = np.concatenate([[0.0], np.cumsum(lengths)])
@@ -106,22 +70,9 @@ def planned_arc_lengths(trajectory, program, limits) -> np.ndarray:
 
 
 def measure_planned(trajectory, program, limits):
-    """planning.measure against the path the planner plans along (planned_pieces: corners
-    blended), every piece a block of its own."""
-    pieces = planned_pieces(program, limits)
-    if not pieces or not any(p.corners is not None for p in pieces):
-        return measure(trajectory, program)
-    rows = planned_rows(trajectory, pieces)
-    curves, maps = zip(*(trimmed_curve(p) for p in pieces))
-    u = trajectory.u.copy()
-    for k in np.unique(rows).tolist():
-        at = rows == k
-        u[at] = maps[k](trajectory.u[at])
-    blocks = tuple(Block(BlockKind.NURBS, c, p.feed_mm_s, program.blocks[p.block].source) for c, p in zip(curves, pieces))
-    planned = Program(program.name, blocks, program.start_position)
-    rows_trajectory = Trajectory(trajectory.algorithm, trajectory.period_s, rows.astype(np.int32), u,
-                                 trajectory.position_mm, trajectory.feed_mm_s)
-    return measure(rows_trajectory, planned)
+    """planning.measure against the path the planner plans along (corners blended)."""
+    path = PlannedPath.of(program, limits)
+    return measure(path.rows(trajectory), path.program)
 
 
 def curve_distances(p: np.ndarray, curve) -> np.ndarray:
