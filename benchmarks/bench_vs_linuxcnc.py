@@ -157,6 +157,32 @@ def plan_ours(program: Any, path: Any, race: RaceLimits, jerk: float | None, mod
     return Side(count * race.period_s, worst)
 
 
+@dataclass
+class OursCache:
+    """Our results keyed by program text, limits, J and a hash of the measured nurbsmotion's
+    sources: a rerun of the same code re-uses them (e.g. to write the docs after a long
+    run), any change to the planner (or --src) measures again."""
+
+    path: Path | None
+    src_hash: str
+    entries: dict[str, Any]
+
+    @classmethod
+    def open(cls, path: Path | None, package_dir: Path) -> OursCache:
+        digest = hashlib.sha256()
+        for file in sorted(package_dir.rglob("*.py")):
+            digest.update(str(file.relative_to(package_dir)).encode() + b"\0" + file.read_bytes())
+        return cls(path, digest.hexdigest()[:16], load_cache(path) if path else {})
+
+    def side(self, text: str, race: RaceLimits, jerk: float | None, measure: Any) -> Side:
+        key = f"{cache_key(text, race)}/J{jerk}/src{self.src_hash}"
+        if key not in self.entries:
+            self.entries[key] = dataclasses.asdict(measure())
+            if self.path:
+                save_cache(self.path, self.entries)
+        return Side(**self.entries[key])
+
+
 def read_ours(text: str, name: str, modules: dict[str, ModuleType]) -> tuple[Any, str | None]:
     """Our reader's program, or the first line of its refusal."""
     try:
@@ -198,8 +224,13 @@ def load_cache(path: Path) -> dict[str, Any]:
 
 
 def save_cache(path: Path, cache: dict[str, Any]) -> None:
+    """Merge into what is on disk (another run may have added entries), written atomically."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(cache, indent=1, sort_keys=True) + "\n")
+    merged = {**load_cache(path), **cache}
+    cache.update(merged)
+    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(merged, indent=1, sort_keys=True) + "\n")
+    tmp.replace(path)
 
 
 def run_peer(text: str, name: str, path: Any, race: RaceLimits, timeout_s: float,
@@ -261,7 +292,8 @@ def table(rows: list[Row]) -> str:
 
 
 # ---- main ------------------------------------------------------------------------------------------------------
-def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Path, modules: dict[str, ModuleType],
+def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Path, ours: OursCache,
+             modules: dict[str, ModuleType],
              max_linuxcnc_s: float, linuxcnc_ok: bool, with_jerk: bool) -> Row:
     file, raw = program_text(name)
     fixed = FIXES.get(file.name, lambda t: t)(raw)
@@ -277,7 +309,7 @@ def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Pat
         copy = Path(tmp) / file.name
         copy.write_text(text)
         refusal, row.rs274_check = rs274_check(copy, program, Path(tmp) / "home") if linuxcnc_ok else (None, "-")
-    row.free = plan_ours(program, path, race, None, modules)
+    row.free = ours.side(text, race, None, lambda: plan_ours(program, path, race, None, modules))
     print(f"  {file.name}: ours no-J {fmt_time(row.free)} dev {fmt_dev(row.free)}", file=sys.stderr, flush=True)
     if refusal is not None:
         row.linuxcnc = Side(skipped=refusal)
@@ -285,7 +317,7 @@ def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Pat
         row.linuxcnc = peer_side(text, file.name, path, row.free, race, cache, cache_path, modules, max_linuxcnc_s,
                                  linuxcnc_ok)
     if with_jerk and row.linuxcnc.time_s is not None:
-        row.jerk = plan_ours(program, path, race, JERK_MM_S3, modules)
+        row.jerk = ours.side(text, race, JERK_MM_S3, lambda: plan_ours(program, path, race, JERK_MM_S3, modules))
     print(f"  {file.name}: LinuxCNC {fmt_time(row.linuxcnc)} {row.linuxcnc.skipped or ''}; ours J {fmt_time(row.jerk)}",
           file=sys.stderr, flush=True)
     return row
@@ -315,6 +347,8 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="the three headline programs: " + ", ".join(HEADLINE))
     parser.add_argument("--src", metavar="DIR", help="src/ of the nurbsmotion checkout to measure (default: this one's)")
     parser.add_argument("--linuxcnc-cache", type=Path, default=DEFAULT_CACHE, metavar="FILE")
+    parser.add_argument("--ours-cache", type=Path, default=Path(tempfile.gettempdir()) / "nurbsmotion_race_ours.json",
+                        metavar="FILE", help="our results, keyed by the measured sources' hash too ('' to plan again)")
     parser.add_argument("--markdown", type=Path, metavar="FILE", help="also write the table to FILE")
     parser.add_argument("--docs", action="store_true", help="write the section 'Race against LinuxCNC' of docs/benchmarks.md")
     parser.add_argument("--max-linuxcnc-s", type=float, default=300.0, metavar="S",
@@ -329,16 +363,21 @@ def main() -> None:
     if missing and not args.cache_only:
         raise SystemExit(missing)
     modules = import_nurbsmotion(args.src)
+    if args.ours_cache is not None and str(args.ours_cache) in ("", "."):
+        args.ours_cache = None
     names = list(HEADLINE) if args.quick else (args.programs or corpus_names())
     race = RaceLimits()
     cache = load_cache(args.linuxcnc_cache)
     os.nice(10)  # our side; LinuxCNC's processes get their priority back (run_linuxcnc, as root)
-    rows = [race_one(name, race, cache, args.linuxcnc_cache, modules, args.max_linuxcnc_s,
-                     missing is None and not args.cache_only, not args.no_jerk) for name in names]
+    ours = OursCache.open(args.ours_cache, Path(modules["program"].__file__).resolve().parents[1])
+    rows: list[Row] = []
+    for name in names:
+        rows.append(race_one(name, race, cache, args.linuxcnc_cache, ours, modules, args.max_linuxcnc_s,
+                             missing is None and not args.cache_only, not args.no_jerk))
+        if args.markdown:  # after every program: a long run's rows so far
+            args.markdown.write_text(table(rows) + "\n")
     body = table(rows)
     sys.stdout.write(body + "\n")
-    if args.markdown:
-        args.markdown.write_text(body + "\n")
     if args.docs:
         write_docs(body, args)
 
