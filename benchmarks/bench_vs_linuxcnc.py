@@ -37,6 +37,7 @@ import datetime as dt
 import hashlib
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -174,8 +175,10 @@ class OursCache:
             digest.update(str(file.relative_to(package_dir)).encode() + b"\0" + file.read_bytes())
         return cls(path, digest.hexdigest()[:16], load_cache(path) if path else {})
 
-    def side(self, text: str, race: RaceLimits, jerk: float | None, measure: Any) -> Side:
+    def side(self, text: str, race: RaceLimits, jerk: float | None, measure: Any, cached_only: bool = False) -> Side:
         key = f"{cache_key(text, race)}/J{jerk}/src{self.src_hash}"
+        if key not in self.entries and cached_only:
+            return Side(skipped="ours: not in the cache (--from-caches)")
         if key not in self.entries:
             self.entries[key] = dataclasses.asdict(measure())
             if self.path:
@@ -233,14 +236,14 @@ def save_cache(path: Path, cache: dict[str, Any]) -> None:
     tmp.replace(path)
 
 
-def run_peer(text: str, name: str, path: Any, race: RaceLimits, timeout_s: float,
+def run_peer(text: str, name: str, path: Any, race: RaceLimits, timeout_s: float, last_move_line: int,
              modules: dict[str, ModuleType]) -> dict[str, Any]:
     """One LinuxCNC run: motion time and largest deviation of its samples from our path."""
     with tempfile.TemporaryDirectory(prefix="race-") as tmp:
         os.chmod(tmp, 0o755)
         started = time.monotonic()
         try:
-            samples = run_linuxcnc(text, race, Path(tmp) / "run", timeout_s)
+            samples = run_linuxcnc(text, race, Path(tmp) / "run", timeout_s, last_move_line)
         except (LinuxcncError, SamplesError, subprocess.TimeoutExpired) as err:
             return {"skipped": f"LinuxCNC: {str(err).splitlines()[0]}", "program": name}
         wall = time.monotonic() - started
@@ -294,7 +297,7 @@ def table(rows: list[Row]) -> str:
 # ---- main ------------------------------------------------------------------------------------------------------
 def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Path, ours: OursCache,
              modules: dict[str, ModuleType],
-             max_linuxcnc_s: float, linuxcnc_ok: bool, with_jerk: bool) -> Row:
+             max_linuxcnc_s: float, linuxcnc_ok: bool, with_jerk: bool, from_caches: bool = False) -> Row:
     file, raw = program_text(name)
     fixed = FIXES.get(file.name, lambda t: t)(raw)
     text = with_tolerance(fixed, race.tolerance_mm)
@@ -308,23 +311,26 @@ def race_one(name: str, race: RaceLimits, cache: dict[str, Any], cache_path: Pat
     with tempfile.TemporaryDirectory(prefix="race-rs274-") as tmp:
         copy = Path(tmp) / file.name
         copy.write_text(text)
-        refusal, row.rs274_check = rs274_check(copy, program, Path(tmp) / "home") if linuxcnc_ok else (None, "-")
-    row.free = ours.side(text, race, None, lambda: plan_ours(program, path, race, None, modules))
+        refusal, row.rs274_check = (rs274_check(copy, program, Path(tmp) / "home") if shutil.which("rs274")
+                                    else (None, "-"))
+    row.free = ours.side(text, race, None, lambda: plan_ours(program, path, race, None, modules), from_caches)
     print(f"  {file.name}: ours no-J {fmt_time(row.free)} dev {fmt_dev(row.free)}", file=sys.stderr, flush=True)
     if refusal is not None:
         row.linuxcnc = Side(skipped=refusal)
     else:
+        last_line = max((b.source.line for b in program.blocks), default=0)
         row.linuxcnc = peer_side(text, file.name, path, row.free, race, cache, cache_path, modules, max_linuxcnc_s,
-                                 linuxcnc_ok)
+                                 linuxcnc_ok, last_line)
     if with_jerk and row.linuxcnc.time_s is not None:
-        row.jerk = ours.side(text, race, JERK_MM_S3, lambda: plan_ours(program, path, race, JERK_MM_S3, modules))
+        row.jerk = ours.side(text, race, JERK_MM_S3, lambda: plan_ours(program, path, race, JERK_MM_S3, modules),
+                             from_caches)
     print(f"  {file.name}: LinuxCNC {fmt_time(row.linuxcnc)} {row.linuxcnc.skipped or ''}; ours J {fmt_time(row.jerk)}",
           file=sys.stderr, flush=True)
     return row
 
 
 def peer_side(text: str, name: str, path: Any, free: Side, race: RaceLimits, cache: dict[str, Any], cache_path: Path,
-              modules: dict[str, ModuleType], max_linuxcnc_s: float, linuxcnc_ok: bool) -> Side:
+              modules: dict[str, ModuleType], max_linuxcnc_s: float, linuxcnc_ok: bool, last_move_line: int) -> Side:
     key = cache_key(text, race)
     entry = cache.get(key)
     if entry is None:
@@ -333,7 +339,7 @@ def peer_side(text: str, name: str, path: Any, free: Side, race: RaceLimits, cac
         estimate = free.time_s or 0.0
         if estimate > max_linuxcnc_s:
             return Side(skipped=f"LinuxCNC not run: ours takes {estimate:.0f} s > --max-linuxcnc-s {max_linuxcnc_s:g}")
-        entry = run_peer(text, name, path, race, 3.0 * estimate + 120.0, modules)
+        entry = run_peer(text, name, path, race, 3.0 * estimate + 120.0, last_move_line, modules)
         cache[key] = entry
         save_cache(cache_path, cache)
     if "skipped" in entry:
@@ -354,13 +360,15 @@ def main() -> None:
     parser.add_argument("--max-linuxcnc-s", type=float, default=300.0, metavar="S",
                         help="do not run LinuxCNC on programs ours takes longer than S to run (real time)")
     parser.add_argument("--cache-only", action="store_true", help="never run LinuxCNC: cached results only")
+    parser.add_argument("--from-caches", action="store_true",
+                        help="plan nothing and run nothing: both sides from the caches (writing the docs after long runs)")
     parser.add_argument("--no-jerk", action="store_true",
                         help="skip ours with J (e.g. to fill the LinuxCNC cache while another run plans)")
     args = parser.parse_args()
     if args.src and not (Path(args.src) / "nurbsmotion").is_dir():
         raise SystemExit(f"--src {args.src}: no nurbsmotion package there")
     missing = missing_tools()
-    if missing and not args.cache_only:
+    if missing and not (args.cache_only or args.from_caches):
         raise SystemExit(missing)
     modules = import_nurbsmotion(args.src)
     if args.ours_cache is not None and str(args.ours_cache) in ("", "."):
@@ -373,7 +381,8 @@ def main() -> None:
     rows: list[Row] = []
     for name in names:
         rows.append(race_one(name, race, cache, args.linuxcnc_cache, ours, modules, args.max_linuxcnc_s,
-                             missing is None and not args.cache_only, not args.no_jerk))
+                             missing is None and not (args.cache_only or args.from_caches), not args.no_jerk,
+                             args.from_caches))
         if args.markdown:  # after every program: a long run's rows so far
             args.markdown.write_text(table(rows) + "\n")
     body = table(rows)

@@ -18,6 +18,7 @@ import linuxcnc  # type: ignore[import-not-found]
 
 SETTLE_S = 0.3  # samples kept after the program ends (the last moving sample is before them)
 POLL_S = 0.02
+IDLE_S = 0.5  # the interpreter idle and the motion queue empty this long: the program has ended
 
 
 def ini_value(ini, name):
@@ -61,8 +62,11 @@ def run(ini_path):
         finally:
             sampler.terminate()
             sampler.wait(5)
-    with open(status_path, "w") as f:
-        json.dump({"ok": ok and not errors, "errors": errors, "wall_s": time.monotonic() - started}, f)
+    stat = linuxcnc.stat()
+    stat.poll()
+    with open(status_path, "w") as f:  # the lines reached: a run that ended early shows it here
+        json.dump({"ok": ok and not errors, "errors": errors, "wall_s": time.monotonic() - started,
+                   "motion_line": stat.motion_line, "current_line": stat.current_line, "read_line": stat.read_line}, f)
 
 
 def drive(program, timeout_s, errors):
@@ -82,12 +86,20 @@ def drive(program, timeout_s, errors):
     command.auto(linuxcnc.AUTO_RUN, 0)
     wait_until(lambda s: s.interp_state != linuxcnc.INTERP_IDLE, stat, 5.0)
 
+    idle_since = [None]
+
     def finished(s):
         drain_errors(channel, errors)
         paused = s.task_paused or s.interp_state == linuxcnc.INTERP_PAUSED
         if paused:
             errors.append("program paused (M0/M1 or a tool change waiting): not raced")
-        return bool(errors) or paused or (s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0)
+        idle = s.interp_state == linuxcnc.INTERP_IDLE and s.queue == 0 and s.exec_state == linuxcnc.EXEC_DONE
+        if not idle:
+            idle_since[0] = None
+        elif idle_since[0] is None:
+            idle_since[0] = time.monotonic()
+        # idle for IDLE_S on end: a one-poll idle state between two reads is not the end
+        return bool(errors) or paused or (idle_since[0] is not None and time.monotonic() - idle_since[0] >= IDLE_S)
 
     if not wait_until(finished, stat, timeout_s):
         errors.append(f"still running after {timeout_s:g} s")

@@ -30,6 +30,7 @@ INSTALL_HINT = "apt-get update; apt-get install -y --no-install-recommends linux
 SAMPLER_DEPTH = 262_144  # servo periods the FIFO holds if halsampler falls behind (4.4 min at 1 ms)
 UNPRIVILEGED_UID = 65534  # rtapi_app refuses to run as root without a fallback uid (nobody)
 INCH_MM = 25.4
+TOOLS = 99  # tool numbers the race machine's tool table holds
 SQRT2 = math.sqrt(2.0)
 
 
@@ -53,6 +54,7 @@ class RaceLimits:
 
 
 # ---- the program text both sides get ---------------------------------------------------------------
+UNITS_WORD = re.compile(r"(?<![A-Z])G0*2([01])(?![\d.])", re.IGNORECASE)
 PROGRAM_END = re.compile(r"(?<![A-Z])M0*(2|30)(?![\d.])", re.IGNORECASE)
 G64_WORD = re.compile(r"G0*64(?![\d.])(\s*[PQ]\s*[-+]?(\d+\.?\d*|\.\d+))*", re.IGNORECASE)
 
@@ -74,11 +76,16 @@ def sub_in_code(pattern: re.Pattern[str], replacement: str, line: str) -> str:
 def with_tolerance(text: str, tolerance_mm: float) -> str:
     """The program with ``G64 P<tolerance>`` on a line of its own before its first line (after
     a leading ``%`` line), and every G64 of its own (with or without P/Q) replaced by the same
-    words: both planners blend at this tolerance throughout. G61/G61.1 (exact stop) are left
+    tolerance (written in inches after a G20): both planners blend at it throughout. G61/G61.1 (exact stop) are left
     as written: both honour them. A program with neither M2/M30 nor a leading ``%`` gets an
     ``M2`` line at its end (rs274 refuses a file without a program end; our reader takes both)."""
     words = f"G64 P{tolerance_mm:g}"
-    body = "".join(sub_in_code(G64_WORD, words, line) for line in text.splitlines(keepends=True))
+    inches, out = False, []
+    for line in text.splitlines(keepends=True):
+        for units in UNITS_WORD.finditer(COMMENT.sub(" ", line)):
+            inches = units.group(1) == "0"  # G20 acts before G64 on its line (order of execution)
+        out.append(sub_in_code(G64_WORD, f"G64 P{tolerance_mm / INCH_MM:.7f}" if inches else words, line))
+    body = "".join(out)
     lines = body.splitlines(keepends=True)
     head = 1 if lines and lines[0].strip() == "%" else 0
     newline = "\r\n" if "\r\n" in text else "\n"
@@ -345,6 +352,12 @@ def wait_for_lock(timeout_s: float) -> None:
         time.sleep(1.0)
 
 
+def tool_table(tools: int = TOOLS) -> str:
+    """Tools 1..N with zero length and diameter: T words and M6 run, G43 offsets nothing
+    (as our reader without a tool table)."""
+    return "".join(f"T{t} P{t} Z0 D0 ;race tool {t}\n" for t in range(1, tools + 1))
+
+
 def prepare_run(folder: Path, program_text: str, limits: RaceLimits, timeout_s: float) -> tuple[RunFiles, Path]:
     """Write the INI, HAL, tool table and program into ``folder``, owned by the unprivileged
     uid rtapi_app runs as; returns the files and the INI path."""
@@ -352,7 +365,7 @@ def prepare_run(folder: Path, program_text: str, limits: RaceLimits, timeout_s: 
     files = RunFiles.inside(folder)
     files.program.write_text(program_text)
     (folder / "race.hal").write_text(hal_text())
-    (folder / "race.tbl").write_text("")
+    (folder / "race.tbl").write_text(tool_table())
     ini = folder / "race.ini"
     ini.write_text(ini_text(limits, files, timeout_s))
     (folder / "home").mkdir(exist_ok=True)
@@ -371,8 +384,10 @@ def normal_priority() -> None:
         pass
 
 
-def run_linuxcnc(program_text: str, limits: RaceLimits, folder: Path, timeout_s: float) -> Samples:
-    """Run the program once through LinuxCNC's planner (real time: a 70 s program takes 70 s)."""
+def run_linuxcnc(program_text: str, limits: RaceLimits, folder: Path, timeout_s: float,
+                 last_move_line: int = 0) -> Samples:
+    """Run the program once through LinuxCNC's planner (real time: a 70 s program takes 70 s);
+    a run whose last executed motion is on a line before ``last_move_line`` ended early (an error)."""
     files, ini = prepare_run(folder, program_text, limits, timeout_s)
     env = dict(os.environ, HOME=str(folder / "home"), RTAPI_FIFO_PATH=str(folder / "fifo" / "rtapi_fifo"),
                RTAPI_UID=str(UNPRIVILEGED_UID))
@@ -388,4 +403,7 @@ def run_linuxcnc(program_text: str, limits: RaceLimits, folder: Path, timeout_s:
     status = json.loads(files.status.read_text())
     if not status["ok"]:
         raise LinuxcncError("; ".join(status["errors"]) or "LinuxCNC reported a failure")
+    reached = int(status.get("motion_line", 0))
+    if 0 < reached < last_move_line:
+        raise LinuxcncError(f"ended at line {reached}, before the last move (line {last_move_line})")
     return parse_samples(files.samples.read_text(), str(files.samples))

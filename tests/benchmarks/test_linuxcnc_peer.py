@@ -113,6 +113,12 @@ def test_tolerance_line_goes_first_and_replaces_the_programs_own():
                                 "G64.1", "M2"]
 
 
+def test_tolerance_in_inches_after_a_g20_even_on_the_same_line():
+    out = with_tolerance("g20 g64\nG1 X1 F10 (G21 in a comment)\nG64 P0.001\nG21\nG64\nM2\n", 0.01)
+    assert out.splitlines() == ["G64 P0.01", "g20 G64 P0.0003937", "G1 X1 F10 (G21 in a comment)", "G64 P0.0003937",
+                                "G21", "G64 P0.01", "M2"]
+
+
 def test_tolerance_after_a_percent_line_and_a_program_end_added_when_missing():
     assert with_tolerance("%\r\nG1 X1 F100\r\n%", 0.01) == "%\r\nG64 P0.01\r\nG1 X1 F100\r\n%\r\n"
     assert with_tolerance("G1 X1 F100", 0.02) == "G64 P0.02\nG1 X1 F100\nM2\n"
