@@ -73,7 +73,15 @@ def braid_fix(text: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-FIXES = {"braid_cut2d.nc": braid_fix}
+def vcarve_fix(text: str) -> str:
+    """CAMotics' vcarve.ngc starts ``G20 F6``: LinuxCNC sets the feed before the units (its
+    order of execution; rs274 prints SET_FEED_RATE(6) before USE_LENGTH_UNITS(INCHES), so
+    6 mm/min), our reader takes 6 in/min. The two words on two lines (G20, then F6) mean
+    6 in/min to both."""
+    return text.replace("G20 F6\n", "G20\nF6\n", 1)
+
+
+FIXES = {"braid_cut2d.nc": braid_fix, "camotics_vcarve.ngc": vcarve_fix}
 
 
 def source_of(name: str) -> str:
@@ -178,7 +186,7 @@ class OursCache:
     def side(self, text: str, race: RaceLimits, jerk: float | None, measure: Any, cached_only: bool = False) -> Side:
         key = f"{cache_key(text, race)}/J{jerk}/src{self.src_hash}"
         if key not in self.entries and cached_only:
-            return Side(skipped="ours: not in the cache (--from-caches)")
+            return Side(skipped="ours: not measured (not in the cache, --from-caches)")
         if key not in self.entries:
             self.entries[key] = dataclasses.asdict(measure())
             if self.path:
@@ -406,7 +414,9 @@ periods from the first to the last moving sample, ours set-points x T; deviation
 distance from the programmed path (our reader's blocks) of every sample / set-point
 (planning.path_deviation). Load during the run (`uptime` at the end): {load}. LinuxCNC ran in
 real time once per program (cached in {args.linuxcnc_cache.name}); its motion time does not
-depend on the load (counted in servo periods), its wall time does.
+depend on the load (counted in servo periods), its wall time does. A run with
+`--from-caches` plans nothing: it assembles what earlier runs of this script measured (both
+caches; ours keyed by a hash of the measured src/nurbsmotion too).
 
 {body}
 """

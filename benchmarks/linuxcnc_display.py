@@ -18,6 +18,7 @@ import linuxcnc  # type: ignore[import-not-found]
 
 SETTLE_S = 0.3  # samples kept after the program ends (the last moving sample is before them)
 POLL_S = 0.02
+START_S = 60.0  # the interpreter leaves its idle state this soon after AUTO_RUN (a loaded host is slow)
 IDLE_S = 0.5  # the interpreter idle and the motion queue empty this long: the program has ended
 
 
@@ -84,7 +85,10 @@ def drive(program, timeout_s, errors):
     command.wait_complete()
     drain_errors(channel, errors)
     command.auto(linuxcnc.AUTO_RUN, 0)
-    wait_until(lambda s: s.interp_state != linuxcnc.INTERP_IDLE, stat, 5.0)
+    if not wait_until(lambda s: s.interp_state != linuxcnc.INTERP_IDLE or s.queue > 0, stat, START_S):
+        drain_errors(channel, errors)
+        errors.append(f"program did not start within {START_S:g} s")
+        return False
 
     idle_since = [None]
 

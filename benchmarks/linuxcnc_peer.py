@@ -403,7 +403,10 @@ def run_linuxcnc(program_text: str, limits: RaceLimits, folder: Path, timeout_s:
     status = json.loads(files.status.read_text())
     if not status["ok"]:
         raise LinuxcncError("; ".join(status["errors"]) or "LinuxCNC reported a failure")
+    samples = parse_samples(files.samples.read_text(), str(files.samples))
+    if samples.motion_cycles() == 0:
+        raise LinuxcncError("no motion recorded (the run ended before the program started)")
     reached = int(status.get("motion_line", 0))
     if 0 < reached < last_move_line:
         raise LinuxcncError(f"ended at line {reached}, before the last move (line {last_move_line})")
-    return parse_samples(files.samples.read_text(), str(files.samples))
+    return samples
