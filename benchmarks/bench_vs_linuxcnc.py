@@ -343,7 +343,7 @@ def peer_side(text: str, name: str, path: Any, free: Side, race: RaceLimits, cac
     entry = cache.get(key)
     if entry is None:
         if not linuxcnc_ok:
-            return Side(skipped="LinuxCNC not installed and not in the cache")
+            return Side(skipped="LinuxCNC: not in the cache (not run)")
         estimate = free.time_s or 0.0
         if estimate > max_linuxcnc_s:
             return Side(skipped=f"LinuxCNC not run: ours takes {estimate:.0f} s > --max-linuxcnc-s {max_linuxcnc_s:g}")
