@@ -210,7 +210,10 @@ def rs274_check(program_file: Path, program: Any, home: Path) -> tuple[str | Non
     canon, error = run_rs274(program_file, home)
     if error is not None:
         return f"rs274: {error}", "-"
-    ends = np.array([m.end_mm for m in parse_canon(canon)]).reshape(-1, 3)
+    try:
+        ends = np.array([m.end_mm for m in parse_canon(canon)]).reshape(-1, 3)
+    except ValueError as err:
+        return None, f"rs274 output not understood ({err})"
     ours = np.vstack([program.start_position[None, :]] + [b.end[None, :] for b in program.blocks])
     if not len(ends):
         return None, "no moves"

@@ -283,7 +283,7 @@ def parse_canon(text: str) -> list[CanonMove]:
         match = CANON_CALL.match(line)
         if not match:
             continue
-        name, args = match.group(1), [a.strip() for a in match.group(2).split(",")]
+        name, args = match.group(1), [a for a in re.split(r"[\s,]+", match.group(2).strip()) if a]
         if name == "USE_LENGTH_UNITS":
             scale = INCH_MM if "INCHES" in args[0] else (10.0 if "CM" in args[0] else 1.0)
         elif name == "SELECT_PLANE":
