@@ -79,6 +79,8 @@ def with_tolerance(text: str, tolerance_mm: float) -> str:
     tolerance (written in inches after a G20): both planners blend at it throughout. G61/G61.1 (exact stop) are left
     as written: both honour them. A program with neither M2/M30 nor a leading ``%`` gets an
     ``M2`` line at its end (rs274 refuses a file without a program end; our reader takes both)."""
+    bom = "\ufeff" if text.startswith("\ufeff") else ""  # a byte-order mark stays the file's first character
+    text = text[len(bom):]
     words = f"G64 P{tolerance_mm:g}"
     inches, out = False, []
     for line in text.splitlines(keepends=True):
@@ -93,7 +95,7 @@ def with_tolerance(text: str, tolerance_mm: float) -> str:
         lines[-1] += newline
     if not head and not PROGRAM_END.search(COMMENT.sub(" ", body)):
         lines.append("M2" + newline)
-    return "".join(lines[:head]) + words + newline + "".join(lines[head:])
+    return bom + "".join(lines[:head]) + words + newline + "".join(lines[head:])
 
 
 # ---- INI and HAL -------------------------------------------------------------------------------------

@@ -123,6 +123,7 @@ def test_tolerance_in_inches_after_a_g20_even_on_the_same_line():
 def test_tolerance_after_a_percent_line_and_a_program_end_added_when_missing():
     assert with_tolerance("%\r\nG1 X1 F100\r\n%", 0.01) == "%\r\nG64 P0.01\r\nG1 X1 F100\r\n%\r\n"
     assert with_tolerance("G1 X1 F100", 0.02) == "G64 P0.02\nG1 X1 F100\nM2\n"
+    assert with_tolerance("\ufeffG1 X1 F100\nM2\n", 0.01) == "\ufeffG64 P0.01\nG1 X1 F100\nM2\n"
     assert with_tolerance("G1 X1 F100\nM30\n", 0.01).endswith("M30\n")
     assert with_tolerance("G1 X1 F100\nM2\n", 0.01).count("M2") == 1
     assert with_tolerance("(M2 ends it)\nG1 X1 F100 ; M30\n", 0.01).endswith("; M30\nM2\n")
