@@ -1,0 +1,414 @@
+"""LinuxCNC 2.9 as a race partner, headless (shared/reference/linuxcnc-peer.md): the INI and
+HAL files of a uspace simulation, one program run through it, its samples read back, and
+rs274's canonical calls as a cross-check of our reader's end points.
+
+A benchmark dependency only: install with
+``apt-get update; apt-get install -y --no-install-recommends linuxcnc-uspace``.
+
+The pieces that need no LinuxCNC (INI/HAL text, sample and canon parsing, the program's
+tolerance line) are plain functions tested in tests/benchmarks/test_linuxcnc_peer.py.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+DISPLAY_SCRIPT = Path(__file__).resolve().parent / "linuxcnc_display.py"
+LOCKFILE = Path("/tmp/linuxcnc.lock")  # fixed by the linuxcnc script: one instance per host
+INSTALL_HINT = "apt-get update; apt-get install -y --no-install-recommends linuxcnc-uspace"
+SAMPLER_DEPTH = 262_144  # servo periods the FIFO holds if halsampler falls behind (4.4 min at 1 ms)
+UNPRIVILEGED_UID = 65534  # rtapi_app refuses to run as root without a fallback uid (nobody)
+INCH_MM = 25.4
+TOOLS = 99  # tool numbers the race machine's tool table holds
+SQRT2 = math.sqrt(2.0)
+
+
+@dataclass(frozen=True)
+class RaceLimits:
+    """The limits both planners race under. LinuxCNC limits acceleration per axis, ours the
+    resultant: each LinuxCNC axis gets A / sqrt 2, so a diagonal reaches A, never more."""
+
+    period_s: float = 0.001
+    feed_cap_mm_s: float = 200.0
+    accel_mm_s2: float = 2500.0
+    tolerance_mm: float = 0.01
+
+    @property
+    def axis_accel_mm_s2(self) -> float:
+        return self.accel_mm_s2 / SQRT2
+
+    def key(self) -> str:
+        return (f"T{self.period_s:g}-F{self.feed_cap_mm_s:g}-A{self.accel_mm_s2:g}-"
+                f"a{self.axis_accel_mm_s2:.2f}-P{self.tolerance_mm:g}")
+
+
+# ---- the program text both sides get ---------------------------------------------------------------
+UNITS_WORD = re.compile(r"(?<![A-Z])G0*2([01])(?![\d.])", re.IGNORECASE)
+PROGRAM_END = re.compile(r"(?<![A-Z])M0*(2|30)(?![\d.])", re.IGNORECASE)
+G64_WORD = re.compile(r"G0*64(?![\d.])(\s*[PQ]\s*[-+]?(\d+\.?\d*|\.\d+))*", re.IGNORECASE)
+
+
+COMMENT = re.compile(r"\([^)]*\)|;[^\r\n]*")
+
+
+def sub_in_code(pattern: re.Pattern[str], replacement: str, line: str) -> str:
+    """``pattern`` replaced in the line's code, its ( ) and ; comments left as written."""
+    out, at = [], 0
+    for comment in COMMENT.finditer(line):
+        out.append(pattern.sub(replacement, line[at:comment.start()]))
+        out.append(comment.group(0))
+        at = comment.end()
+    out.append(pattern.sub(replacement, line[at:]))
+    return "".join(out)
+
+
+def with_tolerance(text: str, tolerance_mm: float) -> str:
+    """The program with ``G64 P<tolerance>`` on a line of its own before its first line (after
+    a leading ``%`` line), and every G64 of its own (with or without P/Q) replaced by the same
+    tolerance (written in inches after a G20): both planners blend at it throughout. G61/G61.1 (exact stop) are left
+    as written: both honour them. A program with neither M2/M30 nor a leading ``%`` gets an
+    ``M2`` line at its end (rs274 refuses a file without a program end; our reader takes both)."""
+    bom = "\ufeff" if text.startswith("\ufeff") else ""  # a byte-order mark stays the file's first character
+    text = text[len(bom):]
+    words = f"G64 P{tolerance_mm:g}"
+    inches, out = False, []
+    for line in text.splitlines(keepends=True):
+        for units in UNITS_WORD.finditer(COMMENT.sub(" ", line)):
+            inches = units.group(1) == "0"  # G20 acts before G64 on its line (order of execution)
+        out.append(sub_in_code(G64_WORD, f"G64 P{tolerance_mm / INCH_MM:.7f}" if inches else words, line))
+    body = "".join(out)
+    lines = body.splitlines(keepends=True)
+    head = 1 if lines and lines[0].strip() == "%" else 0
+    newline = "\r\n" if "\r\n" in text else "\n"
+    if lines and not lines[-1].endswith(("\n", "\r")):
+        lines[-1] += newline
+    if not head and not PROGRAM_END.search(COMMENT.sub(" ", body)):
+        lines.append("M2" + newline)
+    return bom + "".join(lines[:head]) + words + newline + "".join(lines[head:])
+
+
+# ---- INI and HAL -------------------------------------------------------------------------------------
+def hal_text(depth: int = SAMPLER_DEPTH) -> str:
+    """trivkins + motmod on a 1-thread servo loop, joints looped back (commanded = measured),
+    sampler recording axis X, Y, Z pos-cmd and motion.current-vel every servo period."""
+    loop = "\n".join(f"net j{j}pos joint.{j}.motor-pos-cmd => joint.{j}.motor-pos-fb" for j in range(3))
+    sampled = "\n".join(f"net {a}cmd axis.{a}.pos-cmd => sampler.0.pin.{i}" for i, a in enumerate("xyz"))
+    return f"""# generated by benchmarks/linuxcnc_peer.py
+loadrt [KINS]KINEMATICS
+loadrt [EMCMOT]EMCMOT servo_period_nsec=[EMCMOT]SERVO_PERIOD num_joints=[KINS]JOINTS
+loadrt sampler depth={depth} cfg=ffff
+addf motion-command-handler servo-thread
+addf motion-controller servo-thread
+addf sampler.0 servo-thread
+{loop}
+{sampled}
+net speed motion.current-vel => sampler.0.pin.3
+net estop-loop iocontrol.0.user-enable-out => iocontrol.0.emc-enable-in
+net tool-prep-loop iocontrol.0.tool-prepare => iocontrol.0.tool-prepared
+net tool-change-loop iocontrol.0.tool-change => iocontrol.0.tool-changed
+"""
+
+
+@dataclass(frozen=True)
+class RunFiles:
+    """Where one LinuxCNC run reads and writes (all inside its own folder)."""
+
+    folder: Path
+    program: Path
+    samples: Path
+    status: Path
+
+    @classmethod
+    def inside(cls, folder: Path) -> RunFiles:
+        return cls(folder, folder / "program.ngc", folder / "samples.txt", folder / "status.json")
+
+
+def ini_text(limits: RaceLimits, files: RunFiles, timeout_s: float, display: Path = DISPLAY_SCRIPT) -> str:
+    """The INI of the race machine: XYZ trivkins, SERVO_PERIOD = T, [TRAJ] velocity = the feed
+    cap and acceleration = A, every axis and joint A / sqrt 2 and wide travel, arc blends on,
+    no homing required; [RACE] tells the DISPLAY program (linuxcnc_display.py) what to run."""
+    period_ns = round(limits.period_s * 1e9)
+    v, a, a_axis = limits.feed_cap_mm_s, limits.accel_mm_s2, limits.axis_accel_mm_s2
+    axes = "".join(f"""
+[AXIS_{name}]
+MAX_VELOCITY = {v:g}
+MAX_ACCELERATION = {a_axis:.4f}
+MIN_LIMIT = -100000
+MAX_LIMIT = 100000
+
+[JOINT_{j}]
+TYPE = LINEAR
+HOME = 0
+MAX_VELOCITY = {v:g}
+MAX_ACCELERATION = {a_axis:.4f}
+MIN_LIMIT = -100000
+MAX_LIMIT = 100000
+FERROR = 1000
+MIN_FERROR = 1000
+HOME_SEARCH_VEL = 0
+HOME_SEQUENCE = 0
+""" for j, name in enumerate("XYZ"))
+    return f"""# generated by benchmarks/linuxcnc_peer.py
+[EMC]
+VERSION = 1.1
+MACHINE = nurbsmotion-race
+DEBUG = 0
+
+[DISPLAY]
+DISPLAY = {display}
+
+[RACE]
+PROGRAM = {files.program}
+SAMPLES = {files.samples}
+STATUS = {files.status}
+TIMEOUT_S = {timeout_s:g}
+
+[TASK]
+TASK = milltask
+CYCLE_TIME = 0.001
+
+[RS274NGC]
+PARAMETER_FILE = race.var
+
+[EMCMOT]
+EMCMOT = motmod
+COMM_TIMEOUT = 1.0
+SERVO_PERIOD = {period_ns}
+
+[EMCIO]
+EMCIO = io
+CYCLE_TIME = 0.100
+TOOL_TABLE = race.tbl
+
+[HAL]
+HALFILE = race.hal
+
+[TRAJ]
+COORDINATES = X Y Z
+LINEAR_UNITS = mm
+ANGULAR_UNITS = degree
+DEFAULT_LINEAR_VELOCITY = {v:g}
+MAX_LINEAR_VELOCITY = {v:g}
+DEFAULT_LINEAR_ACCELERATION = {a:g}
+MAX_LINEAR_ACCELERATION = {a:g}
+ARC_BLEND_ENABLE = 1
+NO_FORCE_HOMING = 1
+
+[KINS]
+KINEMATICS = trivkins
+JOINTS = 3
+{axes}"""
+
+
+# ---- samples -----------------------------------------------------------------------------------------
+class SamplesError(ValueError):
+    """halsampler's output is unusable (overrun, a gap in the sample numbers, a bad line)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Samples:
+    """One row per servo period: axis X, Y, Z commanded position (mm) and motion.current-vel."""
+
+    position_mm: NDArray[np.float64]  # (N, 3)
+    speed_mm_s: NDArray[np.float64]  # (N,)
+
+    def moving_span(self) -> tuple[int, int] | None:
+        """(first, last) row whose position differs from the row before it; None: no motion."""
+        moved = np.flatnonzero(np.any(self.position_mm[1:] != self.position_mm[:-1], axis=1)) + 1
+        return (int(moved[0]), int(moved[-1])) if len(moved) else None
+
+    def motion_cycles(self) -> int:
+        """Servo periods from the first to the last moving sample, both included."""
+        span = self.moving_span()
+        return 0 if span is None else span[1] - span[0] + 1
+
+    def moving_positions(self) -> NDArray[np.float64]:
+        """The commanded positions from the last rest sample before motion to the end of it."""
+        span = self.moving_span()
+        return self.position_mm[:0] if span is None else self.position_mm[span[0] - 1: span[1] + 1]
+
+
+def parse_samples(text: str, source: str = "halsampler") -> Samples:
+    """``halsampler -t`` output of a ``cfg=ffff`` sampler: ``tag x y z v`` per line, tags
+    consecutive; an ``overrun`` line or a gap means samples were lost (an error)."""
+    rows: list[list[float]] = []
+    last_tag = None
+    for number, line in enumerate(text.splitlines(), 1):
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == "overrun":
+            raise SamplesError(f"{source}:{number}: sampler FIFO overrun (samples lost)")
+        if len(words) != 5:
+            raise SamplesError(f"{source}:{number}: expected 'tag x y z v', got {line.strip()!r}")
+        try:
+            tag, values = int(words[0]), [float(w) for w in words[1:]]
+        except ValueError:
+            raise SamplesError(f"{source}:{number}: not numbers: {line.strip()!r}") from None
+        if last_tag is not None and tag != last_tag + 1:
+            raise SamplesError(f"{source}:{number}: sample {tag} follows {last_tag} ({tag - last_tag - 1} lost)")
+        last_tag = tag
+        rows.append(values)
+    data = np.array(rows, dtype=np.float64).reshape(-1, 4)
+    return Samples(data[:, :3].copy(), data[:, 3].copy())
+
+
+# ---- rs274 canon ------------------------------------------------------------------------------------
+CANON_CALL = re.compile(r"^\s*\d+\s+N\S*\s+([A-Z_0-9]+)\((.*)\)\s*$")
+
+
+@dataclass(frozen=True)
+class CanonMove:
+    kind: str  # STRAIGHT_TRAVERSE, STRAIGHT_FEED, ARC_FEED
+    end_mm: tuple[float, float, float]  # machine coordinates (offsets added, inches converted)
+
+
+def parse_canon(text: str) -> list[CanonMove]:
+    """End points of the moves in ``rs274 -g`` output, in machine millimetres: program
+    coordinates + G5x + G92 + tool length offset, times 25.4 under CANON_UNITS_INCHES; arcs
+    only in the XY plane (ARC_FEED's first/second end = X/Y, axis end = Z)."""
+    scale, plane = 1.0, "XY"
+    g5x, g92, tool = np.zeros(3), np.zeros(3), np.zeros(3)
+    moves: list[CanonMove] = []
+    for line in text.splitlines():
+        match = CANON_CALL.match(line)
+        if not match:
+            continue
+        name, args = match.group(1), [a for a in re.split(r"[\s,]+", match.group(2).strip()) if a]
+        if name == "USE_LENGTH_UNITS":
+            scale = INCH_MM if "INCHES" in args[0] else (10.0 if "CM" in args[0] else 1.0)
+        elif name == "SELECT_PLANE":
+            plane = args[0].replace("CANON_PLANE_", "")
+        elif name == "SET_G5X_OFFSET":
+            g5x = np.array([float(a) for a in args[1:4]])
+        elif name == "SET_G92_OFFSET":
+            g92 = np.array([float(a) for a in args[0:3]])
+        elif name == "USE_TOOL_LENGTH_OFFSET":
+            tool = np.array([float(a) for a in args[0:3]])
+        elif name in ("STRAIGHT_TRAVERSE", "STRAIGHT_FEED"):
+            p = np.array([float(a) for a in args[0:3]])
+            moves.append(CanonMove(name, tuple(((p + g5x + g92 + tool) * scale).tolist())))
+        elif name == "ARC_FEED" and plane == "XY":
+            p = np.array([float(args[0]), float(args[1]), float(args[5])])
+            moves.append(CanonMove(name, tuple(((p + g5x + g92 + tool) * scale).tolist())))
+    return moves
+
+
+def canon_resolution_mm(text: str) -> float:
+    """Largest rounding of rs274's four printed decimals in mm (0.5e-4 per coordinate, in
+    inches when the program switches to them), over the 3 coordinates."""
+    unit = INCH_MM if "CANON_UNITS_INCHES" in text else 1.0
+    return 0.5e-4 * unit * math.sqrt(3.0)
+
+
+def canon_errors(stderr: str) -> str | None:
+    """rs274's first error line, if any."""
+    for line in stderr.splitlines():
+        if line.strip() and not line.startswith("executing"):
+            return line.strip()
+    return None
+
+
+def run_rs274(program: Path, home: Path, timeout_s: float = 60.0) -> tuple[str, str | None]:
+    """(``rs274 -g`` output, its first error line or None); its own HOME for .tool.mmap."""
+    home.mkdir(parents=True, exist_ok=True)
+    env = dict(os.environ, HOME=str(home))
+    done = subprocess.run(["rs274", "-g", str(program)], capture_output=True, text=True, env=env,
+                          timeout=timeout_s, stdin=subprocess.DEVNULL)
+    error = canon_errors(done.stderr)
+    if error is None and done.returncode != 0:
+        error = f"rs274 exit status {done.returncode}"
+    return done.stdout, error
+
+
+# ---- one LinuxCNC run ---------------------------------------------------------------------------------
+class LinuxcncError(RuntimeError):
+    """LinuxCNC refused or failed the program (the message names why)."""
+
+
+def missing_tools() -> str | None:
+    """None when linuxcnc, rs274 and halsampler are installed; else one line saying how."""
+    missing = [name for name in ("linuxcnc", "rs274", "halsampler") if shutil.which(name) is None]
+    if missing:
+        return f"LinuxCNC is not installed ({', '.join(missing)} not found): {INSTALL_HINT}"
+    return None
+
+
+def wait_for_lock(timeout_s: float) -> None:
+    """Another LinuxCNC runs on this host (its lock file exists): wait for it, never clean it up."""
+    end = time.monotonic() + timeout_s
+    while LOCKFILE.exists():
+        if time.monotonic() > end:
+            raise LinuxcncError(f"{LOCKFILE} still exists after {timeout_s:g} s: another LinuxCNC is running")
+        time.sleep(1.0)
+
+
+def tool_table(tools: int = TOOLS) -> str:
+    """Tools 1..N with zero length and diameter: T words and M6 run, G43 offsets nothing
+    (as our reader without a tool table)."""
+    return "".join(f"T{t} P{t} Z0 D0 ;race tool {t}\n" for t in range(1, tools + 1))
+
+
+def prepare_run(folder: Path, program_text: str, limits: RaceLimits, timeout_s: float) -> tuple[RunFiles, Path]:
+    """Write the INI, HAL, tool table and program into ``folder``, owned by the unprivileged
+    uid rtapi_app runs as; returns the files and the INI path."""
+    folder.mkdir(parents=True, exist_ok=True)
+    files = RunFiles.inside(folder)
+    files.program.write_text(program_text)
+    (folder / "race.hal").write_text(hal_text())
+    (folder / "race.tbl").write_text(tool_table())
+    ini = folder / "race.ini"
+    ini.write_text(ini_text(limits, files, timeout_s))
+    (folder / "home").mkdir(exist_ok=True)
+    (folder / "fifo").mkdir(exist_ok=True)
+    if os.geteuid() == 0:
+        for path in [folder, *folder.rglob("*")]:
+            os.chown(path, UNPRIVILEGED_UID, -1)
+    return files, ini
+
+
+def normal_priority() -> None:
+    """In LinuxCNC's process: undo the caller's nice (possible as root only; else kept)."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, 0)
+    except OSError:
+        pass
+
+
+def run_linuxcnc(program_text: str, limits: RaceLimits, folder: Path, timeout_s: float,
+                 last_move_line: int = 0) -> Samples:
+    """Run the program once through LinuxCNC's planner (real time: a 70 s program takes 70 s);
+    a run whose last executed motion is on a line before ``last_move_line`` ended early (an error)."""
+    files, ini = prepare_run(folder, program_text, limits, timeout_s)
+    env = dict(os.environ, HOME=str(folder / "home"), RTAPI_FIFO_PATH=str(folder / "fifo" / "rtapi_fifo"),
+               RTAPI_UID=str(UNPRIVILEGED_UID))
+    env.pop("DISPLAY", None)
+    wait_for_lock(600.0)
+    log = folder / "linuxcnc.log"
+    with open(log, "w") as out:
+        done = subprocess.run(["linuxcnc", str(ini)], stdout=out, stderr=subprocess.STDOUT, env=env, cwd=folder,
+                              stdin=subprocess.DEVNULL, timeout=timeout_s + 120.0, preexec_fn=normal_priority)
+    if not files.status.exists():
+        tail = " | ".join(log.read_text(errors="replace").strip().splitlines()[-3:])
+        raise LinuxcncError(f"LinuxCNC did not run the program (exit {done.returncode}): {tail}")
+    status = json.loads(files.status.read_text())
+    if not status["ok"]:
+        raise LinuxcncError("; ".join(status["errors"]) or "LinuxCNC reported a failure")
+    samples = parse_samples(files.samples.read_text(), str(files.samples))
+    if samples.motion_cycles() == 0:
+        raise LinuxcncError("no motion recorded (the run ended before the program started)")
+    reached = int(status.get("motion_line", 0))
+    if 0 < reached < last_move_line:
+        raise LinuxcncError(f"ended at line {reached}, before the last move (line {last_move_line})")
+    return samples
