@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
+from nurbsmotion.cli._format import figure, number
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
@@ -44,9 +45,10 @@ def read_program(path: str) -> str:
 
 def progress_text(status: dict[str, Any]) -> str:
     job = status["job"]
-    positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
-    return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
-            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
+    positions = " ".join(f"{a['name']} {number(a['commanded_mm'], 3)}" for a in status["axes"])
+    return (f"{figure(job['percent'], '5.1f')} %  cycle {job['cycle']}/{job['total']}  "
+            f"feed {number(job['feed_mm_s'], 1)} mm/s  override {figure(job['override_percent'], 'g')} %  "
+            f"{job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
 
 
 def _state_text(status: dict[str, Any]) -> str:
@@ -85,9 +87,9 @@ class _Rich:
 
     def update(self, status: dict[str, Any]) -> None:
         job = status["job"]
-        positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
+        positions = " ".join(f"{a['name']}{figure(a['commanded_mm'], '+.2f')}" for a in status["axes"])
         self.progress.update(self.task, total=job["total"], completed=job["cycle"],
-                             info=f"{job['feed_mm_s']:6.1f} mm/s ovr {job['override_percent']:g} % "
+                             info=f"{figure(job['feed_mm_s'], '6.1f')} mm/s ovr {figure(job['override_percent'], 'g')} % "
                                   f"{job.get('line') or '-'} {positions} {_state_text(status)}")
 
     def close(self) -> None:
@@ -127,8 +129,8 @@ def follow(client: Client, job_id: str, on_status: Callable[[dict[str, Any]], No
 
 def describe_outcome(info: dict[str, Any]) -> str:
     outcome = info.get("outcome") or {}
-    text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {outcome.get('sent', 0)}/"
-            f"{outcome.get('planned', 0)} set-points in {outcome.get('motion_time_s', 0.0):.2f} s")
+    text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {figure(outcome.get('sent'))}/"
+            f"{figure(outcome.get('planned'))} set-points in {number(outcome.get('motion_time_s'), 2)} s")
     reached = outcome.get("line_reached")
     if reached and outcome.get("outcome") != "completed":
         text += f", reached {reached['where']}"

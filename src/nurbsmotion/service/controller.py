@@ -56,7 +56,7 @@ class ActiveJob:
     name: str
     plan: JobPlan
     handle: JobHandle | None = None
-    stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown'
+    stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown', 'jog_lease', or the reason itself (a sentence)
     late_before: int = 0  # the link's cycle counters when the job started (outcome: the job's own)
     missed_before: int = 0
     started_s: float = field(default_factory=time.monotonic)
@@ -178,6 +178,8 @@ class Controller:
             raise Refused("mdi", err.message) from None
 
     def stop(self, reason: str = "stop") -> dict[str, Any]:
+        """Controlled stop of the running job; ``reason``: a key of the outcome's reasons
+        ('stop': "stopped on request") or the outcome's reason itself."""
         if self._job is None and self.homing.busy:  # stop the homing axis' search, restore its mode
             self.link.stop_homing()
             return {"ok": True, "job": None, "state": "homing"}
@@ -585,7 +587,7 @@ class Controller:
             outcome = "fault"
         reason = job.machine_fault or faults[0]["message"] if job.machine_fault or faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
-            "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, "")
+            "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, job.stop_requested)
         cut_short = job.plan.end_reason(getattr(job.handle, "fell_behind_row", -1))
         if cut_short and outcome == "completed":  # the planner stopped the job (failed or fell behind)
             outcome, reason = "stopped", cut_short
