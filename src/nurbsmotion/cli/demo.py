@@ -201,13 +201,20 @@ def _report(info: dict[str, Any], config: MachineConfig) -> int:
           f"(limit {config.interpolation.max_accel_mm_s2:g} mm/s^2)")
     print(f"max following error: {drives.max_following_error_mm:.3f} mm (simulated servo)")
     print(f"set-points: {outcome['sent']} streamed of {outcome['planned']} planned; the drives applied "
-          f"{'exactly the planned sequence' if drives.exact else 'a DIFFERENT sequence'}")
+          f"{'exactly the planned sequence' if drives.exact else 'a DIFFERENT sequence'}"
+          f"{waited_text(drives.rest_waits, config.cycle_period_s)}")
     print(f"cycles: {figure(outcome.get('late_cycles'))} late, {figure(outcome.get('missed_cycles'))} missed")
     plot = _plot(folder, config)
     print(f"record: {folder}")
     if plot:
         print(f"plot: {plot}")
     return 0 if outcome["outcome"] == "completed" and drives.exact else 1
+
+
+def waited_text(rest_waits: int, period_s: float) -> str:
+    """Where the drives held at a rest of the plan for the planner's next chunk (streamed job)."""
+    return f" (held {rest_waits} cycles, {rest_waits * period_s:.2f} s, at a rest of the plan for its next chunk)" \
+        if rest_waits else ""
 
 
 def _plot(folder: Path, config: MachineConfig) -> Path | None:
