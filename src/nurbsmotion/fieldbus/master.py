@@ -634,7 +634,8 @@ class Master:
         pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
             and ctl_job.playback.at_pause() else None
         return MasterStatus(self._phase, k, tuple(axes), timing, self._wire_index(job) if job else None,
-                            job.length if job else None, tuple(self._faults), pause)
+                            job.length if job else None, tuple(self._faults), pause,
+                            ctl_job.playback.r if ctl_job is not None else None)
 
     def faults(self) -> list[FaultReport]:
         return list(self._faults)

@@ -376,7 +376,8 @@ class Controller:
         mine = status.job_index is not None and (total is None and job.start_cycle >= 0 or status.job_length == total)
         index = status.job_index if mine and status.job_index is not None else -1
         cycle = max(index + 1, 0)
-        feed = job.plan.feed_at(index) * self._effective(job)
+        rate = status.rate if status.rate is not None else self._effective(job)  # 0 while held
+        feed = job.plan.feed_at(index) * rate
         reached = self._line_reached(job, index)
         pause = job.plan.pauses[status.pause] if status.pause is not None else None
         return {"paused": pause.reason if pause else None, "tool": pause.tool if pause else None,"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
