@@ -17,9 +17,9 @@ from typing import Any, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
 from nurbsmotion.cli._format import figure, number
-from nurbsmotion.errors import InputError
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
+from nurbsmotion.text_files import read_text_file
 
 HELP = "submit a program (G-code or YAML) to the daemon, follow it and print the outcome"
 POLL_S = 0.2
@@ -34,13 +34,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-block-delete", action="store_true", help="run '/' lines (block delete switch off)")
     parser.add_argument("--no-optional-stop", action="store_true", help="M1 does not pause (optional stop switch off)")
     add_socket_arguments(parser)
-
-
-def read_program(path: str) -> str:
-    try:
-        return Path(path).read_text(encoding="utf-8-sig")  # a BOM is not part of line 1
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(path, f"cannot read program: {getattr(err, 'strerror', None) or err}") from None
 
 
 def progress_text(status: dict[str, Any]) -> str:
@@ -194,7 +187,7 @@ def follow_and_report(client: Client, args: argparse.Namespace, job: dict[str, A
 
 
 def run(args: argparse.Namespace) -> int:
-    text = read_program(args.program)
+    text = read_text_file(args.program)  # the same errors as check's
 
     def body(client: Client) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
