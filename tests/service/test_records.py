@@ -76,3 +76,13 @@ def test_a_whole_plan_record_is_left_as_written(tmp_path):
     record.write_plan({"cycles": 2}, lambda path: path.write_text("t,x\n0,0\n0.001,1\n"))
     records.mark_interrupted()
     assert record.plan() == {"cycles": 2}
+
+
+def test_record_folders_are_absolute_whatever_the_daemons_working_directory(tmp_path, monkeypatch):
+    """A client's working directory is not the daemon's: 'var/demo/jobs/...' named the wrong place."""
+    monkeypatch.chdir(tmp_path)
+    records = JobRecords("var/demo")
+    record = records.create("a.nc", "G01 X1\n")
+    assert record.folder.is_absolute() and record.folder.parent == tmp_path / "var" / "demo" / "jobs"
+    assert records.listing()["root"] == str(tmp_path / "var" / "demo" / "jobs")
+    assert records.info(record.job_id)["folder"] == str(record.folder)

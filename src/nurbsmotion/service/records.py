@@ -180,7 +180,7 @@ class JobRecords:
     """The ``jobs`` folder of the data directory."""
 
     def __init__(self, data_dir: str | Path) -> None:
-        self.root = Path(data_dir) / "jobs"
+        self.root = Path(data_dir).absolute() / "jobs"  # shown to clients, whose working directory is not ours
         self._last_stamp_ms = 0  # folder stamps strictly increase, so names sort in submission order
 
     def _next_stamp(self) -> datetime:
