@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
-from nurbsmotion.cli._format import figure, number
+from nurbsmotion.cli._format import figure, number, reading_text
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
 from nurbsmotion.text_files import read_text_file
@@ -166,6 +166,9 @@ def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: 
         for line in response.get("errors") or [response.get("error", "rejected")]:
             error_line(args, line)
         return EXIT_REFUSED
+    read = reading_text(response["job"]["summary"].get("reading")) if cmd == "submit" else None
+    if read:  # as check says it: a program read only in part is never silent
+        print(f"{title}: {response['job']['summary'].get('blocks')} blocks, lines {read}", flush=True)
     info = follow_and_report(client, args, response["job"], _display(title, args.no_progress), "job")
     return 0 if info is not None and (info.get("outcome") or {}).get("outcome") == "completed" else 1
 
