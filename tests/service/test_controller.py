@@ -248,3 +248,27 @@ def test_feedback_log_false_records_no_feedback(tmp_path):
         assert link.feedback is None
     finally:
         controller.shutdown(2.0)
+
+
+def test_after_an_abort_the_progress_shows_where_the_job_stopped(parts, monkeypatch):
+    """Between the end of a job and its record (settling, files) the master no longer reports
+    it: the progress line read 'cycle 0/1791' after an abort (issue 26.6)."""
+    import threading
+
+    controller, link = parts
+    recorded = threading.Event()
+    settle = controller._settled_status
+    monkeypatch.setattr(controller, "_settled_status", lambda: (recorded.wait(5.0), settle())[1])
+    job = controller.submit("line.nc", "X5")["job"]
+    _wait(lambda: (controller.status()["job"] or {}).get("cycle", 0) >= 50)
+    controller.abort()
+    _wait(lambda: link.job is None)  # the master let go of it; its record is not written yet
+    status = controller.status()
+    recorded.set()
+    assert status["job"]["id"] == job["id"] and status["state"] == "fault"
+    assert status["job"]["cycle"] >= 50 and status["job"]["cycle"] == link_sent(controller, job["id"])
+
+
+def link_sent(controller, job_id):
+    _wait(_ended(controller))
+    return controller.job_info(job_id)["job"]["outcome"]["sent"]

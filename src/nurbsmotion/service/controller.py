@@ -374,7 +374,7 @@ class Controller:
             return None
         total = job.plan.total_cycles  # None while a streamed job is still being planned
         mine = status.job_index is not None and (total is None and job.start_cycle >= 0 or status.job_length == total)
-        index = status.job_index if mine and status.job_index is not None else -1
+        index = status.job_index if mine and status.job_index is not None else self._ended_index(job)
         cycle = max(index + 1, 0)
         rate = status.rate if status.rate is not None else self._effective(job)  # 0 while held
         feed = job.plan.feed_at(index) * rate
@@ -387,6 +387,14 @@ class Controller:
                 "override_percent": round(self._effective(job) * 100.0, 3),
                 "line": reached["where"] if reached else None, "started_at": job.started_at,
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
+
+    @staticmethod
+    def _ended_index(job: ActiveJob) -> int:
+        """The last planned set-point sent of a job the master has let go of (it ended; its
+        record is being written), so the progress shows where it stopped, not cycle 0; -1
+        before it started."""
+        result = getattr(job.handle, "result", None)
+        return result.sent - 1 if result is not None else -1
 
     @staticmethod
     def _pause_reason(job: ActiveJob, status: MasterStatus) -> str | None:
