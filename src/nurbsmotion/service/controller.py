@@ -433,6 +433,8 @@ class Controller:
         try:
             record = self.records.create(name, text)
             record.write_config(config_dict(self.config))
+            if plan.program is not None:  # the lines an interrupted job's record names (records.py)
+                record.write_block_lines(b.source.line for b in plan.program.blocks)
             plan.write_records(record)
             return record
         except OSError as err:
