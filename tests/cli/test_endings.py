@@ -60,15 +60,15 @@ class FakeDaemon:
 
     def _talk(self, conn: socket.socket) -> None:
         with conn, conn.makefile("rb") as lines:
-            for line in lines:
-                request = json.loads(line)
-                self.requests.append(request["cmd"])
-                response = self.answer(request)
-                if response is not None:
-                    try:
+            try:
+                for line in lines:
+                    request = json.loads(line)
+                    self.requests.append(request["cmd"])
+                    response = self.answer(request)
+                    if response is not None:
                         conn.sendall(json.dumps(response).encode() + b"\n")
-                    except OSError:
-                        return
+            except OSError:  # the client went away (it was interrupted): so does this connection
+                return
 
     def close(self) -> None:
         self.server.close()
