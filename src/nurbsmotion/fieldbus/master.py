@@ -401,7 +401,8 @@ class Master:
             return
         assert self._bus is not None
         self._heartbeat = MasterHeartbeat(self._bus, self.config.master.node_id, period_ms / 1000.0,
-                                          self._making_progress)
+                                          self._making_progress, thread_priority=None if self._rt_priority is None
+                                          else self._rt_priority - 1)
         self._heartbeat.start()
 
     def _making_progress(self) -> bool:
