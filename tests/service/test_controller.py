@@ -226,7 +226,9 @@ def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
     link = FakeLink(config, cycle_s=0.0005)
     controller = Controller(config, link, lambda n, t, s, o: plan_job(n, t, config, s, o), JobRecords(tmp_path))
     try:
-        job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\n")["job"]
+        job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\nM30\nG01 X9\n")["job"]
+        # the submit's summary says how much of the file was read (issue 26.5)
+        assert job["summary"]["reading"] == {"lines_total": 6, "last_line": 5, "ended_by": "M30", "lines_not_read": 1}
         _wait(_ended(controller))
         outcome = controller.job_info(job["id"])["job"]["outcome"]
         assert outcome["line_reached"]["where"] == "part.nc:4" and outcome["line_reached"]["text"] == "G01 X2 Y3"
