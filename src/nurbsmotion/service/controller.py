@@ -149,6 +149,7 @@ class Controller:
                 plan.cancel()
                 self._stop_traffic()
                 self._stop_feedback(job)
+                plan.wait_closed()  # the planner worker writes the trace there until then
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
                 log.info(kv("submit_refused", name=name, error=err))
                 raise InputError("submit", str(err)) from None

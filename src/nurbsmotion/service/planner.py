@@ -112,6 +112,9 @@ class PlannedJob:
     def cancel(self) -> None:
         """Nothing runs beside the job."""
 
+    def wait_closed(self) -> None:
+        """Nothing writes into the record beside the job."""
+
     def end_reason(self, fell_behind_row: int) -> str:
         return ""
 

@@ -183,6 +183,12 @@ class StreamedJob:
             self._cancel_sent = True
         self._send(CancelPlan())
 
+    def wait_closed(self, timeout_s: float = END_TIMEOUT_S) -> None:
+        """After :meth:`cancel`: wait for the worker's last word (it has closed the job's trace),
+        so a folder removed now is not written again: a submission refused at the start of
+        streaming left a folder holding only the trace, marked 'interrupted' later."""
+        self._ended.wait(timeout_s)
+
     def _send(self, command: Any) -> None:
         if self._commands is None or self._ended.is_set():
             return
