@@ -599,7 +599,9 @@ class Master:
         if self._phase != "holding" or self._thread is None:
             raise FieldbusError(f"stream: the axes are not holding (phase {self._phase}); "
                                 f"{'call reset_faults()' if self._thread is not None else 'call bring_up()'} first")
-        if self._job is not None or any(r[0] == "job" for r in self._requests):
+        # tuple(): copied in one C call; the cycle thread pops requests meanwhile (iterating the
+        # deque itself raised 'deque mutated during iteration' in 1 of 50 demo runs under load)
+        if self._job is not None or any(r[0] == "job" for r in tuple(self._requests)):
             raise FieldbusError("stream: a job is already running")
         if self._supervisor.reported:
             raise FieldbusError("stream: faults not acknowledged; call reset_faults() first")
