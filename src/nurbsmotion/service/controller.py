@@ -145,14 +145,16 @@ class Controller:
                 self.machine.ready()
                 job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
                 self.machine.start(job)
-            except (InputError, FieldbusError) as err:
+            except BaseException as err:  # any failure to start, an internal one too: no stray folder
                 plan.cancel()
                 self._stop_traffic()
                 self._stop_feedback(job)
                 plan.wait_closed()  # the planner worker writes the trace there until then
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
                 log.info(kv("submit_refused", name=name, error=err))
-                raise InputError("submit", str(err)) from None
+                if isinstance(err, (InputError, FieldbusError)):
+                    raise InputError("submit", str(err)) from None
+                raise
             job.watcher = threading.Thread(target=self._watch, args=(job,), name=f"job-{record.job_id}", daemon=True)
             with self._lock:
                 self._job = job
