@@ -58,17 +58,17 @@ def cap_switch_interval(period_s: float) -> float:
     return sys.getswitchinterval()
 
 
-def set_thread_realtime(priority: int | None) -> str:
-    """SCHED_FIFO ``priority`` for the calling thread when allowed (root / CAP_SYS_NICE), on
-    the real-time CPU (realtime_cpu) when there is one; returns the policy in force
-    ('SCHED_FIFO', or 'normal: <reason>')."""
+def set_thread_realtime(priority: int | None, thread_id: int = 0) -> str:
+    """SCHED_FIFO ``priority`` for the calling thread (or the thread ``thread_id``, its native
+    id) when allowed (root / CAP_SYS_NICE), on the real-time CPU (realtime_cpu) when there is
+    one; returns the policy in force ('SCHED_FIFO', or 'normal: <reason>')."""
     if priority is None or not hasattr(os, "sched_setscheduler"):
         return "normal: not requested"
     try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(max(1, priority)))
+        os.sched_setscheduler(thread_id, os.SCHED_FIFO, os.sched_param(max(1, priority)))
     except (PermissionError, OSError) as err:
         return f"normal: {err}"
-    pin_to_realtime_cpu()
+    pin_to_realtime_cpu(thread_id)
     return "SCHED_FIFO"
 
 
@@ -96,13 +96,14 @@ def realtime_cpu(allowed: set[int] | None = None) -> int | None:
     return max(allowed) if len(allowed) >= 2 else None
 
 
-def pin_to_realtime_cpu() -> int | None:
-    """Run the calling thread on realtime_cpu(); the CPU, or None (one CPU, or not allowed)."""
+def pin_to_realtime_cpu(thread_id: int = 0) -> int | None:
+    """Run the calling thread (or ``thread_id``) on realtime_cpu(); the CPU, or None (one CPU,
+    or not allowed)."""
     cpu = realtime_cpu()
     if cpu is None:
         return None
     try:
-        os.sched_setaffinity(0, {cpu})
+        os.sched_setaffinity(thread_id, {cpu})
     except OSError:
         return None
     return cpu

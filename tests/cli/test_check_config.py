@@ -73,12 +73,24 @@ def test_the_machine_gate_tool_table_and_persisted_offsets_apply(tmp_path, capsy
 def test_a_program_starting_with_a_byte_order_mark_is_read_by_every_command(tmp_path, capsys):
     """CAM posts and Windows editors write a UTF-8 BOM (tests/data/gcode/textbook_simple_mill.gcode
     has one): it is not part of line 1 for check, check --config, plan or what run submits."""
-    from nurbsmotion.cli.run import read_program
+    from nurbsmotion.text_files import read_text_file
 
     part = tmp_path / "part.nc"
     part.write_bytes(b"\xef\xbb\xbfG21 G90\nG01 X10 F3000\n")
     assert main(["check", str(part)]) == 0
     assert main(["check", "--config", DEMO, str(part)]) == 0
     assert main(["plan", "--config", DEMO, str(part)]) == 0
-    assert not read_program(str(part)).startswith("\ufeff")
+    assert not read_text_file(str(part)).startswith("\ufeff")  # what run submits
     assert "\ufeff" not in capsys.readouterr().err
+
+
+def test_run_of_a_binary_file_says_what_check_says(tmp_path, capsys):
+    """One message for a file that is not text, whichever command reads it (issue 26.6)."""
+    part = tmp_path / "part.nc"
+    part.write_bytes(b"G21\n\x89PNG\r\n\x1a\n\xff\xfe")
+    assert main(["check", str(part)]) == 2
+    checked = capsys.readouterr().err
+    assert main(["run", str(part), "--socket", str(tmp_path / "none.sock")]) == 2  # refused before any daemon
+    ran = capsys.readouterr().err
+    assert checked.replace("nurbsmotion check", "") == ran.replace("nurbsmotion run", "")
+    assert ran == f"nurbsmotion run: error: {part}: not a UTF-8 text file (invalid start byte at byte 4)\n"

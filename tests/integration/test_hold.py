@@ -28,6 +28,7 @@ def test_hold_rests_on_the_path_and_resume_completes_every_row(daemon):
     assert later["state"] == "held" and later["job"]["cycle"] == cycle and later["job"]["paused"] is None
     assert [a["commanded_mm"] for a in later["axes"]] == [a["commanded_mm"] for a in held["axes"]]
     assert all(abs(a["actual_mm"] - a["commanded_mm"]) < 1e-3 for a in later["axes"])  # at rest
+    assert held["job"]["feed_mm_s"] == 0.0 and later["job"]["feed_mm_s"] == 0.0  # at rest: no feed, not the plan's
     assert daemon.request("resume")["ok"]
     job = daemon.wait_job_end(job_id)
     assert job["outcome"]["outcome"] == "completed"

@@ -226,7 +226,9 @@ def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
     link = FakeLink(config, cycle_s=0.0005)
     controller = Controller(config, link, lambda n, t, s, o: plan_job(n, t, config, s, o), JobRecords(tmp_path))
     try:
-        job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\n")["job"]
+        job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\nM30\nG01 X9\n")["job"]
+        # the submit's summary says how much of the file was read (issue 26.5)
+        assert job["summary"]["reading"] == {"lines_total": 6, "last_line": 5, "ended_by": "M30", "lines_not_read": 1}
         _wait(_ended(controller))
         outcome = controller.job_info(job["id"])["job"]["outcome"]
         assert outcome["line_reached"]["where"] == "part.nc:4" and outcome["line_reached"]["text"] == "G01 X2 Y3"
@@ -248,3 +250,41 @@ def test_feedback_log_false_records_no_feedback(tmp_path):
         assert link.feedback is None
     finally:
         controller.shutdown(2.0)
+
+
+def test_after_an_abort_the_progress_shows_where_the_job_stopped(parts, monkeypatch):
+    """Between the end of a job and its record (settling, files) the master no longer reports
+    it: the progress line read 'cycle 0/1791' after an abort (issue 26.6)."""
+    import threading
+
+    controller, link = parts
+    recorded = threading.Event()
+    settle = controller._settled_status
+    monkeypatch.setattr(controller, "_settled_status", lambda: (recorded.wait(5.0), settle())[1])
+    job = controller.submit("line.nc", "X5")["job"]
+    _wait(lambda: (controller.status()["job"] or {}).get("cycle", 0) >= 50)
+    controller.abort()
+    _wait(lambda: link.job is None)  # the master let go of it; its record is not written yet
+    status = controller.status()
+    recorded.set()
+    assert status["job"]["id"] == job["id"] and status["state"] == "fault"
+    assert status["job"]["cycle"] >= 50 and status["job"]["cycle"] == link_sent(controller, job["id"])
+
+
+def link_sent(controller, job_id):
+    _wait(_ended(controller))
+    return controller.job_info(job_id)["job"]["outcome"]["sent"]
+
+
+def test_a_start_that_fails_unexpectedly_leaves_no_record(parts, monkeypatch):
+    """An internal error as streaming starts (a race in the master, 1 of 50 demo runs) left a
+    folder without outcome, marked 'interrupted' by the next daemon: a stray job."""
+    controller, link = parts
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("deque mutated during iteration")
+
+    monkeypatch.setattr(link, "stream", broken)
+    with pytest.raises(RuntimeError):
+        controller.submit("line.nc", "X5")
+    assert controller.records.all() == [] and controller.status()["job"] is None

@@ -76,3 +76,41 @@ def test_a_whole_plan_record_is_left_as_written(tmp_path):
     record.write_plan({"cycles": 2}, lambda path: path.write_text("t,x\n0,0\n0.001,1\n"))
     records.mark_interrupted()
     assert record.plan() == {"cycles": 2}
+
+
+def test_record_folders_are_absolute_whatever_the_daemons_working_directory(tmp_path, monkeypatch):
+    """A client's working directory is not the daemon's: 'var/demo/jobs/...' named the wrong place."""
+    monkeypatch.chdir(tmp_path)
+    records = JobRecords("var/demo")
+    record = records.create("a.nc", "G01 X1\n")
+    assert record.folder.is_absolute() and record.folder.parent == tmp_path / "var" / "demo" / "jobs"
+    assert records.listing()["root"] == str(tmp_path / "var" / "demo" / "jobs")
+    assert records.info(record.job_id)["folder"] == str(record.folder)
+
+
+def test_an_interrupted_job_names_the_line_and_positions_its_files_show(tmp_path):
+    """The daemon died mid-job: the record says where the drives were last (issue 26.6)."""
+    records = JobRecords(tmp_path)
+    record = records.create("part.nc", "G21 G90\nG01 X1 F600\nG01 X2 Y1\n")
+    record.write_block_lines([2, 3])
+    record.write_plan_summary({"program": "part.nc", "streamed": False, "cycles": 5})
+    (record.folder / "trace.csv").write_text("t,block,u,x,y,z\n0,0,0,0,0,0\n0.004,0,0.5,0.5,0,0\n0.008,0,1,1,0,0\n"
+                                             "0.012,1,0.5,1.5,0.5,0\n0.016,1,1,2,1,0\n")
+    (record.folder / "feedback.csv").write_text(
+        "job_cycle,axis,node,statusword,position_counts,position_mm,time_s\n-1,X,1,4663,0,0.000000,0.0\n"
+        "2,X,1,4663,990,0.990000,0.01\n2,Y,2,4663,0,0.000000,0.01\n3,X,1,4663,1480,1.480000,0.014\n"
+        "3,Y,2,4663,490,0.49")  # the daemon died writing this line
+    assert records.mark_interrupted() == [record]
+    outcome = record.outcome()
+    assert outcome["outcome"] == "interrupted"
+    assert outcome["line_reached"] == {"where": "part.nc:3", "line": 3, "text": "G01 X2 Y1", "block": 1, "setpoint": 3}
+    assert outcome["final_position"] == {"X": {"commanded_mm": 1.5, "actual_mm": 1.48},
+                                         "Y": {"commanded_mm": 0.5, "actual_mm": 0.0}}
+    assert outcome["settled"] is False and "feedback.csv" in outcome["reached_from"]
+
+
+def test_an_interrupted_job_without_feedback_says_nothing_it_does_not_know(tmp_path):
+    records = JobRecords(tmp_path)
+    record = records.create("part.nc", "G01 X1 F600\n")
+    assert records.mark_interrupted() == [record]
+    assert record.outcome()["line_reached"] is None and record.outcome()["final_position"] is None

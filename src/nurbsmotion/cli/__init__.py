@@ -11,7 +11,8 @@ planner or canopen (tests/cli/test_main.py checks that the table and the modules
 
 Exit codes: 0 success, 1 the job failed (fault, stop), 2 bad input (one line per error on
 stderr), 3 no daemon answers on the control socket (run, status, stop, abort, hold, resume, reset,
-override, offsets), 70 internal error.
+override, offsets), 70 internal error, 130 interrupted (Ctrl-C), 141 the reader of the output
+left (``| head``; cli._endings).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from dataclasses import dataclass
 from types import ModuleType
 
 from nurbsmotion import __version__
+from nurbsmotion.cli._endings import interrupted, output_closed, reader_gone
 from nurbsmotion.errors import InputError, NurbsmotionError
 from nurbsmotion.log import setup_logging
 
@@ -120,8 +122,24 @@ def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser(argv)
-    args = parser.parse_args(argv)
+    """Run the command; Ctrl-C and a reader that closed stdout end it quietly at any moment,
+    its imports included (exit codes 130 and 141: cli._endings)."""
+    args: argparse.Namespace | None = None
+    try:
+        parser = build_parser(argv)
+        args = parser.parse_args(argv)
+        code = _run_command(parser, args)
+        sys.stdout.flush()  # a reader that left shows here, not in the interpreter's last flush
+        return code
+    except KeyboardInterrupt:
+        return interrupted(getattr(args, "command", None))
+    except BrokenPipeError as err:
+        if reader_gone(sys.stdout) or reader_gone(sys.stderr):
+            return output_closed()
+        return _internal_error(getattr(args, "command", None), err)
+
+
+def _run_command(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     setup_logging(getattr(args, "verbose", 0))
     if args.command in COMMANDS and COMMANDS[args.command].computes:
         from nurbsmotion.runtime import keep_freed_memory  # ctypes: not for the control clients
@@ -139,10 +157,13 @@ def main(argv: list[str] | None = None) -> int:
     except NurbsmotionError as err:
         sys.stderr.write(f"nurbsmotion {args.command}: error: {err}\n")
         return EXIT_FAILED
-    except KeyboardInterrupt:
-        sys.stderr.write(f"nurbsmotion {args.command}: interrupted\n")
-        return 130
+    except BrokenPipeError:
+        raise  # main() tells a closed output from an internal error
     except Exception as err:  # noqa: BLE001 - last line of defence: one line, no traceback
-        log.debug("internal error", exc_info=True)
-        sys.stderr.write(f"nurbsmotion {args.command}: internal error: {type(err).__name__}: {err} (run with -vv for details)\n")
-        return EXIT_INTERNAL
+        return _internal_error(args.command, err)
+
+
+def _internal_error(command: str | None, err: BaseException) -> int:
+    log.debug("internal error", exc_info=err)
+    sys.stderr.write(f"nurbsmotion {command}: internal error: {type(err).__name__}: {err} (run with -vv for details)\n")
+    return EXIT_INTERNAL

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import TypedDict
 
 from nurbsmotion.errors import InputError
+from nurbsmotion.cli._format import reading_text
 from nurbsmotion.cli._planning_options import machine_read_options
 from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.program import ReadOptions, read_program
@@ -75,8 +76,10 @@ def format_summary(s: ProgramSummary) -> str:
         feeds = f"{s.feed_min_mm_min:g} .. {s.feed_max_mm_min:g} mm/min"
         if s.blocks_at_machine_feed:
             feeds += f" ({s.blocks_at_machine_feed} blocks at the machine's rapid/default feed)"
+    read = reading_text(s.reading)
     lines = [
         f"program   {s.name}: OK",
+        *([f"lines     {read}"] if read else []),
         f"blocks    {s.blocks} ({kinds})",
         f"length    {s.length_mm:.3f} mm" + (f" ({lengths})" if lengths else ""),
         f"start     {xyz(s.start_mm)}",

@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
@@ -19,6 +20,7 @@ from typing import Any
 import functools
 
 from nurbsmotion import data
+from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.service.client import Client, RequestFailed
@@ -93,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"drives up: {len(config.axes)} simulated axes on {config.bus.interface}:{config.bus.channel}, "
                   f"T = {config.cycle_period_s * 1000:g} ms")
             _home_jog_mdi(config)
-            info = _run_program(config, args.no_progress)
+            info = _run_program(config, args.no_progress, daemon)
         finally:
             daemon.close()
     finally:
@@ -138,7 +140,7 @@ def follow_homing_quietly(client: Client, names: list[str], follow_homing: Any) 
         return follow_homing(client, names)
 
 
-def _run_program(config: MachineConfig, quiet: bool) -> dict[str, Any]:
+def _run_program(config: MachineConfig, quiet: bool, daemon: Daemon) -> dict[str, Any]:
     with Client(config.control.socket) as client:
         try:
             job = client.call("submit", name=PROGRAM_NAME, program=data.read_text(PROGRAM_NAME))["job"]
@@ -146,41 +148,76 @@ def _run_program(config: MachineConfig, quiet: bool) -> dict[str, Any]:
             from nurbsmotion.errors import InputError
 
             raise InputError(PROGRAM_NAME, "; ".join(err.errors)) from None
-        plan = job["summary"]
-        if plan.get("streamed"):  # planned while it runs (docs/daemon.md, streamed jobs)
-            print(f"planned {PROGRAM_NAME} while it runs: {plan['length_mm']:.1f} mm, {plan['blocks']} blocks, "
-                  f"first chunk in {plan['first_chunk_s']:.2f} s ({plan['algorithm']}, streamed)")
-        else:
-            print(f"planned {PROGRAM_NAME}: {plan['length_mm']:.1f} mm in {plan['cycles']} cycles "
-                  f"({plan['duration_s']:.2f} s, {plan['algorithm']}, planning {plan['planning_time_s']:.2f} s)")
-        display = _display(PROGRAM_NAME, quiet)
         try:
-            return follow(client, job["id"], display.update if display else None)
-        finally:
-            if display is not None:
-                display.close()
+            print(plan_line(job["summary"]))
+            display = _display(PROGRAM_NAME, quiet)
+            try:
+                return follow(client, job["id"], display.update if display else None)
+            finally:
+                if display is not None:
+                    display.close()
+        except BaseException as err:
+            _stop_failed_job(daemon, job, err)
+            raise
+
+
+def plan_line(plan: dict[str, Any]) -> str:
+    """The submitted job's plan in one line; a streamed job's length, cycles and duration are
+    null until the planner worker has reached them (docs/daemon.md, streamed jobs)."""
+    if plan.get("streamed"):
+        return (f"planned {PROGRAM_NAME} while it runs: {figure(plan.get('length_mm'), '.1f', ' mm')}, "
+                f"{plan['blocks']} blocks, first chunk in {number(plan.get('first_chunk_s'), 2)} s "
+                f"({plan['algorithm']}, streamed)")
+    return (f"planned {PROGRAM_NAME}: {figure(plan.get('length_mm'), '.1f', ' mm')} in {figure(plan.get('cycles'))} "
+            f"cycles ({number(plan.get('duration_s'), 2)} s, {plan['algorithm']}, "
+            f"planning {number(plan.get('planning_time_s'), 2)} s)")
+
+
+def _stop_failed_job(daemon: Daemon, job: dict[str, Any], err: BaseException) -> None:
+    """The demo failed (or was interrupted) while its job runs: stop the job along the path
+    with a reason that says so, not the daemon's "asked to end", and name its record."""
+    from nurbsmotion.service.controller import Refused
+
+    why = "was interrupted (Ctrl-C)" if isinstance(err, KeyboardInterrupt) else f"failed: {type(err).__name__}: {err}"
+    controller = daemon.controller
+    if controller is None:
+        return
+    try:
+        controller.stop(f"stopped: the demo {why}")
+    except Refused:  # it had ended already
+        return
+    sys.stderr.write(f"nurbsmotion demo: job {job['id']} stopped; its record: {job['folder']}\n")
 
 
 def _report(info: dict[str, Any], config: MachineConfig) -> int:
     folder = Path(info["folder"])
     outcome, plan = info["outcome"], info["plan"]
-    measured = plan["measured"]
+    measured = plan.get("measured") or {}  # null when the planner worker ended before measuring
+    chord_um = measured.get("max_chord_error_mm")
     drives = drive_report(folder, config)
     print(f"outcome: {outcome['outcome']}{': ' + outcome['reason'] if outcome.get('reason') else ''}")
-    print(f"motion time: {plan['duration_s']:.3f} s planned, {outcome['motion_time_s']:.2f} s wall clock")
-    print(f"max chord error: {measured['max_chord_error_mm'] * 1000:.2f} um "
+    print(f"motion time: {number(plan.get('duration_s'), 3)} s planned, {number(outcome.get('motion_time_s'), 2)} s "
+          f"wall clock")
+    print(f"max chord error: {number(None if chord_um is None else chord_um * 1000, 2)} um "
           f"(limit {config.interpolation.chord_error_mm * 1000:g} um)")
-    print(f"max acceleration: {measured['max_accel_mm_s2']:.0f} mm/s^2 "
+    print(f"max acceleration: {number(measured.get('max_accel_mm_s2'), 0)} mm/s^2 "
           f"(limit {config.interpolation.max_accel_mm_s2:g} mm/s^2)")
     print(f"max following error: {drives.max_following_error_mm:.3f} mm (simulated servo)")
     print(f"set-points: {outcome['sent']} streamed of {outcome['planned']} planned; the drives applied "
-          f"{'exactly the planned sequence' if drives.exact else 'a DIFFERENT sequence'}")
-    print(f"cycles: {outcome['late_cycles']} late, {outcome['missed_cycles']} missed")
+          f"{'exactly the planned sequence' if drives.exact else 'a DIFFERENT sequence'}"
+          f"{waited_text(drives.rest_waits, config.cycle_period_s)}")
+    print(f"cycles: {figure(outcome.get('late_cycles'))} late, {figure(outcome.get('missed_cycles'))} missed")
     plot = _plot(folder, config)
     print(f"record: {folder}")
     if plot:
         print(f"plot: {plot}")
     return 0 if outcome["outcome"] == "completed" and drives.exact else 1
+
+
+def waited_text(rest_waits: int, period_s: float) -> str:
+    """Where the drives held at a rest of the plan for the planner's next chunk (streamed job)."""
+    return f" (held {rest_waits} cycles, {rest_waits * period_s:.2f} s, at a rest of the plan for its next chunk)" \
+        if rest_waits else ""
 
 
 def _plot(folder: Path, config: MachineConfig) -> Path | None:

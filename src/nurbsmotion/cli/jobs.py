@@ -15,6 +15,7 @@ from typing import Any
 import sys
 
 from nurbsmotion.cli._control import EXIT_NO_DAEMON, add_socket_arguments, config_path, with_client
+from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.status import fault_text
 from nurbsmotion.config import load_config
 from nurbsmotion.service.client import Client
@@ -37,20 +38,14 @@ def list_lines(response: dict[str, Any]) -> list[str]:
     lines = [f"{'id':8}  {'submitted':23}  {'outcome':11}  {'time s':>7}  {'program':20}  line reached / reason"]
     for r in rows:
         outcome = "running" if r["running"] else r["outcome"] or "-"
-        seconds = "-" if r["motion_time_s"] is None else f"{r['motion_time_s']:.2f}"
+        seconds = number(r["motion_time_s"], 2)
         detail = r["line_reached"] or ""
         if r["outcome"] not in (None, "completed") and r["reason"]:
             detail = f"{detail}: {r['reason']}" if detail else r["reason"]
-        lines.append(f"{r['id']:8}  {r['submitted_at']:23}  {outcome:11}  {seconds:>7}  {r['name'][:20]:20}  {detail}")
+        lines.append(f"{r['id']:8}  {r['submitted_at'] or '-':23}  {outcome:11}  {seconds:>7}  {r['name'][:20]:20}  {detail}")
     if response["total"] > len(rows):
         lines.append(f"({len(rows)} of {response['total']}; --limit N for more)")
     return lines
-
-
-def number(value: float | None, digits: int) -> str:
-    """A figure of the record, or '-' while it is not known yet (a streamed job's plan.json
-    has no length, cycles or duration until the planner has reached them)."""
-    return "-" if value is None else f"{value:.{digits}f}"
 
 
 def show_lines(job: dict[str, Any]) -> list[str]:
@@ -68,17 +63,18 @@ def show_lines(job: dict[str, Any]) -> list[str]:
     if outcome.get("started_at"):
         lines.append(f"time        {outcome['started_at']} .. {outcome.get('ended_at', '')} "
                      f"({number(outcome.get('motion_time_s'), 2)} s)")
-        lines.append(f"set-points  {outcome.get('sent')}/{outcome.get('planned')} sent; "
-                     f"{outcome.get('late_cycles')} late, {outcome.get('missed_cycles')} missed cycles")
+        lines.append(f"set-points  {figure(outcome.get('sent'))}/{figure(outcome.get('planned'))} sent; "
+                     f"{figure(outcome.get('late_cycles'))} late, {figure(outcome.get('missed_cycles'))} missed cycles")
     reached = outcome.get("line_reached")
     if reached:
         lines.append(f"reached     {reached['where']}: {reached['text']}")
     for name, pos in (outcome.get("final_position") or {}).items():
-        actual = "-" if pos["actual_mm"] is None else f"{pos['actual_mm']:.4f}"
-        lines.append(f"final {name:5} commanded {pos['commanded_mm']:.4f} mm, actual {actual} mm")
+        lines.append(f"final {name:5} commanded {number(pos['commanded_mm'], 4)} mm, "
+                     f"actual {number(pos['actual_mm'], 4)} mm")
     for o in outcome.get("overrides") or []:
-        lines.append(f"override    {o['at_s']:.3f} s (set-point {o['setpoint']}): {o['requested_percent']:g} % "
-                     f"requested, {o['effective_percent']:g} % effective ({o['by']})")
+        lines.append(f"override    {number(o['at_s'], 3)} s (set-point {o['setpoint']}): "
+                     f"{figure(o['requested_percent'], 'g')} % requested, "
+                     f"{figure(o['effective_percent'], 'g')} % effective ({o['by']})")
     for fault in outcome.get("faults") or []:
         lines.append(f"fault       {fault_text(fault)}")
     lines.append(f"files       {' '.join(job.get('files') or [])}")

@@ -15,6 +15,7 @@ import re
 from typing import Any
 
 from nurbsmotion.cli._control import add_socket_arguments, with_client
+from nurbsmotion.cli._format import figure
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.client import Client
 
@@ -55,7 +56,7 @@ def request_fields(args: argparse.Namespace) -> dict[str, Any]:
 
 def format_offsets(o: dict[str, Any]) -> list[str]:
     def xyz(v: list[float]) -> str:
-        return " ".join(f"{a}{c:g}" for a, c in zip("XYZ", v))
+        return " ".join(f"{a}{figure(c, 'g')}" for a, c in zip("XYZ", v))
 
     lines = [f"active {o['active']}, tool {'T' + str(o['tool']) if o.get('tool') is not None else 'unknown'}"]
     for name, value in o["work_offsets_mm"].items():

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from nurbsmotion.cli._control import add_socket_arguments, simple_command, with_client
+from nurbsmotion.cli._format import figure
 
 HELP = "feed override in percent (0-150; above 100 clamped to what keeps the axis limits)"
 
@@ -16,5 +17,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     return with_client(args, simple_command(
-        "override", lambda r: f"override: requested {r['requested_percent']:g} %, "
-                              f"effective {r['effective_percent']:g} %", percent=args.percent))
+        "override", lambda r: f"override: requested {figure(r['requested_percent'], 'g')} %, "
+                              f"effective {figure(r['effective_percent'], 'g')} %", percent=args.percent))

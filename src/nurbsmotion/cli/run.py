@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
-from nurbsmotion.errors import InputError
+from nurbsmotion.cli._format import figure, number, reading_text
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
+from nurbsmotion.text_files import read_text_file
 
 HELP = "submit a program (G-code or YAML) to the daemon, follow it and print the outcome"
 POLL_S = 0.2
@@ -44,18 +45,12 @@ def line_number(text: str) -> int:
     return int(text)
 
 
-def read_program(path: str) -> str:
-    try:
-        return Path(path).read_text(encoding="utf-8-sig")  # a BOM is not part of line 1
-    except (OSError, UnicodeDecodeError) as err:
-        raise InputError(path, f"cannot read program: {getattr(err, 'strerror', None) or err}") from None
-
-
 def progress_text(status: dict[str, Any]) -> str:
     job = status["job"]
-    positions = " ".join(f"{a['name']} {a['commanded_mm']:.3f}" for a in status["axes"])
-    return (f"{job['percent']:5.1f} %  cycle {job['cycle']}/{job['total']}  feed {job['feed_mm_s']:.1f} mm/s  "
-            f"override {job['override_percent']:g} %  {job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
+    positions = " ".join(f"{a['name']} {number(a['commanded_mm'], 3)}" for a in status["axes"])
+    return (f"{figure(job['percent'], '5.1f')} %  cycle {job['cycle']}/{job['total']}  "
+            f"feed {number(job['feed_mm_s'], 1)} mm/s  override {figure(job['override_percent'], 'g')} %  "
+            f"{job.get('line') or '-'}  {positions}  [{_state_text(status)}]")
 
 
 def _state_text(status: dict[str, Any]) -> str:
@@ -94,9 +89,9 @@ class _Rich:
 
     def update(self, status: dict[str, Any]) -> None:
         job = status["job"]
-        positions = " ".join(f"{a['name']}{a['commanded_mm']:+.2f}" for a in status["axes"])
+        positions = " ".join(f"{a['name']}{figure(a['commanded_mm'], '+.2f')}" for a in status["axes"])
         self.progress.update(self.task, total=job["total"], completed=job["cycle"],
-                             info=f"{job['feed_mm_s']:6.1f} mm/s ovr {job['override_percent']:g} % "
+                             info=f"{figure(job['feed_mm_s'], '6.1f')} mm/s ovr {figure(job['override_percent'], 'g')} % "
                                   f"{job.get('line') or '-'} {positions} {_state_text(status)}")
 
     def close(self) -> None:
@@ -136,8 +131,8 @@ def follow(client: Client, job_id: str, on_status: Callable[[dict[str, Any]], No
 
 def describe_outcome(info: dict[str, Any]) -> str:
     outcome = info.get("outcome") or {}
-    text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {outcome.get('sent', 0)}/"
-            f"{outcome.get('planned', 0)} set-points in {outcome.get('motion_time_s', 0.0):.2f} s")
+    text = (f"job {info['id']} {outcome.get('outcome', 'unknown')}: {figure(outcome.get('sent'))}/"
+            f"{figure(outcome.get('planned'))} set-points in {number(outcome.get('motion_time_s'), 2)} s")
     reached = outcome.get("line_reached")
     if reached and outcome.get("outcome") != "completed":
         text += f", reached {reached['where']}"
@@ -180,6 +175,9 @@ def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: 
         for line in response.get("errors") or [response.get("error", "rejected")]:
             error_line(args, line)
         return EXIT_REFUSED
+    read = reading_text(response["job"]["summary"].get("reading")) if cmd == "submit" else None
+    if read:  # as check says it: a program read only in part is never silent
+        print(f"{title}: {response['job']['summary'].get('blocks')} blocks, lines {read}", flush=True)
     info = follow_and_report(client, args, response["job"], _display(title, args.no_progress), "job")
     return 0 if info is not None and (info.get("outcome") or {}).get("outcome") == "completed" else 1
 
@@ -201,7 +199,7 @@ def follow_and_report(client: Client, args: argparse.Namespace, job: dict[str, A
 
 
 def run(args: argparse.Namespace) -> int:
-    text = read_program(args.program)
+    text = read_text_file(args.program)  # the same errors as check's
 
     def body(client: Client) -> int:
         fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}

@@ -7,6 +7,7 @@ import json
 from typing import Any
 
 from nurbsmotion.cli._control import add_socket_arguments, with_client
+from nurbsmotion.cli._format import figure, number
 from nurbsmotion.service.client import Client
 
 HELP = "show the daemon's state, job progress, positions, following errors and faults"
@@ -17,38 +18,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_socket_arguments(parser)
 
 
-def _mm(value: float | None) -> str:
-    return "-" if value is None else f"{value:.4f}"
-
-
 def format_status(s: dict[str, Any]) -> list[str]:
     """Human-readable lines of a status response."""
     override = s["override"]
-    lines = [f"state {s['state']} (drives {s['phase']}), override {override['requested_percent']:g} % "
-             f"(effective {override['effective_percent']:g} %)"]
+    lines = [f"state {s['state']} (drives {s['phase']}), override {figure(override['requested_percent'], 'g')} % "
+             f"(effective {figure(override['effective_percent'], 'g')} %)"]
     coords = s.get("coordinates")
     if coords:
-        offset = " ".join(f"{a}{v:g}" for a, v in zip("XYZ", coords["active_offset_mm"]))
-        g92 = " ".join(f"{a}{v:g}" for a, v in zip("XYZ", coords["g92_mm"])) if coords["g92_applied"] else "off"
+        offset = " ".join(f"{a}{figure(v, 'g')}" for a, v in zip("XYZ", coords["active_offset_mm"]))
+        g92 = " ".join(f"{a}{figure(v, 'g')}" for a, v in zip("XYZ", coords["g92_mm"])) if coords["g92_applied"] \
+            else "off"
         tool = f"T{coords['tool']}" if coords.get("tool") is not None else "unknown"
         lines.append(f"coordinates {coords['active']} (offset {offset} mm), G92 {g92}, tool {tool}")
     job = s.get("job")
     if job:
         started = f" from line {job['start_line']}" if job.get("start_line") else ""
-        lines.append(f"job {job['id']} {job['name']}{started}: cycle {job['cycle']}/{job['total']} ({job['percent']:.1f} %), "
-                     f"feed {job['feed_mm_s']:.1f} mm/s, override {job['override_percent']:g} %, "
+        lines.append(f"job {job['id']} {job['name']}{started}: cycle {job['cycle']}/{job['total']} "
+                     f"({number(job['percent'], 1)} %), feed {number(job['feed_mm_s'], 1)} mm/s, "
+                     f"override {figure(job['override_percent'], 'g')} %, "
                      f"at {job.get('line') or '-'}")
     homing = s.get("homing") or {"axes": {}}
     for a in s["axes"]:
         homed = homing["axes"].get(a["name"])
-        lines.append(f"axis {a['name']} node {a['node']}{f' ({homed})' if homed else ''}: {a['drive_state']}, commanded {_mm(a['commanded_mm'])} mm, "
-                     f"actual {_mm(a['actual_mm'])} mm, following error {_mm(a['following_error_mm'])} mm")
+        lines.append(f"axis {a['name']} node {a['node']}{f' ({homed})' if homed else ''}: {a['drive_state']}, commanded {number(a['commanded_mm'], 4)} mm, "
+                     f"actual {number(a['actual_mm'], 4)} mm, following error {number(a['following_error_mm'], 4)} mm")
     if homing.get("error"):
         lines.append(f"homing failed: {homing['error']}")
     lines.extend(device_lines(s))
     c = s["cycles"]
     lines.append(f"cycles {c['count']}: late {c['late']}, missed {c['missed']}, lateness p99 "
-                 f"{c['lateness_p99_ms']:.3f} ms, max {c['lateness_max_ms']:.3f} ms")
+                 f"{number(c['lateness_p99_ms'], 3)} ms, max {number(c['lateness_max_ms'], 3)} ms")
     lines.extend(f"fault: {fault_text(f)}" for f in s["faults"])
     last = s.get("last_job")
     if last:
@@ -63,9 +62,8 @@ def device_lines(s: dict[str, Any]) -> list[str]:
     lines = []
     sp = s.get("spindle")
     if sp:
-        actual = "-" if sp["actual_rpm"] is None else f"{sp['actual_rpm']:g}"
-        lines.append(f"spindle node {sp['node']}: {sp['drive_state']}, commanded {sp['commanded_rpm']:g} rpm, "
-                     f"actual {actual} rpm{', at speed' if sp['at_speed'] else ''}"
+        lines.append(f"spindle node {sp['node']}: {sp['drive_state']}, commanded {figure(sp['commanded_rpm'], 'g')} rpm, "
+                     f"actual {figure(sp['actual_rpm'], 'g')} rpm{', at speed' if sp['at_speed'] else ''}"
                      f"{', fault: ' + sp['fault'] if sp.get('fault') else ''}")
     io = s.get("io")
     if io:
@@ -80,7 +78,7 @@ def device_lines(s: dict[str, Any]) -> list[str]:
 def fault_text(fault: dict[str, Any]) -> str:
     """The fault's message with its code and measured value, if any."""
     extra = [f"code {fault['code_hex']}"] if fault.get("code_hex") else []
-    extra += [f"{k} {v:g}" if isinstance(v, float) else f"{k} {v}" for k, v in (fault.get("measured") or {}).items()]
+    extra += [f"{k} {figure(v, 'g' if isinstance(v, float) else '')}" for k, v in (fault.get("measured") or {}).items()]
     return fault["message"] + (f" [{', '.join(extra)}]" if extra else "")
 
 

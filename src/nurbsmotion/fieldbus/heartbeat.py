@@ -25,6 +25,7 @@ import can
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.log import kv
+from nurbsmotion.runtime import set_thread_realtime
 
 log = logging.getLogger(__name__)
 
@@ -40,7 +41,12 @@ class MasterHeartbeat:
     """Produce the master's heartbeat on ``bus`` while ``alive()`` holds (see module doc)."""
 
     def __init__(self, bus: can.BusABC, node_id: int, period_s: float, alive: Callable[[], bool],
-                 lease_s: float = LEASE_S, renew_s: float = RENEW_S) -> None:
+                 lease_s: float = LEASE_S, renew_s: float = RENEW_S, thread_priority: int | None = None) -> None:
+        """``thread_priority``: SCHED_FIFO of the watchdog and of a sending thread (python-can's
+        on buses without a kernel sender, e.g. ``virtual``): at normal priority a loaded host
+        starved them past the drives' consumer time while every thread judging the heartbeat
+        ran SCHED_FIFO (the demo beside a CPU burner: EMCY 0x8130 on every drive)."""
+        self.thread_priority = thread_priority
         self.node_id = node_id
         self.period_s = period_s
         self._bus = bus
@@ -63,6 +69,7 @@ class MasterHeartbeat:
         self._task = self._bus.send_periodic(heartbeat_message(self.node_id), self.period_s, duration=self._lease_s)
         if isinstance(self._task, can.broadcastmanager.ThreadBasedCyclicSendTask):
             self._task.on_error = self._send_failed  # keep the thread: a bus error is reported by the cycle loop
+            self._raise_sender(self._task)
         self._thread = threading.Thread(target=self._watch, name="nurbsmotion-heartbeat", daemon=True)
         self._thread.start()
         log.debug(kv("master_heartbeat", node=self.node_id, period_ms=round(self.period_s * 1000),
@@ -89,6 +96,7 @@ class MasterHeartbeat:
             task.end_time = time.perf_counter() + self._lease_s
             if task.thread is None or not task.thread.is_alive():
                 task.start()
+                self._raise_sender(task)
         elif isinstance(task, can.broadcastmanager.RestartableCyclicTaskABC):
             task.start()  # SocketCAN: TX_SETUP again, count = lease / period
         self.renewals += 1
@@ -97,7 +105,12 @@ class MasterHeartbeat:
         log.warning(kv("master_heartbeat_send_failed", error=str(err)))
         return True
 
+    def _raise_sender(self, task: can.broadcastmanager.ThreadBasedCyclicSendTask) -> None:
+        if task.thread is not None and task.thread.native_id is not None:
+            set_thread_realtime(self.thread_priority, task.thread.native_id)
+
     def _watch(self) -> None:
+        set_thread_realtime(self.thread_priority)
         while not self._stop.wait(self._renew_s):
             if self._alive():
                 try:

@@ -401,7 +401,8 @@ class Master:
             return
         assert self._bus is not None
         self._heartbeat = MasterHeartbeat(self._bus, self.config.master.node_id, period_ms / 1000.0,
-                                          self._making_progress)
+                                          self._making_progress, thread_priority=None if self._rt_priority is None
+                                          else self._rt_priority - 1)
         self._heartbeat.start()
 
     def _making_progress(self) -> bool:
@@ -598,7 +599,9 @@ class Master:
         if self._phase != "holding" or self._thread is None:
             raise FieldbusError(f"stream: the axes are not holding (phase {self._phase}); "
                                 f"{'call reset_faults()' if self._thread is not None else 'call bring_up()'} first")
-        if self._job is not None or any(r[0] == "job" for r in self._requests):
+        # tuple(): copied in one C call; the cycle thread pops requests meanwhile (iterating the
+        # deque itself raised 'deque mutated during iteration' in 1 of 50 demo runs under load)
+        if self._job is not None or any(r[0] == "job" for r in tuple(self._requests)):
             raise FieldbusError("stream: a job is already running")
         if self._supervisor.reported:
             raise FieldbusError("stream: faults not acknowledged; call reset_faults() first")
@@ -634,7 +637,8 @@ class Master:
         pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
             and ctl_job.playback.at_pause() else None
         return MasterStatus(self._phase, k, tuple(axes), timing, self._wire_index(job) if job else None,
-                            job.length if job else None, tuple(self._faults), pause)
+                            job.length if job else None, tuple(self._faults), pause,
+                            ctl_job.playback.r if ctl_job is not None else None)
 
     def faults(self) -> list[FaultReport]:
         return list(self._faults)

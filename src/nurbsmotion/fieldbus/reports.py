@@ -62,6 +62,7 @@ class MasterStatus:
     job_length: int | None
     faults: tuple[FaultReport, ...] = field(default=())
     pause: int | None = None  # phase 'held' at a pause row: its index in the job's pauses (None: a hold request)
+    rate: float | None = None  # the running job's playback rate now (1: as planned; 0: at rest, held); None: no job
 
 
 @dataclass(frozen=True)

@@ -40,7 +40,8 @@ from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_L
 from nurbsmotion.program.gcode_offsets import OffsetCommands
 from nurbsmotion.program.gcode_start import StartLineReading
 from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
-from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection)
+from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, ReadExtent,
+                                       SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
 from nurbsmotion.program.tools import ToolTable
@@ -158,6 +159,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.errors: list[tuple[int, InputError]] = []
         self.lines: list[LexedLine | InputError] = []
         self.top_repeats: dict[int, int] = {}
+        self.ended: tuple[int, str] | None = None  # (line, 'M30' / 'M2' / '%'): where reading ended early
+        self.end_word = ""  # the program end of the last line run, as 'M30' / 'M2'
         self.init_nurbs()
         self.init_start_line()
 
@@ -183,7 +186,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.check_start_line_reached()
         name = Path(self.source).stem or self.source
         return Program(name, tuple(self.blocks), self.start.copy(), tuple(self.events), self.offsets.state(),
-                       self.tool_loaded, self.start_line.state if self.start_line is not None else None)
+                       self.tool_loaded, self.start_line.state if self.start_line is not None else None,
+                       read_extent(lines, self.ended, text.endswith("\n")))
 
     def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
         lines: list[LexedLine | InputError] = []
@@ -235,6 +239,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                 continue
             if line.percent:
                 if percent_ends and seen_percent:
+                    self.ended = (line.number, "%")
                     break
                 seen_percent = True
                 pc += 1
@@ -250,6 +255,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                     pc = after
                     continue
                 if self.run_line(line):
+                    self.ended = (line.number, self.end_word)
                     if self.start_line is not None:
                         self.start_line.ended_at = line.number
                     break
@@ -260,6 +266,9 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                 pc = self.after_failed(pc, line, flow)
                 continue
             pc += 1
+        if self.ended is None and pc < len(lines):  # no other way out of the loop: a reader bug, never a shorter program
+            self.record(pc + 1, InputError(f"{self.source}:{pc + 1}", "reading stopped here without M2, M30 or a closing %: "
+                                                                     "the program would be cut short (a reader bug)"))
         if self.nurbs is not None:
             try:
                 self.fail_unfinished_nurbs(None)
@@ -577,6 +586,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             return False
         code = int(m.value)
         if code in END_CODES:
+            self.end_word = f"M{code}"
             return True
         if code == 0 or self.options.optional_stop:
             self.add_event(line, EventKind.PAUSE, m.text)
@@ -712,3 +722,12 @@ def parse_gcode(text: str, source: str = "<gcode>", start_position: ArrayLike = 
                 options: ReadOptions | None = None) -> Program:
     """Parse G-code text into a Program starting at ``start_position`` (machine XYZ, mm)."""
     return GcodeParser(source, start_position, options).parse(text)
+
+
+def read_extent(lines: list[LexedLine | InputError], ended: tuple[int, str] | None, final_newline: bool) -> ReadExtent:
+    """The lines read of the file's: to its end, or to the M2/M30 or closing % that ``ended``
+    it, with the lines after that which hold anything (never run: LinuxCNC ignores them)."""
+    total = len(lines) - (1 if final_newline else 0)  # 'a\nb\n' splits into 3: two lines
+    last, by = ended if ended is not None else (total, "end of file")
+    not_read = sum(1 for ln in lines[last:total] if isinstance(ln, InputError) or not (ln.empty or ln.percent))
+    return ReadExtent(total, last, by, not_read)

@@ -163,6 +163,9 @@ def lex_line(number: int, raw: str, source: str, words_read: dict[str, RawWord] 
         line.empty = True
         return line
     if stripped.startswith("%"):
+        if stripped != "%":  # LinuxCNC: "Bad character '%' used"; taken as the tape end it cut the program
+            raise InputError(f"{where}: {stripped}", "a '%' line is the tape mark and holds nothing else "
+                                                    f"(as a comment: ({stripped[1:].strip()}))")
         line.percent = True
         return line
     if stripped.startswith("/"):

@@ -164,6 +164,18 @@ class ResumeState:
                 "coolant": sorted(m.value for m in self.coolant), "position_mm": list(self.position_mm)}
 
 
+@dataclass(frozen=True)
+class ReadExtent:
+    """How much of its file a reader read: a program is never shorter than its file without
+    saying so. Reading ends at the file's end, at M2/M30 (LinuxCNC ignores what follows) or at
+    the closing ``%`` tape mark of a file that opens with one."""
+
+    lines_total: int  # lines in the file
+    last_line: int  # the line reading ended at (lines_total at the end of the file)
+    ended_by: str  # 'end of file', or the program end or tape mark as written: 'M30', 'M2', '%'
+    lines_not_read: int  # lines after last_line with anything on them (blank lines and a bare '%' left out)
+
+
 @dataclass(frozen=True, eq=False)
 class Program:
     """An ordered list of blocks; consecutive blocks meet (end of one = start of the next).
@@ -179,6 +191,7 @@ class Program:
     coordinates: CoordinateState | None = None
     tool_at_end: int | None = None  # tool in the spindle after the last M6/M61 (None: never changed)
     resume: ResumeState | None = None  # started from a line (ReadOptions.start_line): the state there
+    reading: ReadExtent | None = None  # G-code: the lines read of the file's (YAML curves: None)
 
     @property
     def requires_spindle(self) -> bool:

@@ -10,6 +10,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.program.curve_yaml import parse_curve_yaml
 from nurbsmotion.program.gcode import ReadOptions, parse_gcode
 from nurbsmotion.program.model import Program
+from nurbsmotion.text_files import read_text_file
 
 GCODE_SUFFIXES = (".nc", ".ngc", ".gcode", ".tap")
 YAML_SUFFIXES = (".yaml", ".yml")
@@ -33,12 +34,7 @@ def read_program(path: str | Path, start_position: ArrayLike = (0.0, 0.0, 0.0), 
     if suffix not in GCODE_SUFFIXES + YAML_SUFFIXES:
         raise InputError(source, f"unknown program type {suffix or '(no extension)'!r}: "
                                  f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
-    try:
-        text = Path(path).read_text(encoding="utf-8-sig")  # a BOM is not part of line 1
-    except UnicodeDecodeError as err:
-        raise InputError(source, f"not a UTF-8 text file ({err.reason} at byte {err.start})") from None
-    except OSError as err:
-        raise InputError(source, f"cannot read: {err.strerror or err}") from None
+    text = read_text_file(path)
     if suffix in YAML_SUFFIXES:
         check_no_start_line(source, options)
         return parse_curve_yaml(text, source)

@@ -34,6 +34,7 @@ class ProgramSummary:
     requires_spindle: bool
     requires_coolant: bool
     exact_stops: int  # blocks that end at rest (G61, or before a dwell/pause/tool change)
+    reading: dict[str, Any] | None = None  # G-code: lines_total, last_line, ended_by, lines_not_read (model.ReadExtent)
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -75,7 +76,14 @@ def summarize(program: Program) -> ProgramSummary:
         events_by_kind=events_by_kind(program), dwell_s=float(sum(program.dwell_s_before().values())),
         tools=tuple(e.tool for e in program.events if e.kind is EventKind.TOOL_CHANGE and e.tool is not None),
         requires_spindle=program.requires_spindle, requires_coolant=program.requires_coolant,
-        exact_stops=sum(b.exact_stop for b in program.blocks))
+        exact_stops=sum(b.exact_stop for b in program.blocks),
+        reading=reading_dict(program))
+
+
+def reading_dict(program: Program) -> dict[str, Any] | None:
+    """The lines read of the file's (model.ReadExtent) as a plain dict: check --json, plan.json."""
+    return asdict(program.reading) if program.reading is not None else None
+
 
 
 def events_by_kind(program: Program) -> dict[str, int]:

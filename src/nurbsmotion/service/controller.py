@@ -57,7 +57,7 @@ class ActiveJob:
     name: str
     plan: JobPlan
     handle: JobHandle | None = None
-    stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown'
+    stop_requested: str = ""  # '', 'stop', 'abort', 'shutdown', 'jog_lease', or the reason itself (a sentence)
     late_before: int = 0  # the link's cycle counters when the job started (outcome: the job's own)
     missed_before: int = 0
     started_s: float = field(default_factory=time.monotonic)
@@ -154,13 +154,16 @@ class Controller:
                 self.machine.ready()
                 job.handle = plan.start(self.link, self.homing.shift_counts)  # onto the offsets `method: here` set
                 self.machine.start(job)
-            except (InputError, FieldbusError) as err:
+            except BaseException as err:  # any failure to start, an internal one too: no stray folder
                 plan.cancel()
                 self._stop_traffic()
                 self._stop_feedback(job)
+                plan.wait_closed()  # the planner worker writes the trace there until then
                 shutil.rmtree(record.folder, ignore_errors=True)  # nothing moved: no job happened
                 log.info(kv("submit_refused", name=name, error=err))
-                raise InputError("submit", str(err)) from None
+                if isinstance(err, (InputError, FieldbusError)):
+                    raise InputError("submit", str(err)) from None
+                raise
             job.watcher = threading.Thread(target=self._watch, args=(job,), name=f"job-{record.job_id}", daemon=True)
             with self._lock:
                 self._job = job
@@ -187,6 +190,8 @@ class Controller:
             raise Refused("mdi", err.message) from None
 
     def stop(self, reason: str = "stop") -> dict[str, Any]:
+        """Controlled stop of the running job; ``reason``: a key of the outcome's reasons
+        ('stop': "stopped on request") or the outcome's reason itself."""
         if self._job is None and self.homing.busy:  # stop the homing axis' search, restore its mode
             self.link.stop_homing()
             return {"ok": True, "job": None, "state": "homing"}
@@ -381,9 +386,10 @@ class Controller:
             return None
         total = job.plan.total_cycles  # None while a streamed job is still being planned
         mine = status.job_index is not None and (total is None and job.start_cycle >= 0 or status.job_length == total)
-        index = status.job_index if mine and status.job_index is not None else -1
+        index = status.job_index if mine and status.job_index is not None else self._ended_index(job)
         cycle = max(index + 1, 0)
-        feed = job.plan.feed_at(index) * self._effective(job)
+        rate = status.rate if status.rate is not None else self._effective(job)  # 0 while held
+        feed = job.plan.feed_at(index) * rate
         reached = self._line_reached(job, index)
         pause = job.plan.pauses[status.pause] if status.pause is not None else None
         return {"paused": pause.reason if pause else None, "tool": pause.tool if pause else None,"id": job.record.job_id, "name": job.name, "folder": str(job.record.folder), "cycle": cycle,
@@ -394,6 +400,14 @@ class Controller:
                 "line": reached["where"] if reached else None, "started_at": job.started_at,
                 "start_line": getattr(resume_of(job.plan.program), "line", None),
                 "elapsed_s": round(time.monotonic() - job.started_s, 3)}
+
+    @staticmethod
+    def _ended_index(job: ActiveJob) -> int:
+        """The last planned set-point sent of a job the master has let go of (it ended; its
+        record is being written), so the progress shows where it stopped, not cycle 0; -1
+        before it started."""
+        result = getattr(job.handle, "result", None)
+        return result.sent - 1 if result is not None else -1
 
     @staticmethod
     def _pause_reason(job: ActiveJob, status: MasterStatus) -> str | None:
@@ -432,6 +446,8 @@ class Controller:
         try:
             record = self.records.create(name, text)
             record.write_config(config_dict(self.config, self.link.axis_map.offset_counts))
+            if plan.program is not None:  # the lines an interrupted job's record names (records.py)
+                record.write_block_lines(b.source.line for b in plan.program.blocks)
             plan.write_records(record)
             return record
         except OSError as err:
@@ -595,7 +611,7 @@ class Controller:
             outcome = "fault"
         reason = job.machine_fault or faults[0]["message"] if job.machine_fault or faults else {
             "stop": "stopped on request", "shutdown": "stopped: the daemon was asked to end",
-            "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, "")
+            "abort": "aborted on request (quick stop)", "jog_lease": LEASE_REASON}.get(job.stop_requested, job.stop_requested)
         cut_short = job.plan.end_reason(getattr(job.handle, "fell_behind_row", -1))
         if cut_short and outcome == "completed":  # the planner stopped the job (failed or fell behind)
             outcome, reason = "stopped", cut_short

@@ -13,7 +13,9 @@ from __future__ import annotations
 
 import fcntl
 import os
+import re
 import socket
+import struct
 from pathlib import Path
 
 from nurbsmotion.config import MachineConfig
@@ -36,17 +38,31 @@ def lock_path(config: MachineConfig, lock_dirs: tuple[Path, ...] = LOCK_DIRS) ->
     return Path(config.data_dir) / name
 
 
-def socket_in_use(path: str) -> bool:
-    """A process accepts connections on the Unix socket ``path``."""
+def socket_server_pid(path: str) -> int | None:
+    """The pid of the process that accepts connections on the Unix socket ``path`` (its
+    SO_PEERCRED, taken when it listened); None when nobody does. 0: it listens, pid unknown."""
     probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     probe.settimeout(1.0)
     try:
         probe.connect(path)
+        pid, _, _ = struct.unpack("3i", probe.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, struct.calcsize("3i")))
+        return int(pid)
     except OSError:
-        return False
+        return None
     finally:
         probe.close()
-    return True
+
+
+def socket_in_use(path: str) -> bool:
+    """A process accepts connections on the Unix socket ``path``."""
+    return socket_server_pid(path) is not None
+
+
+def stop_advice(pid: int | None) -> str:
+    """How to end the daemon ``pid`` (SIGTERM: it stops a running job along the path, disables
+    the drives and exits, docs/daemon.md); ``nurbsmotion stop`` only stops its job."""
+    target = str(pid) if pid else "its pid"
+    return f"to end that daemon: kill -TERM {target}, or systemctl stop nurbsmotion where systemd runs it"
 
 
 class BusOwnership:
@@ -61,9 +77,10 @@ class BusOwnership:
         """Take the bus or raise BusTaken naming the owner (pid and socket); changes nothing then."""
         cfg = self.config
         where = f"{cfg.bus.interface}:{cfg.bus.channel}"
-        if socket_in_use(cfg.control.socket):
-            raise BusTaken(f"another daemon serves {cfg.control.socket}{self._owner_text()}; this one touches "
-                           f"nothing (stop it first: nurbsmotion stop / kill)")
+        pid = socket_server_pid(cfg.control.socket)
+        if pid is not None:
+            raise BusTaken(f"another daemon (pid {pid or 'unknown'}) serves {cfg.control.socket}{self._owner_text()}; "
+                           f"this one touches nothing ({stop_advice(pid)})")
         if cfg.bus.interface in IN_PROCESS_INTERFACES:
             return
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -72,8 +89,10 @@ class BusOwnership:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(fd)
-            raise BusTaken(f"bus {where} is owned by another daemon{self._owner_text()} (lock {self.path}); "
-                           f"this one touches nothing") from None
+            owner = self._owner_text()
+            named = re.search(r"pid=(\d+)", owner)
+            raise BusTaken(f"bus {where} is owned by another daemon{owner} (lock {self.path}); this one touches "
+                           f"nothing ({stop_advice(int(named.group(1)) if named else None)})") from None
         os.ftruncate(fd, 0)
         os.write(fd, f"pid={os.getpid()} socket={cfg.control.socket}\n".encode())
         self._file = fd

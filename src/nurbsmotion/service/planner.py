@@ -26,6 +26,7 @@ from nurbsmotion.planning.measure import Measurements, measure
 from nurbsmotion.planning.trace import write_trace
 from nurbsmotion.program import AXES, Program, ProgramEvent, ReadOptions, parse_curve_yaml, parse_gcode
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES, check_no_start_line
+from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 from nurbsmotion.spindle_config import SpindleConfig
@@ -111,6 +112,9 @@ class PlannedJob:
 
     def cancel(self) -> None:
         """Nothing runs beside the job."""
+
+    def wait_closed(self) -> None:
+        """Nothing writes into the record beside the job."""
 
     def end_reason(self, fell_behind_row: int) -> str:
         return ""
@@ -275,8 +279,8 @@ def plan_summary(name: str, program: Program, trajectory: Trajectory, config: Ma
                  a_peak: np.ndarray, rate: float, planning_s: float) -> dict[str, Any]:
     """The plan.json of a job record (the measured figures are added by plan_job)."""
     return {
-        "program": name, "blocks": len(program.blocks), "length_mm": round(program.length_mm, 6),
-        "algorithm": trajectory.algorithm, "period_s": trajectory.period_s, "cycles": len(trajectory),
+        "program": name, "blocks": len(program.blocks), "reading": reading_dict(program),
+        "length_mm": round(program.length_mm, 6), "algorithm": trajectory.algorithm, "period_s": trajectory.period_s, "cycles": len(trajectory),
         "duration_s": round(trajectory.duration_s, 6), "planning_time_s": round(planning_s, 6),
         "max_feed_mm_s": round(float(np.max(trajectory.feed_mm_s)), 6) if len(trajectory) else 0.0,
         "axes": [{"name": a.name, "node": a.node_id, "max_velocity_mm_s": round(float(v), 6),

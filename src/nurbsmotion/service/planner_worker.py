@@ -33,6 +33,7 @@ import logging
 import multiprocessing
 import multiprocessing.connection
 import threading
+import signal
 import time
 import dataclasses
 from dataclasses import dataclass, field
@@ -156,7 +157,10 @@ class WorkerGone(Exception):
 # ---------------------------------------------------------------------- the worker process
 def serve(commands: multiprocessing.connection.Connection,
           results: multiprocessing.connection.Connection) -> None:
-    """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone."""
+    """The worker's main loop: one job per PlanRequest until ``None`` or the daemon is gone.
+    Ctrl-C in a terminal reaches the whole process group: the daemon decides what it means
+    (it stops the job along the path, then this worker), so the worker ignores SIGINT."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     results.send("ready")
     try:
         while True:

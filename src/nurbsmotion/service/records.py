@@ -19,7 +19,7 @@ import uuid
 from dataclasses import dataclass
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from nurbsmotion.errors import InputError
 
@@ -31,6 +31,9 @@ DRIVES_DIR = "drives"  # simulated drives' set-point recordings (simulate: true)
 TRAFFIC_FILE = "traffic"  # + .log / .asc: every bus frame of the job (monitoring.traffic_log)
 CONFIG_FILE = "config.json"  # the machine configuration the job ran with (defaults filled in)
 FEEDBACK_FILE = "feedback.csv"  # every TPDO1 of the job: statusword and position actual (service.feedback)
+BLOCK_LINES_FILE = "blocks.csv"  # the program line of each block (row i: block i), before motion
+FEEDBACK_TAIL_BYTES = 1 << 16  # feedback.csv grows ~120 kB per second of motion: only its end is read
+REACHED_NOTE = "from the record's files: the last job cycle and positions actual in feedback.csv, that row of trace.csv"
 OUTCOMES = ("completed", "stopped", "aborted", "fault", "interrupted", "rejected")
 
 
@@ -123,6 +126,36 @@ class JobRecord:
             os.replace(part, self.folder / TRACE_FILE)
         return rows
 
+    def write_block_lines(self, lines: Iterable[int]) -> None:
+        """blocks.csv: the program line of each block, so an interrupted job's record can name
+        the line it reached without reading the program again."""
+        write_atomic(self.folder / BLOCK_LINES_FILE, ("line\n" + "".join(f"{n}\n" for n in lines)).encode("ascii"))
+
+    def reached_when_interrupted(self) -> dict[str, Any]:
+        """``line_reached`` and ``final_position`` of a job whose daemon died, from its files:
+        the last job cycle feedback.csv holds (what the drives reported last), that row of
+        trace.csv (its set-points and block; blocks.csv names the block's line) and each axis'
+        last position actual. Empty when the files do not tell (no feedback, no motion yet)."""
+        feedback = last_feedback(self.folder / FEEDBACK_FILE)
+        if feedback is None or feedback[0] < 0:
+            return {}
+        cycle, actual_mm = feedback
+        row = trace_row(self.folder / TRACE_FILE, cycle)
+        if row is None:
+            return {}
+        index, values = row
+        final = {name: {"commanded_mm": float(values[name.lower()]) if name.lower() in values else None,
+                        "actual_mm": position} for name, position in actual_mm.items()}
+        out: dict[str, Any] = {"final_position": final, "settled": False, "reached_from": REACHED_NOTE}
+        line = nth_line(self.folder / BLOCK_LINES_FILE, int(float(values.get("block", -1))) + 1)
+        if line is not None and line.isdigit():
+            name = (self.plan() or {}).get("program") or self._program_name()
+            program = next(self.folder.glob(f"{PROGRAM_FILE}.*"), None)
+            text = nth_line(program, int(line) - 1) if program is not None else None
+            out["line_reached"] = {"where": f"{name}:{line}", "line": int(line), "text": (text or "").strip(),
+                                   "block": int(float(values["block"])), "setpoint": index}
+        return out
+
     def write_config(self, config: dict[str, Any]) -> None:
         write_json(self.folder / CONFIG_FILE, config)
 
@@ -180,7 +213,7 @@ class JobRecords:
     """The ``jobs`` folder of the data directory."""
 
     def __init__(self, data_dir: str | Path) -> None:
-        self.root = Path(data_dir) / "jobs"
+        self.root = Path(data_dir).absolute() / "jobs"  # shown to clients, whose working directory is not ours
         self._last_stamp_ms = 0  # folder stamps strictly increase, so names sort in submission order
 
     def _next_stamp(self) -> datetime:
@@ -247,6 +280,60 @@ class JobRecords:
                 record.complete_streamed_plan()
                 record.write_outcome({"outcome": "interrupted", "job": record.job_id,
                                       "reason": "the daemon ended while this job was in progress",
-                                      "recorded_at": now_iso()})
+                                      "recorded_at": now_iso(), "line_reached": None, "final_position": None,
+                                      **record.reached_when_interrupted()})
                 marked.append(record)
         return marked
+
+
+def last_feedback(path: Path) -> tuple[int, dict[str, float]] | None:
+    """The last job cycle in feedback.csv and each axis' last position actual (mm) there, read
+    from the file's end; None without feedback."""
+    try:
+        with open(path, "rb") as csv:
+            size = csv.seek(0, os.SEEK_END)
+            csv.seek(max(size - FEEDBACK_TAIL_BYTES, 0))
+            lines = csv.read().split(b"\n")
+    except OSError:
+        return None
+    cycle, positions = -1, {}
+    for raw in lines[1 if size > FEEDBACK_TAIL_BYTES else 0:-1]:  # whole lines: the tail's first and the last may be cut
+        fields = raw.split(b",")
+        try:
+            job_cycle, axis, position_mm = int(fields[0]), fields[1].decode("ascii"), float(fields[5])
+        except (IndexError, ValueError, UnicodeDecodeError):
+            continue  # the header, a line cut by the daemon's death
+        cycle, positions[axis] = max(cycle, job_cycle), position_mm
+    return (cycle, positions) if positions else None
+
+
+def trace_row(path: Path, index: int) -> tuple[int, dict[str, str]] | None:
+    """(row index, {column: value}) of row ``index`` of a trace CSV, or its last whole row if
+    it has fewer; None if it has none."""
+    try:
+        with open(path, encoding="ascii", errors="replace") as csv:
+            header = csv.readline().strip().split(",")
+            found: tuple[int, str] | None = None
+            for i, line in enumerate(csv):
+                if not line.endswith("\n"):
+                    break
+                found = (i, line)
+                if i >= index:
+                    break
+    except OSError:
+        return None
+    return (found[0], dict(zip(header, found[1].strip().split(",")))) if found is not None else None
+
+
+def nth_line(path: Path, index: int) -> str | None:
+    """Line ``index`` (0: the first) of a text file, None if it has fewer or cannot be read."""
+    if index < 0:
+        return None
+    try:
+        with open(path, encoding="utf-8", errors="replace") as text:
+            for i, line in enumerate(text):
+                if i == index:
+                    return line.rstrip("\n")
+    except OSError:
+        return None
+    return None

@@ -36,6 +36,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
+from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
@@ -136,7 +137,8 @@ class StreamedJob:
         self._thread = threading.Thread(target=self._receive, name="job-receiver", daemon=True)
         start = program.blocks[0].start
         self.summary: dict[str, Any] = {
-            "program": name, "blocks": len(program.blocks), "length_mm": None,  # set once the worker sends it
+            "program": name, "blocks": len(program.blocks), "reading": reading_dict(program),
+            "length_mm": None,  # set once the worker sends it
             "algorithm": "lookahead", "streamed": True, "period_s": config.cycle_period_s,
             "chunk_cycles": chunk_cycles, "first_chunk_cycles": self.first_chunk_cycles,
             "cycles": None, "duration_s": None,
@@ -180,6 +182,12 @@ class StreamedJob:
                 return
             self._cancel_sent = True
         self._send(CancelPlan())
+
+    def wait_closed(self, timeout_s: float = END_TIMEOUT_S) -> None:
+        """After :meth:`cancel`: wait for the worker's last word (it has closed the job's trace),
+        so a folder removed now is not written again: a submission refused at the start of
+        streaming left a folder holding only the trace, marked 'interrupted' later."""
+        self._ended.wait(timeout_s)
 
     def _send(self, command: Any) -> None:
         if self._commands is None or self._ended.is_set():

@@ -74,6 +74,28 @@ def plan_with_holds(recorded: np.ndarray, plan: np.ndarray) -> bool:
     return i == n
 
 
+def rest_waits(recorded: np.ndarray, plan: np.ndarray) -> int | None:
+    """How many rows ``recorded`` holds in the middle of the plan, where the plan itself is
+    at rest (a row equal to the one before it: a streamed job whose chunk ended at rest waits
+    there for the next one, docs/daemon.md); None if it is not the plan, each row once, in
+    order, held only before, after and at such rests."""
+    plan = np.asarray(plan)
+    recorded = np.asarray(recorded)
+    n, i, waits = len(plan), 0, 0
+    at_rest = np.zeros(n, dtype=bool)
+    at_rest[1:] = (plan[1:] == plan[:-1]).all(axis=1)
+    for row in recorded:
+        if i < n and np.array_equal(row, plan[i]):
+            i += 1
+        elif not np.array_equal(row, plan[max(i - 1, 0)]):
+            return None
+        elif 1 < i < n:  # held in the middle: only where the plan rests
+            if not at_rest[i - 1]:
+                return None
+            waits += 1
+    return waits if i == n else None
+
+
 def on_planned_path(recorded: np.ndarray, plan: np.ndarray, tolerance_counts: float = 1.0) -> bool:
     """Every recorded row lies on the planned polyline (within ``tolerance_counts`` per axis,
     the rounding of an interpolated set-point), never moving backwards along it, ending on
@@ -98,8 +120,9 @@ def on_planned_path(recorded: np.ndarray, plan: np.ndarray, tolerance_counts: fl
 class DriveReport:
     planned: int  # planned set-points
     applied: int  # rows the drives recorded during the job (incl. holding before/after)
-    exact: bool  # the recording is the plan, held before and after
+    exact: bool  # the recording is the plan, held before and after and only where the plan rests
     max_following_error_mm: float  # max |set-point - actual| over the axes (servo model)
+    rest_waits: int = 0  # cycles held where the plan rests, waiting for a streamed job's next chunk
 
 
 def drive_report(folder: Path, config: MachineConfig) -> DriveReport:
@@ -107,4 +130,5 @@ def drive_report(folder: Path, config: MachineConfig) -> DriveReport:
     setpoints, actual = recorded_counts(folder, config)
     cpm = np.array([a.counts_per_mm for a in config.axes])
     following = float((np.abs(setpoints - actual) / cpm).max()) if len(setpoints) else 0.0
-    return DriveReport(len(plan), len(setpoints), held_plan_held(setpoints, plan), following)
+    waits = rest_waits(setpoints, plan)
+    return DriveReport(len(plan), len(setpoints), waits is not None, following, waits or 0)
