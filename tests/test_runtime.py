@@ -49,10 +49,16 @@ def test_a_plan_after_keep_freed_memory_causes_no_page_faults():
     assert faults["default"] > 10 * max(faults["after"], 1)  # glibc's default trims the heap after every plan
 
 
-def test_every_command_applies_it(monkeypatch, tmp_path):
-    from nurbsmotion import cli
+def test_the_commands_that_compute_apply_it_and_the_control_clients_do_not(monkeypatch, tmp_path):
+    """check, plan, daemon, demo, sim, compare plan in their own process: they keep freed
+    memory; a control client (status) starts without it (cli.COMMANDS, issue 25 part 5)."""
+    from nurbsmotion import cli, runtime
 
     called = []
-    monkeypatch.setattr(cli, "keep_freed_memory", lambda: called.append(True) or True)
+    monkeypatch.setattr(runtime, "keep_freed_memory", lambda: called.append(True) or True)
     assert cli.main(["status", "--socket", str(tmp_path / "none.sock")]) == 3  # no daemon there
+    assert called == []
+    program = tmp_path / "line.nc"
+    program.write_text("G21 G90 G01 X1 F600\n")
+    assert cli.main(["check", str(program)]) == 0
     assert called == [True]

@@ -34,13 +34,17 @@ PROGRAM = "G01 X5 Y5 F3000\nG01 X-5 Y2\nG01 X0 Y0\n"
 X_HOME_PAST_MM = 0.008 + 0.01 + 0.002  # + the servo model's lag of one set-point
 
 
-def demo_yaml(eds: str, mode: str, channel: str) -> str:
+def demo_yaml(eds: str, mode: str, channel: str, keep_homing: bool = False) -> str:
     """config/demo.yaml with every axis on ``eds`` in ``mode`` and no quick_stop_decel (in
-    the simulated servo's units, outside some files' 0x6085 range)."""
+    the simulated servo's units, outside some files' 0x6085 range); without its homing:
+    sections unless ``keep_homing`` (then the demo offers what each EDS can: demo_config)."""
     text = (ROOT / "config" / "demo.yaml").read_text(encoding="utf-8")
     text = text.replace("channel: nurbsmotion-demo", f"channel: {channel}")
     text = re.sub(r"mode: (csp|ip), ", f"mode: {mode}, eds: {EDS_DIR / eds}, ", text)
-    return text.replace(",\n     quick_stop_decel: 5000000}", "}")
+    if not keep_homing:
+        text = re.sub(r",\s*homing: \{[^{}]*\}", "", text)
+    text = re.sub(r"quick_stop_decel: 5000000,\s*", "", text)  # an axis' key among others
+    return re.sub(r",\s*quick_stop_decel: 5000000\}", "}", text)  # or its last
 
 
 @contextlib.contextmanager
@@ -87,10 +91,10 @@ def test_the_demo_machine_homes_and_runs_on_every_drive_that_can(tmp_path, eds):
 def test_an_epos4_takes_the_home_offset_in_the_vendor_object_named(tmp_path):
     """X's -20 mm written to the EPOS4's 0x30B0 ("home position", the home reads it): the
     drive reports the home at -20000 counts and the axis map stays as configured."""
-    text = demo_yaml("maxon_epos4_50_15_node1.dcf", "csp", f"hc-{uuid.uuid4().hex}").replace(
-        "following_error_window_mm: 2.0}",
-        "following_error_window_mm: 2.0,\n     homing: {method: 17, speed_search_mm_s: 20, speed_zero_mm_s: 2, "
-        "accel_mm_s2: 200, offset_mm: -20, home_offset_object: 0x30B0, home_offset_sign: 1}}", 1)
+    text = demo_yaml("maxon_epos4_50_15_node1.dcf", "csp", f"hc-{uuid.uuid4().hex}", keep_homing=True)
+    x_homing = "offset_mm: -20, order: 2}"  # config/demo.yaml's X: method 17 to -20 mm
+    assert text.count(x_homing) == 1
+    text = text.replace(x_homing, "offset_mm: -20, order: 2, home_offset_object: 0x30B0, home_offset_sign: 1}")
     with demo_machine(tmp_path, text) as (config, daemon, client):
         status = home_all(client, 25.0)
         x = next(a for a in status["axes"] if a["name"] == "X")
