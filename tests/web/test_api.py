@@ -100,6 +100,8 @@ def test_bad_requests_get_one_line_json_errors_and_change_nothing(daemon):
              400, "not JSON"),
             ("GET", "/api/v1/jobs/nope", {}, 409, "nope"),
             ("GET", "/api/v1/jobs?limit=many", {}, 400, "limit"),
+            ("POST", "/api/v1/jobs?name=a.nc&start_line=x", {"data": b"G0 X1\n"}, 400, "start_line"),
+            ("POST", "/api/v1/jobs?name=a.nc&start_line=9", {"data": b"G21 G90\nG01 X1 F600\n"}, 422, "a.nc:9"),
             ("GET", "/api/v1/nothing", {}, 404, "/api/v1/nothing"),
             ("DELETE", "/api/v1/status", {}, 405, "status"),
         ]
@@ -109,7 +111,7 @@ def test_bad_requests_get_one_line_json_errors_and_change_nothing(daemon):
             assert set(answer) <= {"error", "errors"} and words in json.dumps(answer), (path, answer)
             assert "\n" not in answer["error"]
         after = (await get_json(s, "GET", f"{base}/api/v1/jobs"))[1]["total"]
-        assert after - before == 2  # the two rejected programs leave their records, as with the CLI; nothing ran
+        assert after - before == 3  # the three rejected programs leave their records, as with the CLI; nothing ran
         assert (await get_json(s, "GET", f"{base}/api/v1/status"))[1]["state"] == "idle"
     run(daemon, body)
 

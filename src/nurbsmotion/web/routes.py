@@ -109,14 +109,21 @@ async def home_fields(request: web.Request) -> Fields:
 
 
 async def submit_fields(request: web.Request) -> Fields:
-    """A program to run: the raw G-code body with ``?name=``, or JSON ``{"name", "text"}``."""
+    """A program to run: the raw G-code body with ``?name=`` (and ``&start_line=N``), or JSON
+    ``{"name", "text", "start_line"?}``."""
     if request.content_type == "application/json":
-        body = pick(await json_body(request), "name", "text", "keep_override", "block_delete", "optional_stop")
+        body = pick(await json_body(request), "name", "text", "keep_override", "block_delete", "optional_stop",
+                    "start_line")
         name, text = body.pop("name", None), body.pop("text", None)
         if not isinstance(text, str):
             raise BadRequest("body 'text': the program's G-code is required as a string")
     else:
         name, body = request.query.get("name"), {}
+        start_line = request.query.get("start_line")
+        if start_line is not None:
+            if not start_line.isdigit():
+                raise BadRequest(f"query 'start_line': must be a line number, got {start_line!r}")
+            body["start_line"] = int(start_line)
         raw = await request.read()
         try:
             text = raw.decode("utf-8-sig")
@@ -132,12 +139,14 @@ ROUTES: tuple[Route, ...] = (
     Route("GET", f"{API}/jobs", "jobs", Role.OBSERVER, "the newest job records, newest first", jobs_query,
           query=("limit",)),
     Route("POST", f"{API}/jobs", "submit", Role.OPERATOR,
-          "run a program: raw G-code body with ?name=part.nc, or JSON {name, text}; checked completely before "
-          "anything moves", submit_fields,
+          "run a program: raw G-code body with ?name=part.nc (&start_line=N), or JSON {name, text, start_line?}; "
+          "checked completely before anything moves; from line N the tool approaches safely (docs/programs.md)",
+          submit_fields,
           body={"type": "object", "required": ["name", "text"],
                 "properties": {"name": {"type": "string"}, "text": {"type": "string"},
                                "keep_override": {"type": "boolean"}, "block_delete": {"type": "boolean"},
-                               "optional_stop": {"type": "boolean"}}}, query=("name",)),
+                               "optional_stop": {"type": "boolean"},
+                               "start_line": {"type": "integer", "minimum": 1}}}, query=("name", "start_line")),
     Route("GET", f"{API}/jobs/{{id}}", "job", Role.OBSERVER, "one job's record", job_id),
     Route("POST", f"{API}/machine/hold", "hold", Role.OPERATOR, "hold the job at rest on its path", no_fields),
     Route("POST", f"{API}/machine/resume", "resume", Role.OPERATOR, "continue a held or paused job", no_fields),

@@ -196,7 +196,9 @@ $("file").addEventListener("change", async () => {
 
 $("btn-start").addEventListener("click", async () => {
   if (!program) return;
-  const answer = await api("POST", "jobs?name=" + encodeURIComponent(program.name), program.text, "text/plain");
+  const line = Number($("start-line").value);
+  const from = Number.isInteger(line) && line > 1 ? "&start_line=" + line : "";  // restart after a broken tool
+  const answer = await api("POST", "jobs?name=" + encodeURIComponent(program.name) + from, program.text, "text/plain");
   const check = $("check");
   if (answer.ok === false) { check.textContent = [answer.error].concat(answer.errors).join("\n"); check.className = "check bad"; }
   else { check.textContent = "checked and started: job " + answer.job.id; check.className = "check"; }
