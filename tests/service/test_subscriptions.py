@@ -61,7 +61,7 @@ def test_kv_lines_read_back_as_the_event_and_its_fields():
 
 def test_a_subscriber_gets_the_full_status_then_only_changes_at_its_rate():
     status, clock = FakeStatus(), FakeClock()
-    hub = StatusHub(status, clock=clock, wall_clock=lambda: 5.0)
+    hub = StatusHub(status, clock=clock, wall_clock=lambda: 5.0, publisher_thread=False)
     sub, first = hub.subscribe(max_hz=10.0)
     assert first["state"] == "idle"
     hub.publish_once()
@@ -79,7 +79,7 @@ def test_a_subscriber_gets_the_full_status_then_only_changes_at_its_rate():
 
 def test_an_event_is_pushed_at_once_with_the_status_it_changed():
     status, clock = FakeStatus(), FakeClock()
-    hub = StatusHub(status, clock=clock)
+    hub = StatusHub(status, clock=clock, publisher_thread=False)
     sub, _ = hub.subscribe(max_hz=1.0)
     status.value["state"] = "running"
     hub.publish_event({"event": "job_started", "fields": {"job": "j1"}})
@@ -92,7 +92,7 @@ def test_an_event_is_pushed_at_once_with_the_status_it_changed():
 
 def test_every_subscriber_gets_every_event_and_the_status_is_read_once_for_all():
     status = FakeStatus()
-    hub = StatusHub(status, clock=FakeClock())
+    hub = StatusHub(status, clock=FakeClock(), publisher_thread=False)
     subs = [hub.subscribe()[0] for _ in range(10)]
     reads = status.reads
     hub.publish_event({"event": "fault", "fields": {"node": "2"}})
@@ -103,7 +103,7 @@ def test_every_subscriber_gets_every_event_and_the_status_is_read_once_for_all()
 
 
 def test_a_client_that_falls_behind_is_dropped_with_a_reason_and_the_others_go_on():
-    hub = StatusHub(FakeStatus(), clock=FakeClock())
+    hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
     slow, _ = hub.subscribe()
     fast, _ = hub.subscribe()
     for i in range(MAX_PENDING_LINES + 1):
@@ -118,7 +118,7 @@ def test_a_client_that_falls_behind_is_dropped_with_a_reason_and_the_others_go_o
 
 def test_no_subscriber_no_status_read_and_no_queued_event():
     status = FakeStatus()
-    hub = StatusHub(status, clock=FakeClock())
+    hub = StatusHub(status, clock=FakeClock(), publisher_thread=False)
     sub, _ = hub.subscribe()
     hub.unsubscribe(sub)
     reads = status.reads
@@ -128,7 +128,7 @@ def test_no_subscriber_no_status_read_and_no_queued_event():
 
 
 def test_package_log_records_at_info_become_events_and_stderr_stays_as_quiet(capsys):
-    hub = StatusHub(FakeStatus(), clock=FakeClock())
+    hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
     sub, _ = hub.subscribe()
     logger = logging.getLogger("nurbsmotion.service.test_events")
     detach = attach_event_log(hub)
@@ -151,6 +151,6 @@ def test_max_hz_outside_its_range_is_refused_by_the_server(bad, tmp_path):
     from nurbsmotion.service.protocol import Request
     from nurbsmotion.service.server import ControlServer
 
-    server = ControlServer(tmp_path / "s.sock", lambda r: {"ok": True}, hub=StatusHub(FakeStatus()))
+    server = ControlServer(tmp_path / "s.sock", lambda r: {"ok": True}, hub=StatusHub(FakeStatus(), publisher_thread=False))
     refusal = server._subscription_refusal(Request("subscribe", {"max_hz": bad}))
     assert refusal is not None and "max_hz" in refusal["error"]

@@ -108,8 +108,11 @@ class StatusHub:
     """Samples ``read_status`` for the subscribers and fans out status changes and events."""
 
     def __init__(self, read_status: Callable[[], Status], clock: Callable[[], float] = time.monotonic,
-                 wall_clock: Callable[[], float] = time.time) -> None:
+                 wall_clock: Callable[[], float] = time.time, publisher_thread: bool = True) -> None:
+        """``publisher_thread`` False: nothing publishes but ``publish_once`` calls (tests
+        drive the hub step by step with an injected clock)."""
         self._read_status = read_status
+        self._publisher_thread = publisher_thread
         self._clock = clock
         self._wall = wall_clock
         self._subscribers: list[Subscription] = []
@@ -163,7 +166,7 @@ class StatusHub:
 
     # ------------------------------------------------------------------ publisher
     def _ensure_thread(self) -> None:
-        if self._thread is None or not self._thread.is_alive():
+        if self._publisher_thread and (self._thread is None or not self._thread.is_alive()):
             self._thread = threading.Thread(target=self._run, name="status-publisher", daemon=True)
             self._thread.start()
 
