@@ -198,7 +198,8 @@ class CornerPlan:
         turn = np.cross(self.t_in, self.t_out)  # along the binormal, |.| = sin(deflection)
         norm = np.linalg.norm(turn, axis=1)
         binormal = turn / np.maximum(norm, 1e-300)[:, None]
-        rate = self.deflection / (0.5 * (length[:-1] + length[1:]))  # turn per length at each corner
+        with np.errstate(divide="ignore", invalid="ignore"):  # placeholders of non-line pieces have length 0;
+            rate = self.deflection / (0.5 * (length[:-1] + length[1:]))  # only joined lines' corners are used
         out = np.zeros((len(length), 3))
         k = np.flatnonzero(self.joined)
         same_way = np.einsum("ij,ij->i", binormal[k - 1], binormal[k]) > JOIN_SAME_WAY
