@@ -7,7 +7,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import socket
 from pathlib import Path
 from typing import Any, AsyncIterator, Awaitable, Callable
 
@@ -16,17 +15,13 @@ import pytest
 from aiohttp import web
 
 from nurbsmotion.web.app import WebSettings, make_app
+from tests.web.ports import free_port
 from nurbsmotion.web.auth import KeyStore, Role
 from tests.integration.daemon_helpers import daemon_in_process, wait_until
 
 PROGRAM = "G21 G90\nG01 X4 Y3 F3000\nG01 X0 Y0\n"
 LONG = "G21 G90\nG01 X60 F600\n"
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @contextlib.asynccontextmanager

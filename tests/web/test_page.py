@@ -8,7 +8,6 @@ from __future__ import annotations
 import asyncio
 import os
 import shutil
-import socket
 import threading
 import uuid
 from pathlib import Path
@@ -18,6 +17,7 @@ import pytest
 
 from nurbsmotion.config import load_config
 from nurbsmotion.web.app import WebSettings, make_app
+from tests.web.ports import free_port
 from tests.integration.daemon_helpers import DaemonProcess
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
@@ -56,11 +56,6 @@ M30
 BROWSER_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
 
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 @pytest.fixture(scope="module")
