@@ -188,11 +188,13 @@ def test_an_mdi_of_spindle_and_output_words_runs_them_without_motion_and_leaves_
     job = controller.mdi("M8\nM64 P4")["job"]["id"]
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert sim(machine).io_nodes[10].outputs == b"\x11"  # flood and clamp stay on
+    wait_until(lambda: controller.status()["coolant"] == {"mist": False, "flood": True}, 5.0, "status: flood on")
     job = controller.mdi("M5 M9")["job"]["id"]
     outcome = wait_job(machine, job)["outcome"]
     assert [e.get("code") for e in outcome["machine_events"]][:2] == ["M5", "M9"]
     wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
     assert sim(machine).io_nodes[10].outputs == b"\x10"  # coolant off, the clamp (M64) kept
+    wait_until(lambda: controller.status()["coolant"] == {"mist": False, "flood": False}, 5.0, "status: coolant off")
     job = controller.mdi("S500")["job"]["id"]  # the spindle stopped: S alone starts nothing
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert controller.status()["spindle"]["commanded_rpm"] == 0.0 and spindle_rpm(machine) == 0

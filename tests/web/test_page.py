@@ -164,3 +164,27 @@ def test_the_console_homes_jogs_previews_and_runs_a_program(console, tmp_path):
         assert width <= 390, f"the page is {width} px wide on a 390 px phone"
         phone.screenshot(path=str(shots / "console-phone-390.png"), full_page=True)
         browser.close()
+
+
+def test_the_console_says_the_spindle_and_coolant_state_in_words(console):
+    """status.spindle (signed commanded rpm) and status.coolant (per mode) as the read-out shows them."""
+    from playwright.sync_api import expect, sync_playwright
+
+    url, _ = console
+    cases = [("spindleText(null)", "none"),
+             ("spindleText({commanded_rpm: 0, actual_rpm: 0, at_speed: true})", "stopped"),
+             ("spindleText({commanded_rpm: 12000, actual_rpm: 11994.6, at_speed: true})", "CW 12000 rpm, actual 11995"),
+             ("spindleText({commanded_rpm: -800, actual_rpm: -300, at_speed: false})",
+              "CCW 800 rpm, actual 300 (not at speed)"),
+             ("spindleText({commanded_rpm: 800, fault: 'EMCY 0x2310'})", "fault: EMCY 0x2310"),
+             ("coolantText(undefined)", "none"),
+             ("coolantText({mist: false, flood: false})", "off"),
+             ("coolantText({mist: true, flood: true})", "mist + flood"),
+             ("coolantText({flood: true})", "flood")]
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+        page = browser.new_page()
+        page.goto(url)
+        assert {expr: page.evaluate(expr) for expr, _ in cases} == dict(cases)
+        expect(page.locator("#coolant")).to_have_text("none", timeout=20000)  # this machine has no coolant output
+        browser.close()

@@ -126,6 +126,7 @@ class MachineDevices:
                               "fault": s.fault}
         if self.io is not None:
             out["io"] = self.io.status()
+            out["coolant"] = self.io.coolant_state()
         return out
 
     def close(self) -> None:

@@ -210,6 +210,13 @@ class MachineIo:
             self.node.set_outputs({n: False for n in self.coolant})
             log.info(kv("io.coolant_off", node=self.config.io.node_id))  # type: ignore[union-attr]
 
+    def coolant_state(self) -> dict[str, bool]:
+        """Each coolant mode this machine has (``mist``, ``flood``) and whether its output is on
+        now, as the node last reported its outputs (the web console's and ``status``' coolant)."""
+        outputs = self.node.outputs
+        return {mode.value: any(bool(outputs.get(n)) for n in names if n in self.coolant)
+                for mode, names in COOLANT_OUTPUTS.items() if any(n in self.coolant for n in names)}
+
     def status(self) -> dict[str, object]:
         return {"node": self.config.io.node_id, "inputs": self.node.inputs,  # type: ignore[union-attr]
                 "outputs": self.node.outputs, "estop_active": self.estop_active() if self.has_estop() else None,

@@ -43,6 +43,23 @@ function merge(into, changes) {
   }
 }
 
+function spindleText(sp) {
+  // status.spindle: commanded_rpm signed (+ M3 clockwise, - M4), actual_rpm, at_speed, drive_state, fault
+  if (!sp) return "none";
+  if (sp.fault) return "fault: " + sp.fault;
+  const rpm = Number(sp.commanded_rpm || 0);
+  if (rpm === 0) return "stopped";
+  const actual = sp.actual_rpm === null || sp.actual_rpm === undefined ? "" : ", actual " + Math.round(Math.abs(sp.actual_rpm));
+  return (rpm > 0 ? "CW " : "CCW ") + Math.round(Math.abs(rpm)) + " rpm" + actual + (sp.at_speed ? "" : " (not at speed)");
+}
+
+function coolantText(coolant) {
+  // status.coolant: {mist: bool, flood: bool} for the modes this machine has; absent: no coolant output
+  if (!coolant || !Object.keys(coolant).length) return "none";
+  const on = Object.entries(coolant).filter(([, v]) => v).map(([k]) => k);
+  return on.length ? on.join(" + ") : "off";
+}
+
 function fmt(v) { return v === null || v === undefined ? "–" : Number(v).toFixed(3); }
 
 function workOffset(i) {
@@ -74,8 +91,8 @@ function render() {
   });
   const job = status.job;
   $("feed").textContent = job && job.feed_mm_s !== undefined && job.feed_mm_s !== null ? Number(job.feed_mm_s).toFixed(1) : "0.0";
-  $("spindle").textContent = status.spindle ? (status.spindle.direction || status.spindle.state || JSON.stringify(status.spindle)) : "none";
-  $("coolant").textContent = status.coolant ? (status.coolant.mode || JSON.stringify(status.coolant)) : "off";
+  $("spindle").textContent = spindleText(status.spindle);
+  $("coolant").textContent = coolantText(status.coolant);
   const homing = status.homing && status.homing.axes ? status.homing.axes : {};
   $("homed").textContent = Object.keys(homing).length
     ? Object.entries(homing).map(([k, v]) => k + " " + v).join(", ") : "";
