@@ -91,4 +91,5 @@ def interpolation_limits(interp: InterpolationConfig) -> PlanLimits:
         acc_time_s=interp.acc_time_s,
         junction_deviation_mm=interp.junction_deviation_mm,
         path_tolerance_mm=interp.path_tolerance_mm,
+        smoothing=interp.smoothing,
     )
