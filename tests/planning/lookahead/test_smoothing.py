@@ -163,3 +163,33 @@ def test_merge_share_leaves_the_blends_the_rest_of_the_tolerance():
     program = capped(vcarve(700))
     merged = [p for p in planned_pieces(program, LIMITS) if p.covered is not None and p.curve.degree == 1]
     assert merged and all(p.deviation_mm == pytest.approx(MERGE_SHARE * LIMITS.path_tolerance_mm) for p in merged)
+
+
+def test_the_trace_names_the_block_the_plan_reports():
+    from nurbsmotion.planning.lookahead.planned_path import PlannedPath
+    from nurbsmotion.planning.measure import MeasureStream
+    program = polyline(circle_chords(300, noise_mm=0.002), feed_mm_s=100.0)
+    trajectory = plan_lookahead(program, LIMITS)
+    path = PlannedPath.of(program, LIMITS)
+    stream = MeasureStream(path.program)
+    figures = [f for f in (stream.add(path.rows(trajectory)), stream.finish()) if f is not None]
+    blocks = np.concatenate([path.on_program(f).rows.block for f in figures])
+    np.testing.assert_array_equal(blocks, trajectory.block[:len(blocks)])
+
+
+def test_resumed_streamed_and_re_planned_plans_run_on_the_smoothed_path():
+    from nurbsmotion.planning.lookahead import PlanState, PlanStream, plan_from_state, plan_lookahead_resumable
+    program = polyline(circle_chords(600, radius=40.0, noise_mm=0.002), feed_mm_s=100.0)
+    end = program.blocks[-1].curve.end_point[:3]
+    whole = plan_lookahead(program, LIMITS)
+    streamed = np.concatenate([c.position_mm for c in PlanStream(program, LIMITS, chunk_cycles=300)])
+    assert abs(len(streamed) - len(whole)) <= 0.01 * len(whole)
+    chunks = plan_lookahead_resumable(program, LIMITS, chunk_cycles=300)
+    done = [next(chunks), next(chunks)]
+    resumed = [c for c, _ in plan_lookahead_resumable(program, replace(LIMITS, feed_mm_s=60.0), 300, done[-1][1])]
+    replanned = list(plan_from_state(program, LIMITS, PlanState(50.0, 80.0, 0.0)))
+    for part in (streamed, np.concatenate([c.position_mm for c, _ in done] + [c.position_mm for c in resumed]),
+                 np.concatenate([c.position_mm for c in replanned])):
+        assert float(pd.distances_to_path(part, pd.program_path(program)).max()) <= LIMITS.path_tolerance_mm
+        np.testing.assert_array_equal(part[-1], end)
+    assert all(np.all(np.diff(c.block) >= 0) for c in resumed + replanned)

@@ -116,10 +116,18 @@ class PlannedPath:
         return replace(trajectory, block=rows.astype(np.int32), u=u)
 
     def on_program(self, figures: RowFigures) -> RowFigures:
-        """Measured rows with their program block again (the trace's ``block`` column); u stays
-        on the planned piece (on a blend: the blend's parameter)."""
+        """Measured rows with their program block again (the trace's ``block`` column: on a
+        smoothed piece the block reached); u stays on the planned piece (on a blend: the
+        blend's parameter)."""
         if not self.blended:
             return figures
         rows = figures.rows
         blocks = np.array([p.block for p in self.pieces], dtype=np.int32)[rows.block]
+        for k, piece in enumerate(self.pieces):
+            at = np.flatnonzero(rows.block == k)
+            if piece.covered is not None and len(at):
+                curve = piece.curve
+                whole = piece.u_start == curve.u_min and piece.u_end == curve.u_max
+                u = rows.u[at] if whole else piece.u_start + rows.u[at] * (piece.u_end - piece.u_start)  # trimmed line
+                blocks[at] = piece.covered.block_at(u)  # the block reached, as the plan reports it
         return replace(figures, rows=replace(rows, block=blocks))

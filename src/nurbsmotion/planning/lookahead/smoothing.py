@@ -8,7 +8,7 @@ inside (a block that ends at rest ends the chain and is not part of it), a corne
 the corner's path tolerance. Per chain, with t its smallest tolerance:
 
 1. **Merge** (LinuxCNC's naive-CAM merge): vertices are dropped while the chord that replaces
-   them stays within MERGE_SHARE x t of every dropped vertex. A vertex's distance from a
+   them stays within MERGE_SHARE (0.1) x t of every dropped vertex. A vertex's distance from a
    segment is convex along each original segment, and every chord point has an original
    segment whose projection on the chord covers it, so the two paths are within that of each
    other both ways. This is what a V-carve needs (camotics_vcarve.ngc: median segment 1.3 um,
@@ -43,7 +43,7 @@ from nurbsmotion.planning.lookahead.path import BlockPiece, Covered, ProgramNear
 from nurbsmotion.planning.lookahead.runs import ProgramStops
 from nurbsmotion.program import BlockKind, Program
 
-MERGE_SHARE = 0.25  # of the tolerance: merged lines within this of the program (the rest for blends / fits)
+MERGE_SHARE = 0.1  # merged lines within this x the tolerance of the program (J: 0.1 braid 25.6 s, 0.25 26.3 s)
 MAX_MERGE = 256  # program segments one merged line replaces at most
 FIT_POINTS_SHARE = 0.5  # a fit with more control points than this x the run's vertices keeps the lines
 MAX_RUN_SEGMENTS = 5000  # a cut inside a run is a curvature dip to 0 and a blend: with J a crawl
