@@ -193,3 +193,21 @@ def test_resumed_streamed_and_re_planned_plans_run_on_the_smoothed_path():
         assert float(pd.distances_to_path(part, pd.program_path(program)).max()) <= LIMITS.path_tolerance_mm
         np.testing.assert_array_equal(part[-1], end)
     assert all(np.all(np.diff(c.block) >= 0) for c in resumed + replanned)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_random_short_segment_paths_hold_the_tolerance_and_every_limit(seed):
+    """Random walks of 0.001-0.5 mm segments turning by up to 40 deg, in 3-D, with noise at
+    the tolerance's scale: whatever is merged, fitted or blended stays within it."""
+    rng = np.random.default_rng(seed)
+    n = 250
+    turn = np.cumsum(rng.normal(0.0, np.radians(rng.uniform(1, 40)), n))
+    step = rng.uniform(0.001, 0.5, n) * (rng.random(n) < 0.8) + 0.001
+    xyz = np.cumsum(np.stack([step * np.cos(turn), step * np.sin(turn), 0.05 * step * rng.normal(size=n)], axis=1), axis=0)
+    xyz += rng.uniform(-0.003, 0.003, xyz.shape)
+    program = polyline([(0.0, 0.0, 0.0)] + [tuple(p) for p in xyz], feed_mm_s=float(rng.uniform(20, 200)))
+    limits = LIMITS if seed % 2 else NO_JERK
+    trajectory = plan_lookahead(program, limits)
+    assert deviation_mm(trajectory, program) <= limits.path_tolerance_mm
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)
+    assert np.all(np.diff(trajectory.block) >= 0)
