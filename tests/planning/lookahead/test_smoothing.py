@@ -211,3 +211,21 @@ def test_random_short_segment_paths_hold_the_tolerance_and_every_limit(seed):
     assert deviation_mm(trajectory, program) <= limits.path_tolerance_mm
     assert_within_limits(measure_planned(trajectory, program, limits), limits)
     assert np.all(np.diff(trajectory.block) >= 0)
+
+
+def test_a_feed_override_resumes_on_the_same_pieces():
+    """Chains end where the programmed F changes, whatever the override: a resumed plan with
+    a new feed continues on the piece the old plan stopped on."""
+    chords = circle_chords(600, radius=40.0, noise_mm=0.002)
+    lines = ["G21 G90", f"G0 X{chords[0][0]:.4f} Y{chords[0][1]:.4f}"]
+    lines += [f"G1 X{x:.4f} Y{y:.4f} F{6000 if i < 300 else 3000}" for i, (x, y, _) in enumerate(chords[1:])]
+    program = parse_gcode("\n".join(lines) + "\n", "t.nc")
+    from nurbsmotion.planning.lookahead import plan_lookahead_resumable
+    slow = replace(LIMITS, feed_mm_s=40.0)
+    assert [p.covered is not None for p in planned_pieces(program, LIMITS)] == \
+        [p.covered is not None for p in planned_pieces(program, slow)]
+    chunks = plan_lookahead_resumable(program, LIMITS, chunk_cycles=300)
+    done = [next(chunks) for _ in range(2)]  # the rapid, then a chunk that ends moving
+    resumed = next(iter(plan_lookahead_resumable(program, slow, 300, done[-1][1])))[0]
+    step = np.linalg.norm(resumed.position_mm[0] - done[-1][0].position_mm[-1])
+    assert step <= 1.01 * 100.0 * LIMITS.period_s  # the next set-point, one cycle on (F6000 = 100 mm/s)

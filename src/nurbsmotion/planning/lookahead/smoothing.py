@@ -2,7 +2,7 @@
 lines and G2 cubic curves within the path tolerance, so the planner runs along them at the
 speed their curvature allows instead of turning at every tiny vertex.
 
-A chain is a stretch of consecutive whole G01 line pieces with one feed, no stop or dwell
+A chain is a stretch of consecutive whole G01 line pieces with one programmed feed, no stop or dwell
 inside (a block that ends at rest ends the chain and is not part of it), a corner tolerance
 > 0 and smoothing on: the block's G64 Q (> 0 on, Q0 off), else ``PlanLimits.smoothing`` at
 the corner's path tolerance. Per chain, with t its smallest tolerance:
@@ -82,7 +82,7 @@ def chains(pieces: list[BlockPiece], program: Program, limits: PlanLimits,
     for i, piece in enumerate(pieces):
         before = pieces[i - 1] if i else None
         tolerance = smoothing_tolerance(piece, program, limits, stops)
-        joined = (first >= 0 and tolerance > 0 and before is not None and before.feed_mm_s == piece.feed_mm_s
+        joined = (first >= 0 and tolerance > 0 and before is not None and same_programmed_feed(program, before, piece)
                   and program_tolerance(before.last_block, piece.block, limits, stops) > 0)
         if joined:
             smallest = min(smallest, tolerance)
@@ -93,6 +93,13 @@ def chains(pieces: list[BlockPiece], program: Program, limits: PlanLimits,
     if first >= 0 and len(pieces) - 1 > first:
         out.append((first, len(pieces) - 1, smallest))
     return out
+
+
+def same_programmed_feed(program: Program, before: BlockPiece, piece: BlockPiece) -> bool:
+    """Both pieces' blocks programmed at one feed. The programmed F, not the feed planned (a
+    feed override makes every feed one): the pieces, and with them a Resume's ordinal, must
+    not depend on the override."""
+    return program.blocks[before.last_block].feed_mm_s == program.blocks[piece.block].feed_mm_s
 
 
 def merged_vertices(q: NDArray[np.float64], tolerance_mm: float) -> NDArray[np.intp]:
