@@ -34,11 +34,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.geometry import polyline_fit as pf
+from nurbsmotion.geometry.corner_blend import line_pieces
 from nurbsmotion.geometry.nurbs import NurbsCurve
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead.blend import is_line, program_tolerance
-from nurbsmotion.geometry.corner_blend import line_pieces
 from nurbsmotion.planning.lookahead.path import BlockPiece, Covered, ProgramNear
 from nurbsmotion.planning.lookahead.runs import ProgramStops
 from nurbsmotion.program import BlockKind, Program
