@@ -169,9 +169,11 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
 
 
 def planned_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
-    """The path the planner plans along: the program's blocks with motion, their corners
-    blended within the path tolerance (blend.py). A set-point's (block, u) is on the piece of
-    that block (the blend into it, or the block's own piece) whose curve passes through it."""
+    """The path the planner plans along: the program's blocks with motion, short-segment runs
+    smoothed (smoothing.py) and the corners blended within the path tolerance (blend.py). A
+    set-point's (block, u) is on one of the pieces along that block (the blend into it, the
+    block's own piece, a smoothed piece covering it: u on that piece's curve) whose curve
+    passes through it; on a smoothed piece the block is the one reached."""
     return path_pieces(program, limits, ProgramStops.of(program, limits))
 
 
