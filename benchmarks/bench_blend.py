@@ -1,15 +1,17 @@
-"""Corner blending (issue 24): motion time, planning time and the largest deviation from the
-programmed path of the look-ahead plan on the short-segment CAM programs of the LinuxCNC race,
-with and without the jerk limit, blended (path tolerance 0.01 mm) and not (tolerance 0: every
-corner a junction, as before blending).
+"""Corner blending and short-segment smoothing (issue 24): motion time, planning time and
+speed, and the largest deviation from the programmed path of the look-ahead plan on the
+short-segment CAM programs of the LinuxCNC race, with and without the jerk limit: `corners`
+(path tolerance 0: every corner a junction, as before blending), `blended` (tolerance 0.01 mm,
+smoothing off) and `smoothed` (tolerance 0.01 mm, smoothing on: the default).
 
 Limits as in the race (docs/../shared reference linuxcnc-peer.md): T = 1 ms, resultant
 A = 2500 mm/s^2, every feed capped at 200 mm/s (the program's F above it, and rapids),
 chord error 0.01 mm, junction deviation 0.01 mm; J = 50000 mm/s^3 (the daemon's default) or
 none. grbl's HSM_test.nc and braid_cut2d.nc (F7000, as tests/planning/lookahead/
-test_no_give_ups.braid_program reads it). The deviation is the planner's own verified figure
-(verified_max_path_deviation_mm: every set-point on a blend against the two program pieces it
-replaces).
+test_no_give_ups.braid_program reads it), CAMotics' vcarve.ngc as the race reads it
+(bench_vs_linuxcnc.vcarve_fix, its G64 at 0.01 mm). The deviation is the planner's own verified
+figure (verified_max_path_deviation_mm: every set-point on a blend or a smoothed piece against
+the program's lines it stands for).
 
 Also writes a picture of the sharpest blended corner of the braid against its polyline
 (docs/img/corner_blend.png) with --plot (--only-plot: nothing else).
@@ -38,8 +40,9 @@ from nurbsmotion.planning.lookahead import plan_lookahead, planned_pieces  # noq
 from nurbsmotion.program import Program, read_program  # noqa: E402
 
 FEED_CAP_MM_S = 200.0
-LINUXCNC_S = {"HSM_test": 20.4, "braid F7000": 16.7}  # /work/shared/reference/linuxcnc-peer.md, 2026-11-28
+LINUXCNC_S = {"HSM_test": 20.39, "braid F7000": 16.70, "V-carve": 30.11}  # /work/shared/reference/linuxcnc-peer.md, 2026-11-28
 HSM = ROOT / "tests" / "data" / "gcode" / "grbl_HSM_test.nc"
+VCARVE = ROOT / "tests" / "data" / "gcode" / "camotics_vcarve.ngc"
 IMG = ROOT / "docs" / "img" / "corner_blend.png"
 
 
@@ -51,25 +54,33 @@ def capped(program: Program) -> Program:
 
 
 def programs() -> dict[str, Program]:
+    from benchmarks.bench_vs_linuxcnc import vcarve_fix
+    from benchmarks.linuxcnc_peer import with_tolerance
+    from nurbsmotion.program import parse_gcode
     from tests.planning.lookahead.test_no_give_ups import braid_program
-    return {"HSM_test": capped(read_program(HSM)), "braid F7000": capped(braid_program())}
+    vcarve = with_tolerance(vcarve_fix(VCARVE.read_text()), 0.01)
+    return {"HSM_test": capped(read_program(HSM)), "braid F7000": capped(braid_program()),
+            "V-carve": capped(parse_gcode(vcarve, VCARVE.name))}
 
 
-def limits(jerk: float | None, tolerance_mm: float) -> PlanLimits:
+MODES = {"corners": (0.0, False), "blended": (0.01, False), "smoothed": (0.01, True)}  # tolerance, smoothing
+
+
+def limits(jerk: float | None, tolerance_mm: float, smoothing: bool = True) -> PlanLimits:
     return PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=2500.0, max_jerk_mm_s3=jerk,
                       default_feed_mm_s=FEED_CAP_MM_S, rapid_feed_mm_s=FEED_CAP_MM_S, junction_deviation_mm=0.01,
-                      path_tolerance_mm=tolerance_mm)
+                      path_tolerance_mm=tolerance_mm, smoothing=smoothing)
 
 
-def row(name: str, program: Program, jerk: float | None, tolerance_mm: float) -> str:
+def row(name: str, program: Program, jerk: float | None, mode: str) -> str:
     started = time.perf_counter()
-    trajectory = plan_lookahead(program, limits(jerk, tolerance_mm))
+    trajectory = plan_lookahead(program, limits(jerk, *MODES[mode]))
     wall = time.perf_counter() - started
     notes = trajectory.notes
     motion = trajectory.duration_s
     linuxcnc = LINUXCNC_S[name]
-    line = (f"| {name} | {'none' if jerk is None else f'{jerk:g}'} | {'blended' if tolerance_mm > 0 else 'corners'} | "
-            f"{motion:.2f} s | {motion / linuxcnc:.2f}x | {wall:.1f} s | {notes['stops']} | "
+    line = (f"| {name} | {'none' if jerk is None else f'{jerk:g}'} | {mode} | "
+            f"{motion:.2f} s | {motion / linuxcnc:.2f}x | {wall:.1f} s | {len(trajectory) / wall:,.0f} | {notes['stops']} | "
             f"{float(notes.get('verified_max_path_deviation_mm', 0.0)) * 1000:.2f} um | "
             f"{float(notes['verified_max_accel_mm_s2']):.0f} | {float(notes['verified_max_jerk_mm_s3']):.3g} |")
     print(line, flush=True)
@@ -83,7 +94,7 @@ def plot_corner(path: Path) -> None:
     import matplotlib.pyplot as plt
 
     program = programs()["braid F7000"]
-    pieces = planned_pieces(program, limits(50000.0, 0.01))
+    pieces = planned_pieces(program, limits(50000.0, 0.01, smoothing=False))
     blends = [i for i, p in enumerate(pieces) if p.corners is not None]
 
     def sharpness(i: int) -> float:
@@ -128,29 +139,30 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
     parser.add_argument("--plot", action="store_true", help=f"write {IMG.relative_to(ROOT)}")
-    parser.add_argument("--no-baseline", action="store_true", help="skip the plans without blending")
+    parser.add_argument("--no-baseline", action="store_true", help="only the smoothed plans (the default settings)")
     parser.add_argument("--only-plot", action="store_true", help="only the picture")
     args = parser.parse_args()
     if args.plot or args.only_plot:
         plot_corner(IMG)
     if args.only_plot:
         return
-    header = ("| program | J (mm/s^3) | corners | motion | vs LinuxCNC 2.9 | planning (wall) | stops | max deviation "
-              "| max accel | max jerk |\n|---|---|---|---|---|---|---|---|---|---|")
+    header = ("| program | J (mm/s^3) | corners | motion | vs LinuxCNC 2.9 | planning (wall) | set-points/s | stops "
+              "| max deviation | max accel | max jerk |\n|---|---|---|---|---|---|---|---|---|---|---|")
     print(header)
     rows = []
     load_before = os.getloadavg()[0]
     for name, program in programs().items():
         for jerk in (50000.0, None):
-            for tolerance in ((0.01,) if args.no_baseline else (0.0, 0.01)):
-                rows.append(row(name, program, jerk, tolerance))
+            for mode in (("smoothed",) if args.no_baseline else MODES):
+                rows.append(row(name, program, jerk, mode))
     load = f"host load average {load_before:.1f} at the start, {os.getloadavg()[0]:.1f} at the end"
     if args.write:
         body = (f"{load}. T = 1 ms, A = 2500 mm/s^2 resultant, feeds capped at 200 mm/s, chord error 0.01 mm; "
                 "`corners`: path tolerance 0 (every corner a junction, as before blending); `blended`: "
-                "path tolerance 0.01 mm (G64 P0.01). LinuxCNC 2.9's times from the race "
+                "path tolerance 0.01 mm (G64 P0.01), smoothing off; `smoothed`: the same with short-segment "
+                "smoothing (the default). LinuxCNC 2.9's times from the race "
                 "(shared reference linuxcnc-peer.md, same limits).\n\n" + header + "\n" + "\n".join(rows))
-        write_section("blend", "Corner blending", body, "python benchmarks/bench_blend.py --write")
+        write_section("blend", "Corner blending and smoothing", body, "python benchmarks/bench_blend.py --write")
 
 
 if __name__ == "__main__":

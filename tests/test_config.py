@@ -175,3 +175,13 @@ def test_path_tolerance_is_read_checked_and_reaches_the_plan_limits():
     with pytest.raises(InputError) as info:
         parse_config("interpolation:\n  path_tolerance_mm: -1\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
     assert str(info.value).startswith("m.yaml:2: interpolation.path_tolerance_mm")
+
+
+def test_smoothing_is_read_checked_and_reaches_the_plan_limits():
+    from nurbsmotion.planning.limits import limits_from_config
+    cfg = parse_config("interpolation: {smoothing: false}\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert cfg.interpolation.smoothing is False and limits_from_config(cfg).smoothing is False
+    assert limits_from_config(parse_config("axes: [{name: X, node_id: 1}]\n", "m.yaml")).smoothing is True
+    with pytest.raises(InputError) as info:
+        parse_config("interpolation:\n  smoothing: 1\naxes: [{name: X, node_id: 1}]\n", "m.yaml")
+    assert str(info.value).startswith("m.yaml:2: interpolation.smoothing") and "true or false" in str(info.value)

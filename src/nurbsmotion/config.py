@@ -65,6 +65,7 @@ class InterpolationConfig:
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
     path_tolerance_mm: float = 0.01  # corner blends stay this close to the programmed path (G64 P overrides)
+    smoothing: bool = True  # short-segment runs merged and fitted within the path tolerance (G64 Q overrides)
 
 
 @dataclass(frozen=True)
@@ -514,6 +515,7 @@ _INTERPOLATION_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "acc_time_s": _POSITIVE,
     "junction_deviation_mm": (_number, {"minimum": 0, "exclusive_min": False}),
     "path_tolerance_mm": (_number, {"minimum": 0, "exclusive_min": False}),
+    "smoothing": (_boolean, {}),
 }
 
 

@@ -30,6 +30,7 @@ class PlanLimits:
     acc_time_s: float = 1.2
     junction_deviation_mm: float = 0.01
     path_tolerance_mm: float = 0.01  # corner blends' largest distance from the program (G64 P overrides; 0: no blends)
+    smoothing: bool = True  # short-segment runs merged and fitted within the path tolerance (G64 Q overrides; smoothing.py)
     # Per-axis X, Y, Z limits; a None entry is an axis the configuration gives no limit for.
     axis_max_velocity_mm_s: tuple[float | None, ...] | None = None
     axis_max_accel_mm_s2: tuple[float | None, ...] | None = None
@@ -37,6 +38,10 @@ class PlanLimits:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
+            if f.name == "smoothing":
+                if not isinstance(value, bool):
+                    raise InputError(f.name, f"must be true or false, got {value!r}")
+                continue
             values = value if isinstance(value, tuple) else (value,)
             for v in values:
                 if v is None and f.name in ("max_jerk_mm_s3", "feed_mm_s", "axis_max_velocity_mm_s", "axis_max_accel_mm_s2"):
@@ -86,4 +91,5 @@ def interpolation_limits(interp: InterpolationConfig) -> PlanLimits:
         acc_time_s=interp.acc_time_s,
         junction_deviation_mm=interp.junction_deviation_mm,
         path_tolerance_mm=interp.path_tolerance_mm,
+        smoothing=interp.smoothing,
     )

@@ -145,6 +145,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.offsets = Offsets.from_state(self.options.coordinates or CoordinateState())
         self.exact_stop_mode = False
         self.blend_tolerance_mm: float | None = None
+        self.smoothing_tolerance_mm: float | None = None  # G64 Q (0: Q0, no smoothing; None: the machine's)
         self.tool_selected: int | None = None
         self.tool_loaded: int | None = self.options.tool_in_spindle
         self.spindle = self.options.spindle
@@ -556,6 +557,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             if w is not None and w.value < 0:
                 raise InputError(line.at(w), f"G64 {w.letter} is a tolerance: >= 0, got {w.value:g}")
         self.blend_tolerance_mm = p.value * self.mm_per_unit if p is not None and p.value > 0 else None  # P0: no limit
+        self.smoothing_tolerance_mm = q.value * self.mm_per_unit if q is not None else None
 
     def axis_user(self, line: GcodeLine, groups: dict[str, Word]) -> Word | None:
         """G10/G28/G30/G92/G43.1 take the axis words; a motion G code with them is an error."""
@@ -654,7 +656,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
 
     def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: GcodeLine) -> None:
         if not self.skipping:  # before the start line: only where the move ends counts
-            self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm))
+            self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm,
+                                     self.smoothing_tolerance_mm))
         self.position = curve.end_point
 
     def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:

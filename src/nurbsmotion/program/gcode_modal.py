@@ -29,6 +29,7 @@ class ModalSnapshot:
     active_system: int
     exact_stop_mode: bool
     blend_tolerance_mm: float | None
+    smoothing_tolerance_mm: float | None
     constant_surface_speed: bool
     spindle: SpindleDirection
     spindle_rpm: float
@@ -46,6 +47,7 @@ class ModalStateCommands:
     offsets: Offsets
     exact_stop_mode: bool
     blend_tolerance_mm: float | None
+    smoothing_tolerance_mm: float | None
     constant_surface_speed: bool
     spindle: SpindleDirection
     spindle_rpm: float
@@ -55,13 +57,14 @@ class ModalStateCommands:
 
     def snapshot(self) -> ModalSnapshot:
         return ModalSnapshot(self.mm_per_unit, self.plane, self.absolute, self.arc_absolute, self.feed_mm_s,
-                             self.offsets.active, self.exact_stop_mode, self.blend_tolerance_mm,
+                             self.offsets.active, self.exact_stop_mode, self.blend_tolerance_mm, self.smoothing_tolerance_mm,
                              self.constant_surface_speed, self.spindle, self.spindle_rpm, frozenset(self.coolant))
 
     def restore(self, line: GcodeLine, code: str, s: ModalSnapshot) -> None:
         self.mm_per_unit, self.plane, self.absolute, self.arc_absolute = s.mm_per_unit, s.plane, s.absolute, s.arc_absolute
         self.feed_mm_s, self.offsets.active = s.feed_mm_s, s.active_system
         self.exact_stop_mode, self.blend_tolerance_mm = s.exact_stop_mode, s.blend_tolerance_mm
+        self.smoothing_tolerance_mm = s.smoothing_tolerance_mm
         self.constant_surface_speed = s.constant_surface_speed
         if (s.spindle, s.spindle_rpm) != (self.spindle, self.spindle_rpm):
             self.spindle, self.spindle_rpm = s.spindle, s.spindle_rpm

@@ -50,6 +50,7 @@ class Block:
     source: SourceRef
     exact_stop: bool = False  # come to rest at the end of this block (G61/G61.1, or a stopping event follows)
     blend_tolerance_mm: float | None = None  # G64 P: path tolerance at this block's start; None: the machine's
+    smoothing_tolerance_mm: float | None = None  # G64 Q: short-segment smoothing tolerance; 0: off; None: the machine's
 
     def feed_or_default_mm_s(self, default_feed_mm_s: float, rapid_feed_mm_s: float) -> float:
         """The programmed feed, or the machine's: rapid feed for RAPID blocks, default feed otherwise."""

@@ -14,8 +14,9 @@ Public API:
   -> Iterator[(Trajectory, Resume)]``: chunks with the exact state after each; continue from a
   ``Resume`` with new feed/chord/axis limits (a feed override at a chunk boundary), the join
   verified against the real last set-points and filter memory;
-- ``planned_pieces(program, limits)``: the path planned along (corners blended within the
-  path tolerance, blend.py): what a set-point's (block, u) refers to.
+- ``planned_pieces(program, limits)``: the path planned along (short-segment runs smoothed,
+  smoothing.py; corners blended within the path tolerance, blend.py): what a set-point's
+  (block, u) refers to.
 See docs/lookahead.md for the method and the guarantees.
 """
 

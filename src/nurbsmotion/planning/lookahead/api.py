@@ -18,6 +18,7 @@ from nurbsmotion.planning.lookahead.planner import (FALLBACK_SLOWER, FALLBACK_SP
                                                     PlanSettings, PlanningError, WindowPlan, plan_run, settings_for)
 from nurbsmotion.planning.lookahead.runs import ProgramStops, Run, program_pieces, split_runs, trailing_dwell_cycles
 from nurbsmotion.planning.lookahead.sampling import Samples
+from nurbsmotion.planning.lookahead.smoothing import smoothed_pieces
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.planning.trajectory import Trajectory
@@ -168,16 +169,25 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
 
 
 def planned_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
-    """The path the planner plans along: the program's blocks with motion, their corners
-    blended within the path tolerance (blend.py). A set-point's (block, u) is on the piece of
-    that block (the blend into it, or the block's own piece) whose curve passes through it."""
-    return blend_pieces(program_pieces(program, limits), limits, ProgramStops.of(program, limits))
+    """The path the planner plans along: the program's blocks with motion, short-segment runs
+    smoothed (smoothing.py) and the corners blended within the path tolerance (blend.py). A
+    set-point's (block, u) is on one of the pieces along that block (the blend into it, the
+    block's own piece, a smoothed piece covering it: u on that piece's curve) whose curve
+    passes through it; on a smoothed piece the block is the one reached."""
+    return path_pieces(program, limits, ProgramStops.of(program, limits))
+
+
+def path_pieces(program: Program, limits: PlanLimits, stops: ProgramStops) -> list[BlockPiece]:
+    """planned_pieces with the program's stops given: short-segment runs smoothed
+    (smoothing.py), then the corners blended (blend.py)."""
+    pieces = program_pieces(program, limits)
+    return blend_pieces(smoothed_pieces(pieces, program, limits, stops), limits, stops)
 
 
 def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings, int]:
     """Runs, settings, and the set-points of a dwell after the last move."""
     stops = ProgramStops.of(program, limits)
-    pieces = blend_pieces(program_pieces(program, limits), limits, stops)
+    pieces = path_pieces(program, limits, stops)
     settings = settings_for(limits, max_feed(pieces), chunk_cycles)
     return split_runs(pieces, limits, settings.min_pass_mm_s, stops), settings, trailing_dwell_cycles(pieces, stops, limits.period_s)
 

@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 from nurbsmotion.geometry import corner_blend as cb
 from nurbsmotion.geometry.nurbs import NurbsCurve
 from nurbsmotion.planning.limits import PlanLimits
-from nurbsmotion.planning.lookahead.path import BlendCorners, BlockPiece
+from nurbsmotion.planning.lookahead.path import BlendCorners, BlockPiece, ProgramNear
 from nurbsmotion.planning.lookahead.runs import ProgramStops
 
 SHARE_LIMIT = cb.SHARE_LIMIT
@@ -82,15 +82,23 @@ def _put(a: NDArray, index: NDArray[np.intp], values: NDArray) -> NDArray:
 
 def corner_tolerances(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramStops) -> NDArray[np.float64]:
     """(n - 1,) path tolerance of every corner between consecutive pieces: the outgoing block's
-    G64 P, else the machine's; 0 where the corner must stay a junction for the program
+    G64 P, else the machine's, less what a smoothed piece there already uses of it
+    (``BlockPiece.deviation_mm``); 0 where the corner must stay a junction for the program
     (a stop or dwell after the incoming block, or between the two)."""
-    given = stops.tolerance_mm or {}
     out = np.empty(max(len(pieces) - 1, 0))
     for i in range(len(out)):
-        before, after = pieces[i].block, pieces[i + 1].block
-        stop = any(b in stops.stop_after for b in range(before, after)) or stops.dwell_between(before, after) > 0
-        out[i] = 0.0 if stop else given.get(after, limits.path_tolerance_mm)
+        before, after = pieces[i].last_block, pieces[i + 1].block
+        tolerance = program_tolerance(before, after, limits, stops)
+        used = max(pieces[i].deviation_mm, pieces[i + 1].deviation_mm)
+        out[i] = max(tolerance - used, 0.0) if tolerance > used else 0.0
     return out
+
+
+def program_tolerance(before: int, after: int, limits: PlanLimits, stops: ProgramStops) -> float:
+    """Path tolerance of the corner from block ``before`` into block ``after``: the outgoing
+    block's G64 P, else the machine's; 0 where the program stops or dwells between them."""
+    stop = any(b in stops.stop_after for b in range(before, after)) or stops.dwell_between(before, after) > 0
+    return 0.0 if stop else (stops.tolerance_mm or {}).get(after, limits.path_tolerance_mm)
 
 
 def blend_pieces(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramStops) -> list[BlockPiece]:
@@ -259,8 +267,21 @@ def assembled(pieces: list[BlockPiece], plan: CornerPlan, blends: BlendCorners) 
                 points = exact_ends(points, pieces[i], u_end[i], shapes.is_arc[i], after, u_start[i + 1],
                                     shapes.is_arc[i + 1])
             out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, min(piece.feed_mm_s, after.feed_mm_s),
-                                  ordinal=len(out), corners=blends, corner=b))
+                                  ordinal=len(out), corners=blends, corner=b,
+                                  near=blend_near(piece, after, shapes, i, float(plan.tolerance[b]))))
     return out
+
+
+def blend_near(before: BlockPiece, after: BlockPiece, shapes: cb.Pieces, i: int,
+               tolerance_mm: float) -> ProgramNear | None:
+    """The program's lines a blend next to a smoothed piece stands for: the smoothed
+    neighbours' (``near``), the other neighbour itself; None between two program pieces
+    (then its corners are the program's own)."""
+    if before.near is None and after.near is None:
+        return None
+    sides = [p.near.pieces if p.near is not None else shapes.take(np.array([k])) for p, k in ((before, i), (after, i + 1))]
+    joined = cb.Pieces(*(np.concatenate([getattr(side, f) for side in sides]) for f in cb.PIECE_FIELDS))
+    return ProgramNear(joined, tolerance_mm + max(before.deviation_mm, after.deviation_mm))
 
 
 def exact_ends(points: NDArray[np.float64], before: BlockPiece, u_before: float, arc_before: bool,

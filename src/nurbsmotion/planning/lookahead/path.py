@@ -58,11 +58,38 @@ class BlendCorners:
 
 
 @dataclass(frozen=True, eq=False)
+class Covered:
+    """The program blocks a smoothed piece (smoothing.py: merged lines, a fitted curve) runs
+    along, in order, and the u on the piece where each of them ends (the last: the piece's end):
+    a set-point at u has reached block ``blocks[k]``, k the first with ``u <= u_end[k]``."""
+
+    blocks: NDArray[np.int32]
+    u_end: NDArray[np.float64]
+
+    def block_at(self, u: NDArray[np.float64]) -> NDArray[np.int32]:
+        k = np.searchsorted(self.u_end, u, side="left")
+        return self.blocks[np.minimum(k, len(self.blocks) - 1)]
+
+
+@dataclass(frozen=True, eq=False)
+class ProgramNear:
+    """The program's own lines and arcs a piece that is not on the program stands for (a
+    smoothed piece, a blend next to one) and the tolerance it keeps from them: verify.py
+    measures its set-points against these."""
+
+    pieces: Pieces
+    tolerance_mm: float
+
+
+@dataclass(frozen=True, eq=False)
 class BlockPiece:
     """Part [u_start, u_end] of one program block inside a planning window; or a corner blend
     (``corners`` set: its curve replaces corner ``corner`` of them; ``block`` is the outgoing
-    block's). ``ordinal``: the piece's place in the program's list of pieces (-1: not known),
-    which names it where (block, u) does not (a blend and its outgoing block share a block)."""
+    block's); or a smoothed piece (``covered`` set: its own curve along several blocks, the
+    first of them ``block``; ``deviation_mm``: how far it may be from the program, which the
+    blends at its ends leave out of their tolerance). ``ordinal``: the piece's place in the
+    program's list of pieces (-1: not known), which names it where (block, u) does not (a
+    blend and its outgoing block share a block)."""
 
     block: int
     curve: NurbsCurve
@@ -72,6 +99,29 @@ class BlockPiece:
     ordinal: int = -1
     corners: BlendCorners | None = None
     corner: int = -1
+    covered: Covered | None = None
+    deviation_mm: float = 0.0
+    near: ProgramNear | None = None
+
+    @property
+    def last_block(self) -> int:
+        """The last program block the piece runs along."""
+        return int(self.covered.blocks[-1]) if self.covered is not None else self.block
+
+
+def set_point_blocks(pieces: tuple[BlockPiece, ...] | list[BlockPiece], piece_index: NDArray[np.int32],
+                     u: NDArray[np.float64]) -> NDArray[np.int32]:
+    """The program block each set-point (index into ``pieces``, u on that piece) has reached:
+    the piece's block, or on a smoothed piece the covered block at u. ``piece_index`` is
+    non-decreasing (set-points run forward)."""
+    blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[piece_index]
+    for k, piece in enumerate(pieces):
+        if piece.covered is None:
+            continue
+        lo, hi = np.searchsorted(piece_index, [k, k + 1])
+        if hi > lo:
+            blocks[lo:hi] = piece.covered.block_at(u[lo:hi])
+    return blocks
 
 
 @dataclass(eq=False)

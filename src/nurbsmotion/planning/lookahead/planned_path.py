@@ -36,7 +36,7 @@ def trimmed_curve(piece: BlockPiece) -> tuple[NurbsCurve, UMap]:
     """The curve of just the piece's part and the map from u on the block's curve to u on it:
     a trimmed line or arc as a line or arc of its own; blends and whole blocks as they are."""
     curve = piece.curve
-    if piece.corners is not None or (piece.u_start == curve.u_min and piece.u_end == curve.u_max):
+    if piece.corners is not None or (piece.u_start == curve.u_min and piece.u_end == curve.u_max):  # blend, whole
         return curve, lambda u: u
     start, end = curve.points(np.array([piece.u_start, piece.u_end]))
     if curve.degree == 1:
@@ -69,7 +69,7 @@ class PlannedPath:
     @classmethod
     def of(cls, program: Program, limits: PlanLimits) -> "PlannedPath":
         pieces = tuple(planned_pieces(program, limits))
-        if not any(p.corners is not None for p in pieces):
+        if not any(p.corners is not None or p.covered is not None for p in pieces):
             return cls(program, pieces, (), False)
         curves, maps = zip(*(trimmed_curve(p) for p in pieces))
         blocks = tuple(Block(BlockKind.NURBS, c, p.feed_mm_s, program.blocks[p.block].source)
@@ -77,20 +77,31 @@ class PlannedPath:
         return cls(Program(program.name, blocks, program.start_position), pieces, tuple(maps), True)
 
     def piece_rows(self, trajectory: Trajectory) -> NDArray[np.intp]:
-        """Index into ``pieces`` of every set-point: its block's own piece, or the blend into
-        that block where the blend's curve passes through the set-point (they share the block)."""
-        own = {p.block: k for k, p in enumerate(self.pieces) if p.corners is None}
-        blend = {p.block: k for k, p in enumerate(self.pieces) if p.corners is not None}
-        rows = np.array([own.get(b, blend.get(b, -1)) for b in trajectory.block.tolist()], dtype=np.intp)
+        """Index into ``pieces`` of every set-point: among the pieces along its block (the
+        block's own piece, a blend into it, smoothed pieces covering it), the one whose curve
+        passes through the set-point at its u."""
+        candidates: dict[int, list[int]] = {}
+        for k, p in enumerate(self.pieces):
+            for b in (p.covered.blocks.tolist() if p.covered is not None else [p.block]):
+                candidates.setdefault(b, []).append(k)
+        first = {b: ks[0] for b, ks in candidates.items()}
+        rows = np.array([first.get(b, -1) for b in trajectory.block.tolist()], dtype=np.intp)
         if np.any(rows < 0):
             raise ValueError("a set-point's block has no planned piece")
-        for b, k in blend.items():
-            at = np.flatnonzero(trajectory.block == b)
-            if not len(at):
+        for b, ks in candidates.items():
+            if len(ks) < 2:
                 continue
-            points = self.pieces[k].curve.points(trajectory.u[at])[:, :3]
-            on = np.linalg.norm(points - trajectory.position_mm[at], axis=1) <= ON_CURVE_MM
-            rows[at[on]] = k
+            at = np.flatnonzero(trajectory.block == b)
+            for k in ks:
+                curve = self.pieces[k].curve
+                u = trajectory.u[at]
+                inside = (u >= curve.u_min) & (u <= curve.u_max)
+                points = curve.points(np.clip(u, curve.u_min, curve.u_max))[:, :3]
+                on = inside & (np.linalg.norm(points - trajectory.position_mm[at], axis=1) <= ON_CURVE_MM)
+                rows[at[on]] = k
+                at = at[~on]
+                if not len(at):
+                    break
         return rows
 
     def rows(self, trajectory: Trajectory) -> Trajectory:
@@ -105,10 +116,18 @@ class PlannedPath:
         return replace(trajectory, block=rows.astype(np.int32), u=u)
 
     def on_program(self, figures: RowFigures) -> RowFigures:
-        """Measured rows with their program block again (the trace's ``block`` column); u stays
-        on the planned piece (on a blend: the blend's parameter)."""
+        """Measured rows with their program block again (the trace's ``block`` column: on a
+        smoothed piece the block reached); u stays on the planned piece (on a blend: the
+        blend's parameter)."""
         if not self.blended:
             return figures
         rows = figures.rows
         blocks = np.array([p.block for p in self.pieces], dtype=np.int32)[rows.block]
+        for k, piece in enumerate(self.pieces):
+            at = np.flatnonzero(rows.block == k)
+            if piece.covered is not None and len(at):
+                curve = piece.curve
+                whole = piece.u_start == curve.u_min and piece.u_end == curve.u_max
+                u = rows.u[at] if whole else piece.u_start + rows.u[at] * (piece.u_end - piece.u_start)  # trimmed line
+                blocks[at] = piece.covered.block_at(u)  # the block reached, as the plan reports it
         return replace(figures, rows=replace(rows, block=blocks))

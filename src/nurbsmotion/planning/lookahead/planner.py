@@ -25,7 +25,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import jerk_profile as jp
 from nurbsmotion.planning.lookahead import straight
-from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths
+from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid, coarse_lengths, set_point_blocks
 from nurbsmotion.planning.lookahead.runs import Run, planned_jerk_mm_s3
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
@@ -368,7 +368,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
         if repairs == MAX_REPAIR_ROUNDS or set(bad) == {"fluctuation"} or stalled >= MAX_STALLED_REPAIRS:
             raise _violation_error(pieces, samples, result, bad, repairs)
         repair(grid, s, idx, x, s_raw, bad, result, settings, speed_cap, accel_scale)
-    blocks = np.array([piece.block for piece in pieces], dtype=np.int32)[samples.piece]
+    blocks = set_point_blocks(pieces, samples.piece, samples.u)
     stop = None
     if not reaches_end:
         stop = WindowPlan(samples, s, planned_ds, result, repairs, True, None, blocks, start_piece=cursor.piece_index,
@@ -491,7 +491,7 @@ def straight_run_plan(run: Run, cursor: Cursor, settings: PlanSettings) -> Windo
     result = check(grid, samples, s, planned_ds, settings.machine, before, after, cursor.previous)
     if result.violations():
         return None
-    blocks = np.full(len(s), piece.block, dtype=np.int32)
+    blocks = set_point_blocks((piece,), samples.piece, samples.u)
     return WindowPlan(samples, s, planned_ds, result, 0, True, None, blocks)
 
 

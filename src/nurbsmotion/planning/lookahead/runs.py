@@ -143,10 +143,10 @@ def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: floa
     for piece in pieces:
         leaving, end = end_tangents(piece)
         if current:
-            dwell_s = stops.dwell_between(current[-1].block, piece.block)
+            dwell_s = stops.dwell_between(current[-1].last_block, piece.block)
             deviation = (stops.deviation_mm or {}).get(piece.block)
             v = junction_speed(arriving, leaving, limits, min_pass_mm_s, deviation)
-            if v <= 0.0 or dwell_s > 0 or current[-1].block in stops.stop_after:
+            if v <= 0.0 or dwell_s > 0 or current[-1].last_block in stops.stop_after:
                 runs.append(Run(tuple(current), tuple(speeds), rest))
                 current, speeds = [], []
                 rest = dwell_cycles(dwell_s, limits.period_s, True)
@@ -161,7 +161,7 @@ def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: floa
 
 def trailing_dwell_cycles(pieces: list[BlockPiece], stops: ProgramStops, period_s: float) -> int:
     """Set-points held at the end for a dwell after the last move."""
-    last = pieces[-1].block if pieces else -1
+    last = pieces[-1].last_block if pieces else -1
     return dwell_cycles(stops.dwell_between(last, 1 << 62), period_s, False)
 
 

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from nurbsmotion.planning.lookahead.path import PathGrid, row_max, row_norms, to_3d
+from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, row_max, row_norms, to_3d
 from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.search import search_sorted
 from nurbsmotion.planning.lookahead.speed_limits import window_min
@@ -232,8 +232,10 @@ def polyline_steps(grid: PathGrid, first: NDArray[np.int32], last: NDArray[np.in
 
 def path_deviations(grid: PathGrid, samples: Samples) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(distance of every set-point from the programmed path, that / its corner's path
-    tolerance): 0 off the corner blends (the set-points lie on the program's own curves);
-    on a blend, the distance to the two original pieces it replaces (exact for lines and arcs)."""
+    tolerance): 0 off the corner blends and smoothed pieces (the set-points lie on the
+    program's own curves); on a blend, the distance to the two pieces it replaces (exact for
+    lines and arcs); on a smoothed piece and a blend next to one, to the program's lines they
+    stand for (``BlockPiece.near``)."""
     n = len(samples.u)
     distance, ratio = np.zeros(n), np.zeros(n)
     sets = {id(p.corners): p.corners for p in grid.pieces if p.corners is not None}
@@ -245,7 +247,33 @@ def path_deviations(grid: PathGrid, samples: Samples) -> tuple[NDArray[np.float6
         d = np.minimum(corners.incoming.take(c).distance(q), corners.outgoing.take(c).distance(q))[:, 0]
         distance[rows] = d
         ratio[rows] = d / corners.tolerance_mm[c]
+    for k, piece in enumerate(grid.pieces):
+        if piece.near is None:
+            continue
+        rows = np.flatnonzero(samples.piece == k)
+        if len(rows):
+            distance[rows] = near_distances(piece, samples.u[rows], samples.position_mm[rows])
+            ratio[rows] = distance[rows] / piece.near.tolerance_mm
     return distance, ratio
+
+
+NEAR_SEGMENTS = 4  # a set-point on a smoothed piece is measured against its block's segment and this many either side
+
+
+def near_distances(piece: BlockPiece, u: NDArray[np.float64], points: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Distance of set-points on ``piece`` from the program's lines it stands for: on a
+    smoothed piece the segments of the block reached (Covered) and NEAR_SEGMENTS either side,
+    a subset, so never less than the true distance; on a blend all of them (a few)."""
+    assert piece.near is not None
+    near = piece.near.pieces
+    if piece.covered is None:
+        q = np.broadcast_to(points[None], (len(near.length_mm), len(points), 3))
+        return near.distance(q).min(axis=0)
+    at = np.searchsorted(piece.covered.u_end, u, side="left")
+    offsets = np.arange(-NEAR_SEGMENTS, NEAR_SEGMENTS + 1)
+    index = np.clip(at[:, None] + offsets[None, :], 0, len(near.length_mm) - 1)
+    q = np.repeat(points, len(offsets), axis=0)[:, None, :]
+    return near.take(index.ravel()).distance(q)[:, 0].reshape(len(points), len(offsets)).min(axis=1)
 
 
 def rows_max(values: NDArray[np.float64], first_row: int, n: int) -> NDArray[np.float64]:
