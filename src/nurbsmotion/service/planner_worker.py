@@ -38,7 +38,7 @@ import time
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -108,7 +108,7 @@ class CheckedProgram:
 class ProgramBlocks:
     """The next blocks of the CheckedProgram's program, in order."""
 
-    blocks: tuple[Any, ...]
+    blocks: Sequence[Any]  # a slice of the program's blocks (program.records.BlockRecords: arrays)
 
 
 @dataclass(frozen=True, eq=False)
