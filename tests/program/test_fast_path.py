@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.program import Program, ReadOptions, gcode
-from nurbsmotion.program.gcode_fast import is_fast_line
+from nurbsmotion.program import Program, ReadOptions, gcode, gcode_words
+from nurbsmotion.program.gcode_fast import is_fast_line, lexed_first, lines_lexed_first
 from nurbsmotion.program.records import BlockRecords
 from tests.program.test_corpus import TOOLS
 from tests.program.test_fast_reader import texts
@@ -114,3 +114,28 @@ def test_the_block_records_pickle_small():
     assert len(pickle.dumps(program)) < 120 * 20_000  # ~100 bytes a line (a NURBS each: ~2 KB)
     again = pickle.loads(pickle.dumps(program))
     assert block_rows(again) == block_rows(program)
+
+
+def test_the_lines_left_unlexed_until_they_run_need_nothing_before():
+    """GcodeParser.lex lexes up front only the lines lines_lexed_first finds; every
+    other line is no O-word, no '%', not empty (what the reader needs of every line before
+    running), or a lexing error; every plain line is left for gcode_fast."""
+    cases = [text for _, text in texts()] + ["\n\n  \n\t\r\nX1\r\n\x0c\nG1 X1\n \u3000\nX1 \r", "X1", "", "\n", "%\nX1\n%",
+                                               "G90\nX1 X2\nX1.2.3\nX\nN10\n.\nG1 X1 (c)\no100 sub\nG10 L2 P1 X0"]
+    left = 0
+    for text in cases:
+        lines = text.split("\n")
+        found = set(lines_lexed_first(text))
+        assert found == {i for i, line in enumerate(lines) if lexed_first(line)}
+        for i, line in enumerate(lines):
+            if is_fast_line(line):
+                assert i not in found, line
+            if i in found:
+                continue
+            left += 1
+            try:
+                lexed = gcode_words.lex_line(i + 1, line, "t.nc")
+            except InputError:
+                continue
+            assert lexed.oword is None and not lexed.percent and not lexed.empty and lexed.program_number is None, line
+    assert left > 80_000

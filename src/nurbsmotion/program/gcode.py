@@ -32,7 +32,7 @@ from nurbsmotion.geometry.primitives import ArcShape, LineShape
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_shape, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
 from nurbsmotion.program.expressions import ExpressionError, Number
-from nurbsmotion.program.gcode_fast import FAST_LINE, FastLines
+from nurbsmotion.program.gcode_fast import FastLines, lines_lexed_first
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
@@ -179,7 +179,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
     def parse(self, text: str) -> Program:
         text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors, CAM posts) is not part of line 1
         self.raw_lines = text.split("\n")
-        self.lines = lines = self.lex(self.raw_lines)
+        self.lines = lines = self.lex(self.raw_lines, text)
         flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
         if not structure:
             self.check_start_line_place(flow, len(lines) - (1 if text.endswith("\n") else 0))  # as editors count
@@ -187,6 +187,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             for err in structure:  # the program cannot run: say so, with every unreadable line
                 self.record(err_line(err), err)
             for number, line in enumerate(lines, start=1):
+                if structure and isinstance(line, str):
+                    line = self.lex_one(number, line)
                 if structure and isinstance(line, InputError):
                     self.record(number, line)
             if not structure:
@@ -201,16 +203,15 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                        self.tool_loaded, self.start_line.state if self.start_line is not None else None,
                        read_extent(lines, self.ended, text.endswith("\n")))
 
-    def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError | str]:
-        """Every line lexed, except the plain move lines (gcode_fast.is_fast_line): kept as
-        their text, lexed only if the general path must run them (lex_one)."""
-        lines: list[LexedLine | InputError | str] = []
-        fast = FAST_LINE.fullmatch if self.fast_lines else None
-        for number, raw in enumerate(raw_lines, start=1):
-            if fast is not None and fast(raw) is not None and raw and not raw.isspace():
-                lines.append(raw)
-                continue
-            lines.append(self.lex_one(number, raw))
+    def lex(self, raw_lines: list[str], text: str) -> list[LexedLine | InputError | str]:
+        """Every line lexed, except those that may be plain move lines (made only of their
+        characters, gcode_fast.lines_lexed_first): kept as their text, lexed only if the general path
+        must run them (lex_one). The lines to lex are found by one scan of the whole text."""
+        if not self.fast_lines:
+            return [self.lex_one(number, raw) for number, raw in enumerate(raw_lines, start=1)]
+        lines: list[LexedLine | InputError | str] = list(raw_lines)
+        for index in lines_lexed_first(text):
+            lines[index] = self.lex_one(index + 1, raw_lines[index])
         return lines
 
     def lex_one(self, number: int, raw: str) -> LexedLine | InputError:

@@ -32,13 +32,48 @@ import numpy as np
 from nurbsmotion.program.arcs import PLANES, ArcError, arc_geometry, arc_lengths_in_plane
 
 _NUM = r"([+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+))"
-FAST_LINE = re.compile(r"[ \t]*(?:[Nn][0-9]+[ \t]*)?(?:[Gg]0*(1[789])(?![0-9.])[ \t]*)?(?:[Gg]0*([0-3])(?![0-9.])[ \t]*)?"
-                       + "".join(rf"(?:[{c}{c.lower()}][ \t]*{_NUM}[ \t]*)?" for c in "XYZIJKF") + r"\r?")
+_FAST = (r"[ \t]*(?:[Nn][0-9]+[ \t]*)?(?:[Gg]0*(1[789])(?![0-9.])[ \t]*)?(?:[Gg]0*([0-3])(?![0-9.])[ \t]*)?"
+         + "".join(rf"(?:[{c}{c.lower()}][ \t]*{_NUM}[ \t]*)?" for c in "XYZIJKF") + r"\r?")
+FAST_LINE = re.compile(_FAST)
+# The lines the lexer must see before the program runs (lexed_first): blank (the lexer calls
+# them empty), or holding a character no plain line holds (a comment, an O-word, '%', '/',
+# '#', any other letter). The rest is kept as text and matched by FAST_LINE when it runs
+# (lexed then if it is not plain after all: 'G90', 'X1 X2').
+PLAIN_CHARACTERS = " \t\r0-9.+\\-NnGgXxYyZzIiJjKkFf"
+_NOT_PLAIN = re.compile(rf"[^\n{PLAIN_CHARACTERS}]")
+_BLANK_AFTER_BREAK = re.compile(r"\n[ \t]*\r?(?=\n|\Z)")
+_BLANK_FIRST = re.compile(r"[ \t]*\r?(?:\n|\Z)")
 MAX_ABS_VALUE = 1e9  # gcode_words.MAX_ABS_VALUE: larger values go to the general path (its error)
 ZERO_MOVE_MM = 1e-9  # gcode.ZERO_MOVE_MM
 LINE_CODES = (0, 10)  # G0, G1 as round(10 * value)
 NAN = math.nan
+UNUSED_CENTRE_WORD = {17: 2, 18: 1, 19: 0}  # K in G17, J in G18, I in G19 (arcs.PLANES' offset letters)
 ARC_BATCH = 512  # arcs computed together (finish_arcs)
+
+
+def lexed_first(line: str) -> bool:
+    """The line is one lines_lexed_first finds (the definition its test checks against)."""
+    return _BLANK_FIRST.fullmatch(line) is not None or _NOT_PLAIN.search(line) is not None
+
+
+def lines_lexed_first(text: str) -> list[int]:
+    """Indexes (0-based, lines split at '\\n') of the lines ``lexed_first`` takes, in order:
+    two scans of the whole text in C (a character no plain line holds, then blank lines),
+    not a match per line."""
+    starts = [0] if _BLANK_FIRST.match(text) else []
+    pos = 0
+    while (found := _NOT_PLAIN.search(text, pos)) is not None:
+        starts.append(text.rfind("\n", 0, found.start()) + 1)
+        pos = text.find("\n", found.end())
+        if pos < 0:
+            break
+    starts.extend(m.start() + 1 for m in _BLANK_AFTER_BREAK.finditer(text))
+    indexes, index, at = [], 0, 0
+    for start in sorted(set(starts)):
+        index += text.count("\n", at, start)
+        at = start
+        indexes.append(index)
+    return indexes
 
 
 def is_fast_line(raw: str) -> bool:
@@ -140,10 +175,10 @@ class FastLines:
             centre = self.fast_centre(plane, (px, py, pz), (ci, cj, ck), (ox, oy, oz))
             if centre is None:
                 break
-            arcs.append(PendingArc(i, len(blocks), blocks.arc_count, (px, py, pz), (ex, ey, ez), centre, code == 20,
-                                   plane, feed, motion, plane_before))
+            arcs.append(PendingArc(i, len(blocks.kinds), len(blocks.arc_axes) + blocks.arcs_reserved, (px, py, pz),
+                                   (ex, ey, ez), centre, code == 20, plane, feed, motion, plane_before))
             feed, motion = new_feed, code
-            blocks.reserve_arc(px, py, pz, ex, ey, ez, feed, exact, blend, i + 1, PLANES[plane].normal_axis)
+            blocks.reserve_arc(px, py, pz, ex, ey, ez, feed, exact, blend, i + 1)
             px, py, pz = ex, ey, ez
             i += 1
             if len(arcs) >= ARC_BATCH:  # a bad arc wastes at most a batch's work
@@ -165,18 +200,18 @@ class FastLines:
         """The centre of a plain G2/G3 line from I J K as the general path computes it; None
         when the general path must take the line (a centre word outside the plane, a value
         out of range)."""
-        plane = PLANES[plane_code]
+        if words[UNUSED_CENTRE_WORD[plane_code]] is not None:
+            return None
+        unit, absolute = self.mm_per_unit, self.arc_absolute
         centre = list(start)
-        for axis, (letter, text) in enumerate(zip("IJK", words)):
-            if text is None:
-                continue
-            if letter not in plane.offset_letters:
-                return None
-            value = float(text)
-            if not abs(value) <= MAX_ABS_VALUE:
-                return None
-            value *= self.mm_per_unit
-            centre[axis] = value + origin[axis] if self.arc_absolute else start[axis] + value
+        for axis in (0, 1, 2):
+            text = words[axis]
+            if text is not None:
+                value = float(text)
+                if not abs(value) <= MAX_ABS_VALUE:
+                    return None
+                value *= unit
+                centre[axis] = value + origin[axis] if absolute else start[axis] + value
         return centre
 
     def finish_arcs(self, arcs: list[PendingArc]) -> PendingArc | None:
@@ -191,14 +226,14 @@ class FastLines:
                                             np.array([arcs[k].end for k in rows]), np.array([arcs[k].centre for k in rows]))
             for k, values in zip(rows, of_plane):
                 lengths[k] = values
-        set_arc = self.blocks.set_arc
+        add_arc_row = self.blocks.add_arc_row
         for arc, lengths_mm in zip(arcs, lengths):
             try:
                 centre, sweep, rise = arc_geometry(PLANES[arc.plane], arc.start, arc.end, arc.centre, arc.clockwise, True,
                                                    inch, 1, lengths_mm)
             except ArcError:
                 return arc
-            set_arc(arc.arcs_before, centre, sweep, rise)
+            add_arc_row(centre, sweep, rise, PLANES[arc.plane].normal_axis)
         return None
 
 

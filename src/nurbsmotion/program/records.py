@@ -32,7 +32,6 @@ KIND_CODES = {BlockKind.NURBS: 0, BlockKind.LINE: 1, BlockKind.RAPID: 2, BlockKi
 KINDS = tuple(KIND_CODES)  # by code
 NORMALS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # by normal axis (G19, G18, G17)
 SHAPE_NONE = -1  # a line's row in shape_index: nothing more than its start and end
-_NO_ARC = (math.nan,) * 5  # an arc row reserved, not yet set
 FORM_LINE, FORM_ARC, FORM_CURVE = 0, 1, 2  # what a block's geometry is kept as: LineShape, ArcShape, NurbsCurve
 
 
@@ -193,16 +192,26 @@ class BlockRecords(Sequence[Block]):
             out[i] = self.curves[int(self.shape_index[i])].length
         return out
 
+    def hulls_mm(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(lows, highs), each (n, 3): per block the min and max of its curve's control points
+        (the box of their convex hull, which holds the curve): a line's are its ends, from
+        the columns; an arc's come from its curve, built here (a NURBS' are its own)."""
+        lows, highs = np.minimum(self.starts, self.ends), np.maximum(self.starts, self.ends)
+        for i in np.flatnonzero(self.forms != FORM_LINE).tolist():
+            shape = self.shape(i)
+            points = (shape if isinstance(shape, NurbsCurve) else shape.curve()).control_points
+            lows[i], highs[i] = points.min(axis=0), points.max(axis=0)
+        return lows, highs
+
     def extent_mm(self, curve_points: Callable[[NurbsCurve], NDArray[np.float64]]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min, max) XYZ over the path: the end points, each arc's extremes in its plane
-        (where the swept angle passes 0, 90, 180, 270 deg) and ``curve_points(curve)`` of every
-        NURBS curve. No blocks: +inf and -inf."""
+        """(min, max) XYZ over the path: the end points, each arc's extremes (ArcRecords.extents_mm)
+        and ``curve_points(curve)`` of every NURBS curve. No blocks: +inf and -inf."""
         low = np.minimum(self.starts.min(axis=0, initial=np.inf), self.ends.min(axis=0, initial=np.inf))
         high = np.maximum(self.starts.max(axis=0, initial=-np.inf), self.ends.max(axis=0, initial=-np.inf))
         arcs = np.flatnonzero(self.forms == FORM_ARC)
         if len(arcs):
-            arc_low, arc_high = self.arcs.extremes_mm(self.starts[arcs])
-            low, high = np.minimum(low, arc_low), np.maximum(high, arc_high)
+            arc_low, arc_high = self.arcs.extents_mm(self.starts[arcs], self.ends[arcs])
+            low, high = np.minimum(low, arc_low.min(axis=0)), np.maximum(high, arc_high.max(axis=0))
         for curve in self.curves:
             points = curve_points(curve)
             low, high = np.minimum(low, points.min(axis=0)), np.maximum(high, points.max(axis=0))
@@ -224,11 +233,12 @@ class ArcRecords:
     def normals(self) -> NDArray[np.float64]:
         return np.asarray(NORMALS)[self.normal_axes]
 
-    def extremes_mm(self, starts: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """(min, max) XYZ over all the arcs' in-plane extremes (the normal axis: between the
-        ends, counted by the caller). Plane axes (a, b) = (n+1, n+2) mod 3 for normal axis n,
-        so the angle phi = atan2(b - cb, a - ca) grows with a positive sweep."""
-        low, high = np.full(3, np.inf), np.full(3, -np.inf)
+    def extents_mm(self, starts: NDArray[np.float64], ends: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """(lows, highs), each (m, 3): every arc's min and max XYZ. Along the normal: its ends
+        (a helix rises monotonically); in its plane, axes (a, b) = (n+1, n+2) mod 3 for normal
+        axis n, the ends and c +- r where the swept angle phi = atan2(b - cb, a - ca) (growing
+        with a positive sweep) passes 0, 90, 180 or 270 deg."""
+        lows, highs = np.minimum(starts, ends), np.maximum(starts, ends)
         radii = arc_radii_mm(starts, self.centres, self.normals())
         for n in range(3):
             sel = np.flatnonzero(self.normal_axes == n)
@@ -241,10 +251,13 @@ class ArcRecords:
             first = np.where(sweep >= 0, phi0, phi0 + sweep)  # the swept interval [first, first + |sweep|]
             for angle, axis, sign in ((0.0, a, 1.0), (math.pi / 2, b, 1.0), (math.pi, a, -1.0), (1.5 * math.pi, b, -1.0)):
                 passed = np.mod(angle - first, 2 * math.pi) <= np.abs(sweep)
-                if passed.any():
-                    values = c[passed, axis] + sign * r[passed]
-                    low[axis], high[axis] = min(low[axis], values.min()), max(high[axis], values.max())
-        return low, high
+                rows = sel[passed]
+                value = c[passed, axis] + sign * r[passed]
+                if sign > 0:
+                    highs[rows, axis] = np.maximum(highs[rows, axis], value)
+                else:
+                    lows[rows, axis] = np.minimum(lows[rows, axis], value)
+        return lows, highs
 
 
 EMPTY_ARCS = ArcRecords(np.zeros((0, 3)), np.zeros(0), np.zeros(0, dtype=np.uint8), np.zeros(0))
@@ -268,6 +281,7 @@ class RecordsBuilder:
         self.arc_axes = array.array("B")
         self.curves: list[NurbsCurve] = []
         self.overrides: dict[int, SourceRef] = {}
+        self.arcs_reserved = 0  # reserve_arc's rows not given yet (add_arc_row)
 
     def __len__(self) -> int:
         return len(self.kinds)
@@ -316,35 +330,35 @@ class RecordsBuilder:
         self.blends.append(math.nan if blend_tolerance_mm is None else blend_tolerance_mm)
         self.lines.append(line)
 
-    @property
-    def arc_count(self) -> int:
-        return len(self.arc_axes)
-
     def reserve_arc(self, sx: float, sy: float, sz: float, ex: float, ey: float, ez: float, feed_mm_s: float,
-                    exact_stop: bool, blend_tolerance_mm: float | None, line: int, normal_axis: int) -> None:
-        """An arc of this file's line ``line`` whose centre, sweep and rise set_arc gives later
-        (gcode_fast computes a run's arcs together)."""
+                    exact_stop: bool, blend_tolerance_mm: float | None, line: int) -> None:
+        """An arc of this file's line ``line`` whose row of numbers add_arc_row gives later, in
+        the order reserved (gcode_fast computes a run's arcs together)."""
         self.kinds.append(KIND_CODES[BlockKind.ARC])
         self.forms.append(FORM_ARC)
-        self.shape_index.append(len(self.arc_axes))
+        self.shape_index.append(len(self.arc_axes) + self.arcs_reserved)
         self.points.extend((sx, sy, sz, ex, ey, ez))
         self.feeds.append(feed_mm_s)
         self.exact.append(exact_stop)
         self.blends.append(math.nan if blend_tolerance_mm is None else blend_tolerance_mm)
         self.lines.append(line)
-        self.arc_values.extend(_NO_ARC)
-        self.arc_axes.append(normal_axis)
+        self.arcs_reserved += 1
 
-    def set_arc(self, row: int, centre: Sequence[float], sweep_rad: float, rise_mm: float) -> None:
-        self.arc_values[5 * row:5 * row + 5] = array.array("d", (centre[0], centre[1], centre[2], sweep_rad, rise_mm))
+    def add_arc_row(self, centre: Sequence[float], sweep_rad: float, rise_mm: float, normal_axis: int) -> None:
+        """The numbers of the first arc reserved and not given yet."""
+        self.arc_values.extend((centre[0], centre[1], centre[2], sweep_rad, rise_mm))
+        self.arc_axes.append(normal_axis)
+        self.arcs_reserved -= 1
 
     def truncate(self, blocks: int, arcs: int) -> None:
-        """Back to the first ``blocks`` blocks, holding the first ``arcs`` arcs (no curve added since)."""
+        """Back to the first ``blocks`` blocks, holding the first ``arcs`` arcs (no curve added
+        since); arcs reserved and not given are dropped."""
         for values in (self.kinds, self.forms, self.feeds, self.exact, self.blends, self.lines, self.shape_index):
             del values[blocks:]
         del self.points[6 * blocks:]
         del self.arc_values[5 * arcs:]
         del self.arc_axes[arcs:]
+        self.arcs_reserved = 0
         for i in [i for i in self.overrides if i >= blocks]:
             del self.overrides[i]
 
