@@ -55,7 +55,7 @@ def checked_before_motion(text: str) -> Callable[[], object]:
     from nurbsmotion.service.planner import parse
     from nurbsmotion.service.streamed_job import check_before_motion
 
-    config = parse_config(CONFIG.format(channel="bench", socket="/nonexistent/ctl.sock", data_dir="/nonexistent"),
+    config = parse_config(CONFIG.format(channel="bench", socket="/nonexistent/ctl.sock", data_dir="/nonexistent", extra=""),
                           "machine.yaml")
     axis_map = AxisMap.from_config(config)
 
