@@ -139,3 +139,17 @@ def test_arc_extents_in_closed_form_on_quarter_and_full_turns():
         points = curve_samples(shape.curve(), 2000)
         np.testing.assert_allclose(low, points.min(axis=0), atol=1e-6)
         np.testing.assert_allclose(high, points.max(axis=0), atol=1e-6)
+
+
+def test_slices_joined_again_give_the_same_blocks(programs):
+    """BlockRecords.concatenate (the daemon joins the ProgramBlocks slices it receives)."""
+    for program in programs:
+        records = program.blocks
+        for size in (1, 7, 1000):
+            parts = [pickle.loads(pickle.dumps(records[i:i + size])) for i in range(0, len(records), size)]
+            joined = BlockRecords.concatenate(parts)
+            assert joined.signature()[0] == records.signature()[0] and joined.source_overrides == records.source_overrides
+            for a, b in zip(joined, records):
+                assert (a.kind, a.source, a.feed_mm_s) == (b.kind, b.source, b.feed_mm_s)
+                np.testing.assert_array_equal(a.curve.control_points, b.curve.control_points)
+    assert len(BlockRecords.concatenate([])) == 0

@@ -19,7 +19,7 @@ from __future__ import annotations
 import array
 import math
 from dataclasses import dataclass
-from typing import Callable, Iterator, Sequence, overload
+from typing import Any, Callable, Iterator, Sequence, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -57,6 +57,31 @@ class SourceText:
             return ""
         return self.data[self.starts[k]:self.starts[k + 1] - 1].decode("utf-8", "surrogatepass")
 
+    @classmethod
+    def joined(cls, parts: Sequence[SourceText | None]) -> SourceText | None:
+        """Windows in line order as one text (None when any is missing): a window may repeat
+        the last lines of the one before; lines between two windows (no block's) are empty."""
+        texts = [p for p in parts if p is not None]
+        if not texts or len(texts) != len(parts):
+            return None
+        data, starts = bytearray(), list[int]()
+        next_line = texts[0].first_line
+        for t in texts:
+            lines = len(t.starts) - 1
+            for _ in range(t.first_line - next_line):  # a gap: empty lines
+                data += b"\n" if starts else b""
+                starts.append(len(data))
+            skip = max(next_line - t.first_line, 0)  # lines already there
+            if skip >= lines:
+                continue
+            if starts:
+                data += b"\n"
+            base = len(data) - int(t.starts[skip])
+            data += t.data[int(t.starts[skip]):]
+            starts.extend((t.starts[skip:-1] + base).tolist())
+            next_line = t.first_line + lines
+        return cls(bytes(data), np.array(starts + [len(data) + 1], dtype=np.int64), texts[0].first_line)
+
     def window(self, first: int, last: int) -> SourceText:
         """Lines first..last only (a slice of the program's blocks carries no more text than its own)."""
         lo = min(max(first - self.first_line, 0), len(self.starts) - 1)
@@ -90,6 +115,37 @@ class BlockRecords(Sequence[Block]):
         for b in blocks:
             builder.add(b.kind, b.shape, b.feed_mm_s, b.source, b.exact_stop, b.blend_tolerance_mm)
         return builder.build(None)
+
+    @classmethod
+    def concatenate(cls, parts: Sequence[BlockRecords]) -> BlockRecords:
+        """One program's records from its slices in order (what a ProgramBlocks message
+        carries): the columns joined, arc rows and curve indexes shifted, the text windows
+        joined when they are consecutive (a slice's lines follow the previous one's)."""
+        if not parts:
+            return RecordsBuilder("").build(None)
+        arc_offsets = np.cumsum([0] + [len(p.arcs.sweeps_rad) for p in parts[:-1]])
+        curve_offsets = np.cumsum([0] + [len(p.curves) for p in parts[:-1]])
+        index = []
+        for part, arcs_before, curves_before in zip(parts, arc_offsets, curve_offsets):
+            shifted = part.shape_index.copy()
+            shifted[part.forms == FORM_ARC] += arcs_before
+            shifted[part.forms == FORM_CURVE] += curves_before
+            index.append(shifted)
+        overrides: dict[int, SourceRef] = {}
+        first = 0
+        for part in parts:
+            overrides.update({first + i: ref for i, ref in part.source_overrides.items()})
+            first += len(part)
+        arcs = ArcRecords(np.concatenate([p.arcs.centres for p in parts]), np.concatenate([p.arcs.sweeps_rad for p in parts]),
+                          np.concatenate([p.arcs.normal_axes for p in parts]), np.concatenate([p.arcs.rises_mm for p in parts]))
+
+        def joined(name: str) -> NDArray[Any]:
+            return np.concatenate([getattr(p, name) for p in parts])
+
+        return BlockRecords(joined("kinds"), joined("forms"), joined("starts"), joined("ends"), joined("feeds_mm_s"),
+                            joined("exact_stops"), joined("blend_tolerances_mm"), joined("lines"), np.concatenate(index),
+                            arcs, tuple(c for p in parts for c in p.curves), parts[0].file,
+                            SourceText.joined([p.text for p in parts]), overrides)
 
     def __len__(self) -> int:
         return len(self.kinds)
