@@ -134,7 +134,7 @@ def main() -> None:
     one, five, fifteen = os.getloadavg()
     body = (f"Best of {args.repeat} runs each, as this process' CPU time and as wall time; host load average "
             f"{one:.1f} / {five:.1f} / {fifteen:.1f} (1/5/15 min) at the end (2 cores shared with other sessions).\n\n"
-            "| program (parse + validate + build curves) | lines | CPU time | wall time | CPU per line |\n"
+            "| program (parse + validate; NURBS built for NURBS blocks only) | lines | CPU time | wall time | CPU per line |\n"
             "|---|---|---|---|---|\n" + "\n".join(rows))
     write_section("program", "Program reading", body, "python benchmarks/bench_program.py")
 
