@@ -22,7 +22,6 @@ Run: python benchmarks/bench_blend.py [--write] [--plot] [--no-baseline]
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import os
 import sys
 import time
@@ -38,6 +37,7 @@ from benchmarks._report import write_section  # noqa: E402
 from nurbsmotion.planning import PlanLimits  # noqa: E402
 from nurbsmotion.planning.lookahead import plan_lookahead, planned_pieces  # noqa: E402
 from nurbsmotion.program import Program, read_program  # noqa: E402
+from nurbsmotion.program.model import with_feeds_capped  # noqa: E402
 
 FEED_CAP_MM_S = 200.0
 LINUXCNC_S = {"HSM_test": 20.39, "braid F7000": 16.70, "V-carve": 30.11}  # /work/shared/reference/linuxcnc-peer.md, 2026-11-28
@@ -48,9 +48,7 @@ IMG = ROOT / "docs" / "img" / "corner_blend.png"
 
 def capped(program: Program) -> Program:
     """Every programmed feed at most FEED_CAP_MM_S (LinuxCNC's MAX_LINEAR_VELOCITY)."""
-    blocks = tuple(dataclasses.replace(b, feed_mm_s=min(b.feed_mm_s, FEED_CAP_MM_S)) if b.feed_mm_s is not None else b
-                   for b in program.blocks)
-    return dataclasses.replace(program, blocks=blocks)
+    return with_feeds_capped(program, FEED_CAP_MM_S)
 
 
 def programs() -> dict[str, Program]:

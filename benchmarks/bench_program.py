@@ -55,7 +55,7 @@ def checked_before_motion(text: str) -> Callable[[], object]:
     from nurbsmotion.service.planner import parse
     from nurbsmotion.service.streamed_job import check_before_motion
 
-    config = parse_config(CONFIG.format(channel="bench", socket="/nonexistent/ctl.sock", data_dir="/nonexistent"),
+    config = parse_config(CONFIG.format(channel="bench", socket="/nonexistent/ctl.sock", data_dir="/nonexistent", extra=""),
                           "machine.yaml")
     axis_map = AxisMap.from_config(config)
 
@@ -134,7 +134,7 @@ def main() -> None:
     one, five, fifteen = os.getloadavg()
     body = (f"Best of {args.repeat} runs each, as this process' CPU time and as wall time; host load average "
             f"{one:.1f} / {five:.1f} / {fifteen:.1f} (1/5/15 min) at the end (2 cores shared with other sessions).\n\n"
-            "| program (parse + validate + build curves) | lines | CPU time | wall time | CPU per line |\n"
+            "| program (parse + validate; NURBS built for NURBS blocks only) | lines | CPU time | wall time | CPU per line |\n"
             "|---|---|---|---|---|\n" + "\n".join(rows))
     write_section("program", "Program reading", body, "python benchmarks/bench_program.py")
 

@@ -132,15 +132,18 @@ def import_nurbsmotion(src: str | None) -> dict[str, ModuleType]:
     sys.path.insert(0, src or str(ROOT / "src"))
     import importlib
 
-    names = ("nurbsmotion.program", "nurbsmotion.planning", "nurbsmotion.planning.lookahead",
+    names = ("nurbsmotion.program", "nurbsmotion.program.model", "nurbsmotion.planning", "nurbsmotion.planning.lookahead",
              "nurbsmotion.planning.path_deviation", "nurbsmotion.errors")
     return {name.rsplit(".", 1)[-1]: importlib.import_module(name) for name in names}
 
 
 def capped(program: Any, cap_mm_s: float, modules: dict[str, ModuleType]) -> Any:
     """The program with every block's programmed feed at most the cap (MAX_LINEAR_VELOCITY)."""
+    model = modules.get("model")
+    if model is not None and hasattr(model, "with_feeds_capped"):
+        return model.with_feeds_capped(program, cap_mm_s)
     blocks = tuple(dataclasses.replace(b, feed_mm_s=min(b.feed_mm_s, cap_mm_s)) if b.feed_mm_s is not None
-                   and b.feed_mm_s > cap_mm_s else b for b in program.blocks)
+                   and b.feed_mm_s > cap_mm_s else b for b in program.blocks)  # an older tree's dataclass Blocks
     return dataclasses.replace(program, blocks=blocks)
 
 

@@ -1,4 +1,6 @@
-"""Lines and circular arcs as exact NURBS, so the planner only ever sees NurbsCurve.
+"""Lines and circular arcs as exact NURBS, so the planner only ever sees NurbsCurve; and
+as what they are (LineShape, ArcShape: a few numbers, closed-form length), for programs
+that keep them compactly and build the NURBS only when it is asked for.
 
 A circular arc of sweep theta <= 90 deg is exactly the rational quadratic Bezier with
 control points P0, P1 (intersection of the end tangents), P2 and weights 1, cos(theta/2), 1
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import functools
 import math
+from dataclasses import dataclass
 from typing import Any, Sequence, cast
 
 import numpy as np
@@ -46,6 +49,63 @@ def line_curve(start: ArrayLike, end: ArrayLike) -> NurbsCurve:
         return NurbsCurve.create(1, points, [1.0, 1.0], [0.0, 0.0, 1.0, 1.0])  # create names the problem
     points.setflags(write=False)
     return NurbsCurve(1, points, _LINE_WEIGHTS, _LINE_KNOTS)
+
+
+@dataclass(frozen=True, slots=True)
+class LineShape:
+    """A straight segment from ``start`` to ``end`` (3-vectors, mm); ``curve()`` is line_curve."""
+
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+
+    def curve(self) -> NurbsCurve:
+        return line_curve(self.start, self.end)
+
+    @property
+    def length_mm(self) -> float:
+        """|end - start|."""
+        return math.dist(self.start.tolist(), self.end.tolist())
+
+
+@dataclass(frozen=True, slots=True)
+class ArcShape:
+    """A circular arc or helix as arc_curve takes it: about ``centre``, turning ``sweep_rad``
+    about the unit axis ``normal`` from ``start`` to the programmed ``end``, rising
+    ``rise_mm`` along the normal; ``curve()`` is that arc_curve."""
+
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    centre: NDArray[np.float64]
+    sweep_rad: float
+    normal: tuple[float, float, float]
+    rise_mm: float
+
+    def curve(self) -> NurbsCurve:
+        return arc_curve(self.centre, self.start, self.sweep_rad, self.normal, rise_mm=self.rise_mm, end=self.end)
+
+    @property
+    def length_mm(self) -> float:
+        """sqrt((r sweep)^2 + rise^2), r the radius in the plane normal to the axis."""
+        return float(arc_lengths_mm(self.start[None, :], self.centre[None, :], np.asarray(self.normal, float)[None, :],
+                                    np.array([self.sweep_rad]), np.array([self.rise_mm]))[0])
+
+
+def line_lengths_mm(starts: NDArray[np.float64], ends: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|end - start| of many segments, rows (n, 3)."""
+    return np.sqrt(np.einsum("ij,ij->i", ends - starts, ends - starts))
+
+
+def arc_radii_mm(starts: NDArray[np.float64], centres: NDArray[np.float64], normals: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|start - centre| in the plane normal to the (unit) normal, rows (n, 3)."""
+    radial = starts - centres
+    radial = radial - np.einsum("ij,ij->i", radial, normals)[:, None] * normals
+    return np.sqrt(np.einsum("ij,ij->i", radial, radial))
+
+
+def arc_lengths_mm(starts: NDArray[np.float64], centres: NDArray[np.float64], normals: NDArray[np.float64],
+                   sweeps_rad: NDArray[np.float64], rises_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Length of circular arcs and helices: sqrt((r sweep)^2 + rise^2) (the helix unrolled)."""
+    return np.hypot(arc_radii_mm(starts, centres, normals) * sweeps_rad, rises_mm)
 
 
 def arc_sweep_rad(start_angle: float, end_angle: float, clockwise: bool, full_circle_if_equal: bool = True) -> float:

@@ -1,4 +1,5 @@
-"""G02/G03 circular arcs -> exact rational quadratic NURBS (geometry.primitives.arc_curve).
+"""G02/G03 circular arcs -> ArcShape, whose curve is the exact rational quadratic NURBS
+(geometry.primitives.arc_curve).
 
 Planes (RS274/NGC): G17 = XY (offsets I J, normal +Z), G18 = ZX (offsets K I, normal +Y),
 G19 = YZ (offsets J K, normal +X). G03 turns counter-clockwise seen from the tip of the
@@ -29,7 +30,7 @@ from typing import Sequence
 import numpy as np
 
 from nurbsmotion.geometry import NurbsCurve
-from nurbsmotion.geometry.primitives import arc_curve, arc_sweep_rad
+from nurbsmotion.geometry.primitives import ArcShape, arc_sweep_rad
 
 MM_PER_INCH = 25.4
 CENTRE_TOLERANCE_MM = {False: 2 * math.sqrt(2) * 0.01, True: 2 * math.sqrt(2) * 0.001 * MM_PER_INCH}  # by inch units
@@ -121,10 +122,11 @@ def check_radii(r_start: float, r_end: float, inch: bool) -> None:
 
 
 def centre_from_radius(plane: Plane, start: Point, end: Point, radius_mm: float,
-                       clockwise: bool, radius_word: str) -> tuple[float, float, float]:
-    """Centre of the R-format arc (module docstring), in the start's plane."""
+                       clockwise: bool, radius_word: str, chord_mm: float | None = None) -> tuple[float, float, float]:
+    """Centre of the R-format arc (module docstring), in the start's plane (``chord_mm``: the
+    chord's length in the plane, when the caller has it)."""
     chord_a, chord_b = _in_plane(plane, start, end)
-    d = _hypot(chord_a, chord_b)
+    d = _hypot(chord_a, chord_b) if chord_mm is None else chord_mm
     r = checked_r_radius(d, radius_mm, radius_word)
     h = math.sqrt(max(r * r - d * d / 4, 0.0))
     side = (1.0 if not clockwise else -1.0) * (1.0 if radius_mm > 0 else -1.0)
@@ -138,6 +140,12 @@ def centre_from_radius(plane: Plane, start: Point, end: Point, radius_mm: float,
 
 def arc_nurbs(plane: Plane, start: Point, end: Point, centre: Point,
               clockwise: bool, full_circle_if_closed: bool, inch: bool = False, turns: int = 1) -> NurbsCurve:
+    """Exact arc (or helix) from start to end about centre as a NURBS (arc_shape's curve)."""
+    return arc_shape(plane, start, end, centre, clockwise, full_circle_if_closed, inch, turns).curve()
+
+
+def arc_shape(plane: Plane, start: Point, end: Point, centre: Point,
+              clockwise: bool, full_circle_if_closed: bool, inch: bool = False, turns: int = 1) -> ArcShape:
     """Exact arc (or helix) from start to end about centre; radii must agree within tolerance.
 
     When the two radii differ (within tolerance) the centre is moved onto the chord's
@@ -146,24 +154,49 @@ def arc_nurbs(plane: Plane, start: Point, end: Point, centre: Point,
     """
     r_start = _hypot(*_in_plane(plane, centre, start))
     r_end = _hypot(*_in_plane(plane, centre, end))
+    chord_mm = _hypot(*_in_plane(plane, start, end))
+    centre, sweep, rise = arc_geometry(plane, start, end, centre, clockwise, full_circle_if_closed, inch, turns,
+                                       (r_start, r_end, chord_mm))
+    return ArcShape(_point(start), _point(end), _point(centre), sweep, plane.normal, rise)  # exact programmed end points
+
+
+def arc_geometry(plane: Plane, start: Point, end: Point, centre: Point, clockwise: bool, full_circle_if_closed: bool,
+                 inch: bool, turns: int, lengths_mm: tuple[float, float, float]) -> tuple[Point, float, float]:
+    """arc_shape's numbers: (centre, sweep in rad, rise in mm), given ``lengths_mm`` = (radius at
+    the start, radius at the end, chord), each measured in the plane by _hypot; ArcError."""
+    r_start, r_end, chord_mm = lengths_mm
     check_radii(r_start, r_end, inch)
     chord = _in_plane(plane, start, end)
-    closed = _hypot(*chord) <= SAME_POINT_MM
+    closed = chord_mm <= SAME_POINT_MM
     if closed and not full_circle_if_closed:
         raise ArcError("arc end equals its start")
     if not closed and r_start != r_end:
         ccw_of_chord = _cross2(chord, _in_plane(plane, start, centre)) > 0
         radius = (r_start + r_end) / 2
         signed = radius if ccw_of_chord == (not clockwise) else -radius
-        centre = centre_from_radius(plane, start, end, signed, clockwise, "")
+        centre = centre_from_radius(plane, start, end, signed, clockwise, "", chord_mm)
     sweep = arc_sweep_rad(_angle(plane, centre, start), _angle(plane, centre, end), clockwise, closed)
     if closed:
         sweep = -2 * math.pi if clockwise else 2 * math.pi
     if sweep == 0:
         raise ArcError("arc end equals its start")
     sweep += math.copysign(2 * math.pi * (turns - 1), sweep)
-    rise = float(end[plane.normal_axis] - start[plane.normal_axis])
-    return arc_curve(centre, start, sweep, plane.normal, rise_mm=rise, end=end)  # exact programmed end points
+    return centre, sweep, float(end[plane.normal_axis] - start[plane.normal_axis])
+
+
+def arc_lengths_in_plane(plane: Plane, starts: np.ndarray, ends: np.ndarray,
+                         centres: np.ndarray) -> list[tuple[float, float, float]]:
+    """arc_geometry's ``lengths_mm`` of many arcs (rows (m, 3)) at once: numpy's hypot (the
+    same C function _hypot calls) over the columns, one call per length instead of one per arc."""
+    a, b = plane.axes
+    r_start = np.hypot(starts[:, a] - centres[:, a], starts[:, b] - centres[:, b])
+    r_end = np.hypot(ends[:, a] - centres[:, a], ends[:, b] - centres[:, b])
+    chord = np.hypot(ends[:, a] - starts[:, a], ends[:, b] - starts[:, b])
+    return list(zip(r_start.tolist(), r_end.tolist(), chord.tolist()))
+
+
+def _point(p: Point) -> np.ndarray:
+    return np.array([float(p[0]), float(p[1]), float(p[2])])
 
 
 def _cross2(a: tuple[float, float], b: tuple[float, float]) -> float:

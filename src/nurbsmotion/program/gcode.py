@@ -18,7 +18,6 @@ moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_n
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,10 +28,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.geometry import NurbsCurve
-from nurbsmotion.geometry.primitives import line_curve
-from nurbsmotion.program.arcs import PLANES, ArcError, arc_nurbs, centre_from_radius
+from nurbsmotion.geometry.primitives import ArcShape, LineShape
+from nurbsmotion.program.arcs import PLANES, ArcError, arc_shape, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
 from nurbsmotion.program.expressions import ExpressionError, Number
+from nurbsmotion.program.gcode_fast import FastLines, lines_lexed_first
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
@@ -40,12 +40,16 @@ from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_L
 from nurbsmotion.program.gcode_offsets import OffsetCommands
 from nurbsmotion.program.gcode_start import StartLineReading
 from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
-from nurbsmotion.program.model import (Block, BlockKind, CoolantMode, EventKind, Program, ProgramEvent, ReadExtent,
+from nurbsmotion.program.model import (BlockKind, CoolantMode, EventKind, Program, ProgramEvent, ReadExtent,
                                        SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
+from nurbsmotion.program.records import RecordsBuilder, SourceText
 from nurbsmotion.program.tools import ToolTable
 
+# The arc builder every G02/G03 goes through, by this name: an ArcShape (a NurbsCurve is
+# taken too: tests/program/test_arcs.py puts the NURBS oracle in its place).
+arc_nurbs: Callable[..., ArcShape | NurbsCurve] = arc_shape
 MM_PER_INCH = 25.4
 ZERO_MOVE_MM = 1e-9  # shorter G00/G01 moves are skipped
 
@@ -125,8 +129,13 @@ class _Stop(Exception):
     """Too many problems: stop reading."""
 
 
-class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands, StartLineReading):
-    """Reads one program; ``parse`` returns the Program or raises InputError(s)."""
+class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands, StartLineReading, FastLines):
+    """Reads one program; ``parse`` returns the Program or raises InputError(s).
+
+    ``fast_lines``: plain move lines take gcode_fast's path (False: every line is lexed and
+    run by the general path, the fast path's oracle)."""
+
+    fast_lines = True
 
     def __init__(self, source: str, start_position: ArrayLike = (0.0, 0.0, 0.0), options: ReadOptions | None = None) -> None:
         self.source = source
@@ -154,11 +163,13 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.coolant: set[CoolantMode] = set()
         self.saved_states: list[ModalSnapshot | None] = [None]  # M70 per call level
         self.frames: list[_Frame] = []
-        self.blocks: list[Block] = []
+        self.blocks = RecordsBuilder(source, self.line_text)
+        self.raw_lines: list[str] = []
         self.events: list[ProgramEvent] = []
         self.params = ParameterStore(self.system_parameter)
         self.errors: list[tuple[int, InputError]] = []
-        self.lines: list[LexedLine | InputError] = []
+        self.lines: list[LexedLine | InputError | str] = []  # str: a plain line for gcode_fast, lexed if it must be
+        self.words_read: dict[str, RawWord] = {}  # the program's plain words, shared between its lines
         self.top_repeats: dict[int, int] = {}
         self.ended: tuple[int, str] | None = None  # (line, 'M30' / 'M2' / '%'): where reading ended early
         self.end_word = ""  # the program end of the last line run, as 'M30' / 'M2'
@@ -168,7 +179,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
     # ---- driver ------------------------------------------------------------------------
     def parse(self, text: str) -> Program:
         text = text.removeprefix("\ufeff")  # a byte-order mark (Windows editors, CAM posts) is not part of line 1
-        self.lines = lines = self.lex(text.split("\n"))
+        self.raw_lines = text.split("\n")
+        self.lines = lines = self.lex(self.raw_lines, text)
         flow, structure = index_owords([ln if isinstance(ln, LexedLine) else None for ln in lines], self.source)
         if not structure:
             self.check_start_line_place(flow, len(lines) - (1 if text.endswith("\n") else 0))  # as editors count
@@ -176,6 +188,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             for err in structure:  # the program cannot run: say so, with every unreadable line
                 self.record(err_line(err), err)
             for number, line in enumerate(lines, start=1):
+                if structure and isinstance(line, str):
+                    line = self.lex_one(number, line)
                 if structure and isinstance(line, InputError):
                     self.record(number, line)
             if not structure:
@@ -186,19 +200,30 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             raise self.collected_errors()
         self.check_start_line_reached()
         name = Path(self.source).stem or self.source
-        return Program(name, tuple(self.blocks), self.start.copy(), tuple(self.events), self.offsets.state(),
+        return Program(name, self.blocks.build(SourceText.of(text)), self.start.copy(), tuple(self.events), self.offsets.state(),
                        self.tool_loaded, self.start_line.state if self.start_line is not None else None,
                        read_extent(lines, self.ended, text.endswith("\n")))
 
-    def lex(self, raw_lines: list[str]) -> list[LexedLine | InputError]:
-        lines: list[LexedLine | InputError] = []
-        words_read: dict[str, RawWord] = {}  # the program's plain words, shared between its lines
-        for number, raw in enumerate(raw_lines, start=1):
-            try:
-                lines.append(lex_line(number, raw, self.source, words_read))
-            except InputError as err:
-                lines.append(err)
+    def lex(self, raw_lines: list[str], text: str) -> list[LexedLine | InputError | str]:
+        """Every line lexed, except those that may be plain move lines (made only of their
+        characters, gcode_fast.lines_lexed_first): kept as their text, lexed only if the general path
+        must run them (lex_one). The lines to lex are found by one scan of the whole text."""
+        if not self.fast_lines:
+            return [self.lex_one(number, raw) for number, raw in enumerate(raw_lines, start=1)]
+        lines: list[LexedLine | InputError | str] = list(raw_lines)
+        for index in lines_lexed_first(text):
+            lines[index] = self.lex_one(index + 1, raw_lines[index])
         return lines
+
+    def lex_one(self, number: int, raw: str) -> LexedLine | InputError:
+        try:
+            return lex_line(number, raw, self.source, self.words_read)
+        except InputError as err:
+            return err
+
+    def line_text(self, number: int) -> str:
+        """Line ``number`` (1-based) of the text being read, as written."""
+        return self.raw_lines[number - 1] if 1 <= number <= len(self.raw_lines) else ""
 
     def record(self, number: int, err: InputError) -> None:
         for e in getattr(err, "errors", [err]):
@@ -213,7 +238,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             ordered.append(InputError(self.source, f"stopped after {self.options.max_errors} problems; fix these and check again"))
         return ordered[0] if len(ordered) == 1 else InputErrors(ordered)
 
-    def run(self, lines: list[LexedLine | InputError], flow: Flow) -> None:
+    def run(self, lines: list[LexedLine | InputError | str], flow: Flow) -> None:
         """Run the lines in program order (O-word jumps and calls); stop at M2/M30 or a closing '%'."""
         frames = self.frames
         first = next((ln for ln in lines if not (isinstance(ln, LexedLine) and ln.empty)), None)
@@ -234,6 +259,14 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                 self.record(number, InputError(f"{self.source}:{number}", f"more than {self.options.max_loop_lines:,} lines run in loops and calls: "
                                                                         f"an O-word loop that never ends?"))
                 raise _Stop
+            if isinstance(line, str):
+                if self.fast_ready():
+                    after = self.run_fast(lines, pc, min(len(lines), pc + 1 + len(lines) + self.options.max_loop_lines - executed))
+                    if after > pc:
+                        executed += after - pc - 1
+                        pc = after
+                        continue
+                line = self.lex_one(pc + 1, line)
             if isinstance(line, InputError):
                 self.record(pc + 1, line)
                 pc += 1
@@ -602,8 +635,8 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             return
         event = ProgramEvent(kind, len(self.blocks), line.source, code, **values)  # type: ignore[arg-type]
         self.events.append(event)
-        if event.stops_motion and self.blocks and not self.blocks[-1].exact_stop:
-            self.blocks[-1] = dataclasses.replace(self.blocks[-1], exact_stop=True)
+        if event.stops_motion and len(self.blocks) and not self.blocks.last_exact_stop:
+            self.blocks.mark_exact_stop_last()
 
     # ---- moves ------------------------------------------------------------------------
     def move_with_g53(self, line: GcodeLine, motion_on_line: bool, non_modal: Word | None) -> None:
@@ -654,11 +687,17 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                 point[axis] = value + offset[axis] if self.absolute else base[axis] + value
         return point
 
-    def add_block(self, kind: BlockKind, curve: NurbsCurve, feed_mm_s: float | None, line: GcodeLine) -> None:
+    def add_block(self, kind: BlockKind, shape: NurbsCurve | LineShape | ArcShape, feed_mm_s: float | None,
+                  line: GcodeLine) -> None:
         if not self.skipping:  # before the start line: only where the move ends counts
-            self.blocks.append(Block(kind, curve, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm,
-                                     self.smoothing_tolerance_mm))
-        self.position = curve.end_point
+            self.blocks.add(kind, shape, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm,
+                            self.smoothing_tolerance_mm)
+        self.position = shape.end_point if isinstance(shape, NurbsCurve) else shape.end.copy()
+
+    def arcs_batched(self) -> bool:
+        """gcode_fast computes arcs a run at a time (arcs.arc_geometry, as arc_shape) when the
+        reader's arc builder is arc_shape; another (a test's oracle) takes every arc itself."""
+        return arc_nurbs is arc_shape
 
     def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
         feed = None if rapid else self.need_feed(line)
@@ -667,7 +706,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         if self.skipping:  # before the start line: no curve to build, only where it ends
             self.position = end
             return
-        self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, line_curve(self.position, end), feed, line)
+        self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, LineShape(self.position, end), feed, line)
 
     def straight(self, line: GcodeLine, _explicit: bool) -> None:
         self.add_straight(line, self.target(line, self.position), rapid=self.motion == RAPID)
@@ -693,7 +732,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         try:
             if radius is not None:
                 centre = centre_from_radius(plane, start_xyz, end_xyz, radius.value * self.mm_per_unit, clockwise, radius.text)
-                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, False, inch, int(turns.value) if turns else 1)
+                shape = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, False, inch, int(turns.value) if turns else 1)
             elif offsets:
                 centre = start_xyz.copy()
                 origin = self.offsets.total().tolist() if self.arc_absolute else None
@@ -701,7 +740,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
                     axis = "IJK".index(w.letter)
                     value = w.value * self.mm_per_unit
                     centre[axis] = value + origin[axis] if origin is not None else start_xyz[axis] + value
-                curve = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, True, inch, int(turns.value) if turns else 1)
+                shape = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, True, inch, int(turns.value) if turns else 1)
             else:
                 gword = line.g(self.motion or 0)
                 raise ArcError(f"an arc needs centre offsets {' '.join(plane.offset_letters)} or a radius R", gword.text if gword else "")
@@ -710,7 +749,7 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             word = line.words[err.word].text if err.word in line.words else err.word
             word = word or " ".join(w.text for w in offsets) or (radius.text if radius else "")
             raise InputError(line.at(word), str(err)) from None
-        self.add_block(BlockKind.ARC, curve, feed, line)
+        self.add_block(BlockKind.ARC, shape, feed, line)
 
 
 def err_line(err: InputError) -> int:
@@ -727,10 +766,10 @@ def parse_gcode(text: str, source: str = "<gcode>", start_position: ArrayLike = 
     return GcodeParser(source, start_position, options).parse(text)
 
 
-def read_extent(lines: list[LexedLine | InputError], ended: tuple[int, str] | None, final_newline: bool) -> ReadExtent:
+def read_extent(lines: list[LexedLine | InputError | str], ended: tuple[int, str] | None, final_newline: bool) -> ReadExtent:
     """The lines read of the file's: to its end, or to the M2/M30 or closing % that ``ended``
     it, with the lines after that which hold anything (never run: LinuxCNC ignores them)."""
     total = len(lines) - (1 if final_newline else 0)  # 'a\nb\n' splits into 3: two lines
     last, by = ended if ended is not None else (total, "end of file")
-    not_read = sum(1 for ln in lines[last:total] if isinstance(ln, InputError) or not (ln.empty or ln.percent))
+    not_read = sum(1 for ln in lines[last:total] if isinstance(ln, (InputError, str)) or not (ln.empty or ln.percent))
     return ReadExtent(total, last, by, not_read)

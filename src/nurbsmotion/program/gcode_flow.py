@@ -38,7 +38,7 @@ class OwordRunning:
     """The O-word part of the G-code reader (mixed into GcodeParser)."""
 
     source: str
-    lines: list[LexedLine | InputError]
+    lines: list[LexedLine | InputError | str]  # str: a plain line (gcode_fast)
     params: ParameterStore
     top_repeats: dict[int, int]
 

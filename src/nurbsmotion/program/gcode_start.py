@@ -27,7 +27,6 @@ are no canned-cycle repeats to start inside.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -35,7 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.errors import InputError
-from nurbsmotion.geometry.primitives import line_curve
+from nurbsmotion.geometry.primitives import LineShape
 from nurbsmotion.program.coordinates import Offsets
 from nurbsmotion.program.gcode_line import GcodeLine
 from nurbsmotion.program.model import BlockKind, CoolantMode, EventKind, ResumeState, SpindleDirection
@@ -97,7 +96,7 @@ class StartLineReading:
     constant_surface_speed: bool
     coolant: set[CoolantMode]
     nurbs: Any
-    blocks: list[Any]
+    blocks: Any  # program.records.RecordsBuilder
     frames: list[Any]
     add_event: Callable[..., None]
     add_block: Callable[..., None]
@@ -177,8 +176,8 @@ class StartLineReading:
         across = np.array([target[0], target[1], clear_z])
         for a, b, kind in ((here, up, BlockKind.RAPID), (up, across, BlockKind.RAPID), (across, target, BlockKind.LINE)):
             if float(np.linalg.norm(b - a)) > APPROACH_ZERO_MM:
-                self.add_block(kind, line_curve(a, b), None if kind is BlockKind.RAPID else self.feed_mm_s, line)
-                self.blocks[-1] = dataclasses.replace(self.blocks[-1], exact_stop=True)  # no corner blended away
+                self.add_block(kind, LineShape(a, b), None if kind is BlockKind.RAPID else self.feed_mm_s, line)
+                self.blocks.mark_exact_stop_last()  # no corner blended away
         self.position = target
 
     def check_start_line_reached(self) -> None:

@@ -1,7 +1,9 @@
-"""A Program: the toolpath as blocks, every block a NURBS curve with its feed and source line.
+"""A Program: the toolpath as blocks, every block a curve with its feed and source line.
 
-Lines are degree-1 NURBS and arcs exact rational quadratics (geometry.primitives), so the
-planners only ever see NurbsCurve. Positions are machine XYZ in mm (work, G92 and tool
+A block's ``curve`` is a NurbsCurve: lines are degree-1 NURBS and arcs exact rational
+quadratics (geometry.primitives), so the planners only ever see NurbsCurve. A reader keeps
+lines and arcs as what they are (program.records: arrays, closed-form lengths) and builds
+that curve only when a block is asked for it. Positions are machine XYZ in mm (work, G92 and tool
 offsets already applied); feeds in mm/s.
 
 What happens between moves (dwell, pause, tool change, spindle, coolant) is a
@@ -11,13 +13,16 @@ are done. Events that stop motion mark the block before them ``exact_stop``.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.geometry import NurbsCurve
+from nurbsmotion.geometry.primitives import ArcShape, LineShape
 from nurbsmotion.program.coordinates import CoordinateState
 
 AXES = ("X", "Y", "Z")
@@ -42,15 +47,54 @@ class SourceRef:
         return f"{self.file}:{self.line}"
 
 
-@dataclass(frozen=True, eq=False)
 class Block:
-    kind: BlockKind
-    curve: NurbsCurve
-    feed_mm_s: float | None  # None: the machine's feed applies (rapid feed for RAPID, default feed otherwise)
-    source: SourceRef
-    exact_stop: bool = False  # come to rest at the end of this block (G61/G61.1, or a stopping event follows)
-    blend_tolerance_mm: float | None = None  # G64 P: path tolerance at this block's start; None: the machine's
-    smoothing_tolerance_mm: float | None = None  # G64 Q: short-segment smoothing tolerance; 0: off; None: the machine's
+    """One move: its kind, geometry, feed and source line.
+
+    ``Block(kind, curve, ...)`` holds a NurbsCurve; a reader's blocks hold a LineShape or
+    ArcShape instead (``shape``: a few numbers) and build ``curve`` from it when asked (kept
+    on this Block, never in the program: program.records). Start, end and length come from
+    the shape without building the curve."""
+
+    __slots__ = ("kind", "shape", "feed_mm_s", "source", "exact_stop", "blend_tolerance_mm", "smoothing_tolerance_mm",
+                 "_curve")
+
+    def __init__(self, kind: BlockKind, curve: NurbsCurve | LineShape | ArcShape, feed_mm_s: float | None,
+                 source: SourceRef, exact_stop: bool = False, blend_tolerance_mm: float | None = None,
+                 smoothing_tolerance_mm: float | None = None) -> None:
+        self.kind = kind
+        self.shape = curve
+        self.feed_mm_s = feed_mm_s  # None: the machine's feed applies (rapid feed for RAPID, default feed otherwise)
+        self.source = source
+        self.exact_stop = exact_stop  # come to rest at the end of this block (G61/G61.1, or a stopping event follows)
+        self.blend_tolerance_mm = blend_tolerance_mm  # G64 P: path tolerance at this block's start; None: the machine's
+        self.smoothing_tolerance_mm = smoothing_tolerance_mm  # G64 Q: short-segment smoothing tolerance; 0: off; None: the machine's
+        self._curve: NurbsCurve | None = curve if isinstance(curve, NurbsCurve) else None
+
+    def __repr__(self) -> str:
+        return (f"Block({self.kind.value}, {self.shape!r}, feed_mm_s={self.feed_mm_s}, source={self.source}, "
+                f"exact_stop={self.exact_stop}, blend_tolerance_mm={self.blend_tolerance_mm}, "
+                f"smoothing_tolerance_mm={self.smoothing_tolerance_mm})")
+
+    def __getstate__(self) -> tuple[object, ...]:
+        return (self.kind, self.shape, self.feed_mm_s, self.source, self.exact_stop, self.blend_tolerance_mm,
+                self.smoothing_tolerance_mm)
+
+    def __setstate__(self, state: tuple[object, ...]) -> None:
+        self.__init__(*state)  # type: ignore[misc]
+
+    def replace(self, **changes: object) -> Block:
+        """A copy with some fields changed (``exact_stop=True``), as dataclasses.replace."""
+        values = {"kind": self.kind, "curve": self.shape, "feed_mm_s": self.feed_mm_s, "source": self.source,
+                  "exact_stop": self.exact_stop, "blend_tolerance_mm": self.blend_tolerance_mm,
+                  "smoothing_tolerance_mm": self.smoothing_tolerance_mm, **changes}
+        return Block(**values)  # type: ignore[arg-type]
+
+    @property
+    def curve(self) -> NurbsCurve:
+        """The block's NURBS: a line's degree-1 segment, an arc's exact rational quadratic."""
+        if self._curve is None:
+            self._curve = self.shape.curve()  # type: ignore[union-attr]
+        return self._curve
 
     def feed_or_default_mm_s(self, default_feed_mm_s: float, rapid_feed_mm_s: float) -> float:
         """The programmed feed, or the machine's: rapid feed for RAPID blocks, default feed otherwise."""
@@ -60,15 +104,18 @@ class Block:
 
     @property
     def start(self) -> NDArray[np.float64]:
-        return self.curve.start_point
+        shape = self.shape
+        return shape.start_point if isinstance(shape, NurbsCurve) else shape.start.copy()
 
     @property
     def end(self) -> NDArray[np.float64]:
-        return self.curve.end_point
+        shape = self.shape
+        return shape.end_point if isinstance(shape, NurbsCurve) else shape.end.copy()
 
     @property
     def length_mm(self) -> float:
-        return self.curve.length
+        """Arc length: closed form for a line or arc (geometry.primitives), the NURBS length otherwise."""
+        return self.shape.length if isinstance(self.shape, NurbsCurve) else self.shape.length_mm
 
 
 class EventKind(str, enum.Enum):
@@ -186,7 +233,7 @@ class Program:
     """
 
     name: str
-    blocks: tuple[Block, ...]
+    blocks: Sequence[Block]  # a reader's: program.records.BlockRecords (compact); any sequence of Blocks works
     start_position: NDArray[np.float64]
     events: tuple[ProgramEvent, ...] = ()
     coordinates: CoordinateState | None = None
@@ -213,8 +260,20 @@ class Program:
 
     @property
     def length_mm(self) -> float:
+        from nurbsmotion.program.records import BlockRecords
+
+        if isinstance(self.blocks, BlockRecords):
+            return float(self.blocks.lengths_mm().sum())
         return float(sum(b.length_mm for b in self.blocks))
 
     @property
     def end_position(self) -> NDArray[np.float64]:
-        return self.blocks[-1].end if self.blocks else self.start_position.copy()
+        return self.blocks[-1].end if len(self.blocks) else self.start_position.copy()
+
+
+def with_feeds_capped(program: Program, cap_mm_s: float) -> Program:
+    """The program with every programmed feed at most ``cap_mm_s`` (a machine's top speed, as
+    LinuxCNC's MAX_LINEAR_VELOCITY caps F); the blocks as Block objects."""
+    blocks = tuple(b.replace(feed_mm_s=cap_mm_s) if b.feed_mm_s is not None and b.feed_mm_s > cap_mm_s else b
+                   for b in program.blocks)
+    return dataclasses.replace(program, blocks=blocks)

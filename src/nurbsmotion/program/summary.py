@@ -1,5 +1,6 @@
 """What a program does, in numbers: blocks by kind, length, bounding box, feed range, and
-what happens between moves (dwell, pauses, tool changes, spindle, coolant)."""
+what happens between moves (dwell, pauses, tool changes, spindle, coolant). Computed over
+the blocks' records (program.records), vectorised: no curve is built for a line or arc."""
 
 from __future__ import annotations
 
@@ -10,6 +11,7 @@ import numpy as np
 
 from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.program.model import EventKind, Program
+from nurbsmotion.program.records import KINDS, BlockRecords
 
 SAMPLES_PER_SPAN = 64
 
@@ -48,36 +50,36 @@ def curve_samples(curve: NurbsCurve, per_span: int = SAMPLES_PER_SPAN) -> np.nda
 
 
 def summarize(program: Program) -> ProgramSummary:
-    """Summary of a program; the bounding box is of sampled curve points (not control points)."""
+    """Summary of a program, over its records' arrays (program.records): lengths in closed
+    form for lines and arcs; the bounding box holds the end points, each arc's extremes and
+    sampled points of every NURBS curve (curve_samples)."""
+    records = BlockRecords.of_blocks(program.blocks)
+    codes, first = np.unique(records.kinds, return_index=True)
+    lengths = records.lengths_mm()
     by_kind: dict[str, int] = {}
     length_by_kind: dict[str, float] = {}
-    points = [program.start_position.reshape(1, 3)]
-    feeds = []
-    for block in program.blocks:
-        kind = block.kind.value
-        by_kind[kind] = by_kind.get(kind, 0) + 1
-        length_by_kind[kind] = length_by_kind.get(kind, 0.0) + block.length_mm
-        points.append(curve_samples(block.curve))
-        if block.feed_mm_s is not None:
-            feeds.append(block.feed_mm_s * 60.0)
-    cloud = np.vstack(points)
+    for code in codes[np.argsort(first)].tolist():  # in order of first appearance
+        of_kind = records.kinds == code
+        by_kind[KINDS[code].value] = int(of_kind.sum())
+        length_by_kind[KINDS[code].value] = float(lengths[of_kind].sum())
+    low, high = records.extent_mm(curve_samples)
     start, end = program.start_position, program.end_position
+    low, high = np.minimum(low, start), np.maximum(high, start)
+    feeds = records.feeds_mm_s[~np.isnan(records.feeds_mm_s)] * 60.0
 
     def triple(v: np.ndarray) -> tuple[float, float, float]:
         return (float(v[0]), float(v[1]), float(v[2]))
 
     return ProgramSummary(
-        name=program.name, blocks=len(program.blocks), blocks_by_kind=by_kind,
+        name=program.name, blocks=len(records), blocks_by_kind=by_kind,
         length_mm=float(sum(length_by_kind.values())), length_by_kind_mm=length_by_kind,
-        start_mm=triple(start), end_mm=triple(end),
-        bbox_min_mm=triple(cloud.min(axis=0)), bbox_max_mm=triple(cloud.max(axis=0)),
-        feed_min_mm_min=min(feeds) if feeds else None, feed_max_mm_min=max(feeds) if feeds else None,
-        blocks_at_machine_feed=len(program.blocks) - len(feeds),
+        start_mm=triple(start), end_mm=triple(end), bbox_min_mm=triple(low), bbox_max_mm=triple(high),
+        feed_min_mm_min=float(feeds.min()) if len(feeds) else None, feed_max_mm_min=float(feeds.max()) if len(feeds) else None,
+        blocks_at_machine_feed=len(records) - len(feeds),
         events_by_kind=events_by_kind(program), dwell_s=float(sum(program.dwell_s_before().values())),
         tools=tuple(e.tool for e in program.events if e.kind is EventKind.TOOL_CHANGE and e.tool is not None),
         requires_spindle=program.requires_spindle, requires_coolant=program.requires_coolant,
-        exact_stops=sum(b.exact_stop for b in program.blocks),
-        reading=reading_dict(program))
+        exact_stops=int(records.exact_stops.sum()), reading=reading_dict(program))
 
 
 def reading_dict(program: Program) -> dict[str, Any] | None:

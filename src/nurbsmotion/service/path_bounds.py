@@ -26,6 +26,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.geometry.nurbs import NurbsCurve
 from nurbsmotion.program import Program
 from nurbsmotion.program.model import SourceRef
+from nurbsmotion.program.records import BlockRecords
 
 BRACKET_MM = 1e-6  # extremes known to this; far below one count of any real axis
 SAMPLES_PER_SPAN = 16
@@ -89,7 +90,10 @@ def curve_extreme(curve: NurbsCurve, j: int, sign: float) -> Extreme:
 def block_hulls(program: Program) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """(lows, highs): per block, the min and max of its control points per coordinate, arrays
     (blocks, dim). One reduction over all the program's control points (np.*.reduceat), not
-    a few per block: a CAM program has ~10^5 blocks."""
+    a few per block: a CAM program has ~10^5 blocks. A reader's program (program.records)
+    gives them from its columns: its lines' ends without building their curves."""
+    if isinstance(program.blocks, BlockRecords):
+        return program.blocks.hulls_mm()
     points = [block.curve.control_points for block in program.blocks]
     starts = np.cumsum([0] + [len(p) for p in points[:-1]])
     stacked = np.concatenate(points)

@@ -38,7 +38,7 @@ import time
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -55,6 +55,7 @@ from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program, ReadOptions
+from nurbsmotion.program.records import BlockRecords
 from nurbsmotion.service.planner import machine_has_devices, spindle_wait_reason
 
 log = logging.getLogger(__name__)
@@ -108,7 +109,7 @@ class CheckedProgram:
 class ProgramBlocks:
     """The next blocks of the CheckedProgram's program, in order."""
 
-    blocks: tuple[Any, ...]
+    blocks: Sequence[Any]  # a slice of the program's blocks (program.records.BlockRecords: arrays)
 
 
 @dataclass(frozen=True, eq=False)
@@ -354,6 +355,9 @@ class BlockLengths:
         self.lengths_mm = np.zeros(len(program.blocks))
         self.done = 0
         self.sent = False
+        if isinstance(program.blocks, BlockRecords) and not program.blocks.curves:  # lines and arcs only: closed form, at once
+            self.lengths_mm = program.blocks.lengths_mm()
+            self.done = len(program.blocks)
 
     def compute(self, budget_s: float | None) -> bool:
         """Go on for about ``budget_s`` (None: to the end); True once every length is known."""
@@ -375,15 +379,19 @@ def send_program(results: Any, program: Program) -> None:
 def receive_program(results: Any, outline: CheckedProgram, timeout_s: float) -> Program:
     """The daemon's side of send_program: the blocks joined to the outline (TimeoutError when a
     slice is not there within ``timeout_s``; EOFError/OSError when the worker is gone)."""
-    blocks: list[Any] = []
-    while len(blocks) < outline.block_count:
+    slices: list[Any] = []
+    received = 0
+    while received < outline.block_count:
         if not results.poll(timeout_s):
-            raise TimeoutError(f"the program's blocks after {len(blocks)} of {outline.block_count}")
+            raise TimeoutError(f"the program's blocks after {received} of {outline.block_count}")
         message = results.recv()  # one slice: the lock is held while it loads, then free again
         if not isinstance(message, ProgramBlocks):
             raise TypeError(f"expected the program's blocks, got {type(message).__name__}")
-        blocks.extend(message.blocks)
-    return dataclasses.replace(outline.program, blocks=tuple(blocks))
+        slices.append(message.blocks)
+        received += len(message.blocks)
+    if slices and all(isinstance(part, BlockRecords) for part in slices):  # a reader's: kept as columns
+        return dataclasses.replace(outline.program, blocks=BlockRecords.concatenate(slices))
+    return dataclasses.replace(outline.program, blocks=tuple(b for part in slices for b in part))
 
 
 def pause_events(program: Program, spindle_waits: bool) -> list[Any]:

@@ -17,6 +17,7 @@ from nurbsmotion.planning import path_deviation as pd
 from nurbsmotion.planning.lookahead import plan_lookahead, plan_lookahead_chunks, planned_pieces
 from nurbsmotion.planning.lookahead.smoothing import MERGE_SHARE, merged_vertices
 from nurbsmotion.program import Program, parse_gcode
+from nurbsmotion.program.model import with_feeds_capped
 from tests.planning.lookahead.conftest import assert_within_limits, measure_planned, polyline
 from tests.planning.lookahead.test_no_give_ups import braid_program
 
@@ -27,9 +28,7 @@ NO_JERK = replace(LIMITS, max_jerk_mm_s3=None)
 
 
 def capped(program: Program, feed_mm_s: float = 200.0) -> Program:
-    blocks = tuple(replace(b, feed_mm_s=min(b.feed_mm_s, feed_mm_s)) if b.feed_mm_s is not None else b
-                   for b in program.blocks)
-    return replace(program, blocks=blocks)
+    return with_feeds_capped(program, feed_mm_s)
 
 
 def vcarve(lines: int | None = None) -> Program:
