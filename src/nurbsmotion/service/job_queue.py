@@ -8,8 +8,9 @@ so each program is still checked before motion (the checked-program store makes 
 
 The queue pauses itself, and the operator resumes it explicitly (``queue.resume``):
 - when a job it started ends in anything but ``completed`` (fault, abort, stop);
-- when its next program is refused (rejected, not homed, a fault, busy with another job):
-  the entry stays first;
+- when its next program is refused (rejected, not homed, busy with another job): the entry
+  stays first;
+- when the drives are in fault while it waits (a reset does not start the next entry);
 - at the daemon's start when it holds entries: a restart never starts motion by itself.
 Every change is one INFO log line ``queue_changed`` (an event on the subscribe push).
 """
@@ -161,11 +162,12 @@ class JobQueue:
 @dataclass
 class QueueHooks:
     """What the runner needs of the daemon: is the machine idle, start an entry (the job's
-    id, or InputError), the last job's id and outcome."""
+    id, or InputError), the last job's id and outcome, is it in fault."""
 
     idle: Callable[[], bool]
     start: Callable[[QueueEntry], str]
     last_job: Callable[[], dict[str, Any] | None]
+    faulted: Callable[[], bool] = lambda: False
 
 
 class QueueRunner:
@@ -206,7 +208,12 @@ class QueueRunner:
                 self.queue.pause(f"job {last['id']} ({last.get('name')}) ended {last.get('outcome')}"
                                  f"{': ' + last['reason'] if last.get('reason') else ''}")
                 return
-        if self.queue.paused is not None or not self.queue.entries or not self.hooks.idle():
+        if self.queue.paused is not None or not self.queue.entries:
+            return
+        if self.hooks.faulted():
+            self.queue.pause("the drives are in fault: reset, then resume the queue")
+            return
+        if not self.hooks.idle():
             return
         entry = self.queue.take_first()
         if entry is None:

@@ -39,7 +39,8 @@ class Programs:
         self.library = ProgramLibrary(config.data_dir, int(config.web.max_upload_mb * 1024 * 1024))
         self.checker = ProgramChecker()
         self.queue = queue
-        self.runner = QueueRunner(self.queue, QueueHooks(controller.idle, self._start_entry, controller.last_job))
+        self.runner = QueueRunner(self.queue, QueueHooks(controller.idle, self._start_entry, controller.last_job,
+                                                         lambda: controller.state() == "fault"))
 
     def start(self) -> None:
         self.store.prune()
