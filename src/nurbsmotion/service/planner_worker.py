@@ -65,6 +65,7 @@ QUIT_TIMEOUT_S = 5.0
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 BLOCKS_PER_MESSAGE = 1000  # blocks a ProgramBlocks slice carries (~15 ms of the daemon's lock to load)
 LENGTHS_BUDGET_S = 0.02  # arc-length work between two chunks (a chunk is 2 s of motion): planning stays ahead
+STORE_AHEAD_S = 4.0  # the checked program is stored once planning is this far ahead of the axes (a write: ~1 s per 10^5 blocks)
 
 
 @dataclass(frozen=True)
@@ -197,7 +198,8 @@ class WorkerJob:
         self.measure: MeasureStream | None = None
         self.path: PlannedPath | None = None
         self.lengths: BlockLengths | None = None
-        self.to_store: Program | None = None  # checked now: written to the store after the first chunk
+        self.to_store: Program | None = None  # checked now: written to the store once planning is well ahead
+        self.first_sent_s = float("nan")  # when the first chunk was sent (the axes start about then)
 
     def run(self) -> PlanEnd:
         errors: tuple[tuple[str, str], ...] = ()
@@ -228,6 +230,7 @@ class WorkerJob:
             raise WorkerGone() from None
         except Exception as err:  # a bug: the job's progress falls back to blocks, its end is still reported
             log.warning(kv("path_lengths_failed", program=self.request.name, error=repr(err)))
+        self._store_checked()  # not yet stored: the job ended or was cancelled before planning got that far ahead
         self._close_trace()
         stream = self.stream
         return PlanEnd(self.planned, finished and not errors, errors,
@@ -262,15 +265,23 @@ class WorkerJob:
             self.planned += len(counts)
             before = counts[-2:]
             self._trace_rows(self._on_program(self.measure.add(self.path.rows(chunk))))
-            self._store_checked()
+            if self.planned == len(counts):
+                self.first_sent_s = time.monotonic()
+            if self._ahead_s() >= STORE_AHEAD_S:
+                self._store_checked()
             self._send_lengths(budget_s=LENGTHS_BUDGET_S)
             if self._read_commands(block=False):
                 return False
         return True
 
+    def _ahead_s(self) -> float:
+        """Seconds of motion planned beyond where the axes are now (about: from the first chunk on)."""
+        return self.planned * self.config.cycle_period_s - (time.monotonic() - self.first_sent_s)
+
     def _store_checked(self) -> None:
-        """Once the first chunk is on its way (first motion does not wait for it): the checked
-        program into the store, so the next start of it is not read and checked again."""
+        """The checked program into the store, so the next start of it is not read and checked
+        again: once planning is STORE_AHEAD_S ahead of the axes (first motion never waits for
+        the write, and the axes never run out of rows during it), or at the job's end."""
         program, self.to_store = self.to_store, None
         if program is not None:
             store_checked(self.request, program)
