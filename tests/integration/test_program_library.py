@@ -124,6 +124,8 @@ def test_the_queue_runs_programs_in_order_stops_at_an_abort_and_survives_a_resta
         wait_until(lambda: daemon.controller.running_job_name() == "long.nc", 20.0, "the second entry to run")
         assert daemon.controller.last_job()["name"] == "square.nc"
         assert daemon.controller.last_job()["outcome"] == "completed"
+        during = call(daemon, "programs.add", name="while-running.nc", program=SQUARE)  # the checker process
+        assert during["ok"] and daemon.controller.running_job_name() == "long.nc"
         assert call(daemon, "abort")["ok"]
         wait_until(lambda: daemon.programs.queue.paused is not None, 10.0, "the queue to pause")
         queue = call(daemon, "queue.list")["queue"]
@@ -131,9 +133,23 @@ def test_the_queue_runs_programs_in_order_stops_at_an_abort_and_survives_a_resta
         assert [e["id"] for e in queue["entries"]] == [ids[2]]
         assert call(daemon, "reset")["ok"]
     with daemon_in_process(data_dir, "", "lib") as daemon:  # restarted: the library and the queue are back
-        assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["long.nc", "square.nc"]
+        assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["long.nc", "square.nc",
+                                                                                 "while-running.nc"]
         queue = call(daemon, "queue.list")["queue"]
         assert [e["id"] for e in queue["entries"]] == [ids[2]] and queue["paused"]
         assert call(daemon, "queue.remove", id=ids[2])["queue"]["entries"] == []
         bad = call(daemon, "queue.remove", id=99)
         assert not bad["ok"] and bad["error"] == "field 'id': no queue entry 99 (entries: none)"
+
+
+def test_a_job_stopped_at_once_still_stores_its_checked_program(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        first = call(daemon, "submit", name="long.nc", program=LONG)
+        assert call(daemon, "stop")["ok"]
+        job_end(daemon, first["job"]["id"])
+        assert call(daemon, "mdi", text="G53 G0 X0 Y0 Z0")["ok"]  # back where it started
+        wait_until(lambda: daemon.controller.idle(), 20.0, "the MDI to end")
+        second = call(daemon, "submit", name="long.nc", program=LONG)
+        assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
+            (False, True)
+        assert call(daemon, "abort")["ok"]
