@@ -16,7 +16,12 @@ Each job is stopped (controlled stop) at its first motion, the axes sent back to
 ``checked_from_store``). First set-point: from the request to the first cycle whose
 set-point leaves the held position (the master's job index >= 1).
 
-Run: python benchmarks/bench_library_start.py [--copies 2 19] [--program FILE]
+``--cpu``: instead, where the time before the first set-point goes, in CPU seconds of one
+process (time.process_time: far less sensitive to a loaded host than wall time): reading and
+checking (what the store saves), loading the store's entry, pickling the checked program for
+the daemon (the worker's share of the transfer), and the planner's first chunk.
+
+Run: python benchmarks/bench_library_start.py [--copies 2 19] [--program FILE] [--cpu]
 """
 
 from __future__ import annotations
@@ -121,12 +126,72 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
             "store_hits": counters["hits"], "store_misses": counters["misses"]}
 
 
-def run_child(program: Path, copies: int) -> dict[str, Any]:
+def cpu_steps(program: Path, copies: int) -> dict[str, Any]:
+    """CPU seconds of each step before the first set-point, in this process (``--cpu``)."""
+    import pickle
+
+    import numpy as np
+
+    from nurbsmotion.config import parse_config
+    from nurbsmotion.planning.limits import limits_from_config
+    from nurbsmotion.planning.lookahead import PlanStream
+    from nurbsmotion.service.checked_store import load_checked, save_checked
+    from nurbsmotion.service.planner_worker import read_and_check, send_program
+    from nurbsmotion.service.streamed_job import CHUNK_CYCLES, FIRST_CHUNK_CYCLES, plan_request
+
+    work = Path(tempfile.mkdtemp(prefix="lib-cpu-"))
+    (work / "tools.yaml").write_text(TOOLS_YAML)
+    config = parse_config(CONFIG.format(channel="cpu", socket=work / "ctl.sock", data_dir=work / "var",
+                                        extra=PROGRAM_MACHINE), str(work / "machine.yaml"), base_dir=work)
+    text = program_copies(program, copies)
+    request = plan_request(program.name, text, config, np.zeros(3))
+
+    def cpu(step: Any) -> tuple[float, Any]:
+        t0 = time.process_time()
+        value = step()
+        return time.process_time() - t0, value
+
+    read_s, checked = cpu(lambda: read_and_check(request))
+    save_checked(work / "entry.checked", "key", checked)
+    load_s, loaded = cpu(lambda: load_checked(work / "entry.checked", "key"))
+
+    class Sink:
+        size = 0
+
+        def send(self, message: Any) -> None:
+            Sink.size += len(pickle.dumps(message))
+
+    transfer_s, _ = cpu(lambda: send_program(Sink(), loaded))
+    stream = PlanStream(loaded, limits_from_config(config), CHUNK_CYCLES, FIRST_CHUNK_CYCLES)
+    first_chunk_s, _ = cpu(lambda: next(iter(stream.chunks())))
+    return {"program": program.name, "copies": copies, "lines": text.count("\n"), "blocks": len(checked.blocks),
+            "read_check_cpu_s": read_s, "store_load_cpu_s": load_s, "transfer_pickle_cpu_s": transfer_s,
+            "transfer_mb": Sink.size / 1e6, "entry_mb": (work / "entry.checked").stat().st_size / 1e6,
+            "first_chunk_cpu_s": first_chunk_s}
+
+
+def cpu_table(results: list[dict[str, Any]]) -> str:
+    rows = ["| program | lines (blocks) | read + check (saved by the store) | load the store's entry (entry MB) "
+            "| pickle for the daemon (MB) | planner's first chunk | started, load before → after |",
+            "|---|---|---|---|---|---|---|"]
+    for r in results:
+        head = f"| {r['program']} x {r['copies']} "
+        if "error" in r:
+            rows.append(f"{head}| failed: {r['error']} | | | | | {r['started']}, {r['load_before']} |")
+            continue
+        rows.append(f"{head}| {r['lines']:,} ({r['blocks']:,}) | {r['read_check_cpu_s']:.2f} | "
+                    f"{r['store_load_cpu_s']:.2f} ({r['entry_mb']:.1f}) | {r['transfer_pickle_cpu_s']:.2f} "
+                    f"({r['transfer_mb']:.1f}) | {r['first_chunk_cpu_s']:.2f} | {r['started']}, {r['load_before']} "
+                    f"→ {r['load_after']} |")
+    return "\n".join(rows)
+
+
+def run_child(program: Path, copies: int, cpu: bool = False) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     before = load_line()
-    out = subprocess.run([sys.executable, __file__, "--child", str(copies), "--program", str(program)],
-                         capture_output=True, text=True, env=env, timeout=3600)
+    out = subprocess.run([sys.executable, __file__, "--child", str(copies), "--program", str(program)]
+                         + ["--cpu"] * cpu, capture_output=True, text=True, env=env, timeout=3600)
     run = {"started": started, "load_before": before, "load_after": load_line()}
     if out.returncode != 0:
         tail = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"
@@ -159,15 +224,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--copies", type=int, nargs="*", default=[2, 19])
     parser.add_argument("--program", type=Path, default=PROGRAM)
+    parser.add_argument("--cpu", action="store_true", help="CPU seconds of each step instead (module docstring)")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
-        print(json.dumps(one_size(args.program, args.child)))
+        print(json.dumps(cpu_steps(args.program, args.child) if args.cpu else one_size(args.program, args.child)))
         return
     results = []
     for copies in args.copies:
-        results.append(run_child(args.program, copies))
+        results.append(run_child(args.program, copies, args.cpu))
         print(json.dumps(results[-1]), flush=True)
+    if args.cpu:
+        body = ("CPU seconds (time.process_time) of each step before a streamed job's first set-point, one process, "
+                "bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord error): what `start NAME` and a "
+                "second `run FILE` skip (read + check) and what they still pay (the entry's load, the transfer to "
+                "the daemon, the planner's first chunk: its set-up over the whole program).\n\n" + cpu_table(results))
+        write_section("library_start_cpu", "Library starts: where the time to the first set-point goes (CPU)", body,
+                      "python benchmarks/bench_library_start.py --cpu --copies "
+                      + " ".join(str(c) for c in args.copies))
+        return
     body = ("The daemon and three simulated drives in one process (bench_first_motion's machine: T = 1 ms, "
             "lookahead J = 50000 mm/s^3, 1 um chord error, spindle, tools 1-99); each request through the control "
             "socket from the held position 0, 0, 0; each job stopped at its first motion and the axes sent back "
