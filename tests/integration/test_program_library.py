@@ -153,3 +153,12 @@ def test_a_job_stopped_at_once_still_stores_its_checked_program(data_dir):
         assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
             (False, True)
         assert call(daemon, "abort")["ok"]
+
+
+def test_a_program_over_the_size_limit_is_refused_and_not_added(data_dir):
+    with daemon_in_process(data_dir, "web: {max_upload_mb: 0.001}\n", "lib") as daemon:  # 1048 bytes
+        big = call(daemon, "programs.add", name="big.nc", program=SQUARE * 40)
+        assert not big["ok"] and big["error"] == (f"program 'big.nc': {len(SQUARE) * 40:,} bytes is larger than the "
+                                                  "0.001 MB limit (web.max_upload_mb)")
+        assert call(daemon, "programs.add", name="small.nc", program=SQUARE)["ok"]
+        assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["small.nc"]

@@ -43,16 +43,17 @@ def check_library_name(name: str) -> str:
 class ProgramLibrary:
     """DATA_DIR/programs (module docstring). Thread-safe: one lock around each change."""
 
-    def __init__(self, data_dir: str | Path, max_bytes: int) -> None:
+    def __init__(self, data_dir: str | Path, max_mb: float) -> None:
         self.folder = Path(data_dir) / "programs"
-        self.max_bytes = max_bytes
+        self.max_mb = max_mb
+        self.max_bytes = int(max_mb * 1024 * 1024)
         self._lock = threading.Lock()
 
     def check_size(self, name: str, text: str) -> int:
         size = len(text.encode("utf-8"))
         if size > self.max_bytes:
-            raise InputError(f"program {name!r}", f"{size / 1048576:.1f} MB is larger than the "
-                                                  f"{self.max_bytes / 1048576:g} MB limit (web.max_upload_mb)")
+            raise InputError(f"program {name!r}", f"{size:,} bytes is larger than the {self.max_mb:g} MB limit "
+                                                  "(web.max_upload_mb)")
         return size
 
     def add(self, name: str, text: str, sha256: str, check: dict[str, Any]) -> dict[str, Any]:

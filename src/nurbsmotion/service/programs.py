@@ -36,7 +36,7 @@ class Programs:
         self.config = config
         self.controller = controller
         self.store = store
-        self.library = ProgramLibrary(config.data_dir, int(config.web.max_upload_mb * 1024 * 1024))
+        self.library = ProgramLibrary(config.data_dir, config.web.max_upload_mb)
         self.checker = ProgramChecker()
         self.queue = queue
         self.runner = QueueRunner(self.queue, QueueHooks(controller.idle, self._start_entry, controller.last_job,
