@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 from pathlib import Path
 from typing import Any
 
@@ -100,3 +101,12 @@ def test_a_refused_start_keeps_the_entry_first_and_a_fault_pauses_the_queue(tmp_
     queue.resume()
     runner.step()
     assert queue.paused == "the drives are in fault: reset, then resume the queue" and machine.started == []
+
+
+def test_the_library_commands_are_the_protocol_commands_programs_serves():
+    from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
+    from nurbsmotion.service.protocol import COMMANDS
+
+    assert LIBRARY_COMMANDS <= set(COMMANDS)
+    served = Programs.handlers(SimpleNamespace(queue=None, listing=None), {})  # type: ignore[arg-type]
+    assert set(served) == LIBRARY_COMMANDS

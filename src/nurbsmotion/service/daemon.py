@@ -36,7 +36,7 @@ from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
 from nurbsmotion.service.planner import needs_planner_worker, prepare_job
 from nurbsmotion.service.planner_worker import PlannerWorker
-from nurbsmotion.service.programs import Programs
+from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
@@ -52,7 +52,7 @@ ANSWERED_WHILE_CLOSING = frozenset({"status", "job", "jobs", "stop", "abort", "j
 def dispatch(controller: Controller, request: Request, programs: Programs | None = None) -> dict[str, Any]:
     """Route one checked request to the controller (the library and queue: to ``programs``)."""
     f = request.fields
-    if programs is not None and (request.cmd in ("start",) or request.cmd.startswith(("programs.", "queue."))):
+    if programs is not None and request.cmd in LIBRARY_COMMANDS:
         return programs.handlers(f)[request.cmd]()
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
         "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),

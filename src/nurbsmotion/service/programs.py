@@ -28,6 +28,10 @@ from nurbsmotion.service.start_line import start_line_field
 
 log = logging.getLogger(__name__)
 
+LIBRARY_COMMANDS = frozenset({"programs.add", "programs.list", "programs.get", "programs.remove", "start", "queue.list",
+                              "queue.add", "queue.remove", "queue.move", "queue.clear", "queue.pause",
+                              "queue.resume"})  # served by Programs.handlers
+
 
 class Programs:
     """The library, the checked-program store, the checker and the queue of one daemon."""
