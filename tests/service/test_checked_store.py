@@ -52,3 +52,16 @@ def test_prune_keeps_the_newest_entries(tmp_path: Path):
         os.utime(store.path(f"k{i}"), (1000 + i, 1000 + i))
     store.prune(keep=2)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["k3.checked", "k4.checked"]
+
+
+def test_a_miss_prunes_the_folder_to_the_newest_entries(tmp_path: Path):
+    store = CheckedStore(tmp_path, "cfg")
+    for i in range(checked_store.MAX_ENTRIES + 8):
+        store.path(f"k{i:02d}").write_bytes(b"x")
+        os.utime(store.path(f"k{i:02d}"), (1000 + i, 1000 + i))
+    store.note(True, "p.nc")
+    assert len(list(tmp_path.iterdir())) == checked_store.MAX_ENTRIES + 8  # a hit writes nothing: no pruning
+    store.note(False, "p.nc")
+    assert sorted(p.name for p in tmp_path.iterdir())[0] == "k08.checked"
+    assert len(list(tmp_path.iterdir())) == checked_store.MAX_ENTRIES
+    assert (store.hits, store.misses) == (1, 1)

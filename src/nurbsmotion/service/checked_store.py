@@ -125,7 +125,8 @@ class CheckedStore:
         return self.folder / f"{key}{SUFFIX}"
 
     def note(self, hit: bool, name: str) -> None:
-        """Count a use of the store; one log line (checked_program source=store|read)."""
+        """Count a use of the store; one log line (checked_program source=store|read); a miss
+        prunes the folder (a new entry will be written)."""
         with self._lock:
             if hit:
                 self.hits += 1
@@ -133,6 +134,8 @@ class CheckedStore:
                 self.misses += 1
         log.info(kv("checked_program", name=name, source="store" if hit else "read", hits=self.hits,
                     misses=self.misses))
+        if not hit:
+            self.prune()  # a new entry is on its way: the folder never holds more than MAX_ENTRIES + 1
 
     def prune(self, keep: int = MAX_ENTRIES) -> None:
         """Remove all but the ``keep`` newest entries."""

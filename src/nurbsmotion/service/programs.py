@@ -63,6 +63,7 @@ class Programs:
         start_mm, options = self.controller.reading_start()
         request = plan_request(name, text, self.config, start_mm, options, self.store)
         report = self.checker.check(request, tuple(a.name for a in self.config.axes))
+        self.store.note(report.from_store, name)
         if report.errors:
             log.info(kv("program_refused", name=name, errors=len(report.errors),
                         first=report.as_dict()["errors"][0]))
