@@ -70,7 +70,6 @@ def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
     daemon.config_path.write_text(MACHINE.format(channel=f"page-{uuid.uuid4().hex}", socket=daemon.socket,
                                                  data_dir=daemon.data_dir))
     daemon.config = load_config(daemon.config_path)
-    daemon.start()
     settings = WebSettings(socket=str(daemon.socket), data_dir=str(daemon.data_dir), port=free_port())
     loop = asyncio.new_event_loop()
     runner = web.AppRunner(make_app(settings))
@@ -84,15 +83,17 @@ def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
         loop.run_forever()
 
     thread = threading.Thread(target=serve, daemon=True)
-    thread.start()
     try:
+        daemon.start()  # in the try: a daemon that answers too late is still ended (it kept running before)
+        thread.start()
         assert started.wait(20.0)
         yield f"http://{settings.host}:{settings.port}/", daemon
     finally:
         if started.is_set():
             asyncio.run_coroutine_threadsafe(runner.cleanup(), loop).result(10.0)
         loop.call_soon_threadsafe(loop.stop)
-        thread.join(5.0)
+        if thread.is_alive():
+            thread.join(5.0)
         daemon.close()
 
 
