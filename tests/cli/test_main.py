@@ -48,7 +48,9 @@ def test_help_lists_every_command(capsys):
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["status"], ["-v", "hold"], ["jog", "X+1"], ["stop"],
-                                  ["run", "examples/wang_table1.nc"]])
+                                  ["run", "examples/wang_table1.nc"], ["start", "wang_table1.nc"],
+                                  ["programs", "add", "examples/wang_table1.nc"], ["programs", "list"],
+                                  ["queue", "list"]])
 def test_control_commands_import_neither_numpy_nor_the_planner(argv, tmp_path):
     """Only the named command's module is imported: a control client starts without numpy,
     the planner, the program reader, canopen or the configuration loader."""

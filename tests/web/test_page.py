@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import os
+import re
 import shutil
 import threading
 import uuid
@@ -69,7 +70,6 @@ def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
     daemon.config_path.write_text(MACHINE.format(channel=f"page-{uuid.uuid4().hex}", socket=daemon.socket,
                                                  data_dir=daemon.data_dir))
     daemon.config = load_config(daemon.config_path)
-    daemon.start()
     settings = WebSettings(socket=str(daemon.socket), data_dir=str(daemon.data_dir), port=free_port())
     loop = asyncio.new_event_loop()
     runner = web.AppRunner(make_app(settings))
@@ -83,15 +83,17 @@ def console(tmp_path_factory) -> Iterator[tuple[str, Any]]:
         loop.run_forever()
 
     thread = threading.Thread(target=serve, daemon=True)
-    thread.start()
     try:
+        daemon.start()  # in the try: a daemon that answers too late is still ended (it kept running before)
+        thread.start()
         assert started.wait(20.0)
         yield f"http://{settings.host}:{settings.port}/", daemon
     finally:
         if started.is_set():
             asyncio.run_coroutine_threadsafe(runner.cleanup(), loop).result(10.0)
         loop.call_soon_threadsafe(loop.stop)
-        thread.join(5.0)
+        if thread.is_alive():
+            thread.join(5.0)
         daemon.close()
 
 
@@ -187,4 +189,67 @@ def test_the_console_says_the_spindle_and_coolant_state_in_words(console):
         page.goto(url)
         assert {expr: page.evaluate(expr) for expr, _ in cases} == dict(cases)
         expect(page.locator("#coolant")).to_have_text("none", timeout=20000)  # this machine has no coolant output
+        browser.close()
+
+
+def test_the_library_uploads_checks_selects_previews_starts_and_queues(console, tmp_path):
+    """Upload to the daemon's library (a refused program shows its file:line and is not
+    added), select a program (preview drawn from the library's text), start it by name,
+    and queue it twice: the queue pane follows the daemon's events."""
+    from playwright.sync_api import expect, sync_playwright
+
+    url, daemon = console
+    good, bad = tmp_path / "library-part.nc", tmp_path / "broken.nc"
+    good.write_text(PART)
+    bad.write_text("G21 G90\nG01 X10 Q3 F600\n")
+    shots = shots_dir(tmp_path)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=BROWSER_ARGS)
+        page = browser.new_page(viewport={"width": 1600, "height": 1100})
+        errors: list[str] = []
+        page.on("pageerror", lambda err: errors.append(str(err)))
+        page.on("dialog", lambda dialog: dialog.accept())
+        page.goto(url)
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        if "homed" not in (page.locator("#homed").text_content() or ""):
+            page.get_by_test_id("btn-home").click()
+            expect(page.locator("#homed")).to_contain_text("X homed", timeout=20000)
+        page.locator("#file").set_input_files(str(bad))
+        expect(page.get_by_test_id("check-result")).to_contain_text("broken.nc:2", timeout=20000)
+        expect(page.get_by_test_id("check-result")).to_contain_text("not added")
+        expect(page.get_by_test_id("program-list")).not_to_contain_text("broken.nc")
+        page.screenshot(path=str(shots / "library-refused-1600.png"), full_page=True)
+        page.locator("#file").set_input_files(str(good))
+        library = page.get_by_test_id("program-list")
+        # 7 or 8 blocks: the first move (G00 Z5) is none when Z already holds at 5 (the other test ran first)
+        expect(library.locator("li[data-program='library-part.nc']")).to_contain_text(
+            re.compile(r"[78] blocks · X 0\.\.30 Y 0\.\.30 Z -1\.\.5 mm"), timeout=20000)
+        expect(page.get_by_test_id("check-result")).to_contain_text(re.compile(r"library-part.nc checked: [78] blocks"))
+        page.reload()  # nothing local left: the list and the preview come from the daemon's library
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        library.locator("li[data-program='library-part.nc'] button.pick").click()
+        expect(library.locator("li.selected")).to_have_attribute("data-program", "library-part.nc")
+        expect(page.get_by_test_id("selected-program")).to_contain_text("library-part.nc:")
+        assert canvas_is_drawn(page)
+        page.screenshot(path=str(shots / "library-selected-1600.png"), full_page=True)
+        page.get_by_test_id("btn-start").click()
+        expect(page.get_by_test_id("check-result")).to_contain_text("(checked when added)", timeout=20000)
+        expect(page.get_by_test_id("job-history").locator("li", has_text="library-part.nc").first).to_contain_text(
+            "completed", timeout=60000)
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
+        page.get_by_test_id("btn-queue-pause").click()
+        expect(page.get_by_test_id("queue-state")).to_contain_text("paused", timeout=10000)
+        page.get_by_test_id("btn-queue-add").click()
+        page.get_by_test_id("btn-queue-add").click()
+        expect(page.get_by_test_id("queue").locator("li")).to_have_count(2, timeout=10000)
+        page.screenshot(path=str(shots / "library-queued-1600.png"), full_page=True)
+        page.get_by_test_id("btn-queue-resume").click()
+        expect(page.get_by_test_id("queue").locator("li")).to_have_count(0, timeout=60000)
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=60000)
+        expect(page.get_by_test_id("job-history").locator("li", has_text="library-part.nc")).to_have_count(3,
+                                                                                                     timeout=60000)
+        page.screenshot(path=str(shots / "library-queue-done-1600.png"), full_page=True)
+        library.locator("li[data-program='library-part.nc'] button", has_text="✕").click()  # confirmed
+        expect(library).not_to_contain_text("library-part.nc", timeout=10000)
+        assert not errors, errors
         browser.close()

@@ -28,6 +28,12 @@ PLAIN_EVERY_S = 1.0
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("program", help="program file (.nc G-code or .yaml curves); read here, sent as text")
+    add_job_options(parser)
+    add_socket_arguments(parser)
+
+
+def add_job_options(parser: argparse.ArgumentParser) -> None:
+    """The options of a job started by ``run`` and by ``start``."""
     parser.add_argument("--no-progress", action="store_true", help="only print the outcome")
     parser.add_argument("--keep-override", action="store_true",
                         help="keep the feed override in force now (default: the job starts at 100 %%)")
@@ -35,7 +41,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-optional-stop", action="store_true", help="M1 does not pause (optional stop switch off)")
     parser.add_argument("--start-line", type=line_number, metavar="N",
                         help="start from line N: the state there rebuilt, approached over machine.safe_z_mm")
-    add_socket_arguments(parser)
 
 
 def line_number(text: str) -> int:
@@ -168,14 +173,16 @@ def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict
 
 
 def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: str, fields: dict[str, Any]) -> int:
-    """Send ``cmd`` (submit, mdi), follow the job it started with a progress display, print
+    """Send ``cmd`` (submit, start, mdi), follow the job it started with a progress display, print
     its outcome; the exit code (0 completed, 1 not, 2 rejected)."""
     response = client.request(cmd, **fields)
     if not response.get("ok"):
         for line in response.get("errors") or [response.get("error", "rejected")]:
             error_line(args, line)
         return EXIT_REFUSED
-    read = reading_text(response["job"]["summary"].get("reading")) if cmd == "submit" else None
+    read = reading_text(response["job"]["summary"].get("reading")) if cmd in ("submit", "start") else None
+    if cmd == "start" and response["job"]["summary"].get("checked_from_store"):
+        print(f"{title}: checked before (the library's check of it holds)", flush=True)
     if read:  # as check says it: a program read only in part is never silent
         print(f"{title}: {response['job']['summary'].get('blocks')} blocks, lines {read}", flush=True)
     info = follow_and_report(client, args, response["job"], _display(title, args.no_progress), "job")
@@ -202,12 +209,17 @@ def run(args: argparse.Namespace) -> int:
     text = read_text_file(args.program)  # the same errors as check's
 
     def body(client: Client) -> int:
-        fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
-        fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
-                                                ("optional_stop", args.no_optional_stop)) if off})
-        if args.start_line is not None:
-            fields["start_line"] = args.start_line
         name = Path(args.program).name
-        return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **fields})
+        return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **job_fields(args)})
 
     return with_client(args, body)
+
+
+def job_fields(args: argparse.Namespace) -> dict[str, Any]:
+    """The request fields of add_job_options' options (only those not at their default)."""
+    fields: dict[str, Any] = {"keep_override": True} if args.keep_override else {}
+    fields.update({k: False for k, off in (("block_delete", args.no_block_delete),
+                                            ("optional_stop", args.no_optional_stop)) if off})
+    if args.start_line is not None:
+        fields["start_line"] = args.start_line
+    return fields

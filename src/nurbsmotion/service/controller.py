@@ -120,12 +120,8 @@ class Controller:
             self._planning = True
         try:
             status = self.link.status()
-            start_mm = self._held_position_mm(status)
             try:
-                options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop,
-                                                          self.machine.spindle_commanded_rpm())
-                if start_line is not None:
-                    options = start_line_options(options, start_line, self.config)
+                start_mm, options = self.reading_start(block_delete, optional_stop, start_line, status)
                 plan = self.planner(name, text, start_mm, options)
             except InputError as err:
                 self._record_rejection(name, text, err)
@@ -309,6 +305,26 @@ class Controller:
                 raise Refused("home", refusal)
             names = self.homing.start(axes, status.faults)
         return {"ok": True, "axes": names, "state": "homing"}
+
+    def reading_start(self, block_delete: bool = True, optional_stop: bool = True, start_line: int | None = None,
+                      status: MasterStatus | None = None) -> tuple[np.ndarray, ReadOptions]:
+        """Where a program submitted now starts (the held position, machine mm) and the reader's
+        options then: the persisted offsets and tool, the switches, the spindle as it runs, the
+        start line (InputError when it cannot be started from there)."""
+        start_mm = self._held_position_mm(status or self.link.status())
+        options = self.machine_state.read_options(self.config.tool_table, block_delete, optional_stop,
+                                                  self.machine.spindle_commanded_rpm())
+        if start_line is not None:
+            options = start_line_options(options, start_line, self.config)
+        return start_mm, options
+
+    def last_job(self) -> dict[str, Any] | None:
+        """The last job that ended: id, name, outcome, reason, ... (None before the first)."""
+        return self._last
+
+    def idle(self) -> bool:
+        """No job, no submission under way, no homing, no fault: a job may start now."""
+        return self._job is None and not self._planning and self.state() == "idle"
 
     def held_position_mm(self) -> np.ndarray:
         """Where the axes hold, machine mm (axis map in force)."""

@@ -25,8 +25,10 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
+from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.controller import Controller, Refused
 from nurbsmotion.service.devices import open_devices
+from nurbsmotion.service.job_queue import JobQueue
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.motion import MotionLink, Simulation
@@ -34,6 +36,7 @@ from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
 from nurbsmotion.service.planner import needs_planner_worker, prepare_job
 from nurbsmotion.service.planner_worker import PlannerWorker
+from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
 from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
@@ -46,16 +49,18 @@ log = logging.getLogger(__name__)
 ANSWERED_WHILE_CLOSING = frozenset({"status", "job", "jobs", "stop", "abort", "jog_stop"})  # read, or stop sooner
 
 
-def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
-    """Route one checked request to the controller."""
+def dispatch(controller: Controller, request: Request, programs: Programs | None = None) -> dict[str, Any]:
+    """Route one checked request to the controller (the library and queue: to ``programs``)."""
     f = request.fields
+    if programs is not None and request.cmd in LIBRARY_COMMANDS:
+        return programs.handlers(f)[request.cmd]()
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
         "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
                                             bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
                                             start_line=start_line_field(f.get("start_line"))),
         "mdi": lambda: controller.mdi(f["text"]),
         "offsets": lambda: controller.offsets(f),
-        "status": controller.status,
+        "status": lambda: with_queue(controller.status(), programs),
         "job": lambda: controller.job_info(f["id"]),
         "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
         "stop": controller.stop,
@@ -70,7 +75,16 @@ def dispatch(controller: Controller, request: Request) -> dict[str, Any]:
         "jog_renew": controller.jogging.renew,
         "jog_stop": controller.jogging.stop,
     }
+    if request.cmd not in handlers:
+        raise Refused(request.cmd, "this daemon has no program library")
     return handlers[request.cmd]()
+
+
+def with_queue(status: dict[str, Any], programs: Programs | None) -> dict[str, Any]:
+    """The status with the job queue's summary (service.job_queue)."""
+    if programs is not None:
+        status["queue"] = programs.queue.summary()
+    return status
 
 
 class Daemon:
@@ -90,6 +104,8 @@ class Daemon:
         self.hub: StatusHub | None = None  # pushes status and events to subscribed clients
         self._detach_event_log: Callable[[], None] | None = None
         self._stop_webhooks: Callable[[], None] | None = None
+        self.store = CheckedStore.for_config(config)  # checked programs (service.checked_store)
+        self.programs: Programs | None = None  # the program library and job queue
 
     def start(self) -> None:
         self.ownership.acquire()  # before the first frame and before touching the job records (BusTaken)
@@ -97,6 +113,7 @@ class Daemon:
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
+        queue = JobQueue(self.config.data_dir)  # a corrupt queue.json too
         self._start_planner_worker()
         try:
             link, self.simulation = self._open_motion(self.config)
@@ -112,7 +129,8 @@ class Daemon:
             raise
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
-        self.hub = StatusHub(self.controller.status)
+        self.programs = Programs(self.config, self.controller, self.store, queue)
+        self.hub = StatusHub(self._status)
         self._detach_event_log = attach_event_log(self.hub)
         self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group, hub=self.hub)
@@ -121,6 +139,7 @@ class Daemon:
         except BaseException:
             self._stop_motion()
             raise
+        self.programs.start()
         sd_notify("READY=1")
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
 
@@ -140,17 +159,22 @@ class Daemon:
             log.warning(kv("planner_worker_not_ready", error=err))
 
     def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
-        return prepare_job(name, text, self.config, start, options, self.planner_worker)
+        return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store)
+
+    def _status(self) -> dict[str, Any]:
+        assert self.controller is not None
+        return with_queue(self.controller.status(), self.programs)
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller
         if controller is None or self._closing and request.cmd not in ANSWERED_WHILE_CLOSING:
             raise Refused(request.cmd, "the daemon is shutting down")
-        return dispatch(controller, request)
+        return dispatch(controller, request, self.programs)
 
     def close(self) -> None:
         self._closing = True
         sd_notify("STOPPING=1")
+        self._stop_programs()
         if self.controller is not None:
             self.controller.shutdown()  # the socket still answers status and job meanwhile
         if self.server is not None:
@@ -176,7 +200,14 @@ class Daemon:
             self.hub.close()
             self.hub = None
 
+    def _stop_programs(self) -> None:
+        """The queue starts nothing more; the checker process ends."""
+        if self.programs is not None:
+            self.programs.close()
+            self.programs = None
+
     def _stop_motion(self) -> None:
+        self._stop_programs()
         self._stop_hub()
         if self.controller is not None:
             self.controller.shutdown()

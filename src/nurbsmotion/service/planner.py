@@ -32,6 +32,7 @@ from nurbsmotion.service.rate import max_rate
 from nurbsmotion.spindle_config import SpindleConfig
 
 if TYPE_CHECKING:
+    from nurbsmotion.service.checked_store import CheckedStore
     from nurbsmotion.service.planner_worker import PlannerWorker
     from nurbsmotion.service.streamed_job import StreamedJob
 
@@ -192,15 +193,17 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
 
 
 def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
-                options: ReadOptions | None = None, worker: "PlannerWorker | None" = None) -> "PlannedJob | StreamedJob":
+                options: ReadOptions | None = None, worker: "PlannerWorker | None" = None,
+                store: "CheckedStore | None" = None) -> "PlannedJob | StreamedJob":
     """The daemon's planner: the lookahead planner streams the job while it runs in the
-    planner worker (service.streamed_job, checked completely first); the papers' methods
-    plan it whole, and so are MDI lines (one line: planned at once; one without motion runs
-    as a still job, which a streamed job cannot be)."""
+    planner worker (service.streamed_job, checked completely first, or loaded checked from
+    ``store``); the papers' methods plan it whole, and so are MDI lines (one line: planned at
+    once; one without motion runs as a still job, which a streamed job cannot be)."""
     if config.interpolation.algorithm == "lookahead" and worker is not None and name != MDI_NAME:
         from nurbsmotion.service.streamed_job import prepare_streamed_job
 
-        return prepare_streamed_job(name, text, config, worker, start_mm, options)
+        return prepare_streamed_job(name, text, config, worker, start_mm, options,
+                                    store=store if name != JOG_NAME else None)  # a jog: a new line each time
     return plan_job(name, text, config, start_mm, options)
 
 

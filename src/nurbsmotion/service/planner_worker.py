@@ -32,6 +32,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import multiprocessing.connection
+import pickle
 import threading
 import signal
 import time
@@ -65,6 +66,7 @@ QUIT_TIMEOUT_S = 5.0
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 BLOCKS_PER_MESSAGE = 1000  # blocks a ProgramBlocks slice carries (~15 ms of the daemon's lock to load)
 LENGTHS_BUDGET_S = 0.02  # arc-length work between two chunks (a chunk is 2 s of motion): planning stays ahead
+STORE_AHEAD_S = 4.0  # the checked program is stored once planning is this far ahead of the axes (a write: ~1 s per 10^5 blocks)
 
 
 @dataclass(frozen=True)
@@ -81,6 +83,8 @@ class PlanRequest:
     columns: list[int]
     chunk_cycles: int
     first_chunk_cycles: int
+    checked_path: Path | None = None  # the checked-program entry to load, or write once checked (service.checked_store)
+    checked_key: str = ""
 
 
 @dataclass(frozen=True)
@@ -103,6 +107,7 @@ class CheckedProgram:
 
     program: Program  # with blocks=()
     block_count: int
+    from_store: bool = False  # loaded from the checked-program store: not read and checked again
 
 
 @dataclass(frozen=True, eq=False)
@@ -194,13 +199,16 @@ class WorkerJob:
         self.measure: MeasureStream | None = None
         self.path: PlannedPath | None = None
         self.lengths: BlockLengths | None = None
+        self.to_store: Program | None = None  # checked now: written to the store once planning is well ahead
+        self.first_sent_s = float("nan")  # when the first chunk was sent (the axes start about then)
 
     def run(self) -> PlanEnd:
         errors: tuple[tuple[str, str], ...] = ()
         finished = False
         try:
-            program = self._checked_program()
-            send_program(self.results, program)
+            program, from_store = read_or_load(self.request)
+            self.to_store = None if from_store else program
+            send_program(self.results, program, from_store)
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
             limits = limits_from_config(self.config)
@@ -223,6 +231,7 @@ class WorkerJob:
             raise WorkerGone() from None
         except Exception as err:  # a bug: the job's progress falls back to blocks, its end is still reported
             log.warning(kv("path_lengths_failed", program=self.request.name, error=repr(err)))
+        self._store_checked()  # not yet stored: the job ended or was cancelled before planning got that far ahead
         self._close_trace()
         stream = self.stream
         return PlanEnd(self.planned, finished and not errors, errors,
@@ -232,21 +241,6 @@ class WorkerJob:
 
     def _on_program(self, figures: RowFigures | None) -> RowFigures | None:
         return figures if figures is None or self.path is None else self.path.on_program(figures)
-
-    def _checked_program(self) -> Program:
-        """The request's program, parsed and checked before motion (InputError otherwise)."""
-        from nurbsmotion.service.planner import parse
-        from nurbsmotion.service.streamed_job import check_before_motion  # it imports this module
-
-        r = self.request
-        # No cyclic collection while parsing: it keeps ~10 objects a word, and the collector's
-        # passes over the worker's heap took ~0.1 s of a long program's parse (Wang x 460 in the
-        # worker: checked program back in 0.88-1.13 s with them, 0.79-0.80 s without; x 100
-        # 0.37 -> 0.17 s). Collected afterwards as usual.
-        with GcQuiet("disable"):
-            program = parse(r.name, r.text, r.start_xyz, r.options)
-            check_before_motion(r.name, program, self.config, r.columns, self.axis_map)
-        return program
 
     def _named(self, err: InputError) -> tuple[str, str]:
         """(where, message) with the program's name in front (a planner error names the line)."""
@@ -272,10 +266,26 @@ class WorkerJob:
             self.planned += len(counts)
             before = counts[-2:]
             self._trace_rows(self._on_program(self.measure.add(self.path.rows(chunk))))
+            if self.planned == len(counts):
+                self.first_sent_s = time.monotonic()
+            if self._ahead_s() >= STORE_AHEAD_S:
+                self._store_checked()
             self._send_lengths(budget_s=LENGTHS_BUDGET_S)
             if self._read_commands(block=False):
                 return False
         return True
+
+    def _ahead_s(self) -> float:
+        """Seconds of motion planned beyond where the axes are now (about: from the first chunk on)."""
+        return self.planned * self.config.cycle_period_s - (time.monotonic() - self.first_sent_s)
+
+    def _store_checked(self) -> None:
+        """The checked program into the store, so the next start of it is not read and checked
+        again: once planning is STORE_AHEAD_S ahead of the axes (first motion never waits for
+        the write, and the axes never run out of rows during it), or at the job's end."""
+        program, self.to_store = self.to_store, None
+        if program is not None:
+            store_checked(self.request, program)
 
     def _send_lengths(self, budget_s: float | None) -> None:
         """Compute block lengths for up to ``budget_s`` (None: all); send them once all are known."""
@@ -368,10 +378,51 @@ class BlockLengths:
         return self.done == len(self.blocks)
 
 
-def send_program(results: Any, program: Program) -> None:
+def read_and_check(request: PlanRequest) -> Program:
+    """The request's program, parsed and checked before motion (InputError otherwise)."""
+    from nurbsmotion.service.planner import parse
+    from nurbsmotion.service.streamed_job import check_before_motion  # it imports this module
+
+    r = request
+    # No cyclic collection while parsing: it keeps ~10 objects a word, and the collector's
+    # passes over the worker's heap took ~0.1 s of a long program's parse (Wang x 460 in the
+    # worker: checked program back in 0.88-1.13 s with them, 0.79-0.80 s without; x 100
+    # 0.37 -> 0.17 s). Collected afterwards as usual.
+    with GcQuiet("disable"):
+        program = parse(r.name, r.text, r.start_xyz, r.options)
+        check_before_motion(r.name, program, r.config, r.columns, AxisMap.from_config(r.config))
+    return program
+
+
+def read_or_load(request: PlanRequest) -> tuple[Program, bool]:
+    """(the checked program, True) from the store when its entry is there and sound, else
+    (read and checked now, False) (service.checked_store)."""
+    if request.checked_path is not None:
+        from nurbsmotion.service.checked_store import load_checked
+
+        with GcQuiet("disable"):
+            program = load_checked(request.checked_path, request.checked_key)
+        if program is not None:
+            return program, True
+    return read_and_check(request), False
+
+
+def store_checked(request: PlanRequest, program: Program) -> None:
+    """Write ``program`` to the request's store entry (a failure is logged: the next start reads again)."""
+    if request.checked_path is None:
+        return
+    from nurbsmotion.service.checked_store import save_checked
+
+    try:
+        save_checked(request.checked_path, request.checked_key, program)
+    except (OSError, pickle.PicklingError) as err:
+        log.warning(kv("checked_program_not_stored", program=request.name, error=err))
+
+
+def send_program(results: Any, program: Program, from_store: bool = False) -> None:
     """The checked program to the daemon: its outline, then its blocks in slices (CheckedProgram)."""
     blocks = program.blocks
-    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks)))
+    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks), from_store))
     for first in range(0, len(blocks), BLOCKS_PER_MESSAGE):
         results.send(ProgramBlocks(blocks[first:first + BLOCKS_PER_MESSAGE]))
 

@@ -15,7 +15,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-MAX_REQUEST_BYTES = 10 * 1024 * 1024
+MAX_REQUEST_BYTES = 80 * 1024 * 1024  # a library program (web.max_upload_mb, default 64 MB) as JSON text
+PROGRAM_NAME = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$"  # a library program's name: a file name, no path
 DEFAULT_SOCKET = "/tmp/nurbsmotion.sock"  # where the daemon listens unless control.socket says otherwise
 
 # command -> {field: (type name, required)}
@@ -23,6 +24,21 @@ COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
     "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False),
                "block_delete": ("boolean", False), "optional_stop": ("boolean", False),
                "start_line": ("number", False)},  # start from this line of the program (program.gcode_start)
+    # the program library (service.programs): checked once when added, started by name
+    "programs.add": {"name": ("string", True), "program": ("string", True)},
+    "programs.list": {},
+    "programs.get": {"name": ("string", True)},
+    "programs.remove": {"name": ("string", True)},
+    "start": {"name": ("string", True), "keep_override": ("boolean", False), "block_delete": ("boolean", False),
+              "optional_stop": ("boolean", False), "start_line": ("number", False)},
+    # the persistent job queue of library programs (service.job_queue)
+    "queue.list": {},
+    "queue.add": {"name": ("string", True), "start_line": ("number", False)},
+    "queue.remove": {"id": ("number", True)},
+    "queue.move": {"id": ("number", True), "position": ("number", True)},
+    "queue.clear": {},
+    "queue.pause": {},
+    "queue.resume": {},
     "mdi": {"text": ("string", True)},
     "status": {},
     "job": {"id": ("string", True)},

@@ -38,6 +38,7 @@ from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
+from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
                                                 PlannerWorker, PlanRequest, TracePath, as_error, receive_program)
@@ -348,9 +349,28 @@ class StreamedJob:
 
 def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
-                         chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> StreamedJob:
-    """Have the worker parse and check ``text`` completely and start planning it; return once
-    the first chunk is planned (InputError naming file:line for anything refused; nothing moves)."""
+                         chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
+                         store: CheckedStore | None = None) -> StreamedJob:
+    """Have the worker parse and check ``text`` completely (or load it checked from ``store``,
+    service.checked_store) and start planning it; return once the first chunk is planned
+    (InputError naming file:line for anything refused; nothing moves)."""
+    request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
+    connection = worker.connect(request)
+    program, from_store = checked_program(name, worker, connection[1])
+    if store is not None:
+        store.note(from_store, name)
+    job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
+                      first_chunk_cycles=request.first_chunk_cycles)
+    job.summary["checked_from_store"] = from_store
+    job.begin()
+    return job
+
+
+def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+                 options: ReadOptions | None = None, store: CheckedStore | None = None,
+                 chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> PlanRequest:
+    """The worker's request for ``text`` started at ``start_mm`` (machine axes; None: 0) with
+    ``options``, with its entry in the checked-program ``store`` (service.checked_store)."""
     from nurbsmotion.service.planner import axis_columns
 
     columns = axis_columns(config)
@@ -358,18 +378,15 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     if start_mm is not None:
         start_xyz[columns] = start_mm
     options = options or ReadOptions(tool_table=config.tool_table)
-    first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
-    connection = worker.connect(PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
-                                            first_chunk_cycles))
-    program = checked_program(name, worker, connection[1])
-    job = StreamedJob(name, program, config, columns, worker, connection, chunk_cycles,
-                      first_chunk_cycles=first_chunk_cycles)
-    job.begin()
-    return job
+    key = store.key(name, text, start_xyz, options) if store is not None else ""
+    return PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
+                       min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key)
 
 
-def checked_program(name: str, worker: PlannerWorker, results: Any, timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> Program:
-    """The worker's first answer: the program parsed and checked, or the errors refusing it."""
+def checked_program(name: str, worker: PlannerWorker, results: Any,
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> tuple[Program, bool]:
+    """The worker's first answer: (the program parsed and checked, whether it came from the
+    checked-program store), or the errors refusing it."""
     try:
         if not results.poll(timeout_s):
             worker.abandon()
@@ -380,7 +397,7 @@ def checked_program(name: str, worker: PlannerWorker, results: Any, timeout_s: f
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
         try:
-            return receive_program(results, answer, timeout_s)
+            return receive_program(results, answer, timeout_s), answer.from_store
         except TimeoutError as err:
             worker.abandon()
             raise InputError(name, f"the planner worker did not send {err}") from None

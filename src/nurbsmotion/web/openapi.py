@@ -6,7 +6,7 @@ import re
 from typing import Any, Iterable
 
 from nurbsmotion import __version__
-from nurbsmotion.web.routes import API, Route
+from nurbsmotion.web.routes import API, NOT_THERE, PROGRAM_COMMANDS, RAW, Route
 
 ERROR = {"type": "object", "required": ["error"], "properties": {"error": {"type": "string"},
                                                                   "errors": {"type": "array", "items": {"type": "string"}}}}
@@ -33,12 +33,16 @@ def operation(route: Route) -> dict[str, Any]:
     params += [{"name": name, "in": "query", "required": False, "schema": {"type": "string"}} for name in route.query]
     if params:
         op["parameters"] = params
+    raw = {"text/plain": {"schema": {"type": "string", "description": "the G-code, with ?name="}}}
     if route.body:
         content: dict[str, Any] = {"application/json": {"schema": route.body}}
         if route.cmd == "submit":
-            content["text/plain"] = {"schema": {"type": "string", "description": "the G-code, with ?name="}}
-            op["responses"]["422"] = _error("the program was rejected: one line per problem in errors")
-        op["requestBody"] = {"required": route.method != "GET", "content": content}
+            content.update(raw)
+        op["requestBody"] = {"required": route.method != "GET", "content": raw if route.body == RAW else content}
+    if route.cmd in PROGRAM_COMMANDS:
+        op["responses"]["422"] = _error("the program was rejected: one line per problem in errors")
+    if route.cmd in NOT_THERE or route.cmd in ("start", "submit", "queue.add", "queue.remove", "queue.move"):
+        op["responses"]["404"] = _error("no such library program or queue entry")
     return op
 
 

@@ -7,7 +7,8 @@ the rest, so the CLI and the web give the same errors:
 
 - the daemon's ``ok: true`` -> 200 with its answer;
 - a refused request (``ok: false``) -> 409 ``{"error": ...}``; a rejected program (submit,
-  mdi: every line it names in ``errors``) -> 422 with ``errors``;
+  start, mdi, a library upload: every line it names in ``errors``) -> 422 with ``errors``; a
+  library program or queue entry that is not there -> 404;
 - a request the gateway cannot read (not JSON, a wrong type) -> 400; no daemon -> 503.
 """
 
@@ -21,11 +22,13 @@ from typing import Any, Awaitable, Callable
 
 from aiohttp import web
 
+from nurbsmotion.service.protocol import PROGRAM_NAME as PROGRAM_NAME_PATTERN
 from nurbsmotion.web.auth import Role
 from nurbsmotion.web.daemon_link import DaemonLink, DaemonUnreachable
 
 API = "/api/v1"
-PROGRAM_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
+PROGRAM_NAME = re.compile(PROGRAM_NAME_PATTERN)
+COMMAND = "__cmd__"  # a fields_of may name another daemon command than its route's (POST jobs: start, queue.add)
 JOB_FILE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 FILE_TYPES = {".png": "image/png", ".csv": "text/csv", ".json": "application/json", ".log": "text/plain",
               ".asc": "text/plain", ".yaml": "text/yaml"}
@@ -108,30 +111,96 @@ async def home_fields(request: web.Request) -> Fields:
     return {"axes": " ".join(axes)} if axes else {}
 
 
+def checked_name(name: Any, what: str = "program name") -> str:
+    if not isinstance(name, str) or not PROGRAM_NAME.match(name):
+        raise BadRequest(f"{what} {name!r}: 1-128 letters, digits, '.', '_' or '-' (no path), e.g. part.nc")
+    return name
+
+
+async def raw_program(request: web.Request) -> tuple[str, str]:
+    """(``?name=``, the raw body as text) of an upload."""
+    name = checked_name(request.query.get("name"))
+    raw = await request.read()
+    try:
+        return name, raw.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise BadRequest(f"body: not a UTF-8 text file (byte {err.start})") from None
+
+
 async def submit_fields(request: web.Request) -> Fields:
-    """A program to run: the raw G-code body with ``?name=`` (and ``&start_line=N``), or JSON
-    ``{"name", "text", "start_line"?}``."""
+    """A program to run: the raw G-code body with ``?name=`` (and ``&start_line=N``), JSON
+    ``{"name", "text", "start_line"?}``, or a library program: JSON ``{"program": NAME,
+    "start_line"?}`` (``"queue": true``: queued instead, service.job_queue)."""
     if request.content_type == "application/json":
-        body = pick(await json_body(request), "name", "text", "keep_override", "block_delete", "optional_stop",
-                    "start_line")
+        body = pick(await json_body(request), "name", "text", "program", "queue", "keep_override", "block_delete",
+                    "optional_stop", "start_line")
+        if "program" in body:
+            return library_start(body)
         name, text = body.pop("name", None), body.pop("text", None)
         if not isinstance(text, str):
-            raise BadRequest("body 'text': the program's G-code is required as a string")
+            raise BadRequest("body 'text': the program's G-code is required as a string "
+                             "(or 'program': the name of a library program)")
+        if "queue" in body:
+            raise BadRequest("body 'queue': only library programs are queued ({\"program\": NAME, \"queue\": true})")
     else:
-        name, body = request.query.get("name"), {}
+        body = {}
         start_line = request.query.get("start_line")
         if start_line is not None:
             if not start_line.isdigit():
                 raise BadRequest(f"query 'start_line': must be a line number, got {start_line!r}")
             body["start_line"] = int(start_line)
-        raw = await request.read()
-        try:
-            text = raw.decode("utf-8-sig")
-        except UnicodeDecodeError as err:
-            raise BadRequest(f"body: not a UTF-8 text file (byte {err.start})") from None
-    if not isinstance(name, str) or not PROGRAM_NAME.match(name):
-        raise BadRequest(f"program name {name!r}: 1-128 letters, digits, '.', '_' or '-' (no path), e.g. part.nc")
-    return {"name": name, "program": text, **body}
+        name, text = await raw_program(request)
+    return {"name": checked_name(name), "program": text, **body}
+
+
+def library_start(body: Fields) -> Fields:
+    """``{"program": NAME, ...}``: start it (``start``) or queue it (``"queue": true``)."""
+    name = checked_name(body.pop("program"), "body 'program': library program name")
+    queue = body.pop("queue", False)
+    if not isinstance(queue, bool):
+        raise BadRequest(f"body 'queue': must be true or false, got {queue!r}")
+    if queue:
+        return {COMMAND: "queue.add", "name": name, **pick(body, "start_line")}
+    return {COMMAND: "start", "name": name, **body}
+
+
+async def program_upload(request: web.Request) -> Fields:
+    name, text = await raw_program(request)
+    return {"name": name, "program": text}
+
+
+async def program_name(request: web.Request) -> Fields:
+    return {"name": checked_name(request.match_info["name"])}
+
+
+async def queue_add_fields(request: web.Request) -> Fields:
+    """``{"program": NAME, "start_line"?}``: queue a library program."""
+    return library_start({**pick(await json_body(request), "program", "start_line"), "queue": True})
+
+
+def entry_id(request: web.Request) -> int:
+    text = request.match_info["id"]
+    if not text.isdigit():
+        raise BadRequest(f"queue entry {text!r}: a whole number (GET {API}/queue lists them)")
+    return int(text)
+
+
+async def queue_entry(request: web.Request) -> Fields:
+    pick(await json_body(request))
+    return {"id": entry_id(request)}
+
+
+async def queue_move_fields(request: web.Request) -> Fields:
+    body = pick(await json_body(request), "position")
+    if "position" not in body:
+        raise BadRequest("body 'position': required, 1 = the next to run")
+    return {"id": entry_id(request), "position": body["position"]}
+
+
+RAW = {"type": "string"}  # a route whose body is the raw program text (OpenAPI: text/plain)
+PROGRAM_BODY = {"type": "object", "required": ["program"],
+                "properties": {"program": {"type": "string", "description": "a library program's name"},
+                               "start_line": {"type": "integer", "minimum": 1}}}
 
 
 ROUTES: tuple[Route, ...] = (
@@ -139,15 +208,42 @@ ROUTES: tuple[Route, ...] = (
     Route("GET", f"{API}/jobs", "jobs", Role.OBSERVER, "the newest job records, newest first", jobs_query,
           query=("limit",)),
     Route("POST", f"{API}/jobs", "submit", Role.OPERATOR,
-          "run a program: raw G-code body with ?name=part.nc (&start_line=N), or JSON {name, text, start_line?}; "
-          "checked completely before anything moves; from line N the tool approaches safely (docs/programs.md)",
+          "run a program: raw G-code body with ?name=part.nc (&start_line=N), or JSON {name, text, start_line?}, "
+          "or a library program: JSON {program, start_line?} (daemon command start; with \"queue\": true "
+          "queued: queue.add); checked completely before anything moves (a library program: checked when added); "
+          "from line N the tool approaches safely (docs/programs.md)",
           submit_fields,
-          body={"type": "object", "required": ["name", "text"],
+          body={"type": "object", "oneOf": [{"required": ["name", "text"]}, {"required": ["program"]}],
                 "properties": {"name": {"type": "string"}, "text": {"type": "string"},
+                               "program": {"type": "string", "description": "a library program's name"},
+                               "queue": {"type": "boolean", "description": "queue the library program"},
                                "keep_override": {"type": "boolean"}, "block_delete": {"type": "boolean"},
                                "optional_stop": {"type": "boolean"},
                                "start_line": {"type": "integer", "minimum": 1}}}, query=("name", "start_line")),
     Route("GET", f"{API}/jobs/{{id}}", "job", Role.OBSERVER, "one job's record", job_id),
+    Route("GET", f"{API}/programs", "programs.list", Role.OBSERVER,
+          "the program library: each program's size, when added and its check (blocks, lines, extent)", no_fields),
+    Route("POST", f"{API}/programs", "programs.add", Role.OPERATOR,
+          "add a program to the library: raw G-code body with ?name=part.nc; read and checked against the machine "
+          "once (file:line errors: 422, not added), then started by name without a second check",
+          program_upload, body=RAW, query=("name",)),
+    Route("GET", f"{API}/programs/{{name}}", "programs.get", Role.OBSERVER,
+          "one library program: its text and its check (blocks, lines, extent, errors)", program_name),
+    Route("DELETE", f"{API}/programs/{{name}}", "programs.remove", Role.OPERATOR, "remove a library program",
+          program_name),
+    Route("GET", f"{API}/queue", "queue.list", Role.OBSERVER,
+          "the job queue: its entries in order and whether it is paused (why)", no_fields),
+    Route("POST", f"{API}/queue", "queue.add", Role.OPERATOR,
+          "queue a library program (also POST jobs with {\"program\": NAME, \"queue\": true})",
+          queue_add_fields, body=PROGRAM_BODY),
+    Route("DELETE", f"{API}/queue", "queue.clear", Role.OPERATOR, "remove every queue entry", no_fields),
+    Route("DELETE", f"{API}/queue/{{id}}", "queue.remove", Role.OPERATOR, "remove one queue entry", queue_entry),
+    Route("PUT", f"{API}/queue/{{id}}", "queue.move", Role.OPERATOR, "move a queue entry to a position (1 = next)",
+          queue_move_fields, body={"type": "object", "required": ["position"],
+                                   "properties": {"position": {"type": "integer", "minimum": 1}}}),
+    Route("POST", f"{API}/queue/pause", "queue.pause", Role.OPERATOR, "start no more queue entries", no_fields),
+    Route("POST", f"{API}/queue/resume", "queue.resume", Role.OPERATOR,
+          "start the queue's entries again when the machine is idle (after a fault, abort or restart)", no_fields),
     Route("POST", f"{API}/machine/hold", "hold", Role.OPERATOR, "hold the job at rest on its path", no_fields),
     Route("POST", f"{API}/machine/resume", "resume", Role.OPERATOR, "continue a held or paused job", no_fields),
     Route("POST", f"{API}/machine/stop", "stop", Role.OPERATOR, "controlled stop along the path", no_fields),
@@ -179,17 +275,22 @@ ROUTES: tuple[Route, ...] = (
 )
 
 
-PROGRAM_COMMANDS = ("submit", "mdi")  # their refusals name program lines: 422
+PROGRAM_COMMANDS = ("submit", "start", "mdi", "programs.add")  # their refusals name program lines: 422
+NOT_THERE = ("programs.get", "programs.remove")  # a well-formed name the daemon refuses: no such program
 
 
 def answer(cmd: str, response: dict[str, Any]) -> web.Response:
     """The daemon's answer as HTTP (module docstring)."""
     if response.get("ok"):
         return web.json_response(response)
-    if cmd in PROGRAM_COMMANDS and response.get("errors"):
+    error_text = response.get("error", "refused")
+    if cmd in PROGRAM_COMMANDS and response.get("errors") and not error_text.startswith("program '"):
         return web.json_response({"error": response.get("error", "rejected"), "errors": response["errors"]},
                                  status=422)
-    return web.json_response({"error": response.get("error", "refused")}, status=409)
+    if cmd in NOT_THERE or error_text.startswith("program '") and "not in the library" in error_text or \
+            error_text.startswith("field 'id': no queue entry"):
+        return web.json_response({"error": error_text}, status=404)
+    return web.json_response({"error": error_text}, status=409)
 
 
 def error(status: int, message: str) -> web.Response:
@@ -200,7 +301,8 @@ def route_handler(route: Route, link: DaemonLink) -> Callable[[web.Request], Awa
     async def handle(request: web.Request) -> web.Response:
         try:
             fields = await route.fields_of(request) if route.fields_of is not None else {}
-            return answer(route.cmd, await link.request(route.cmd, **fields))
+            cmd = fields.pop(COMMAND, route.cmd)
+            return answer(cmd, await link.request(cmd, **fields))
         except BadRequest as err:
             return error(400, str(err))
         except DaemonUnreachable as err:

@@ -7,7 +7,8 @@ const AXES = ["X", "Y", "Z"];
 const RENEW_MS = 200;            // continuous jog: renew the daemon's lease (0.5 s) this often
 let status = null;               // the daemon's status, kept current from the pushed changes
 let ws = null;
-let program = null;              // {name, text, path: parseGcode(text)}
+let program = null;              // the selected library program: {name, text, path: parseGcode(text), check}
+let library = [];                // the daemon's program library (GET programs): name, size, check
 let trail = [];                  // executed tool positions of the running job (machine XY)
 let view = { scale: 1, x: 0, y: 0, center: [0, 0, 0], yaw: -Math.PI / 4, pitch: Math.PI / 3.3, fitted: false };
 let renewTimer = null;
@@ -109,7 +110,7 @@ function render() {
       + (done.line_reached ? " at " + done.line_reached : "") : "";
   }
   const running = ["running", "pausing", "held", "stopping"].includes(status.state);
-  $("btn-start").disabled = !program || running || status.state === "fault";
+  $("btn-start").disabled = !program || !library.some((p) => p.name === program.name) || running || status.state === "fault";
   $("btn-hold").disabled = status.state !== "running";
   $("btn-resume").disabled = status.state !== "held";
   $("btn-stop").disabled = !running;
@@ -147,6 +148,8 @@ function connect() {
       addLog(m.line, m.level === "WARNING" || m.level === "ERROR" ? "bad" : "");
       if (m.event === "job_started") trail = [];
       if (m.event === "job_ended" || m.event === "submit_rejected") loadJobs();
+      if (m.event === "queue_changed") loadQueue();
+      if (m.event === "program_added" || m.event === "program_removed") loadPrograms();
       return;
     }
     if (m.id !== undefined && (m.error || (m.response && !m.response.ok)))
@@ -197,28 +200,128 @@ document.addEventListener("keyup", (e) => { if (KEYS[e.key]) stopContinuousJog()
 window.addEventListener("blur", stopContinuousJog);
 
 // ------------------------------------------------------------------ program and buttons
-$("file").addEventListener("change", async () => {
-  const file = $("file").files[0];
-  if (!file) return;
-  const text = await file.text();
+function showProgram(name, text, check) {
+  // the preview of a program's text, drawn now (the daemon's check may follow)
   const started = performance.now();
-  program = { name: file.name.replace(/[^A-Za-z0-9._-]/g, "_"), text, path: parseGcode(text) };
-  $("program-name").textContent = program.name + ": " + program.path.count + " moves";
-  $("check").textContent = ""; $("check").className = "check";
+  program = { name, text, path: parseGcode(text), check };
+  $("program-name").textContent = name + ": " + program.path.count + " moves";
   view.fitted = false; trail = [];
   render();
   drawPreview();
   window.previewDrawnMs = performance.now() - started;  // read by the page test and the web benchmark
+  markSelected();
+}
+
+function extentText(e) {
+  return e ? e.axes.map((a, i) => a + " " + e.min_mm[i] + ".." + e.max_mm[i]).join(" ") + " mm" : "";
+}
+
+function checkText(name, check) {
+  if (!check) return "";
+  if (!check.ok) return name + " refused:\n" + check.errors.join("\n");
+  const lines = check.lines ? check.lines.last_line + " of " + check.lines.lines_total + " lines" : "";
+  return name + " checked: " + check.blocks + " blocks, " + lines + ", extent " + extentText(check.extent);
+}
+
+function showCheck(text, bad) { $("check").textContent = text; $("check").className = bad ? "check bad" : "check"; }
+
+$("file").addEventListener("change", async () => {
+  // upload into the daemon's library: drawn at once, checked by the daemon once (file:line errors)
+  const file = $("file").files[0];
+  if (!file) return;
+  const text = await file.text();
+  const name = file.name.replace(/[^A-Za-z0-9._-]/g, "_").replace(/^[._-]+/, "") || "program.nc";
+  showProgram(name, text, null);
+  showCheck("checking " + name + "…", false);
+  const answer = await api("POST", "programs?name=" + encodeURIComponent(name), text, "text/plain");
+  $("file").value = "";
+  if (answer.ok === false) {
+    showCheck(name + " refused, not added:\n" + [answer.error].concat(answer.errors).filter((v, i, a) => v && a.indexOf(v) === i).join("\n"), true);
+    program = null; render();
+    return;
+  }
+  program.check = answer.program.check;
+  showCheck(checkText(name, program.check), false);
+  await loadPrograms();
 });
+
+async function selectProgram(name) {
+  const answer = await api("GET", "programs/" + encodeURIComponent(name));
+  if (!answer.program) return;
+  showProgram(name, answer.program.text, answer.program.check);
+  showCheck(checkText(name, answer.program.check), false);
+}
+
+function markSelected() {
+  for (const li of $("programs").children) li.classList.toggle("selected", !!program && li.dataset.program === program.name);
+  $("queue-add").disabled = !program || !library.some((p) => p.name === program.name);
+}
+
+function smallButton(label, title, onClick) {
+  const b = document.createElement("button");
+  b.className = "small"; b.textContent = label; b.title = title; b.addEventListener("click", onClick);
+  return b;
+}
+
+async function loadPrograms() {
+  const answer = await api("GET", "programs");
+  if (!answer.programs) return;
+  library = answer.programs;
+  const list = $("programs");
+  list.innerHTML = "";
+  if (!library.length) { const li = document.createElement("li"); li.className = "muted"; li.textContent = "the library is empty"; list.append(li); }
+  for (const p of library) {
+    const li = document.createElement("li");
+    li.dataset.program = p.name;
+    const pick = document.createElement("button");
+    pick.className = "pick"; pick.textContent = p.name; pick.title = "select: preview and start";
+    pick.addEventListener("click", () => selectProgram(p.name));
+    const info = document.createElement("span");
+    info.className = "info";
+    info.textContent = p.check ? p.check.blocks + " blocks · " + extentText(p.check.extent) : "";
+    li.append(pick, info, smallButton("+ queue", "add to the job queue", () => api("POST", "queue", { program: p.name })),
+      smallButton("✕", "remove from the library", async () => {
+        if (!confirm("Remove " + p.name + " from the library?")) return;
+        await api("DELETE", "programs/" + encodeURIComponent(p.name));
+        if (program && program.name === p.name) { program = null; $("program-name").textContent = "no program selected"; render(); }
+        loadPrograms();
+      }));
+    list.append(li);
+  }
+  markSelected();
+}
+
+async function loadQueue() {
+  const answer = await api("GET", "queue");
+  if (!answer.queue) return;
+  const q = answer.queue, list = $("queue");
+  $("queue-state").textContent = q.paused ? "paused: " + q.paused : (q.entries.length ? "runs when idle" : "empty");
+  list.innerHTML = "";
+  q.entries.forEach((e, i) => {
+    const li = document.createElement("li");
+    const text = document.createElement("span");
+    text.textContent = e.program + (e.start_line ? " from line " + e.start_line : "");
+    li.append(text);
+    if (i > 0) li.append(smallButton("↑", "run earlier", () => api("PUT", "queue/" + e.id, { position: i })));
+    li.append(smallButton("✕", "take out of the queue", () => api("DELETE", "queue/" + e.id)));
+    li.dataset.entry = e.id;
+    list.append(li);
+  });
+}
+
+$("queue-add").addEventListener("click", () => { if (program) api("POST", "queue", { program: program.name }); });
+$("queue-pause").addEventListener("click", () => api("POST", "queue/pause"));
+$("queue-resume").addEventListener("click", () => api("POST", "queue/resume"));
+$("queue-clear").addEventListener("click", () => { if (confirm("Remove every queue entry?")) api("DELETE", "queue"); });
 
 $("btn-start").addEventListener("click", async () => {
   if (!program) return;
   const line = Number($("start-line").value);
-  const from = Number.isInteger(line) && line > 1 ? "&start_line=" + line : "";  // restart after a broken tool
-  const answer = await api("POST", "jobs?name=" + encodeURIComponent(program.name) + from, program.text, "text/plain");
-  const check = $("check");
-  if (answer.ok === false) { check.textContent = [answer.error].concat(answer.errors).join("\n"); check.className = "check bad"; }
-  else { check.textContent = "checked and started: job " + answer.job.id; check.className = "check"; }
+  const body = { program: program.name };
+  if (Number.isInteger(line) && line > 1) body.start_line = line;  // restart after a broken tool
+  const answer = await api("POST", "jobs", body);
+  if (answer.ok === false) showCheck([answer.error].concat(answer.errors).filter((v, i, a) => v && a.indexOf(v) === i).join("\n"), true);
+  else showCheck("started: job " + answer.job.id + (answer.job.summary.checked_from_store ? " (checked when added)" : ""), false);
 });
 $("btn-hold").addEventListener("click", () => api("POST", "machine/hold"));
 $("btn-resume").addEventListener("click", () => api("POST", "machine/resume"));
@@ -445,4 +548,6 @@ function setView(yaw, pitch) { view.yaw = yaw; view.pitch = pitch; view.fitted =
 
 connect();
 loadJobs();
+loadPrograms();
+loadQueue();
 drawPreview();

@@ -1,0 +1,259 @@
+"""Time to the first set-point from ``start NAME`` (a library program) and from ``run FILE``
+(the first and the second time) for a real CAM program (issue 25 item 1).
+
+One fresh process per size holds the daemon and its simulated drives exactly as
+bench_first_motion does (its machine: T = 1 ms, lookahead J = 50000, a spindle and tools
+1-99 for the program's words). Through the control socket, from the same held position
+(the machine's 0, 0, 0: the checked-program store's key includes where a program starts):
+
+1. ``submit`` (what ``run FILE`` sends) of the program never seen: read and checked, stored;
+2. ``submit`` of it again: loaded from the store;
+3. ``programs.add`` of it under another name (the add's check, timed: it runs while the
+   machine is idle, before any start), then ``start NAME``: loaded from the store.
+
+Each job is stopped (controlled stop) at its first motion, the axes sent back to 0 by MDI
+``G53 G0 X0 Y0 Z0``; each row says whether the store served it (the job's
+``checked_from_store``). First set-point: from the request to the first cycle whose
+set-point leaves the held position (the master's job index >= 1).
+
+``--cpu``: instead, where the time before the first set-point goes, in CPU seconds of one
+process (time.process_time: far less sensitive to a loaded host than wall time): reading and
+checking (what the store saves), loading the store's entry, pickling the checked program for
+the daemon (the worker's share of the transfer), and the planner's first chunk.
+
+Run: python benchmarks/bench_library_start.py [--copies 2 19] [--program FILE] [--cpu]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))
+
+from benchmarks._report import write_section  # noqa: E402
+from benchmarks.bench_first_motion import (CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line,  # noqa: E402
+                                           program_copies)
+
+PROGRAM = ROOT / "tests" / "data" / "gcode" / "fusion360_led_floor_1121_btn8copies_20bit.nc"
+TARGET_START_S = 1.0
+
+
+def first_setpoint_s(client: Any, master: Any, cmd: str, **fields: Any) -> tuple[float, dict[str, Any]]:
+    """Send ``cmd``; seconds until the master's job sends its second row (the first that
+    moves), then a controlled stop and the axes back at 0 (MDI)."""
+    started = time.perf_counter()
+    answer = client.call(cmd, **fields)
+    job = master._job
+    while job is None or job.index < 1:
+        time.sleep(0.0005)
+        job = master._job
+    seconds = time.perf_counter() - started
+    client.call("stop")
+    idle(client)
+    client.call("mdi", text="G53 G0 X0 Y0 Z0")
+    idle(client)
+    return seconds, answer
+
+
+def idle(client: Any, timeout_s: float = 120.0) -> None:
+    deadline = time.monotonic() + timeout_s
+    while client.call("status")["job"] is not None:
+        if time.monotonic() > deadline:
+            raise TimeoutError("the job did not end")
+        time.sleep(0.05)
+
+
+def one_size(program: Path, copies: int) -> dict[str, Any]:
+    """The three starts of ``program`` x ``copies`` in one daemon (module docstring)."""
+    from nurbsmotion.config import parse_config
+    from nurbsmotion.fieldbus import Master
+    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
+    from nurbsmotion.service.client import Client
+    from nurbsmotion.service.daemon import Daemon
+    from nurbsmotion.service.link import SimulatedDrives
+    from nurbsmotion.sim import SimNetwork
+
+    work = Path(tempfile.mkdtemp(prefix="lib-"))
+    (work / "tools.yaml").write_text(TOOLS_YAML)
+    config = parse_config(CONFIG.format(channel=f"lib-{uuid.uuid4().hex}", socket=work / "ctl.sock",
+                                        data_dir=work / "var", extra=PROGRAM_MACHINE),
+                          str(work / "machine.yaml"), base_dir=work)
+    masters: list[Master] = []
+
+    def open_motion(cfg: Any) -> Any:
+        drives = SimulatedDrives(cfg, rt_priority=SIM_DRIVES_PRIORITY)
+        drives.network = SimNetwork.for_machine(cfg, record=False)
+        drives.start()
+        master = Master(cfg, rt_priority=CYCLE_THREAD_PRIORITY, gc_mode="freeze")
+        master.bring_up()
+        masters.append(master)
+        return master, drives
+
+    text = program_copies(program, copies)
+    name = f"{program.stem}_x{copies}{program.suffix}"
+    daemon = Daemon(config, open_motion)
+    daemon.start()
+    assert daemon.planner_worker is not None
+    daemon.planner_worker.wait_ready()
+    try:
+        with Client(config.control.socket, timeout_s=900.0) as client:
+            run_first, first = first_setpoint_s(client, masters[0], "submit", name=name, program=text)
+            run_second, second = first_setpoint_s(client, masters[0], "submit", name=name, program=text)
+            library_name = f"lib_{name}"
+            t0 = time.perf_counter()
+            client.call("programs.add", name=library_name, program=text)
+            add_s = time.perf_counter() - t0
+            start, started = first_setpoint_s(client, masters[0], "start", name=library_name)
+            counters = client.call("programs.list")["checked_store"]
+    finally:
+        daemon.close()
+    return {"program": program.name, "copies": copies, "lines": text.count("\n"),
+            "blocks": first["job"]["summary"]["blocks"],
+            "run_first_s": run_first, "run_first_from_store": first["job"]["summary"]["checked_from_store"],
+            "run_second_s": run_second, "run_second_from_store": second["job"]["summary"]["checked_from_store"],
+            "add_s": add_s, "start_s": start, "start_from_store": started["job"]["summary"]["checked_from_store"],
+            "store_hits": counters["hits"], "store_misses": counters["misses"]}
+
+
+def cpu_steps(program: Path, copies: int) -> dict[str, Any]:
+    """CPU seconds of each step before the first set-point, in this process (``--cpu``)."""
+    import pickle
+
+    import numpy as np
+
+    from nurbsmotion.config import parse_config
+    from nurbsmotion.planning.limits import limits_from_config
+    from nurbsmotion.planning.lookahead import PlanStream
+    from nurbsmotion.service.checked_store import load_checked, save_checked
+    from nurbsmotion.service.planner_worker import read_and_check, send_program
+    from nurbsmotion.service.streamed_job import CHUNK_CYCLES, FIRST_CHUNK_CYCLES, plan_request
+
+    work = Path(tempfile.mkdtemp(prefix="lib-cpu-"))
+    (work / "tools.yaml").write_text(TOOLS_YAML)
+    config = parse_config(CONFIG.format(channel="cpu", socket=work / "ctl.sock", data_dir=work / "var",
+                                        extra=PROGRAM_MACHINE), str(work / "machine.yaml"), base_dir=work)
+    text = program_copies(program, copies)
+    request = plan_request(program.name, text, config, np.zeros(3))
+
+    def cpu(step: Any) -> tuple[float, Any]:
+        t0 = time.process_time()
+        value = step()
+        return time.process_time() - t0, value
+
+    read_s, checked = cpu(lambda: read_and_check(request))
+    save_checked(work / "entry.checked", "key", checked)
+    load_s, loaded = cpu(lambda: load_checked(work / "entry.checked", "key"))
+
+    class Sink:
+        size = 0
+
+        def send(self, message: Any) -> None:
+            Sink.size += len(pickle.dumps(message))
+
+    transfer_s, _ = cpu(lambda: send_program(Sink(), loaded))
+    stream = PlanStream(loaded, limits_from_config(config), CHUNK_CYCLES, FIRST_CHUNK_CYCLES)
+    first_chunk_s, _ = cpu(lambda: next(iter(stream.chunks())))
+    return {"program": program.name, "copies": copies, "lines": text.count("\n"), "blocks": len(checked.blocks),
+            "read_check_cpu_s": read_s, "store_load_cpu_s": load_s, "transfer_pickle_cpu_s": transfer_s,
+            "transfer_mb": Sink.size / 1e6, "entry_mb": (work / "entry.checked").stat().st_size / 1e6,
+            "first_chunk_cpu_s": first_chunk_s}
+
+
+def cpu_table(results: list[dict[str, Any]]) -> str:
+    rows = ["| program | lines (blocks) | read + check (saved by the store) | load the store's entry (entry MB) "
+            "| pickle for the daemon (MB) | planner's first chunk | started, load before → after |",
+            "|---|---|---|---|---|---|---|"]
+    for r in results:
+        head = f"| {r['program']} x {r['copies']} "
+        if "error" in r:
+            rows.append(f"{head}| failed: {r['error']} | | | | | {r['started']}, {r['load_before']} |")
+            continue
+        rows.append(f"{head}| {r['lines']:,} ({r['blocks']:,}) | {r['read_check_cpu_s']:.2f} | "
+                    f"{r['store_load_cpu_s']:.2f} ({r['entry_mb']:.1f}) | {r['transfer_pickle_cpu_s']:.2f} "
+                    f"({r['transfer_mb']:.1f}) | {r['first_chunk_cpu_s']:.2f} | {r['started']}, {r['load_before']} "
+                    f"→ {r['load_after']} |")
+    return "\n".join(rows)
+
+
+def run_child(program: Path, copies: int, cpu: bool = False) -> dict[str, Any]:
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
+    before = load_line()
+    out = subprocess.run([sys.executable, __file__, "--child", str(copies), "--program", str(program)]
+                         + ["--cpu"] * cpu, capture_output=True, text=True, env=env, timeout=3600)
+    run = {"started": started, "load_before": before, "load_after": load_line()}
+    if out.returncode != 0:
+        tail = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"
+        return {"program": program.name, "copies": copies, "error": tail, **run}
+    return {**json.loads(out.stdout.strip().splitlines()[-1]), **run}
+
+
+def served(seconds: float, from_store: bool) -> str:
+    return f"{seconds:.2f} ({'store' if from_store else 'read + checked'})"
+
+
+def table(results: list[dict[str, Any]]) -> str:
+    rows = ["| program | lines (blocks) | `run FILE` 1st: s to first set-point | `run FILE` 2nd | `programs add` (check) s "
+            "| `start NAME` | store hits / misses | target start <= 1.0 s | started, load before → after |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        head = f"| {r['program']} x {r['copies']} "
+        if "error" in r:
+            rows.append(f"{head}| failed: {r['error']} | | | | | | | {r['started']}, {r['load_before']} |")
+            continue
+        rows.append(f"{head}| {r['lines']:,} ({r['blocks']:,}) | {served(r['run_first_s'], r['run_first_from_store'])} "
+                    f"| {served(r['run_second_s'], r['run_second_from_store'])} | {r['add_s']:.2f} "
+                    f"| {served(r['start_s'], r['start_from_store'])} | {r['store_hits']} / {r['store_misses']} "
+                    f"| {'met' if r['start_s'] <= TARGET_START_S else 'NOT met'} "
+                    f"| {r['started']}, {r['load_before']} → {r['load_after']} |")
+    return "\n".join(rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--copies", type=int, nargs="*", default=[2, 19])
+    parser.add_argument("--program", type=Path, default=PROGRAM)
+    parser.add_argument("--cpu", action="store_true", help="CPU seconds of each step instead (module docstring)")
+    parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child is not None:
+        print(json.dumps(cpu_steps(args.program, args.child) if args.cpu else one_size(args.program, args.child)))
+        return
+    results = []
+    for copies in args.copies:
+        results.append(run_child(args.program, copies, args.cpu))
+        print(json.dumps(results[-1]), flush=True)
+    if args.cpu:
+        body = ("CPU seconds (time.process_time) of each step before a streamed job's first set-point, one process, "
+                "bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord error): what `start NAME` and a "
+                "second `run FILE` skip (read + check) and what they still pay (the entry's load, the transfer to "
+                "the daemon, the planner's first chunk: its set-up over the whole program).\n\n" + cpu_table(results))
+        write_section("library_start_cpu", "Library starts: where the time to the first set-point goes (CPU)", body,
+                      "python benchmarks/bench_library_start.py --cpu --copies "
+                      + " ".join(str(c) for c in args.copies))
+        return
+    body = ("The daemon and three simulated drives in one process (bench_first_motion's machine: T = 1 ms, "
+            "lookahead J = 50000 mm/s^3, 1 um chord error, spindle, tools 1-99); each request through the control "
+            "socket from the held position 0, 0, 0; each job stopped at its first motion and the axes sent back "
+            "by MDI. Seconds from the request to the first set-point that moves; in brackets whether the "
+            "planner worker read and checked the program or loaded it checked from DATA_DIR/checked "
+            "(service.checked_store). `programs add`: the request's answer, the check done in the checker "
+            "process. Host: 2 cores shared with other sessions (load average before → after).\n\n" + table(results))
+    command = "python benchmarks/bench_library_start.py --copies " + " ".join(str(c) for c in args.copies)
+    write_section("library_start", "Library starts: `start NAME` and `run FILE` to the first set-point", body,
+                  command)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,164 @@
+"""The program library and the job queue in a daemon with simulated drives (this process):
+checked once when added, started by name without a second check, the checked-program store
+invalidated by a changed file, configuration or entry, and both kept across a restart."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from nurbsmotion.service.client import Client
+from tests.integration.daemon_helpers import daemon_in_process, wait_until
+
+SQUARE = "G21 G90\nG01 X4 Y3 F3000\nG01 X0 Y0\n"  # ends where it started: started again from there
+LONG = "G21 G90\nG01 X40 F600\nG01 X0\n"  # ~8 s
+BAD = "G21 G90\nG01 X4 Y3 F3000\nG01 X0 Q\n"
+
+
+def call(daemon: Any, cmd: str, **fields: Any) -> dict[str, Any]:
+    with Client(daemon.config.control.socket) as client:
+        return client.request(cmd, **fields)
+
+
+def job_end(daemon: Any, job_id: str, timeout_s: float = 30.0) -> dict[str, Any]:
+    wait_until(lambda: daemon.controller.last_job() is not None and daemon.controller.last_job()["id"] == job_id,
+               timeout_s, f"the end of job {job_id}")
+    return daemon.controller.job_info(job_id)["job"]
+
+
+@pytest.fixture()
+def data_dir(tmp_path: Path) -> Path:
+    return tmp_path / "data"
+
+
+def test_a_program_added_is_checked_once_and_started_by_name_without_a_second_check(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        added = call(daemon, "programs.add", name="square.nc", program=SQUARE)
+        assert added["ok"], added
+        check = added["program"]["check"]
+        assert check["ok"] and check["blocks"] == 2 and check["errors"] == []
+        assert check["lines"]["lines_total"] == 3
+        assert check["extent"] == {"axes": ["X", "Y", "Z"], "min_mm": [0.0, 0.0, 0.0], "max_mm": [4.0, 3.0, 0.0]}
+        assert (data_dir / "programs" / "square.nc").read_text() == SQUARE
+        listing = call(daemon, "programs.list")
+        assert [p["name"] for p in listing["programs"]] == ["square.nc"]
+        assert call(daemon, "programs.get", name="square.nc")["program"]["text"] == SQUARE
+
+        started = call(daemon, "start", name="square.nc")
+        assert started["ok"], started
+        assert started["job"]["summary"]["checked_from_store"] is True
+        assert job_end(daemon, started["job"]["id"])["outcome"]["outcome"] == "completed"
+        assert daemon.store.hits == 1 and daemon.store.misses == 1  # the add read it, the start did not
+
+        # run FILE uses the same store: the first submit of a new name reads it, the second not
+        first = call(daemon, "submit", name="other.nc", program=SQUARE)
+        job_end(daemon, first["job"]["id"])
+        second = call(daemon, "submit", name="other.nc", program=SQUARE)
+        job_end(daemon, second["job"]["id"])
+        assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
+            (False, True)
+        assert daemon.store.counters()["hits"] == 2 and daemon.store.counters()["misses"] == 2
+
+        assert call(daemon, "programs.remove", name="square.nc")["ok"]
+        assert call(daemon, "programs.list")["programs"] == []
+        gone = call(daemon, "start", name="square.nc")
+        assert not gone["ok"] and gone["error"] == "program 'square.nc': not in the library (nurbsmotion programs list)"
+
+
+def test_a_refused_program_is_not_added_and_bad_names_are_refused(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        refused = call(daemon, "programs.add", name="bad.nc", program=BAD)
+        assert not refused["ok"] and refused["error"].startswith("bad.nc:3:"), refused
+        assert call(daemon, "programs.list")["programs"] == []
+        beyond = call(daemon, "programs.add", name="far.nc", program="G21 G90\nG01 X150 F3000\n")
+        assert not beyond["ok"] and "soft limit" in beyond["error"] and beyond["error"].startswith("far.nc:2")
+        for name in ("../x.nc", "a/b.nc", ".hidden.nc", "", "x" * 129 + ".nc"):
+            answer = call(daemon, "programs.add", name=name, program=SQUARE)
+            assert not answer["ok"] and answer["error"].startswith("field 'name': program name"), (name, answer)
+        kind = call(daemon, "programs.add", name="part.doc", program=SQUARE)
+        assert not kind["ok"] and "unknown program type" in kind["error"]
+        assert not (data_dir / "x.nc").exists() and call(daemon, "programs.list")["programs"] == []
+
+
+def test_a_changed_file_configuration_or_entry_is_checked_again(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        assert call(daemon, "programs.add", name="square.nc", program=SQUARE)["ok"]
+        (data_dir / "programs" / "square.nc").write_text(SQUARE.replace("X4 Y3", "X5 Y3"))  # edited by hand
+        edited = call(daemon, "start", name="square.nc")
+        assert edited["job"]["summary"]["checked_from_store"] is False
+        job_end(daemon, edited["job"]["id"])
+        for entry in (data_dir / "checked").glob("*.checked"):
+            entry.write_bytes(entry.read_bytes()[:40] + b"garbage")  # corrupt: rechecked, never trusted
+        corrupt = call(daemon, "start", name="square.nc")
+        assert corrupt["job"]["summary"]["checked_from_store"] is False
+        job_end(daemon, corrupt["job"]["id"])
+        again = call(daemon, "start", name="square.nc")
+        assert again["job"]["summary"]["checked_from_store"] is True
+        job_end(daemon, again["job"]["id"])
+    # the same data under another configuration: a section no check reads changed (web), then one
+    # the checks read (machine.safe_z_mm)
+    with daemon_in_process(data_dir, "web: {max_upload_mb: 32}\n", "lib") as daemon:
+        same = call(daemon, "start", name="square.nc")
+        assert same["job"]["summary"]["checked_from_store"] is True
+        job_end(daemon, same["job"]["id"])
+    with daemon_in_process(data_dir, "machine: {safe_z_mm: 5}\n", "lib") as daemon:
+        other = call(daemon, "start", name="square.nc")
+        assert other["ok"] and other["job"]["summary"]["checked_from_store"] is False
+        job_end(daemon, other["job"]["id"])
+
+
+def test_the_queue_runs_programs_in_order_stops_at_an_abort_and_survives_a_restart(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        for name, text in (("square.nc", SQUARE), ("long.nc", LONG)):
+            assert call(daemon, "programs.add", name=name, program=text)["ok"]
+        assert call(daemon, "queue.pause")["queue"]["paused"] == "paused by the operator"
+        ids = [call(daemon, "queue.add", name=n)["entry"]["id"] for n in ("long.nc", "square.nc", "long.nc")]
+        refused = call(daemon, "queue.add", name="missing.nc")
+        assert not refused["ok"] and "not in the library" in refused["error"]
+        moved = call(daemon, "queue.move", id=ids[1], position=1)["queue"]
+        assert [e["program"] for e in moved["entries"]] == ["square.nc", "long.nc", "long.nc"]
+        assert call(daemon, "status")["queue"] == {"entries": 3, "next": "square.nc", "paused": "paused by the operator"}
+        assert call(daemon, "queue.resume")["ok"]
+        wait_until(lambda: daemon.controller.running_job_name() == "long.nc", 20.0, "the second entry to run")
+        assert daemon.controller.last_job()["name"] == "square.nc"
+        assert daemon.controller.last_job()["outcome"] == "completed"
+        during = call(daemon, "programs.add", name="while-running.nc", program=SQUARE)  # the checker process
+        assert during["ok"] and daemon.controller.running_job_name() == "long.nc"
+        assert call(daemon, "abort")["ok"]
+        wait_until(lambda: daemon.programs.queue.paused is not None, 10.0, "the queue to pause")
+        queue = call(daemon, "queue.list")["queue"]
+        assert queue["paused"].endswith("(long.nc) ended aborted: aborted on request (quick stop)"), queue
+        assert [e["id"] for e in queue["entries"]] == [ids[2]]
+        assert call(daemon, "reset")["ok"]
+    with daemon_in_process(data_dir, "", "lib") as daemon:  # restarted: the library and the queue are back
+        assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["long.nc", "square.nc",
+                                                                                 "while-running.nc"]
+        queue = call(daemon, "queue.list")["queue"]
+        assert [e["id"] for e in queue["entries"]] == [ids[2]] and queue["paused"]
+        assert call(daemon, "queue.remove", id=ids[2])["queue"]["entries"] == []
+        bad = call(daemon, "queue.remove", id=99)
+        assert not bad["ok"] and bad["error"] == "field 'id': no queue entry 99 (entries: none)"
+
+
+def test_a_job_stopped_at_once_still_stores_its_checked_program(data_dir):
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        first = call(daemon, "submit", name="long.nc", program=LONG)
+        assert call(daemon, "stop")["ok"]
+        job_end(daemon, first["job"]["id"])
+        assert call(daemon, "mdi", text="G53 G0 X0 Y0 Z0")["ok"]  # back where it started
+        wait_until(lambda: daemon.controller.idle(), 20.0, "the MDI to end")
+        second = call(daemon, "submit", name="long.nc", program=LONG)
+        assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
+            (False, True)
+        assert call(daemon, "abort")["ok"]
+
+
+def test_a_program_over_the_size_limit_is_refused_and_not_added(data_dir):
+    with daemon_in_process(data_dir, "web: {max_upload_mb: 0.001}\n", "lib") as daemon:  # 1048 bytes
+        big = call(daemon, "programs.add", name="big.nc", program=SQUARE * 40)
+        assert not big["ok"] and big["error"] == (f"program 'big.nc': {len(SQUARE) * 40:,} bytes is larger than the "
+                                                  "0.001 MB limit (web.max_upload_mb)")
+        assert call(daemon, "programs.add", name="small.nc", program=SQUARE)["ok"]
+        assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["small.nc"]
