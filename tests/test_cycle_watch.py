@@ -95,6 +95,16 @@ def test_the_first_wake_up_has_no_gap_to_judge():
     assert clocks.watch().woke(1.0, 0) is None
 
 
+def test_a_catch_up_wake_up_soon_after_a_late_one_is_not_reported_again():
+    clocks = Clocks()
+    watch = clocks.watch()
+    on_time(watch, clocks, 2)
+    clocks.step(0.300, 0.001)
+    assert watch.woke(0.292, 70) is not None
+    clocks.step(0.001)  # its deadline passed long ago, but the thread was away 1 ms
+    assert watch.woke(0.293, 0) is None
+
+
 @pytest.mark.parametrize("cpu_s, wire, ran_out, expected", [
     (0.2, 0, False, "thread:x"), (0.01, 60, False, "other_work"), (0.01, 5, True, "other_work"),
     (0.01, 5, False, "machine")])

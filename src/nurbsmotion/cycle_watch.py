@@ -3,7 +3,9 @@
 With the kernel queue (fieldbus/bcm_queue.py) the cycle thread wakes every few cycles and
 the kernel sends SYNC meanwhile; the queue holds 64 cycles for 3 axes (256 ms at T = 4 ms,
 64 ms at 1 ms). A thread away longer ends the job in a ``stall`` fault. When it comes back
-later than ``threshold_s`` (the writer passes half the queue), this says from three measurements
+more than ``threshold_s`` after its previous wake-up (the writer passes half the queue; its
+lateness alone also counts the catch-up wake-ups after one late one), this says from three
+measurements
 what kept it away, so an integrator knows what to fix on the machine:
 
 - ``held_by=thread:<name>``: this process ran meanwhile (process CPU >= half the gap), so
@@ -129,12 +131,13 @@ class CycleWatch:
 
     def woke(self, late_s: float, wire_cycles: int, queue_ran_out: bool = False) -> LateWake | None:
         """One wake-up, ``late_s`` after its deadline, ``wire_cycles`` SYNCs sent since the
-        previous one; the late wake-up (also logged, at most once a second), else None."""
+        previous one; a LateWake (also logged, at most once a second) when the thread was
+        away longer than ``threshold_s``, else None."""
         now, cpu = self._clock(), self._process_cpu()
         away, used = now - self._last_wake_s, cpu - self._last_cpu_s
         first = self._last_wake_s < 0
         self._last_wake_s, self._last_cpu_s = now, cpu
-        if first or late_s <= self.threshold_s:
+        if first or away <= self.threshold_s:  # away, not late: a wake-up after a late one is late too
             if now - self._threads_at_s >= THREAD_SAMPLE_PERIOD_S:
                 self._threads, self._threads_at_s = self._threads_cpu(), now
             return None
