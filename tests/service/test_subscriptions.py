@@ -154,3 +154,86 @@ def test_max_hz_outside_its_range_is_refused_by_the_server(bad, tmp_path):
     server = ControlServer(tmp_path / "s.sock", lambda r: {"ok": True}, hub=StatusHub(FakeStatus(), publisher_thread=False))
     refusal = server._subscription_refusal(Request("subscribe", {"max_hz": bad}))
     assert refusal is not None and "max_hz" in refusal["error"]
+
+
+class SocketStandIn:
+    """A non-blocking send: takes at most ``room`` bytes a call (None: all), BlockingIOError
+    when it has none, OSError once ``gone``."""
+
+    def __init__(self, room: int | None = None) -> None:
+        self.room = room
+        self.gone = False
+        self.received = b""
+
+    def __call__(self, data: bytes) -> int:
+        if self.gone:
+            raise BrokenPipeError("peer went away")
+        taken = data if self.room is None else data[:self.room]
+        if not taken and data:
+            raise BlockingIOError
+        self.received += taken
+        return len(taken)
+
+    def lines(self) -> list[dict]:
+        return [json.loads(line) for line in self.received.splitlines()]
+
+
+def test_the_publisher_writes_every_attached_subscribers_lines_itself():
+    """One round of the publisher sends to every client: no per-client thread has to wake."""
+    status = FakeStatus()
+    hub = StatusHub(status, clock=FakeClock(), publisher_thread=False)
+    sockets = [SocketStandIn() for _ in range(10)]
+    subs = [hub.subscribe()[0] for _ in sockets]
+    for sub, sock in zip(subs, sockets):
+        sub.attach(sock)
+    hub.publish_event({"event": "fault", "fields": {"node": "2"}})
+    hub.publish_once()
+    for sub, sock in zip(subs, sockets):
+        assert [line["event"] for line in sock.lines() if line["notify"] == "event"] == ["fault"]
+        assert sub.take(0.0) == []  # nothing left for anyone to take
+
+
+def test_what_a_full_socket_did_not_take_goes_first_in_the_next_round():
+    clock = FakeClock()
+    hub = StatusHub(FakeStatus(), clock=clock, publisher_thread=False)
+    sub, _ = hub.subscribe()
+    sock = SocketStandIn(room=7)
+    sub.attach(sock)
+    for i in range(3):
+        hub.publish_event({"event": "tick", "fields": {"i": str(i)}})
+        hub.publish_once()
+    sock.room = None
+    hub.publish_once()
+    events = [line["fields"]["i"] for line in sock.lines() if line["notify"] == "event"]
+    seqs = [line["seq"] for line in sock.lines()]
+    assert events == ["0", "1", "2"] and seqs == sorted(seqs)
+
+
+def test_an_attached_client_whose_socket_stays_full_is_dropped_with_a_reason():
+    from nurbsmotion.service.subscriptions import MAX_UNSENT_BYTES
+
+    hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
+    slow, _ = hub.subscribe()
+    fast, _ = hub.subscribe()
+    slow_socket, fast_socket = SocketStandIn(room=0), SocketStandIn()
+    slow.attach(slow_socket)
+    fast.attach(fast_socket)
+    big = "x" * 100_000
+    for _ in range(MAX_UNSENT_BYTES // 100_000 + 2):
+        hub.publish_event({"event": "big", "fields": {"text": big}})
+        hub.publish_once()
+    assert slow.dropped and "too slow" in slow.dropped and not slow.unsent
+    [notice] = [json.loads(line) for line in slow.take(0.0)]
+    assert notice["notify"] == "dropped" and "too slow" in notice["error"]
+    assert fast.dropped is None and len(fast_socket.lines()) > MAX_UNSENT_BYTES // 100_000
+
+
+def test_a_client_gone_while_the_publisher_writes_is_dropped():
+    hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
+    sub, _ = hub.subscribe()
+    sock = SocketStandIn()
+    sub.attach(sock)
+    sock.gone = True
+    hub.publish_event({"event": "tick"})
+    hub.publish_once()
+    assert sub.dropped is not None and "connection lost" in sub.dropped

@@ -65,6 +65,7 @@ import can
 from can.interfaces.socketcan import constants as bcm
 from can.interfaces.socketcan.socketcan import build_bcm_header, create_bcm_socket, send_bcm
 
+from nurbsmotion.cycle_watch import CycleWatch
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
 from nurbsmotion.fieldbus.supervisor import CycleHistory
 from nurbsmotion.fieldbus.writer import CyclicFrames
@@ -202,6 +203,7 @@ class BcmQueueWriter:
         self.overtaken = 0  # changed cycles the wire sent with their old frames
         self.headroom = QueueHeadroom(self.cycles)  # while moving (at rest the horizon is a few cycles)
         self.moving = False
+        self.watch = CycleWatch(period_s, self.cycles * period_s / 2)  # cycle_thread_late: back after half the queue
 
     def _init_frames(self) -> None:
         """SYNC frames and the RPDO frame heads of every slot (their data is packed per cycle)."""
@@ -224,7 +226,9 @@ class BcmQueueWriter:
         lateness, missed = self.grid.advance(woke)
         self.stats.add(lateness, missed)
         assert self.echo is not None
+        c_before = self.c
         self.echo.drain(self._on_sync)
+        self.watch.woke(lateness, self.c - c_before, self.stalled())
         if self.running and self.moving:
             self.headroom.add(self.h - self.c)
         return self.c

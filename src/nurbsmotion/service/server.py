@@ -3,14 +3,17 @@
 Each line a client sends is one request (see protocol); each gets one response line.
 A malformed, oversized or refused request gets an error line and the daemon keeps serving;
 a client that disappears mid-request only ends its own thread. A ``subscribe`` request turns
-its connection into a push stream (service.subscriptions) served by that client's thread
-from its own queue, so a slow subscriber delays nobody.
+its connection into a push stream (service.subscriptions): the hub's publisher writes every
+subscriber's lines without blocking (what a socket cannot take waits in that client's own
+queue, so a slow subscriber delays nobody) and the client's thread only waits for it to
+hang up.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import select
 import socket
 import stat
 import threading
@@ -28,6 +31,7 @@ log = logging.getLogger(__name__)
 Handler = Callable[[Request], dict[str, Any]]
 SOCKET_MODE = 0o660
 _CHUNK = 1 << 20
+PUSH_POLL_S = 0.5  # a subscriber's thread looks for the daemon's stop or the hub's drop this often
 
 
 class ControlServer:
@@ -218,13 +222,22 @@ class ControlServer:
         return None
 
     def _push(self, conn: socket.socket, sub: Subscription) -> None:
-        conn.setblocking(True)
-        while not self._stopping.is_set():
-            lines = sub.take(0.2)
-            if lines and not _send_lines(conn, lines):
+        """The hub's publisher sends this client's lines (Subscription.attach, non-blocking);
+        this thread only waits for the client to hang up, the daemon to stop, or the hub to
+        drop the client, waking PUSH_POLL_S apart rather than at every line."""
+        conn.setblocking(False)
+        sub.attach(conn.send)
+        while not self._stopping.is_set() and sub.dropped is None:
+            try:
+                readable, _, _ = select.select([conn], [], [], PUSH_POLL_S)
+            except (OSError, ValueError):
                 return
-            if sub.dropped is not None or _peer_closed(conn):
+            if readable and _peer_closed(conn):
                 return
+        if sub.dropped is not None:
+            conn.setblocking(True)
+            conn.settimeout(1.0)
+            _send_lines(conn, [sub.unsent, *sub.take(0.0)])  # the 'dropped' line, after what was queued
 
     @staticmethod
     def _send(conn: socket.socket, response: dict[str, Any]) -> bool:

@@ -14,9 +14,13 @@ After ``{"cmd": "subscribe"}`` a control connection receives, one JSON line each
 
 One publisher thread (normal priority) reads the controller's status for all subscribers at
 the fastest rate any of them asked for, and only while someone is subscribed; a logged event
-wakes it at once, so a state change reaches clients with the event, not a period later. The
-cycle thread pays one ``deque.append`` and ``Event.set`` per log line it writes (faults), and
-the status read takes the controller's lock as a ``status`` request does.
+wakes it at once, so a state change reaches clients with the event, not a period later. It
+also writes every subscriber's lines to its connection (``Subscription.attach``: a
+non-blocking send; what the socket cannot take now waits for the next round), so a round
+wakes one thread for all clients instead of one per client: every thread that wakes takes
+the interpreter lock the cycle thread needs (issue 22). The cycle thread pays one
+``deque.append`` and ``Event.set`` per log line it writes (faults), and the status read
+takes the controller's lock as a ``status`` request does.
 """
 
 from __future__ import annotations
@@ -34,7 +38,9 @@ from nurbsmotion.service.protocol import encode
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
 MAX_HZ_RANGE = (0.5, 100.0)
 MAX_PENDING_LINES = 2000  # a client this far behind is dropped (events queue; status lines merge)
+MAX_UNSENT_BYTES = 4 * 1024 * 1024  # an attached client whose socket leaves this much unsent is dropped
 Status = dict[str, Any]
+Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
 
 
 def status_changes(old: Status | None, new: Status) -> Status:
@@ -79,6 +85,8 @@ class Subscription:
     dropped: str | None = None
     seq: int = 0
     wake: threading.Condition = field(default_factory=threading.Condition)
+    writer: Writer | None = None  # attached: the publisher sends the lines (flush), nobody takes them
+    unsent: bytes = b""
 
     def put(self, body: bytes) -> None:
         """Queue one line: ``body`` is an encoded JSON object, shared by every subscriber;
@@ -93,6 +101,34 @@ class Subscription:
                 self.dropped = f"client too slow: more than {MAX_PENDING_LINES} lines behind"
                 self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
             self.wake.notify()
+
+    def attach(self, writer: Writer) -> None:
+        """From now on the publisher sends this subscriber's lines with ``writer`` (flush)."""
+        with self.wake:
+            self.writer = writer
+
+    def flush(self) -> None:
+        """Send what waits (the publisher's thread; attached subscribers only): what the
+        socket does not take now is kept for the next flush; a socket that keeps more than
+        MAX_UNSENT_BYTES, or fails, drops the subscriber (its connection's thread sees it)."""
+        with self.wake:
+            if self.writer is None or self.dropped is not None or (not self.lines and not self.unsent):
+                return  # a dropped client's notice is sent by its connection's thread
+            data = self.unsent + b"".join(self.lines)
+            self.lines.clear()
+            try:
+                sent = self.writer(data)
+            except BlockingIOError:
+                sent = 0
+            except OSError as err:
+                self.dropped, self.unsent = f"connection lost: {err}", b""
+                self.wake.notify()
+                return
+            self.unsent = data[sent:]
+            if len(self.unsent) > MAX_UNSENT_BYTES and self.dropped is None:
+                self.dropped, self.unsent = f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", b""
+                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
+                self.wake.notify()
 
     def take(self, timeout_s: float) -> list[bytes]:
         """The lines waiting now (after at most ``timeout_s``); empty when none came."""
@@ -216,6 +252,8 @@ class StatusHub:
                 sub.put(encoded[key])
                 sub.pending = {}
                 sub.next_status_s = now + sub.period_s
+        for sub in subscribers:
+            sub.flush()
 
 
 class EventLogHandler(logging.Handler):
