@@ -37,6 +37,18 @@ def heartbeat_message(node_id: int, state: int = c.NmtState.OPERATIONAL) -> can.
     return can.Message(arbitration_id=c.COB_HEARTBEAT + node_id, is_extended_id=False, data=bytes([state]))
 
 
+def started_heartbeat(bus: can.BusABC, node_id: int, period_ms: int, alive: Callable[[], bool],
+                      rt_priority: int | None) -> "MasterHeartbeat | None":
+    """The master's heartbeat, started (None: ``period_ms`` 0, no heartbeat); its threads run
+    just below the cycle thread's ``rt_priority``."""
+    if period_ms == 0:
+        return None
+    heartbeat = MasterHeartbeat(bus, node_id, period_ms / 1000.0, alive,
+                                thread_priority=None if rt_priority is None else rt_priority - 1)
+    heartbeat.start()
+    return heartbeat
+
+
 class MasterHeartbeat:
     """Produce the master's heartbeat on ``bus`` while ``alive()`` holds (see module doc)."""
 
