@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from nurbsmotion.config import load_config
-from nurbsmotion.errors import InputError
-from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.errors import InputError, Refused
+from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.records import JobRecords

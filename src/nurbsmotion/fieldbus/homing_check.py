@@ -34,7 +34,7 @@ from nurbsmotion import cia402 as c
 from nurbsmotion import drive_od
 from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
 from nurbsmotion.errors import InputError
-from nurbsmotion.fieldbus.bringup_plan import mode_of
+from nurbsmotion.fieldbus.drive_state import mode_of
 from nurbsmotion.fieldbus.homing import (HOME_OFFSET, HOMING_ACCELERATION, HOMING_METHOD, HOMING_SPEEDS, MODE_HOMING,
                                          HomingPlan, OffsetObject, here_offset_counts, homing_drive_values,
                                          homing_plan)
