@@ -187,7 +187,14 @@ class Master:
             network.send_message(c.COB_NMT,  # PDOs (CiA 301 §7.3.2.2) until its own bring-up starts it
                                  bytes([c.NmtCommand.PRE_OPERATIONAL, self.cyclic_velocity.node_id]))
         self._fb.hb_time[:] = [time.perf_counter()] * self._n
-        self._start_loop()
+        if self._writer is None:  # the cycle loop's writer, kept across bring-ups
+            self._writer = self._make_writer()
+            kernel = self._conn.kernel_queue()
+            log.info(kv("cycle_writer", sync_source="kernel" if kernel else "loop", writer=type(self._writer).__name__))
+            if kernel:
+                self._warn_timer_threads_below()
+        self._conn.filter_received()
+        self._loop.start(self._writer, self._rt_priority)
         self._wait_enabled()
 
     def _bring_up_by_sdo(self, network: canopen.Network) -> None:
@@ -374,17 +381,6 @@ class Master:
                                   bus)
         return LoopWriter(bus, self._frames, self._history, self._period_s, self._spin_s,
                           self._late_threshold_s, self._conn.log_cycle, self._loop.on_send_error)
-
-    def _start_loop(self) -> None:
-        if self._writer is None:
-            self._writer = self._make_writer()
-            kernel = self._conn.kernel_queue()
-            log.info(kv("cycle_writer", sync_source="kernel" if kernel else "loop",
-                        writer=type(self._writer).__name__))
-            if kernel:
-                self._warn_timer_threads_below()
-        self._conn.filter_received()
-        self._loop.start(self._writer, self._rt_priority)
 
     def _warn_timer_threads_below(self) -> None:
         """The kernel queue's SYNC leaves from the kernel's soft-timer threads when softirq
