@@ -19,6 +19,8 @@ FORBIDDEN = {
     "sim": ("fieldbus", "geometry", "program", "planning", "service", "cli", "axes"),
     "service": ("cli", "web"),
     "web": ("geometry", "program", "planning", "fieldbus", "sim", "cli", "axes"),
+    # read by every layer: knows the control protocol's socket default and the tool-table reader only
+    "config": ("geometry", "planning", "fieldbus", "sim", "cli", "web", "axes"),
 }
 
 

@@ -19,7 +19,7 @@ from nurbsmotion.fieldbus.io import (
     input_states,
     output_groups,
 )
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.sim.io_node import SimIoNode
 from tests.helpers import wait_for
 

@@ -18,7 +18,7 @@ from nurbsmotion.config import default_eds_path
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.spindle import SpindleDrive, csv_at_speed, ramp_step
 from nurbsmotion.sim.network import SimNetwork, SpindleSim
-from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import SpindleConfig, SpindleMode
 from tests.helpers import wait_for as _wait_for
 
 wait_for = functools.partial(_wait_for, timeout_s=3.0, poll_s=0.005)  # this module's waits

@@ -11,7 +11,7 @@ import canopen
 import pytest
 
 from nurbsmotion.fieldbus.io import IoNode
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.sim.io_node import SimIoNode
 from tests.helpers import wait_for as _wait_for
 

@@ -25,7 +25,7 @@ from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.errors import Refused
 from nurbsmotion.service.client import Client, RequestFailed
-from nurbsmotion.homing_config import HomingConfig
+from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.verify import drive_report
@@ -108,7 +108,7 @@ def _home_jog_mdi(config: MachineConfig) -> None:
     """Home every axis, jog X+10, one MDI line: each through the control API as a client would."""
     from nurbsmotion.cli.home import follow_homing
     from nurbsmotion.errors import InputError
-    from nurbsmotion.homing_config import homing_method_name
+    from nurbsmotion.config.homing import homing_method_name
 
     with Client(config.control.socket) as client:
         names = client.call("home")["axes"]

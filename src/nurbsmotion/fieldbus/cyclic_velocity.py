@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 from nurbsmotion import cia402 as c
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import SpindleConfig, SpindleMode
 
 TARGET_VELOCITY_FORMAT = struct.Struct("<i")  # 0x60FF INTEGER32, counts/s
 KEEP_SEGMENTS = 16  # older segments are gone from every ring and history by then

@@ -28,7 +28,7 @@ from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.feedback import arrival_perf_s
 from nurbsmotion.fieldbus.node_heartbeat import HeartbeatWatch
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)

@@ -41,7 +41,7 @@ from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
-from nurbsmotion.spindle_config import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
+from nurbsmotion.config.spindle import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
                                         TARGET_VELOCITY, VELOCITY_ACTUAL, SpindleConfig, SpindleMode)
 
 log = logging.getLogger(__name__)

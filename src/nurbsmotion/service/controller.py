@@ -38,7 +38,7 @@ from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.start_line import resume_of, start_line_options
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.config.spindle import SpindleConfig
 
 log = logging.getLogger(__name__)
 

@@ -19,7 +19,7 @@ from nurbsmotion.fieldbus.spindle import SpindleDrive
 from nurbsmotion.log import kv
 from nurbsmotion.service.machine_io import AxisMotion, MachineIo, SafetyTrip
 from nurbsmotion.service.motion import BusHost
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.config.spindle import SpindleConfig
 
 log = logging.getLogger(__name__)
 

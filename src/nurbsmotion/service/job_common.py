@@ -20,7 +20,7 @@ from nurbsmotion.planning.measure import Measurements
 from nurbsmotion.planning.trace import write_trace
 from nurbsmotion.program import AXES, Program, ProgramEvent, ReadOptions, parse_curve_yaml, parse_gcode
 from nurbsmotion.program.reader import GCODE_SUFFIXES, YAML_SUFFIXES, check_no_start_line
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.config.spindle import SpindleConfig
 
 
 @dataclass(frozen=True)

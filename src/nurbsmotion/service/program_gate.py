@@ -20,7 +20,7 @@ from __future__ import annotations
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.program import CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.config.spindle import SpindleConfig
 
 COOLANT_OUTPUTS = {CoolantMode.MIST: ("coolant", "mist", "coolant_mist"),
                    CoolantMode.FLOOD: ("coolant", "flood", "coolant_flood")}

@@ -5,12 +5,12 @@ tools: tools.yaml   # the tool table (docs/programs.md), relative to this file
 spindle: none       # there is no spindle drive: programs with M3/M4 are refused
 ```
 
-(``spindle:`` may instead describe the spindle drive, see spindle_config.)
+(``spindle:`` may instead describe the spindle drive, see config.spindle.)
 
 ``tools`` is read with the program package's tool-table reader when the configuration is
 loaded: a missing file is an error at the ``tools`` line, a bad table one error per problem
 at the table's own line (``tools.yaml:4: tools[0].length_mm: ...``). ``spindle: none`` and
-an absent key both mean no spindle; a mapping is read by spindle_config.
+an absent key both mean no spindle; a mapping is read by config.spindle.
 config.py calls :func:`read_tools`, :func:`read_spindle` and :func:`load_tool_file`.
 The tool-table reader is imported only when a configuration names a table: importing the
 program package (numpy, the G-code reader) would add ~0.14 s to every command that reads a
@@ -24,9 +24,9 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
-from nurbsmotion.config_yaml import MISSING, SHOWN, Doc, string
+from nurbsmotion.config.yaml_reading import MISSING, SHOWN, Doc, string
 from nurbsmotion.errors import InputError
-from nurbsmotion.spindle_config import read_spindle_drive
+from nurbsmotion.config.spindle import read_spindle_drive
 
 if TYPE_CHECKING:
     from nurbsmotion.program.tools import ToolTable
@@ -41,7 +41,7 @@ def read_tools(doc: Doc) -> Any:
 
 def read_spindle(doc: Doc) -> Any:
     """``spindle: none`` (YAML reads a bare ``none`` as the string; ``null`` means absent), or
-    the spindle drive's mapping (spindle_config)."""
+    the spindle drive's mapping (config.spindle)."""
     if isinstance(doc.node, yaml.MappingNode):
         return read_spindle_drive(doc)
     value = doc.value()

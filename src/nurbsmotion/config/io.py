@@ -30,7 +30,7 @@ from typing import Any
 
 import yaml
 
-from nurbsmotion.config_yaml import Doc, MISSING, SHOWN, boolean, fields, number, string
+from nurbsmotion.config.yaml_reading import Doc, MISSING, SHOWN, boolean, fields, number, string
 
 MAX_BITS = 64  # eight UNSIGNED8 groups: one 8-byte PDO
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")

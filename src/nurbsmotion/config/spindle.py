@@ -28,7 +28,7 @@ from typing import Any
 from canopen.objectdictionary import ObjectDictionary
 
 from nurbsmotion import drive_od
-from nurbsmotion.config_yaml import MISSING, Doc, fields, number, optional, string
+from nurbsmotion.config.yaml_reading import MISSING, Doc, fields, number, optional, string
 from nurbsmotion.drive_od import default_eds_path
 from nurbsmotion.errors import InputError
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from nurbsmotion.config_yaml import Doc, MISSING, SHOWN, boolean, fields, number
+from nurbsmotion.config.yaml_reading import Doc, MISSING, SHOWN, boolean, fields, number
 
 HERE = "here"
 STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)

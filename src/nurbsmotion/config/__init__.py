@@ -3,6 +3,11 @@
 Every error names the file, the YAML line and the field path, e.g.
 ``config/demo.yaml:14: axes[1].counts_per_mm: must be > 0, got -5``.
 Unknown keys are errors too (a typo must not silently fall back to a default).
+
+This module reads the machine's top level (bus, axes, monitoring, control, web, notify ...)
+and composes the sections that have their own modules: ``yaml_reading`` (the readers every
+section uses), ``homing`` (``axes[i].homing``, ``axes[i].sim``), ``io`` (the I/O node),
+``spindle`` (the spindle drive) and ``tooling`` (``tools:``, ``spindle: none``).
 """
 
 from __future__ import annotations
@@ -15,16 +20,16 @@ import yaml
 from canopen.objectdictionary import ObjectDictionary
 
 from nurbsmotion import drive_od
-from nurbsmotion.config_yaml import MISSING, Doc, boolean, fields, number, optional, sequence_of, string
+from nurbsmotion.config.yaml_reading import MISSING, Doc, boolean, fields, number, optional, sequence_of, string
 from nurbsmotion.drive_od import default_eds_path
 from nurbsmotion.errors import InputError, InputErrors
-from nurbsmotion.homing_config import AxisSimSensors, HomingConfig, read_axis_sim, read_homing
-from nurbsmotion.io_config import IoConfig, check_io_limits, check_io_node, read_io
+from nurbsmotion.config.homing import AxisSimSensors, HomingConfig, read_axis_sim, read_homing
+from nurbsmotion.config.io import IoConfig, check_io_limits, check_io_node, read_io
 from nurbsmotion.service.protocol import DEFAULT_SOCKET
-from nurbsmotion.spindle_config import SpindleConfig, load_spindle_description
-from nurbsmotion.tooling_config import load_tool_file, read_spindle, read_tools
+from nurbsmotion.config.spindle import SpindleConfig, load_spindle_description
+from nurbsmotion.config.tooling import load_tool_file, read_spindle, read_tools
 
-if TYPE_CHECKING:  # read when a configuration names a tool table (tooling_config.load_tool_file)
+if TYPE_CHECKING:  # read when a configuration names a tool table (config.tooling.load_tool_file)
     from nurbsmotion.program.tools import ToolTable
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
@@ -108,7 +113,7 @@ class AxisConfig:
     quick_stop_decel: int | None = None  # 0x6085 in the drive's own units; None: left to the drive
     sdo: tuple[SdoEntry, ...] = ()
     od: ObjectDictionary | None = field(default=None, compare=False, repr=False)  # the EDS as canopen reads it
-    sim: AxisSimSensors | None = None  # the simulated drive's switches and index pulses (homing_config)
+    sim: AxisSimSensors | None = None  # the simulated drive's switches and index pulses (config.homing)
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -251,7 +256,7 @@ class MachineConfig:
     io: IoConfig | None = None
     simulate: bool = False
     master: MasterConfig = MasterConfig()
-    tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
+    tools: str | None = None  # tool table file (config.tooling); tool_table: its contents
     tool_table: ToolTable | None = field(default=None, compare=False, repr=False)
     spindle: SpindleConfig | str | None = None  # 'none' or absent (None): no spindle drive
     require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
