@@ -68,7 +68,7 @@ from nurbsmotion.fieldbus.cycle import DeadlineGrid, wait_until  # noqa: E402
 from nurbsmotion.fieldbus.supervisor import CycleHistory  # noqa: E402
 from nurbsmotion.fieldbus.writer import CyclicFrames  # noqa: E402
 from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, set_thread_realtime  # noqa: E402
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # noqa: E402
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus  # noqa: E402
 
 CHANNEL = "vcan0"
 LISTEN_CHANNEL = "vcan1"  # vcan0's frames forwarded by can-gw, stamped on arrival (module docstring)

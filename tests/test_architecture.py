@@ -21,6 +21,8 @@ FORBIDDEN = {
     "web": ("geometry", "program", "planning", "fieldbus", "sim", "cli", "axes"),
     # read by every layer: knows the control protocol's socket default and the tool-table reader only
     "config": ("geometry", "planning", "fieldbus", "sim", "cli", "web", "axes"),
+    # shared by fieldbus and sim: CANopen constants and transport, no layer above
+    "can": ("config", "geometry", "program", "planning", "fieldbus", "sim", "service", "cli", "web", "axes"),
 }
 
 

@@ -12,7 +12,7 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import Master

@@ -2,7 +2,7 @@
 
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.homing import (
     Event,

@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import canopen
 import pytest
 
-from nurbsmotion.cia402 import NmtState
+from nurbsmotion.can.cia402 import NmtState
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import (
     IoNode,

@@ -15,7 +15,7 @@ from can.interfaces.virtual import VirtualBus
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import Master

@@ -13,7 +13,7 @@ from dataclasses import replace
 import canopen
 import pytest
 
-from nurbsmotion import drive_od
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import default_eds_path
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.spindle import SpindleDrive, csv_at_speed, ramp_step

@@ -1,5 +1,5 @@
 """The supervisor's heartbeat consumer judges heartbeats as they arrived on the bus
-(nurbsmotion.arrival_clock): a heartbeat that arrived in time but waits unread behind a late
+(nurbsmotion.can.arrival_clock): a heartbeat that arrived in time but waits unread behind a late
 receive thread is not a lost drive; a drive that really fell silent is reported."""
 
 from __future__ import annotations

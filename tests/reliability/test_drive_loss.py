@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.config import MachineConfig, parse_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon

@@ -8,7 +8,7 @@ import canopen
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, parse_fault_spec
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import struct
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer, decode_consumer_entry
 
 from conftest import Bench, wait_for

@@ -7,7 +7,7 @@ import struct
 
 import pytest
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.sim import SetpointRecord, read_csv
 
 from conftest import Bench, rpdo, wait_for

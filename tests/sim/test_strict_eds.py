@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 
 from conftest import Bench, derived_eds, rpdo, variable_section, wait_for
 

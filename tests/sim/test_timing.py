@@ -11,7 +11,7 @@ import struct
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim import MissingSetpoint, SetpointSource, SyncSettings, stream_report
 from nurbsmotion.sim.timing import SyncMonitor, missed_ticks
 

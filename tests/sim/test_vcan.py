@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.sim import FaultInjection
 
 from conftest import Bench, open_bench, rpdo, wait_for

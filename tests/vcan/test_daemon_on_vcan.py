@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import yaml
 
-from nurbsmotion.cia402 import COB_TPDO
+from nurbsmotion.can.cia402 import COB_TPDO
 from nurbsmotion.config import load_config
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT
 from nurbsmotion.service.verify import held_plan_held, planned_counts
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus
 from tests.integration.daemon_helpers import DaemonProcess
 from tests.helpers import wait_for
 

@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING, Any, Callable
 import yaml
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import drive_od
+from nurbsmotion.can import drive_od
 from nurbsmotion.config.yaml_reading import MISSING, Doc, boolean, fields, number, optional, sequence_of, string
-from nurbsmotion.drive_od import default_eds_path
+from nurbsmotion.can.drive_od import default_eds_path
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.config.homing import AxisSimSensors, HomingConfig, read_axis_sim, read_homing
 from nurbsmotion.config.io import IoConfig, check_io_limits, check_io_node, read_io

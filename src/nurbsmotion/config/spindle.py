@@ -27,9 +27,9 @@ from typing import Any
 
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import drive_od
+from nurbsmotion.can import drive_od
 from nurbsmotion.config.yaml_reading import MISSING, Doc, fields, number, optional, string
-from nurbsmotion.drive_od import default_eds_path
+from nurbsmotion.can.drive_od import default_eds_path
 from nurbsmotion.errors import InputError
 
 MONITOR_POLL_S = 0.05  # the master reads 0x6041 / 0x606C this often (fieldbus.spindle; counted in the bus load)

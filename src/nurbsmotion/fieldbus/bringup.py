@@ -20,8 +20,8 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, datatypes
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import AxisConfig
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, PdoSetup, ReadBack, Write, describe_value

@@ -26,8 +26,8 @@ from typing import Callable
 
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import MachineConfig, axis_where
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.busload import HEARTBEAT_DLC, SYNC_DLC, fits_following_error_tpdo, frame_bits

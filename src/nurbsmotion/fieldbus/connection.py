@@ -1,7 +1,7 @@
 """The master's connection: the CAN bus, canopen's Network on it, the receive thread and the
 traffic record.
 
-On SocketCAN the bus is the batched one (nurbsmotion.socketcan_batch: fewer system calls
+On SocketCAN the bus is the batched one (nurbsmotion.can.socketcan_batch: fewer system calls
 per cycle) and canopen's notifier reads a batch of frames per wake-up; the drives' answers
 (TPDOs, EMCY, heartbeats) go straight into the master's Feedback arrays. With the kernel
 queue (fieldbus.bcm_queue) a receive filter keeps our own SYNC and RPDOs off the raw socket.
@@ -15,8 +15,8 @@ import can
 from can.interfaces.socketcan import SocketcanBus
 import canopen
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.arrival_clock import socket_pending
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.arrival_clock import socket_pending
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import bringup
@@ -26,14 +26,14 @@ from nurbsmotion.fieldbus.feedback import Callback, Feedback
 from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import RpdoSlot
 from nurbsmotion.runtime import set_thread_realtime
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 
 log = logging.getLogger(__name__)
 
 
 def uses_kernel_queue(sync_source: str, bus: object) -> bool:
     """'auto': any SocketCAN bus, python-can's or a subclass (the master's own is the
-    batched one, nurbsmotion.socketcan_batch; comparing the class name sent the daemon on
+    batched one, nurbsmotion.can.socketcan_batch; comparing the class name sent the daemon on
     socketcan to the loop writer)."""
     if sync_source == "auto":
         return isinstance(bus, SocketcanBus)

@@ -25,7 +25,7 @@ import enum
 from dataclasses import dataclass
 from typing import Any, Protocol, Sequence, Union
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_ENABLED, CW_QUICK_STOP, CW_SHUTDOWN, enable_step,
                                               is_ready, running_controlword)
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingProcedure

@@ -10,8 +10,8 @@ ready only when statusword bit 12 (IP active) answers it.
 
 from __future__ import annotations
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.config import AxisConfig
 
 CW_ENABLED = int(c.Controlword.ENABLE_OPERATION)

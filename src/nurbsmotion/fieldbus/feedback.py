@@ -14,7 +14,7 @@ from typing import Any, Callable
 
 import can
 
-from nurbsmotion.arrival_clock import ArrivalClock, WallClockOffset
+from nurbsmotion.can.arrival_clock import ArrivalClock, WallClockOffset
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 
 EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3

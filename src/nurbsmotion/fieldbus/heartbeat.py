@@ -23,7 +23,7 @@ from typing import Callable
 
 import can
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import set_thread_realtime
 

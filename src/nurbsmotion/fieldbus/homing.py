@@ -35,8 +35,8 @@ import math
 import struct
 from dataclasses import dataclass
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.drive_state import enable_step
 from nurbsmotion.config.homing import HomingConfig

@@ -30,8 +30,8 @@ from pathlib import Path
 
 from canopen.objectdictionary import ObjectDictionary, datatypes
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.drive_state import mode_of

@@ -26,7 +26,7 @@ import threading
 import time
 from typing import Callable
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import bringup
 from nurbsmotion.fieldbus.bringup_plan import ReadBack

@@ -23,7 +23,7 @@ from canopen import objectdictionary as odt
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.feedback import arrival_perf_s

@@ -31,7 +31,7 @@ import can
 import canopen
 import numpy as np
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import SYNC_SOURCES, MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
@@ -149,7 +149,7 @@ class Master:
         self._conn.receive_from(node_id, cob_ids)
 
     def judging_time_s(self) -> float:
-        """Now on the frames' arrival timeline (perf_counter based, nurbsmotion.arrival_clock):
+        """Now on the frames' arrival timeline (perf_counter based, nurbsmotion.can.arrival_clock):
         what another node's heartbeat consumer judges on (fieldbus.io)."""
         return self._fb.judging_time_s()
 

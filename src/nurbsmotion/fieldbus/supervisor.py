@@ -15,7 +15,7 @@ import logging
 import time
 from typing import Any
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.controller import OE_MASK, OE_VALUE, RUNNING_PHASES, Phase, Req, Request
 from nurbsmotion.fieldbus.drive_state import enable_step, state_name
 from nurbsmotion.fieldbus.feedback import EVENT_BAD_TPDO, EVENT_EMCY, EVENT_NMT, Feedback, arrival_perf_s

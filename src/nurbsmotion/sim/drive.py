@@ -27,9 +27,9 @@ from typing import Any
 import canopen
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.arrival_clock import ArrivalClock, socket_pending
-from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState, State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.arrival_clock import ArrivalClock, socket_pending
+from nurbsmotion.can.cia402 import EmcyCode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
 from nurbsmotion.sim import axis as axis_module
 from nurbsmotion.sim import eds as eds_rules
@@ -288,7 +288,7 @@ class SimDrive:
 
     def _judge_timeouts(self, now: float) -> float:
         """Heartbeat consumer, SYNC loss and RPDO timers at ``now`` seen through the reception
-        lag (nurbsmotion.arrival_clock); returns when (drive clock) the next of them falls due."""
+        lag (nurbsmotion.can.arrival_clock); returns when (drive clock) the next of them falls due."""
         arrival_now = self._arrival.judging_time(now)
         self._judge_at(arrival_now)
         due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),

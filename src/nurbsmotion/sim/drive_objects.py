@@ -19,7 +19,7 @@ import canopen
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout

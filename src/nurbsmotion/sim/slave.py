@@ -19,7 +19,7 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, ODArray
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import NmtCommand
+from nurbsmotion.can.cia402 import NmtCommand
 from nurbsmotion.sim import pdo as pdo_layout
 
 ABORT_NO_SUBINDEX = 0x06090011

@@ -58,7 +58,7 @@ import can
 from can.interfaces.socketcan import constants
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, dissect_can_frame
 
-from nurbsmotion.arrival_clock import WallClockOffset
+from nurbsmotion.can.arrival_clock import WallClockOffset
 
 MSG_WAITFORONE = 0x10000  # linux/socket.h: block for the first message only
 TIMEVAL = struct.Struct("@ll")  # struct timeval for SO_RCVTIMEO

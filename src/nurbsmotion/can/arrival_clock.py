@@ -79,7 +79,7 @@ class ArrivalClock:
 
 def socket_pending(bus: object) -> Callable[[], bool]:
     """``pending()`` for a python-can bus: the bus's own ``frames_waiting()`` (the batched
-    SocketCAN bus, nurbsmotion.socketcan_batch: frames it has read but not yet handed out are
+    SocketCAN bus, nurbsmotion.can.socketcan_batch: frames it has read but not yet handed out are
     invisible to select()), the receive queue of python-can's in-process virtual bus,
     select() on its file descriptor (SocketCAN), else always False."""
     import select
