@@ -1,5 +1,5 @@
 """A SocketCAN bus for the per-cycle traffic: python-can's, with a few system calls per
-cycle instead of two per frame. Used by the master (fieldbus.master) and the simulated
+cycle instead of two per frame. Used by the master (fieldbus.connection) and the simulated
 drives (sim.network) on ``interface: socketcan``; transport only, no CANopen in it.
 
 python-can's ``SocketcanBus`` waits in ``select`` before every ``recvmsg`` and polls the

@@ -12,7 +12,7 @@ cycle from the value the previous one had there and moving towards its target by
 packs a cycle again (the kernel queue repacks the cycles it recomputes and its tail) gets the
 same frame, and a new target never jumps: the master applies it (:meth:`apply`) in the cycle
 thread at the first cycle it (re)computes from then on, and recomputes every queued cycle
-from there (fieldbus.master: a request rewinds). A quick stop is a segment with an unlimited
+from there (fieldbus.cycle_loop: a request rewinds). A quick stop is a segment with an unlimited
 step (the drive's own quick-stop ramp 0x6085 decelerates).
 """
 
