@@ -5,7 +5,7 @@ run after run in alternation (A/B interleaved: the host's load changes under oth
   ring of 64 cycles, SYNC then 3 RPDOs spaced T/4, lease renewed every wake-up, period
   trimmed from the echoed SYNCs), driven as the master drives it (horizon, commit, tail).
 - **etf:D**: every frame sent ahead with an absolute CLOCK_TAI launch time
-  (``fieldbus.etf_queue.TxtimeSocket``) under an ETF qdisc of delta D µs: cycle k's SYNC at
+  (``benchmarks/etf_queue.py``: ``TxtimeSocket``) under an ETF qdisc of delta D µs: cycle k's SYNC at
   t0 + k·T + D, its RPDOs 1, 2, 3 µs later (one watchdog expiry sends the four, in order).
   The writer wakes every 8 ms (as the BCM writer) and keeps the frames of the cycles up to
   ``--horizon`` beyond the wire queued. Frames the qdisc dropped come from its error queue.
@@ -60,14 +60,15 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))
 
+from benchmarks.etf_queue import CAN_FRAME, TxtimeError, TxtimeSocket, tai_now_ns  # noqa: E402
 from nurbsmotion.fieldbus.bcm_queue import WAKE_PERIOD_S, BcmQueueWriter  # noqa: E402
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, wait_until  # noqa: E402
-from nurbsmotion.fieldbus.etf_queue import CAN_FRAME, TxtimeError, TxtimeSocket, tai_now_ns  # noqa: E402
 from nurbsmotion.fieldbus.supervisor import CycleHistory  # noqa: E402
 from nurbsmotion.fieldbus.writer import CyclicFrames  # noqa: E402
 from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, set_thread_realtime  # noqa: E402
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # noqa: E402
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus  # noqa: E402
 
 CHANNEL = "vcan0"
 LISTEN_CHANNEL = "vcan1"  # vcan0's frames forwarded by can-gw, stamped on arrival (module docstring)

@@ -52,8 +52,8 @@ def checked_before_motion(text: str) -> Callable[[], object]:
 
     from nurbsmotion.axes import AxisMap
     from nurbsmotion.config import parse_config
-    from nurbsmotion.service.planner import parse
-    from nurbsmotion.service.streamed_job import check_before_motion
+    from nurbsmotion.service.job_common import parse
+    from nurbsmotion.service.path_bounds import check_before_motion
 
     config = parse_config(CONFIG.format(channel="bench", socket="/nonexistent/ctl.sock", data_dir="/nonexistent", extra=""),
                           "machine.yaml")

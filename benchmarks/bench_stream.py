@@ -66,7 +66,7 @@ from nurbsmotion.fieldbus import Master  # noqa: E402
 from nurbsmotion.fieldbus.bcm_queue import GUARD_CYCLES, WAKE_PERIOD_S  # noqa: E402
 from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP  # noqa: E402
 from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY  # noqa: E402
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus  # noqa: E402
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus  # noqa: E402
 
 SYNC_ID = 0x80
 NODES = (1, 2, 3)

@@ -1,4 +1,4 @@
-"""Timeouts judged on the frames' arrival timeline (nurbsmotion.arrival_clock), as the simulated
+"""Timeouts judged on the frames' arrival timeline (nurbsmotion.can.arrival_clock), as the simulated
 drives and the master's heartbeat consumer judge them:
 a backlog of frames that arrived in time is not a loss; a silent bus is."""
 
@@ -7,7 +7,7 @@ from __future__ import annotations
 import can
 import pytest
 
-from nurbsmotion.arrival_clock import ArrivalClock, socket_pending
+from nurbsmotion.can.arrival_clock import ArrivalClock, socket_pending
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 
 MASTER = 0x7F
@@ -62,7 +62,7 @@ def test_pending_on_the_virtual_bus_is_its_receive_queue() -> None:
 
 
 def test_the_wall_clock_offset_is_read_again_only_after_its_refresh_time(monkeypatch) -> None:
-    from nurbsmotion import arrival_clock
+    from nurbsmotion.can import arrival_clock
 
     wall = [1000.0]
     monkeypatch.setattr(arrival_clock.time, "time", lambda: wall[0])

@@ -4,7 +4,7 @@ import pytest
 
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.homing_config import HERE, HomingConfig
+from nurbsmotion.config.homing import HERE, HomingConfig
 
 
 def _axis(homing: str) -> str:
@@ -72,7 +72,7 @@ def test_drive_methods_35_and_37_need_no_speeds():
 
 
 def test_an_axis_sim_section_places_the_simulated_switches_and_index_pulses():
-    from nurbsmotion.homing_config import AxisSimSensors
+    from nurbsmotion.config.homing import AxisSimSensors
 
     cfg = parse_config("axes:\n  - name: X\n    node_id: 1\n    sim: {negative_limit_mm: -3, index_pitch_mm: 2, "
                        "index_phase_mm: 0.7}\n  - {name: Y, node_id: 2}\n")

@@ -4,7 +4,7 @@ import pytest
 
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 
 AXES = "axes: [{name: X, node_id: 1}]\n"
 

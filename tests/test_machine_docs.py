@@ -4,7 +4,7 @@ import re
 from pathlib import Path
 
 from nurbsmotion.config import parse_config
-from nurbsmotion.homing_config import HERE
+from nurbsmotion.config.homing import HERE
 
 DOC = Path(__file__).resolve().parents[1] / "docs" / "machine.md"
 

@@ -1,4 +1,4 @@
-"""nurbsmotion/socketcan_batch.py without SocketCAN (its vcan0 tests: tests/vcan/test_socketcan_batch.py)."""
+"""nurbsmotion/can/socketcan_batch.py without SocketCAN (its vcan0 tests: tests/vcan/test_socketcan_batch.py)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import time
 
 import can
 
-from nurbsmotion.socketcan_batch import BatchNotifier
+from nurbsmotion.can.socketcan_batch import BatchNotifier
 
 
 def test_the_batch_notifier_leaves_other_buses_to_python_can():

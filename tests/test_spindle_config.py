@@ -6,7 +6,7 @@ import pytest
 
 from nurbsmotion.config import default_eds_path, load_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import SpindleConfig, SpindleMode
 
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = "spindle:\n  node_id: 5\n  counts_per_rev: 4096\n  max_rpm: 12000\n  accel_rpm_s: 6000\n"

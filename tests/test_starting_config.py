@@ -12,7 +12,7 @@ from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputErrors
 from nurbsmotion.fieldbus.eds_catalog import EdsMatch, read_entry
 from nurbsmotion.fieldbus.scan import DeviceType, Identity, NodeReport
-from nurbsmotion.starting_config import FILL_IN, BusSettings, axis_mode, spindle_mode, starting_config
+from nurbsmotion.cli._starting_config import FILL_IN, BusSettings, axis_mode, spindle_mode, starting_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SERVO = read_entry(ROOT / "eds" / "nurbsmotion-servo.eds")

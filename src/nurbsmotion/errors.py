@@ -21,6 +21,11 @@ class InputError(NurbsmotionError):
         super().__init__(f"{where}: {message}" if where else message)
 
 
+class Refused(InputError):
+    """A control request that is well-formed but not possible now (busy, no job, in fault);
+    ``where`` names the request (service.controller, service.jog)."""
+
+
 class InputErrors(InputError):
     """Several independent problems found in one input; each is one line."""
 

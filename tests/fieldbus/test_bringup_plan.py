@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.bringup_plan import (Field, PdoSetup, ReadBack, Write, cyclic_load, describe_value,

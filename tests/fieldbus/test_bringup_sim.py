@@ -9,15 +9,15 @@ import uuid
 from pathlib import Path
 from typing import Iterator
 
-import can
 import numpy as np
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import Master
 from tests.fieldbus.eds_variants import eds_variant, one_entry_pdos
+from tests.helpers import simulated_machine, wait_for
 
 sim_package = pytest.importorskip("nurbsmotion.sim")
 FaultInjection, SimNetwork = sim_package.FaultInjection, sim_package.SimNetwork
@@ -35,28 +35,8 @@ def rig(mode: str = "csp", eds: Path | None = None, n_axes: int = 2, master_hear
                        f"monitoring: {{heartbeat_producer_ms: 50, heartbeat_consumer_ms: 600, "
                        f"master_heartbeat_ms: {master_heartbeat_ms}, master_heartbeat_consumer_multiple: 4}}\n"
                        f"axes:\n{axes}", "rig.yaml")
-    sim = SimNetwork(channel=channel)
-    for node in range(1, n_axes + 1):
-        sim.add_drive(node, eds)
-    sim.start()
-    bus = can.Bus(interface="virtual", channel=channel)
-    master = Master(cfg, bus, bootup_timeout_s=1.0)
-    try:
-        if bring_up:
-            master.bring_up()
-        yield master, sim
-    finally:
-        master.shutdown()
-        bus.shutdown()
-        sim.stop()
-
-
-def wait_for(predicate, timeout_s: float = WAIT_S) -> None:
-    end = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached in time")
-        time.sleep(0.01)
+    with simulated_machine(cfg, {node: {"eds": eds} for node in range(1, n_axes + 1)}, bring_up) as machine:
+        yield machine.master, machine.sim
 
 
 def test_drives_get_the_master_heartbeat_consumer_entry():

@@ -1,7 +1,7 @@
 """Per-cycle CiA-402 state machine against scripted statuswords (no drive needed)."""
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import STATUSWORD_OF_STATE, State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import STATUSWORD_OF_STATE, State
 from nurbsmotion.fieldbus.drive_state import enable_step, is_ready
 
 

@@ -2,7 +2,7 @@
 
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.homing import (
     Event,
@@ -15,7 +15,7 @@ from nurbsmotion.fieldbus.homing import (
     homing_drive_values,
     homing_plan,
 )
-from nurbsmotion.homing_config import HERE, HomingConfig
+from nurbsmotion.config.homing import HERE, HomingConfig
 
 OE = 0x0237  # OPERATION ENABLED + voltage + remote
 IN_PROGRESS = OE

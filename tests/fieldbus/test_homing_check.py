@@ -12,7 +12,7 @@ from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.fieldbus.homing_check import OffsetRoute, offered_homing, plan_homing
-from nurbsmotion.homing_config import HERE, HomingConfig
+from nurbsmotion.config.homing import HERE, HomingConfig
 
 EDS_DIR = Path(__file__).resolve().parents[1] / "data" / "eds"
 MOVING = "{method: 17, speed_search_mm_s: 20, speed_zero_mm_s: 2, accel_mm_s2: 200, offset_mm: -20}"

@@ -14,7 +14,7 @@ import pytest
 
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.fieldbus.homing import HomingProcedure, homing_drive_values, homing_plan
-from nurbsmotion.homing_config import HomingConfig
+from nurbsmotion.config.homing import HomingConfig
 
 sim_package = pytest.importorskip("nurbsmotion.sim")
 SimNetwork = sim_package.SimNetwork

@@ -11,7 +11,7 @@ from collections.abc import Iterator
 import canopen
 import pytest
 
-from nurbsmotion.cia402 import NmtState
+from nurbsmotion.can.cia402 import NmtState
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.io import (
     IoNode,
@@ -19,20 +19,13 @@ from nurbsmotion.fieldbus.io import (
     input_states,
     output_groups,
 )
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.sim.io_node import SimIoNode
+from tests.helpers import wait_for
 
 IO = IoConfig(12, inputs=(IoSignal("estop", 0, active_low=True), IoSignal("limit_x_min", 1),
                           IoSignal("probe", 10)),
               outputs=(IoSignal("coolant_flood", 0), IoSignal("coolant_mist", 1), IoSignal("lamp_ok", 9, True)))
-
-
-def wait_until(condition, timeout_s: float = 2.0, what: str = "condition") -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.001)
 
 
 def test_input_states_by_bit_and_polarity():
@@ -75,14 +68,14 @@ def test_bring_up_inputs_and_outputs_with_the_simulated_node():
         io = IoNode(master, IO, on_change=lambda name, active: changes.append((name, active)))
         io.bring_up(heartbeat_producer_ms=50)
         assert io.inputs == {"estop": False, "limit_x_min": False, "probe": False}  # read by SDO before start
-        wait_until(lambda: sim.outputs == b"\x00\x02", what="initial outputs (lamp_ok off = high)")
+        wait_for(lambda: sim.outputs == b"\x00\x02", 2.0, what="initial outputs (lamp_ok off = high)")
         sim.set_input(0, False)  # e-stop pressed (contact opens)
-        wait_until(lambda: io.input("estop") is True, what="estop via TPDO1")
+        wait_for(lambda: io.input("estop") is True, 2.0, what="estop via TPDO1")
         assert changes == [("estop", True)]
         sim.set_input(10, True)
-        wait_until(lambda: io.input("probe") is True, what="probe")
+        wait_for(lambda: io.input("probe") is True, 2.0, what="probe")
         io.set_outputs({"coolant_flood": True, "lamp_ok": True})
-        wait_until(lambda: sim.outputs == b"\x01\x00", what="outputs via RPDO1")
+        wait_for(lambda: sim.outputs == b"\x01\x00", 2.0, what="outputs via RPDO1")
         assert sim.output(0) and not sim.output(9)
         # what bring-up configured in the node: event-driven PDO 1 mapping the two groups
         assert sim.node.sdo[0x1800][2].raw == 255 and sim.node.sdo[0x1A00][0].raw == 2
@@ -118,21 +111,49 @@ def test_a_drive_at_the_io_node_id_is_refused():
             master.disconnect()
 
 
+class JudgingClock:
+    """The master's judging time (perf_counter) until a test stops it; then it moves only
+    when the test advances it (the heartbeat watch's clock, injected as the master's is)."""
+
+    def __init__(self) -> None:
+        self.stopped_at: float | None = None
+
+    def __call__(self) -> float:
+        return time.perf_counter() if self.stopped_at is None else self.stopped_at
+
+    def stop(self) -> None:
+        self.stopped_at = time.perf_counter()
+
+    def advance(self, seconds: float) -> None:
+        assert self.stopped_at is not None
+        self.stopped_at += seconds
+
+
+def silence_ms(message: str) -> int:
+    """N of 'io node 12: no heartbeat for N ms (consumer time 200 ms)'."""
+    return int(message.split("no heartbeat for ")[1].split(" ms")[0])
+
+
 def test_the_master_consumes_the_nodes_heartbeat_and_the_node_the_masters():
     sim = SimIoNode(12, input_groups=2, output_groups=2)
     sim.set_input(0, True)
+    clock = JudgingClock()
     with io_bus(sim) as master:
         lost: list[str] = []
-        io = IoNode(master, IO, on_lost=lost.append)
+        io = IoNode(master, IO, on_lost=lost.append, judging_time_s=clock)
         io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=200, master_heartbeat=(127, 500))
         assert sim.node.sdo[0x1016][1].raw == 127 << 16 | 500  # the node watches the master (CiA 301 0x1016:01)
         time.sleep(0.4)  # heartbeats every 50 ms: nothing lost
         assert lost == [] and io.lost is None and io.input("estop") is False
         sim.detach()  # the node goes silent
-        t0 = time.monotonic()
-        wait_until(lambda: lost, 2.0, "the loss")
-        assert 0.15 < time.monotonic() - t0 < 1.0
+        clock.stop()
+        clock.advance(0.05)  # less than the consumer time since the last heartbeat: not lost
+        time.sleep(0.15)  # the watch looks every 50 ms
+        assert lost == []
+        clock.advance(0.25)
+        wait_for(lambda: lost, 2.0, "the loss")
         assert len(lost) == 1 and lost[0].startswith("io node 12: no heartbeat for ")
+        assert 300 <= silence_ms(lost[0]) < 500  # judged at the advanced time: the last heartbeat < 200 ms before
         assert lost[0].endswith(" ms (consumer time 200 ms)")
         assert io.inputs is None and io.input("estop") is None  # unknown: an unread e-stop counts as pressed
         io.close()
@@ -145,7 +166,7 @@ def test_a_restarted_node_is_lost_and_a_second_bring_up_revives_it():
         io = IoNode(master, IO, on_lost=lost.append)
         io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=300)
         master.nmt.send_command(0x81)  # NMT reset node: boot-up, defaults, PRE-OPERATIONAL
-        wait_until(lambda: lost, 2.0, "the loss")
+        wait_for(lambda: lost, 2.0, "the loss")
         assert lost == ["io node 12: heartbeat reports boot-up: the node restarted (its PDO mapping and outputs are "
                         "back to defaults)"]
         io.bring_up(heartbeat_producer_ms=50, heartbeat_consumer_ms=300)
@@ -153,9 +174,9 @@ def test_a_restarted_node_is_lost_and_a_second_bring_up_revives_it():
         # the bring-up's NMT start is not confirmed (CiA 301): the input changes once the node
         # is OPERATIONAL (set at once, a loaded host's node could still be PRE-OPERATIONAL and
         # never send the change: CiA 401 TPDOs are sent on a change only)
-        wait_until(lambda: sim.nmt_state is NmtState.OPERATIONAL, 2.0, "the node OPERATIONAL again")
+        wait_for(lambda: sim.nmt_state is NmtState.OPERATIONAL, 2.0, "the node OPERATIONAL again")
         sim.set_input(10, True)
-        wait_until(lambda: io.input("probe") is True, what="TPDO1 after the second bring-up")
+        wait_for(lambda: io.input("probe") is True, 2.0, what="TPDO1 after the second bring-up")
         time.sleep(0.4)
         assert len(lost) == 1
         io.close()

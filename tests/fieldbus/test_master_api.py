@@ -43,7 +43,7 @@ def test_unknown_options_are_refused():
 
 def _socketcan_bus_without_socket():
     """An instance of the master's own SocketCAN bus class, never opened (no AF_CAN here)."""
-    from nurbsmotion.socketcan_batch import BatchedSocketcanBus
+    from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus
     return BatchedSocketcanBus.__new__(BatchedSocketcanBus)
 
 

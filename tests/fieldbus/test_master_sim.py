@@ -7,7 +7,6 @@ wait has a generous time-out so a loaded 2-core machine does not make them flaky
 from __future__ import annotations
 
 import contextlib
-import time
 import uuid
 from typing import Iterator
 
@@ -16,10 +15,11 @@ from can.interfaces.virtual import VirtualBus
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import Master
+from tests.helpers import simulated_machine, wait_for
 
 sim_package = pytest.importorskip("nurbsmotion.sim")
 FaultInjection, SimNetwork = sim_package.FaultInjection, sim_package.SimNetwork
@@ -41,37 +41,16 @@ def rig(mode: str = "csp", n_axes: int = 3, simulated: int | None = None, bring_
         identity: str = "", **master_kw) -> Iterator[tuple[Master, SimNetwork, can.BusABC]]:
     """Simulated drives 1..simulated, a master for axes 1..n_axes, and a probe bus on which a
     test can send frames of its own (a bus does not hear itself); torn down whatever happens."""
-    channel = "fb-" + uuid.uuid4().hex
-    sim = SimNetwork(channel=channel)
-    for node in range(1, (simulated if simulated is not None else n_axes) + 1):
-        sim.add_drive(node, identity=(0x1234, 0x42))
-    sim.start()
-    bus = can.Bus(interface="virtual", channel=channel)
-    probe = can.Bus(interface="virtual", channel=channel)
-    master = Master(make_config(channel, mode, n_axes, identity=identity), bus, bootup_timeout_s=1.0, **master_kw)
-    try:
-        if bring_up:
-            master.bring_up()
-        yield master, sim, probe
-    finally:
-        master.shutdown()
-        probe.shutdown()
-        bus.shutdown()
-        sim.stop()
+    config = make_config("fb-" + uuid.uuid4().hex, mode, n_axes, identity=identity)
+    drives = {node: {"identity": (0x1234, 0x42)} for node in range(1, (simulated if simulated is not None else n_axes) + 1)}
+    with simulated_machine(config, drives, bring_up, **master_kw) as machine:
+        yield machine.master, machine.sim, machine.probe
 
 
 def sine_counts(n: int = 300, n_axes: int = 3, amplitude: int = 5000) -> np.ndarray:
     k = np.arange(n)
     cols = [np.round(amplitude * np.sin(2 * np.pi * (j + 1) * k / n)) for j in range(n_axes)]
     return np.column_stack(cols).astype(np.int32)
-
-
-def wait_for(predicate, timeout_s: float = WAIT_S) -> None:
-    end = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > end:
-            raise AssertionError("condition not reached in time")
-        time.sleep(0.01)
 
 
 def recorded(sim: SimNetwork, node: int) -> tuple[list[int], list[int]]:

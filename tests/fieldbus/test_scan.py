@@ -13,7 +13,7 @@ import can
 import canopen
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import eds_catalog
 from nurbsmotion.fieldbus.scan import VENDOR_NAMES, DeviceType, Identity, NodeReport, ScanSettings, SdoAnswer, \

@@ -5,7 +5,7 @@ from bit 10 / the ramp, direction, stop, quick stop + disable without a fault re
 from __future__ import annotations
 
 import contextlib
-import time
+import functools
 import uuid
 from collections.abc import Iterator
 from dataclasses import replace
@@ -13,12 +13,15 @@ from dataclasses import replace
 import canopen
 import pytest
 
-from nurbsmotion import drive_od
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import default_eds_path
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.spindle import SpindleDrive, csv_at_speed, ramp_step
 from nurbsmotion.sim.network import SimNetwork, SpindleSim
-from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import SpindleConfig, SpindleMode
+from tests.helpers import wait_for as _wait_for
+
+wait_for = functools.partial(_wait_for, timeout_s=3.0, poll_s=0.005)  # this module's waits
 
 NODE = 5
 CONFIG = SpindleConfig(node_id=NODE, counts_per_rev=4096, max_rpm=12000, accel_rpm_s=30000,
@@ -42,15 +45,6 @@ def spindle_bus(config: SpindleConfig) -> Iterator[tuple[canopen.Network, SimNet
         master.sync.stop()
         master.disconnect()
         sim.stop()
-
-
-def wait_for(condition, timeout_s: float = 3.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if condition():
-            return True
-        time.sleep(0.005)
-    return False
 
 
 def test_ramp_step_and_csv_window():

@@ -1,5 +1,5 @@
 """The supervisor's heartbeat consumer judges heartbeats as they arrived on the bus
-(nurbsmotion.arrival_clock): a heartbeat that arrived in time but waits unread behind a late
+(nurbsmotion.can.arrival_clock): a heartbeat that arrived in time but waits unread behind a late
 receive thread is not a lost drive; a drive that really fell silent is reported."""
 
 from __future__ import annotations
@@ -65,10 +65,12 @@ def test_a_drive_silent_while_other_frames_keep_arriving_is_reported() -> None:
 
 
 def test_the_listener_stamps_each_frame_with_its_receive_timestamp() -> None:
+    """Both clocks injected: perf_counter 100 s and wall clock 5000 s when the frame is handled."""
     feedback = Feedback(1)
-    listener = feedback.watch_reception(lambda: True)
-    listener.on_message_received(can.Message(arbitration_id=0x181, data=bytes(6), timestamp=time.time() - 0.2))
-    assert 0.19 < time.perf_counter() - feedback.arrival.arrival_s < 0.3  # type: ignore[operator]
+    perf_now, wall_now = 100.0, 5000.0
+    listener = feedback.watch_reception(lambda: True, read_time=lambda: perf_now, wall_time=lambda: wall_now)
+    listener.on_message_received(can.Message(arbitration_id=0x181, data=bytes(6), timestamp=wall_now - 0.2))
+    assert 0.19 < perf_now - feedback.arrival.arrival_s < 0.3  # type: ignore[operator]
     assert 0.19 < feedback.arrival.lag_s < 0.3
 
 

@@ -8,7 +8,6 @@ import os
 import subprocess
 import sys
 import tempfile
-import time
 import uuid
 from pathlib import Path
 from collections.abc import Iterator
@@ -19,6 +18,7 @@ import pytest
 import nurbsmotion
 from nurbsmotion.config import MachineConfig, load_config
 from nurbsmotion.service.client import Client, DaemonUnavailable
+from tests.helpers import wait_for
 
 SRC_DIR = Path(nurbsmotion.__file__).resolve().parents[1]
 START_TIMEOUT_S = 20.0
@@ -44,21 +44,10 @@ data_dir: {data_dir}
 """
 
 
-def wait_until(condition: Any, timeout_s: float, what: str, poll_s: float = 0.02) -> Any:
-    deadline = time.monotonic() + timeout_s
-    while True:
-        value = condition()
-        if value:
-            return value
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(poll_s)
-
-
 def home_all(client: Any, timeout_s: float) -> dict[str, Any]:
     """``home`` every axis, wait until the homing ended; the status then, its homing without error."""
     assert client.call("home")["ok"]
-    wait_until(lambda: not client.call("status")["homing"]["busy"], timeout_s, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], timeout_s, "the homing to end", poll_s=0.05)
     status = client.call("status")
     assert status["homing"]["error"] is None, status["homing"]
     return status
@@ -140,7 +129,7 @@ class DaemonProcess:
             self.proc = subprocess.Popen([sys.executable, "-m", "nurbsmotion", *self.verbose, "daemon", "--config",
                                           str(self.config_path)], stdout=log, stderr=subprocess.STDOUT,
                                          env=self.environment())
-        wait_until(self._answers, START_TIMEOUT_S, "the daemon to answer on its socket", poll_s=0.05)
+        wait_for(self._answers, START_TIMEOUT_S, "the daemon to answer on its socket", poll_s=0.05)
         return self
 
     def _answers(self) -> bool:
@@ -164,14 +153,14 @@ class DaemonProcess:
         def ended() -> dict[str, Any] | None:
             job = self.request("job", id=job_id)["job"]
             return job if job["outcome"] is not None else None
-        return wait_until(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
+        return wait_for(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
 
     def wait_progress(self, fraction: float, timeout_s: float = 20.0) -> dict[str, Any]:
         def reached() -> dict[str, Any] | None:
             status = self.request("status")
             job = status["job"]
             return status if job and job["cycle"] >= fraction * job["total"] else None
-        return wait_until(reached, timeout_s, f"{fraction:.0%} of the job", poll_s=0.01)
+        return wait_for(reached, timeout_s, f"{fraction:.0%} of the job", poll_s=0.01)
 
     def close(self, timeout_s: float = 15.0) -> None:
         if self.proc is not None and self.proc.poll() is None:

@@ -18,7 +18,8 @@ from nurbsmotion.cli import main
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
-from tests.integration.daemon_helpers import DaemonProcess, daemon, wait_until  # noqa: F401 (fixture)
+from tests.integration.daemon_helpers import DaemonProcess, daemon  # noqa: F401 (fixture)
+from tests.helpers import wait_for
 
 SHORT = "G21 G90\nG01 X4 Y2 F3000\nG01 X0 Y3 Z1\n"  # ~0.3 s at 50 mm/s
 LONG = "G21 G90\nG01 X60 Y20 F6000\n"  # ~0.8 s, 100 mm/s at cruise
@@ -129,7 +130,7 @@ def test_a_fault_during_a_job_is_recorded_then_reset_allows_a_new_job(daemon):
     assert status["state"] == "fault" and status["faults"]
     assert all(a["drive_state"] != "OPERATION ENABLED" for a in status["axes"] if a["node"] == 2)
     positions = [a["actual_mm"] for a in status["axes"]]
-    wait_until(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
+    wait_for(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
     refused = daemon.request("submit", name="short.nc", program=SHORT)
     assert refused["ok"] is False and "reset" in refused["error"]
     assert daemon.request("reset")["ok"]
@@ -158,7 +159,7 @@ def test_abort_quick_stops_and_reset_brings_the_drives_back(daemon):
     assert daemon.request("abort")["ok"]
     outcome = daemon.wait_job_end(job_id)["outcome"]
     assert outcome["outcome"] == "aborted" and outcome["sent"] < outcome["planned"]
-    wait_until(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
+    wait_for(lambda: daemon.request("status")["phase"] == "disabled", 5.0, "the drives to be disabled")
     first = [a["actual_mm"] for a in daemon.request("status")["axes"]]
     assert daemon.request("status")["state"] == "fault"
     assert daemon.request("submit", name="short.nc", program=SHORT)["ok"] is False

@@ -7,14 +7,15 @@ from pathlib import Path
 import numpy as np
 
 from nurbsmotion.service.verify import on_planned_path, plan_with_holds, planned_counts, recorded_counts
-from tests.integration.daemon_helpers import DaemonProcess, daemon, wait_until  # noqa: F401 (fixture)
+from tests.integration.daemon_helpers import DaemonProcess, daemon  # noqa: F401 (fixture)
+from tests.helpers import wait_for
 
 LONGER = "G21 G90\nG01 X90 Y40 F6000\nG01 X0 Y0\n"  # ~2 s
 PAUSES = "G21 G90\nG01 X10 Y5 F3000\nM0\nG01 X20 Y5\nT3 M6\nG01 X20 Y15\nG01 X0 Y0\nM30\n"
 
 
 def _state(daemon: DaemonProcess, wanted: str) -> dict:
-    return wait_until(lambda: (s := daemon.request("status"))["state"] == wanted and s, 20.0, f"state {wanted}")
+    return wait_for(lambda: (s := daemon.request("status"))["state"] == wanted and s, 20.0, f"state {wanted}")
 
 
 def test_hold_rests_on_the_path_and_resume_completes_every_row(daemon):
@@ -23,7 +24,7 @@ def test_hold_rests_on_the_path_and_resume_completes_every_row(daemon):
     assert daemon.request("hold")["state"] == "pausing"
     held = _state(daemon, "held")
     cycle = held["job"]["cycle"]
-    wait_until(lambda: daemon.request("status")["cycles"]["count"] > held["cycles"]["count"] + 50, 20.0, "50 cycles")
+    wait_for(lambda: daemon.request("status")["cycles"]["count"] > held["cycles"]["count"] + 50, 20.0, "50 cycles")
     later = daemon.request("status")
     assert later["state"] == "held" and later["job"]["cycle"] == cycle and later["job"]["paused"] is None
     assert [a["commanded_mm"] for a in later["axes"]] == [a["commanded_mm"] for a in held["axes"]]
@@ -63,7 +64,7 @@ def test_a_program_with_m0_and_m6_pauses_at_its_rows_and_completes_after_two_res
     assert first["job"]["paused"] == "M0 at part.nc:3" and first["job"]["tool"] is None
     assert [round(a["commanded_mm"], 6) for a in first["axes"]] == [10.0, 5.0, 0.0]
     assert daemon.request("resume")["ok"]
-    second = wait_until(lambda: (s := daemon.request("status"))["state"] == "held" and s["job"]["paused"] != first[
+    second = wait_for(lambda: (s := daemon.request("status"))["state"] == "held" and s["job"]["paused"] != first[
         "job"]["paused"] and s, 20.0, "the M6 pause")
     assert second["job"]["paused"] == "M6 tool change to T3 at part.nc:5" and second["job"]["tool"] == 3
     assert [round(a["commanded_mm"], 6) for a in second["axes"]] == [20.0, 5.0, 0.0]

@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from nurbsmotion.service.client import Client
-from tests.integration.daemon_helpers import daemon_with_home_sensors, subprocess_environment, wait_until
+from tests.integration.daemon_helpers import daemon_with_home_sensors, subprocess_environment
+from tests.helpers import wait_for
 
 HomeSensors = pytest.importorskip("nurbsmotion.sim.homing").HomeSensors
 
@@ -49,7 +50,7 @@ def machine():
 
 def _home(client: Client, axes: str = "") -> dict:
     assert client.call("home", axes=axes)["ok"]
-    wait_until(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
     return client.call("status")
 
 
@@ -61,7 +62,7 @@ def _wait_job(client: Client, job_id: str, timeout_s: float = 30.0) -> dict:
     def ended():
         job = client.call("job", id=job_id)["job"]
         return job if job["outcome"] is not None else None
-    return wait_until(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
+    return wait_for(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
 
 
 def test_until_homed_jobs_mdi_and_absolute_jogs_are_refused_then_home_in_order(machine):
@@ -77,7 +78,7 @@ def test_until_homed_jobs_mdi_and_absolute_jogs_are_refused_then_home_in_order(m
 
     response = client.call("home")
     assert response["axes"] == ["Z", "X", "Y"]  # homing.order 1, 2, then the axis without an order
-    wait_until(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
     status = client.call("status")
     assert status["homing"]["axes"] == {"X": "homed", "Y": "homed", "Z": "homed"} and status["state"] == "idle"
     assert not status["faults"]
@@ -114,7 +115,7 @@ def test_a_drive_fault_forgets_the_homed_state(machine):
     _home(client, "Y X")
     assert client.call("status")["homing"]["axes"]["X"] == "homed"
     client.call("inject_fault", spec="node=1,kind=fault,code=0x2310")
-    wait_until(lambda: client.call("status")["state"] == "fault", 10.0, "the fault")
+    wait_for(lambda: client.call("status")["state"] == "fault", 10.0, "the fault")
     assert client.call("status")["homing"]["axes"] == {"X": "not homed", "Y": "homed", "Z": "not homed"}
     client.call("reset")
     assert client.call("status")["homing"]["axes"]["X"] == "not homed"
@@ -195,7 +196,7 @@ def test_the_cli_homes_jogs_and_a_killed_continuous_jog_client_stops_the_axis(ma
     assert out.decode().splitlines() == ["homing Z, Y", "axis Z: homed", "axis Y: homed"]
 
     jog = _cli(socket, "jog", "Y+", "--speed", "20", "--no-progress")
-    wait_until(lambda: (client.call("status")["job"] or {}).get("name") == "<jog>", 20.0, "the jog to start")
+    wait_for(lambda: (client.call("status")["job"] or {}).get("name") == "<jog>", 20.0, "the jog to start")
     time.sleep(1.0)  # the client renews its lease meanwhile
     status = client.call("status")
     assert status["job"] is not None and status["state"] == "running"
@@ -210,7 +211,7 @@ def test_the_cli_homes_jogs_and_a_killed_continuous_jog_client_stops_the_axis(ma
     assert info["outcome"] == "stopped"
 
     jog = _cli(socket, "jog", "Y-", "--speed", "20", "--no-progress")  # Ctrl-C: stop along the path
-    wait_until(lambda: (client.call("status")["job"] or {}).get("name") == "<jog>", 20.0, "the jog to start")
+    wait_for(lambda: (client.call("status")["job"] or {}).get("name") == "<jog>", 20.0, "the jog to start")
     time.sleep(0.5)
     jog.send_signal(signal.SIGINT)
     out, err = jog.communicate(timeout=30)
@@ -247,9 +248,9 @@ def test_stop_ends_a_homing_search_and_abort_quick_stops(machine):
     daemon, client = machine
     daemon.simulation.network[1].axis.home_sensors = HomeSensors()  # X searches without ever finding a switch
     assert client.call("home", axes="X")["axes"] == ["X"]
-    wait_until(lambda: abs(_axes(client.call("status"))["X"][1]) > 1.0, 20.0, "X to search")
+    wait_for(lambda: abs(_axes(client.call("status"))["X"][1]) > 1.0, 20.0, "X to search")
     assert client.call("stop") == {"ok": True, "job": None, "state": "homing"}
-    wait_until(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
     status = client.call("status")
     assert status["homing"]["error"].startswith("axis X: node 1: homing method 17: stopped on request (statusword")
     assert status["state"] == "idle" and status["homing"]["axes"]["X"] == "not homed"
@@ -257,9 +258,9 @@ def test_stop_ends_a_homing_search_and_abort_quick_stops(machine):
     assert x[0] == x[1] < -1.0  # at rest where the search stopped, holding there
 
     assert client.call("home", axes="X")["ok"]
-    wait_until(lambda: client.call("status")["homing"]["axes"]["X"] == "homing", 20.0, "the homing to start")
+    wait_for(lambda: client.call("status")["homing"]["axes"]["X"] == "homing", 20.0, "the homing to start")
     assert client.call("abort") == {"ok": True, "job": None}
-    wait_until(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], 20.0, "the homing to end", poll_s=0.05)
     assert client.call("status")["state"] == "fault"
     client.call("reset")
     assert client.call("status")["state"] == "idle"

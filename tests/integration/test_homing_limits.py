@@ -13,7 +13,8 @@ import pytest
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.sim.homing import HomeSensors
-from tests.integration.daemon_helpers import daemon_with_home_sensors, wait_until
+from tests.integration.daemon_helpers import daemon_with_home_sensors
+from tests.helpers import wait_for
 
 CONFIG = """\
 cycle_period_ms: 4
@@ -53,17 +54,17 @@ def ignoring() -> Iterator[tuple[Daemon, Client]]:
 
 def press(daemon: Daemon, name: str, active: bool) -> None:
     daemon.simulation.network.set_io_input(name, active)  # type: ignore[union-attr]
-    wait_until(lambda: daemon.controller.status()["io"]["inputs"][name] is active, 5.0, f"{name} {active}")
+    wait_for(lambda: daemon.controller.status()["io"]["inputs"][name] is active, 5.0, f"{name} {active}")
 
 
 def searching(client: Client) -> None:
     """X is homing and has moved (the search is under way)."""
     assert client.call("home", axes="X")["ok"]
-    wait_until(lambda: client.call("status")["axes"][0]["actual_mm"] < -1.0, 10.0, "X searching", poll_s=0.02)
+    wait_for(lambda: client.call("status")["axes"][0]["actual_mm"] < -1.0, 10.0, "X searching", poll_s=0.02)
 
 
 def homing_end(client: Client) -> dict:
-    wait_until(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
+    wait_for(lambda: not client.call("status")["homing"]["busy"], 30.0, "the homing to end", poll_s=0.05)
     return client.call("status")["homing"]
 
 

@@ -5,7 +5,7 @@ through the controlword and statusword only, with the CiA-301 one-cycle delay of
 import pytest
 
 from nurbsmotion.fieldbus.homing import HomingProcedure, homing_drive_values
-from nurbsmotion.homing_config import HomingConfig
+from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.sim.homing import HomeSensors, HomingSetup, homing_tick, idle
 
 T = 0.004

@@ -12,7 +12,8 @@ import pytest
 from nurbsmotion.cli.status import format_status
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 IO = """\
 io:
@@ -29,7 +30,7 @@ def machine(tmp_path: Path) -> Iterator[Daemon]:
 
 
 def wait_job(daemon: Daemon, job_id: str, timeout_s: float = 30.0) -> dict:
-    return wait_until(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info["outcome"],
+    return wait_for(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info["outcome"],
                       timeout_s, f"job {job_id} end")
 
 
@@ -38,14 +39,14 @@ def test_a_silent_io_node_aborts_motion_and_reset_brings_it_back(machine):
     node = sim.io_nodes[10]
     assert node.node.sdo[0x1016][1].raw == 127 << 16 | 500  # it watches the master's heartbeat too
     job = controller.submit("p.nc", "G21 G90\nM8\nG01 X50 F600\n")["job"]["id"]
-    wait_until(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
+    wait_for(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
     node.detach()  # the node goes silent (power loss, cable)
     outcome = wait_job(machine, job)
     assert outcome["outcome"] == "fault"
     assert outcome["reason"].startswith("io node 10: no heartbeat for ")
     assert outcome["reason"].endswith(" ms (consumer time 300 ms): its inputs are unknown: quick stop, then every "
                                       "drive disabled")
-    wait_until(lambda: controller.status()["phase"] == "disabled", 5.0, "axes disabled")
+    wait_for(lambda: controller.status()["phase"] == "disabled", 5.0, "axes disabled")
     status = controller.status()
     assert status["io"]["lost"].startswith("no heartbeat for ") and status["io"]["estop_active"] is True
     assert any(line.startswith("io node 10: inputs active none (unknown), outputs on none, LOST: no heartbeat")
@@ -63,4 +64,4 @@ def test_a_silent_io_node_aborts_motion_and_reset_brings_it_back(machine):
     job = controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")["job"]["id"]
     assert wait_job(machine, job)["outcome"] == "completed"
     sim.set_io_input("estop", True)  # its inputs arrive again
-    wait_until(lambda: controller.status()["io"]["estop_active"], 5.0, "e-stop seen")
+    wait_for(lambda: controller.status()["io"]["estop_active"], 5.0, "e-stop seen")

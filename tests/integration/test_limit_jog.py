@@ -13,7 +13,8 @@ import pytest
 
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 IO = """\
 io:
@@ -31,11 +32,11 @@ def machine(tmp_path: Path) -> Iterator[tuple[Daemon, Client]]:
 
 def press(daemon: Daemon, name: str, active: bool) -> None:
     daemon.simulation.network.set_io_input(name, active)  # type: ignore[union-attr]
-    wait_until(lambda: daemon.controller.status()["io"]["inputs"][name] is active, 5.0, f"{name} {active}")
+    wait_for(lambda: daemon.controller.status()["io"]["inputs"][name] is active, 5.0, f"{name} {active}")
 
 
 def wait_job(client: Client, job_id: str, timeout_s: float = 30.0) -> dict:
-    return wait_until(lambda: (job := client.call("job", id=job_id)["job"])["outcome"] is not None and job["outcome"],
+    return wait_for(lambda: (job := client.call("job", id=job_id)["job"])["outcome"] is not None and job["outcome"],
                       timeout_s, f"the end of job {job_id}", poll_s=0.05)
 
 
@@ -46,7 +47,7 @@ def x_mm(client: Client, axis: int = 0) -> float:
 def run_onto(daemon: Daemon, client: Client, axis: str, direction: str, switch: str) -> dict:
     """A continuous jog of ``axis`` that meets ``switch`` after a few cycles: the job's outcome."""
     job = client.call("jog", axis=axis, direction=direction, speed=20.0)["job"]["id"]
-    wait_until(lambda: client.call("status")["job"]["cycle"] > 50, 10.0, "moving")
+    wait_for(lambda: client.call("status")["job"]["cycle"] > 50, 10.0, "moving")
     client.call("jog_renew")
     press(daemon, switch, True)
     outcome = wait_job(client, job)
@@ -83,14 +84,14 @@ def test_a_jog_off_the_switch_is_the_only_motion_while_it_is_active_and_it_trips
     assert x_mm(client) == pytest.approx(on_switch - 0.5, abs=1e-6)
 
     job = client.call("jog", axis="X", direction="-", speed=5.0)["job"]["id"]  # continuous, away: allowed
-    wait_until(lambda: x_mm(client) < on_switch - 0.8, 5.0, "moving off", poll_s=0.01)
+    wait_for(lambda: x_mm(client) < on_switch - 0.8, 5.0, "moving off", poll_s=0.01)
     client.call("jog_renew")
     press(daemon, "limit_x_max", False)  # off the switch: armed again
     client.call("jog_stop")
     assert wait_job(client, job)["outcome"] == "stopped"
 
     job = client.call("jog", axis="X", distance=1.0)["job"]["id"]  # towards it again: allowed, and it trips
-    wait_until(lambda: client.call("status")["job"] and client.call("status")["job"]["cycle"] > 10, 5.0, "moving")
+    wait_for(lambda: client.call("status")["job"] and client.call("status")["job"]["cycle"] > 10, 5.0, "moving")
     press(daemon, "limit_x_max", True)
     outcome = wait_job(client, job)
     assert outcome["outcome"] == "fault" and outcome["reason"].startswith("limit input limit_x_max")
@@ -120,6 +121,6 @@ def test_a_switch_found_active_at_rest_with_no_end_said_is_refused_and_limit_axi
     assert client.request("jog", axis="Z", distance=-1.0)["error"].endswith(": jog Z- moves towards it; "
                                                                             "jog Z+ moves away")
     job = client.call("jog", axis="Z", direction="+", speed=5.0)["job"]["id"]
-    wait_until(lambda: x_mm(client, 2) > 0.05, 5.0, "Z moving up")
+    wait_for(lambda: x_mm(client, 2) > 0.05, 5.0, "Z moving up")
     client.call("jog_stop")
     assert wait_job(client, job)["outcome"] == "stopped"

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
-from tests.integration.daemon_helpers import DaemonProcess, daemon, wait_until  # noqa: F401 (fixture)
+from tests.integration.daemon_helpers import DaemonProcess, daemon  # noqa: F401 (fixture)
 
 
 def _mdi(daemon: DaemonProcess, text: str) -> dict:

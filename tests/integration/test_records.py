@@ -17,7 +17,8 @@ import pytest
 from nurbsmotion.cli import main
 from nurbsmotion.sim import read_csv
 from nurbsmotion.service.records import DRIVES_DIR
-from tests.integration.daemon_helpers import DaemonProcess, wait_until
+from tests.integration.daemon_helpers import DaemonProcess
+from tests.helpers import wait_for
 
 SHORT = "G21 G90\nG01 X4 Y2 F3000\n(a comment)\nG01 X0 Y3 Z1\n"
 LONGER = "G21 G90\nG01 X90 Y40 F6000\n"  # ~1.1 s
@@ -47,7 +48,7 @@ def test_the_daemon_logs_ready_jobs_rejections_and_overrides_at_its_default_leve
     daemon.request("override", percent=80)
     job = daemon.request("submit", name="short.nc", program=SHORT)["job"]
     daemon.wait_job_end(job["id"])
-    events = wait_until(lambda: [e for e in _events(daemon.log()) if e.startswith("job_ended ")] and
+    events = wait_for(lambda: [e for e in _events(daemon.log()) if e.startswith("job_ended ")] and
                         _events(daemon.log()), 5.0, "the job_ended line")
     [rejection] = [e for e in events if e.startswith("submit_rejected ")]
     assert "name=bad.nc" in rejection and 'first="bad.nc:1: Q7' in rejection

@@ -12,7 +12,7 @@ from pathlib import Path
 from nurbsmotion.config import load_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import wait_until
+from tests.helpers import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -29,7 +29,7 @@ def test_home_with_the_demo_configuration_homes_every_axis(tmp_path: Path):
     try:
         with Client(config.control.socket) as client:
             assert client.call("home")["axes"] == ["Y", "X", "Z"]
-            wait_until(lambda: not client.call("status")["homing"]["busy"], 60.0, "the homing to end", poll_s=0.05)
+            wait_for(lambda: not client.call("status")["homing"]["busy"], 60.0, "the homing to end", poll_s=0.05)
             status = client.call("status")
     finally:
         daemon.close()

@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 SPINDLE = "spindle: {node_id: 5, mode: csv, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000}\n"
 STEP_COUNTS_S = 20000 * 4096 / 60 * 0.004  # accel_rpm_s in counts/s² x the 4 ms cycle
@@ -37,7 +38,7 @@ def test_m3_ramps_0x60ff_per_sync_in_the_spindles_rpdo(machine):
     controller = machine.controller
     drive = machine.simulation.network[5]
     job = controller.submit("mill.nc", "G21 G90\nS6000 M3\nG01 X5 F3000\nM5\nG01 X0 F600\n")["job"]["id"]
-    info = wait_until(lambda: (i := controller.job_info(job)["job"]).get("outcome") and i, 30.0, "job end")
+    info = wait_for(lambda: (i := controller.job_info(job)["job"]).get("outcome") and i, 30.0, "job end")
     outcome = info["outcome"]
     assert outcome["outcome"] == "completed", outcome["reason"]
     assert [(e.get("code"), e.get("at_speed")) for e in outcome["machine_events"]][0] == ("M3", True)
@@ -54,5 +55,5 @@ def test_m3_ramps_0x60ff_per_sync_in_the_spindles_rpdo(machine):
     assert velocity[-1] == 0  # M5 ramped it down during the last move (0.3 s of its 0.5 s)
     sdo_writes = [d for d in frames(folder, 0x605) if d[0] & 0xE0 == 0x20 and d[1:3] == b"\xff\x60"]
     assert sdo_writes == []  # no 0x60FF by SDO during the job
-    wait_until(lambda: drive.axis.velocity_actual == 0, 5.0, "spindle at rest")
+    wait_for(lambda: drive.axis.velocity_actual == 0, 5.0, "spindle at rest")
     assert drive.axis.mode == 9

@@ -14,7 +14,8 @@ import pytest
 from nurbsmotion.cli.status import format_status
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import daemon_in_process, subprocess_environment, wait_until
+from tests.integration.daemon_helpers import daemon_in_process, subprocess_environment
+from tests.helpers import wait_for
 
 SPINDLE_IO = """\
 spindle: {node_id: 5, counts_per_rev: 4096, max_rpm: 12000, accel_rpm_s: 20000, at_speed_timeout_s: 3.0}
@@ -42,19 +43,19 @@ def spindle_rpm(daemon: Daemon) -> float:
 
 def wait_job(daemon: Daemon, job_id: str, timeout_s: float = 30.0) -> dict:
     assert daemon.controller is not None
-    return wait_until(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info, timeout_s,
+    return wait_for(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info, timeout_s,
                       f"job {job_id} end")
 
 
 def test_a_mill_program_waits_for_the_spindle_switches_coolant_and_stops_both_at_the_end(machine):
     controller = machine.controller
     assert controller.status()["spindle"]["commanded_rpm"] == 0
-    wait_until(lambda: controller.status()["spindle"]["actual_rpm"] is not None, 2.0, "first 0x606C read")
+    wait_for(lambda: controller.status()["spindle"]["actual_rpm"] is not None, 2.0, "first 0x606C read")
     lines = format_status(controller.status())
     assert "spindle node 5: OPERATION ENABLED, commanded 0 rpm, actual 0 rpm, at speed" in lines
     assert "io node 10: inputs active none, outputs on none" in lines
     job = controller.submit("mill.nc", MILL)["job"]["id"]
-    status = wait_until(lambda: (s := controller.status())["job"] and s["job"]["paused"] and s, 10.0, "spindle wait")
+    status = wait_for(lambda: (s := controller.status())["job"] and s["job"]["paused"] and s, 10.0, "spindle wait")
     assert "S6000 M3" in status["job"]["paused"] or "M3 at mill.nc:2" in status["job"]["paused"]
     assert abs(status["axes"][0]["commanded_mm"]) < 1e-9  # nothing moved before the spindle is at speed
     info = wait_job(machine, job)
@@ -66,13 +67,13 @@ def test_a_mill_program_waits_for_the_spindle_switches_coolant_and_stops_both_at
     log_lines = (Path(info["folder"]) / "events.log").read_text().splitlines()
     assert len(log_lines) == len(outcome["machine_events"]) and log_lines[0].startswith("spindle_event ")
     assert sim(machine).io_nodes[10].outputs == b"\x00"  # coolant off after M9 and at the end
-    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after M5")
+    wait_for(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after M5")
 
 
 def test_the_flood_output_is_on_between_m8_and_m9(machine):
     controller = machine.controller
     job = controller.submit("c.nc", "G21 G90\nM8\nG01 X20 F600\nM9\n")["job"]["id"]
-    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x01", 5.0, "flood on")
+    wait_for(lambda: sim(machine).io_nodes[10].outputs == b"\x01", 5.0, "flood on")
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert sim(machine).io_nodes[10].outputs == b"\x00"
 
@@ -80,8 +81,8 @@ def test_the_flood_output_is_on_between_m8_and_m9(machine):
 def test_m64_and_m65_switch_the_output_at_bit_p_at_their_row(machine):
     controller = machine.controller
     job = controller.submit("o.nc", "G21 G90\nM64 P4\nG01 X20 F600\nM65 P4\nG01 X0\n")["job"]["id"]
-    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x10", 5.0, "clamp on")
-    wait_until(lambda: sim(machine).io_nodes[10].outputs == b"\x00", 10.0, "clamp off at M65's row")
+    wait_for(lambda: sim(machine).io_nodes[10].outputs == b"\x10", 5.0, "clamp on")
+    wait_for(lambda: sim(machine).io_nodes[10].outputs == b"\x00", 10.0, "clamp off at M65's row")
     events = wait_job(machine, job)["outcome"]["machine_events"]
     assert [(e.get("code"), e.get("outputs")) for e in events][:2] == [("M64", {"clamp": True}),
                                                                        ("M65", {"clamp": False})]
@@ -91,16 +92,16 @@ def test_m64_and_m65_switch_the_output_at_bit_p_at_their_row(machine):
 def test_abort_quick_stops_and_disables_the_spindle_and_the_next_job_enables_it(machine):
     controller = machine.controller
     job = controller.submit("a.nc", "G21 G90\nS3000 M4\nG01 X50 F600\nM5\n")["job"]["id"]
-    wait_until(lambda: spindle_rpm(machine) < -2900 and controller.status()["job"]["cycle"] > 10, 10.0, "M4 running")
+    wait_for(lambda: spindle_rpm(machine) < -2900 and controller.status()["job"]["cycle"] > 10, 10.0, "M4 running")
     controller.abort()
     outcome = wait_job(machine, job)["outcome"]
     assert outcome["outcome"] == "aborted"
-    wait_until(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
+    wait_for(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
     assert spindle_rpm(machine) == 0
     controller.reset()
     job = controller.submit("b.nc", "G21 G90\nS1000 M3\nG01 X1 F600\n")["job"]["id"]
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
-    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle ramped to rest at job end")
+    wait_for(lambda: spindle_rpm(machine) == 0, 5.0, "spindle ramped to rest at job end")
 
 
 def test_an_unreachable_speed_stops_the_job_with_one_line(machine):
@@ -120,19 +121,19 @@ def test_an_unreachable_speed_stops_the_job_with_one_line(machine):
 def test_estop_aborts_the_job_disables_everything_and_refuses_motion_until_released(machine):
     controller = machine.controller
     job = controller.submit("e.nc", "G21 G90\nS3000 M3\nM8\nG01 X50 F600\n")["job"]["id"]
-    wait_until(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
+    wait_for(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
     sim(machine).set_io_input("estop", True)
     outcome = wait_job(machine, job)["outcome"]
     assert outcome["outcome"] == "fault" and outcome["reason"].startswith("e-stop input estop (io node 10 bit 0")
-    wait_until(lambda: controller.status()["phase"] == "disabled", 5.0, "axes disabled")
-    wait_until(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
+    wait_for(lambda: controller.status()["phase"] == "disabled", 5.0, "axes disabled")
+    wait_for(lambda: controller.status()["spindle"]["drive_state"] == "SWITCH ON DISABLED", 5.0, "spindle disabled")
     assert sim(machine).io_nodes[10].outputs == b"\x00"
     with pytest.raises(InputError, match="e-stop input estop .* is active: release it first"):
         controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")
     with pytest.raises(InputError, match="e-stop"):
         controller.reset()
     sim(machine).set_io_input("estop", False)
-    wait_until(lambda: controller.status()["io"]["estop_active"] is False, 5.0, "estop released")
+    wait_for(lambda: controller.status()["io"]["estop_active"] is False, 5.0, "estop released")
     controller.reset()
     job = controller.submit("again.nc", "G21 G90\nG01 X1 F600\n")["job"]["id"]
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
@@ -141,7 +142,7 @@ def test_estop_aborts_the_job_disables_everything_and_refuses_motion_until_relea
 def test_a_limit_input_faults_the_job_with_one_line_naming_the_axis(machine):
     controller = machine.controller
     job = controller.submit("l.nc", "G21 G90\nG01 X50 F600\n")["job"]["id"]
-    wait_until(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
+    wait_for(lambda: controller.status()["job"]["cycle"] > 20, 10.0, "moving")
     sim(machine).set_io_input("limit_x_max", True)
     outcome = wait_job(machine, job)["outcome"]
     assert outcome["outcome"] == "fault"
@@ -188,13 +189,13 @@ def test_an_mdi_of_spindle_and_output_words_runs_them_without_motion_and_leaves_
     job = controller.mdi("M8\nM64 P4")["job"]["id"]
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert sim(machine).io_nodes[10].outputs == b"\x11"  # flood and clamp stay on
-    wait_until(lambda: controller.status()["coolant"] == {"mist": False, "flood": True}, 5.0, "status: flood on")
+    wait_for(lambda: controller.status()["coolant"] == {"mist": False, "flood": True}, 5.0, "status: flood on")
     job = controller.mdi("M5 M9")["job"]["id"]
     outcome = wait_job(machine, job)["outcome"]
     assert [e.get("code") for e in outcome["machine_events"]][:2] == ["M5", "M9"]
-    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
+    wait_for(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
     assert sim(machine).io_nodes[10].outputs == b"\x10"  # coolant off, the clamp (M64) kept
-    wait_until(lambda: controller.status()["coolant"] == {"mist": False, "flood": False}, 5.0, "status: coolant off")
+    wait_for(lambda: controller.status()["coolant"] == {"mist": False, "flood": False}, 5.0, "status: coolant off")
     job = controller.mdi("S500")["job"]["id"]  # the spindle stopped: S alone starts nothing
     assert wait_job(machine, job)["outcome"]["outcome"] == "completed"
     assert controller.status()["spindle"]["commanded_rpm"] == 0.0 and spindle_rpm(machine) == 0
@@ -216,7 +217,7 @@ def test_the_cli_mdi_m3_turns_the_spindle_and_m5_stops_it(machine):
     assert abs(spindle_rpm(machine) - 1000.0) < 20.0
     done = cli("mdi", "M5", "--no-progress")
     assert done.returncode == 0, done.stderr
-    wait_until(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
+    wait_for(lambda: spindle_rpm(machine) == 0, 5.0, "spindle at rest after mdi M5")
 
 
 # Long enough that its events lie in later chunks than the first (streamed_job.FIRST_CHUNK_CYCLES

@@ -16,7 +16,8 @@ from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT
 from nurbsmotion.planning.trace import read_trace
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 SAFE_Z_MM = 10.0
 MACHINE = f"""\
@@ -54,7 +55,7 @@ def submit(daemon: Daemon, **fields) -> dict:
 
 def wait_job(daemon: Daemon, job_id: str, timeout_s: float = 30.0) -> dict:
     assert daemon.controller is not None
-    return wait_until(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info, timeout_s,
+    return wait_for(lambda: (info := daemon.controller.job_info(job_id)["job"]).get("outcome") and info, timeout_s,
                       f"job {job_id} end")
 
 

@@ -21,7 +21,8 @@ from nurbsmotion.service.link import open_link
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.streamed_job import prepare_streamed_job
 from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
-from tests.integration.daemon_helpers import CONFIG, wait_until
+from tests.integration.daemon_helpers import CONFIG
+from tests.helpers import wait_for
 
 CHUNK = 100
 # ~4.5 s at F1200: about 9 chunks, most of them ending while the axes move (a stop tail each)
@@ -47,12 +48,12 @@ def submit(controller: Controller, text: str, name: str = "long.nc") -> str:
 
 
 def ended(controller: Controller, job_id: str, timeout_s: float = 30.0) -> dict:
-    wait_until(lambda: controller._job is None, timeout_s, "the job's end")
+    wait_for(lambda: controller._job is None, timeout_s, "the job's end")
     return controller.job_info(job_id)["job"]
 
 
 def running_at(controller: Controller, cycle: int) -> dict:
-    return wait_until(lambda: (s := controller.status())["job"] and s["job"]["cycle"] >= cycle and s, 20.0,
+    return wait_for(lambda: (s := controller.status())["job"] and s["job"]["cycle"] >= cycle and s, 20.0,
                       f"cycle {cycle}")
 
 
@@ -114,7 +115,7 @@ def test_records_are_written_while_the_job_runs(machine):
     trace = folder / "trace.csv.part"
     trace = trace if trace.exists() else folder / "trace.csv"  # the producer may have planned the rest already
     assert (folder / "plan.json").exists() and len(trace.read_text().splitlines()) > 6 * CHUNK
-    wait_until(lambda: (folder / "feedback.csv").exists() and (folder / "feedback.csv").stat().st_size > 0, 5.0,
+    wait_for(lambda: (folder / "feedback.csv").exists() and (folder / "feedback.csv").stat().st_size > 0, 5.0,
                "feedback rows")
     assert not (folder / "outcome.json").exists()
     ended(machine, job_id)
@@ -136,7 +137,7 @@ def test_hold_and_resume_mid_job_complete_every_planned_row(machine):
     job_id = submit(machine, LONG)
     running_at(machine, 5 * CHUNK + 30)
     machine.hold()
-    held = wait_until(lambda: (s := machine.status())["state"] == "held" and s, 10.0, "held")
+    held = wait_for(lambda: (s := machine.status())["state"] == "held" and s, 10.0, "held")
     time.sleep(0.5)  # held across several chunks' worth of time: the producer waits, the axes rest
     assert machine.status()["job"]["cycle"] == held["job"]["cycle"]
     machine.resume()
@@ -179,7 +180,7 @@ def test_a_drive_fault_mid_job_ends_it_with_the_fault(machine):
 
 def test_a_program_pause_in_a_later_chunk_holds_there_and_resume_completes(machine):
     job_id = submit(machine, WITH_M0)
-    paused = wait_until(lambda: (s := machine.status())["state"] == "held" and s, 20.0, "the M0 pause")
+    paused = wait_for(lambda: (s := machine.status())["state"] == "held" and s, 20.0, "the M0 pause")
     assert paused["job"]["paused"] == "M0 at long.nc:4"
     assert paused["job"]["cycle"] > 2 * CHUNK
     machine.resume()

@@ -9,7 +9,8 @@ import threading
 from typing import Any
 
 from nurbsmotion.service.client import Client
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 PROGRAM = "G21 G90\nG01 X5 Y2 F3000\nG01 X0 Y0\n"
 
@@ -53,7 +54,7 @@ def test_ten_subscribers_see_the_job_start_and_end_and_its_state_changes(tmp_pat
         with Client(daemon.config.control.socket) as client:
             job = client.call("submit", name="sq.nc", program=PROGRAM)["job"]["id"]
         for listener in listeners:
-            wait_until(lambda: listener.events("job_ended"), 30.0, "job_ended pushed to every subscriber")
+            wait_for(lambda: listener.events("job_ended"), 30.0, "job_ended pushed to every subscriber")
         for listener in listeners:
             [started] = listener.events("job_started")
             [ended] = listener.events("job_ended")
@@ -65,12 +66,12 @@ def test_ten_subscribers_see_the_job_start_and_end_and_its_state_changes(tmp_pat
             positions = [line["changes"]["axes"] for line in listener.lines
                          if line.get("notify") == "status" and "axes" in line["changes"]]
             assert positions and positions[-1][0]["commanded_mm"] == 0.0
-        wait_until(lambda: all(listener.states()[-1:] == ["idle"] for listener in listeners), 10.0,
+        wait_for(lambda: all(listener.states()[-1:] == ["idle"] for listener in listeners), 10.0,
                    "the idle state pushed after the job")
         assert daemon.hub.subscribers == 10
         for listener in listeners:
             listener.hang_up()
-        wait_until(lambda: daemon.hub.subscribers == 0, 10.0, "hung-up subscribers removed")
+        wait_for(lambda: daemon.hub.subscribers == 0, 10.0, "hung-up subscribers removed")
         with Client(daemon.config.control.socket) as client:
             assert client.call("status")["state"] == "idle"  # the daemon serves on
 
@@ -80,10 +81,10 @@ def test_a_fault_is_pushed_with_its_node_and_the_status_says_fault(tmp_path):
         listener = Listener(daemon.config.control.socket, max_hz=5.0)
         with Client(daemon.config.control.socket) as client:
             client.call("submit", name="long.nc", program="G21 G90\nG01 X60 F1200\n")
-            wait_until(lambda: "running" in listener.states(), 20.0, "the job running")
+            wait_for(lambda: "running" in listener.states(), 20.0, "the job running")
             client.call("inject_fault", spec="node=2,kind=fault,code=0x2310")
-            wait_until(lambda: listener.events("fault"), 20.0, "the fault pushed")
+            wait_for(lambda: listener.events("fault"), 20.0, "the fault pushed")
             [fault, *_] = listener.events("fault")
             assert fault["fields"]["node"] == "2" and fault["level"] == "WARNING"
-            wait_until(lambda: "fault" in listener.states(), 20.0, "state fault pushed")
+            wait_for(lambda: "fault" in listener.states(), 20.0, "state fault pushed")
         listener.hang_up()

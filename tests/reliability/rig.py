@@ -8,17 +8,15 @@ flaky); nothing asserts on timing except where the issue asks for a detection bo
 from __future__ import annotations
 
 import contextlib
-import time
 import uuid
-from dataclasses import dataclass
-from typing import Any, Callable, Iterator
+from typing import Any, Iterator
 
-import can
 import numpy as np
 
 from nurbsmotion.config import MachineConfig, parse_config
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.sim import SimNetwork
+from tests.helpers import SimulatedMachine, simulated_machine
 
 WAIT_S = 30.0
 PERIOD_MS = 4
@@ -45,48 +43,17 @@ def machine_config(channel: str, period_ms: float = PERIOD_MS, n_axes: int = 3) 
     return parse_config(text, "reliability.yaml")
 
 
-@dataclass
-class Rig:
-    config: MachineConfig
-    master: Master
-    sim: SimNetwork
-    probe: can.BusABC  # a second bus on the channel: frames the test injects reach master and drives
+Rig = SimulatedMachine  # config, master, sim, probe
 
 
 @contextlib.contextmanager
 def rig(n_drives: int = 3, bring_up: bool = True, period_ms: float = PERIOD_MS, **master_kw: Any) -> Iterator[Rig]:
     """Drives 1..n_drives and a master for three axes; torn down whatever happens."""
-    channel = "rel-" + uuid.uuid4().hex
-    config = machine_config(channel, period_ms)
-    sim = SimNetwork(channel=channel)
-    for node in range(1, n_drives + 1):
-        sim.add_drive(node, lag_cycles=1)
-    sim.start()
-    bus = can.Bus(interface="virtual", channel=channel)
-    probe = can.Bus(interface="virtual", channel=channel)
-    master_kw.setdefault("bootup_timeout_s", 1.0)
     master_kw.setdefault("rt_priority", None)  # SCHED_FIFO would starve the in-process drives on 2 loaded cores
-    master = Master(config, bus, **master_kw)
-    try:
-        if bring_up:
-            master.bring_up()
-        yield Rig(config, master, sim, probe)
-    finally:
-        master.shutdown()
-        probe.shutdown()
-        bus.shutdown()
-        sim.stop()
-
-
-def wait_for(predicate: Callable[[], Any], timeout_s: float = WAIT_S, what: str = "condition") -> Any:
-    end = time.monotonic() + timeout_s
-    while True:
-        value = predicate()
-        if value:
-            return value
-        if time.monotonic() > end:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.005)
+    config = machine_config("rel-" + uuid.uuid4().hex, period_ms)
+    with simulated_machine(config, {node: {"lag_cycles": 1} for node in range(1, n_drives + 1)}, bring_up,
+                           **master_kw) as machine:
+        yield machine
 
 
 def smooth_move(start_counts: list[int], distance_mm: list[float], duration_s: float,

@@ -13,10 +13,11 @@ import can
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.sim import FaultInjection, SimNetwork
-from tests.reliability.rig import PERIOD_MS, WAIT_S, Rig, assert_no_jump, held_counts, rig, smooth_move, wait_for
+from tests.reliability.rig import PERIOD_MS, WAIT_S, Rig, assert_no_jump, held_counts, rig, smooth_move
+from tests.helpers import wait_for
 
 NODES = (1, 2, 3)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.config import MachineConfig, parse_config
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.daemon import Daemon
@@ -21,7 +21,8 @@ from nurbsmotion.fieldbus import Master
 from nurbsmotion.service.link import SimulatedDrives
 from nurbsmotion.sim import FaultInjection, read_csv
 from tests.reliability.rig import (A_MAX_MM_S2, COUNTS_PER_MM, HEARTBEAT_CONSUMER_MS, HEARTBEAT_PRODUCER_MS,
-                                   V_MAX_MM_S, assert_records_within_limits, wait_for)
+                                   V_MAX_MM_S, assert_records_within_limits)
+from tests.helpers import wait_for
 
 LONG = "G21 G90\nG01 X60 Y20 Z5 F4800\n"  # ~1 s
 SHORT = "G21 G90\nG01 X1 Y1 Z1 F3000\n"

@@ -13,7 +13,8 @@ import can
 import pytest
 
 from nurbsmotion.sim import FaultInjection
-from tests.reliability.rig import PERIOD_MS, WAIT_S, Rig, assert_no_jump, held_counts, rig, smooth_move, wait_for
+from tests.reliability.rig import PERIOD_MS, WAIT_S, Rig, assert_no_jump, held_counts, rig, smooth_move
+from tests.helpers import wait_for
 
 SEEDS_FAST = 3
 SEEDS_LONG = 20

@@ -10,7 +10,8 @@ import threading
 import numpy as np
 import pytest
 
-from tests.reliability.rig import A_MAX_MM_S2, COUNTS_PER_MM, PERIOD_MS, WAIT_S, held_counts, rig, smooth_move, wait_for
+from tests.reliability.rig import A_MAX_MM_S2, COUNTS_PER_MM, PERIOD_MS, WAIT_S, held_counts, rig, smooth_move
+from tests.helpers import wait_for
 
 
 @pytest.mark.parametrize("cause", ["abort", "fault"])

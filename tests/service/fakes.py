@@ -13,7 +13,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
 from nurbsmotion.planning import Trajectory
-from nurbsmotion.service.planner import PlannedJob
+from nurbsmotion.service.job_common import PlannedJob
 
 
 class FakeJob:

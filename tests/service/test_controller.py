@@ -2,9 +2,9 @@
 
 import csv
 import dataclasses
+import functools
 import json
 import logging
-import time
 from pathlib import Path
 
 import pytest
@@ -15,15 +15,11 @@ from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.records import JobRecords
 from tests.service.fakes import FakeLink, fake_planner
+from tests.helpers import wait_for as _wait_for
+
+wait_for = functools.partial(_wait_for, timeout_s=5.0, poll_s=0.005)  # this module's waits
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _wait(condition, timeout_s=5.0):
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
 
 
 @pytest.fixture
@@ -45,7 +41,7 @@ def test_a_job_runs_to_completion_and_leaves_its_record(parts):
     controller, link = parts
     job = controller.submit("line.nc", "X5")["job"]
     assert controller.status()["state"] in ("running", "idle")
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     info = controller.job_info(job["id"])["job"]
     assert info["outcome"]["outcome"] == "completed"
     assert info["outcome"]["sent"] == info["outcome"]["planned"] == 200
@@ -76,7 +72,7 @@ def test_one_job_at_a_time(parts):
     with pytest.raises(InputError, match="busy"):
         controller.submit("b.nc", "X1")
     controller.stop()
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     assert controller.status()["last_job"]["outcome"] == "stopped"
 
 
@@ -84,7 +80,7 @@ def test_a_fault_is_recorded_and_reset_allows_a_new_job(parts):
     controller, link = parts
     link.fault_at = 50
     job = controller.submit("a.nc", "X5")["job"]
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     status = controller.status()
     assert status["state"] == "fault" and status["faults"][0]["node"] == 2
     outcome = controller.job_info(job["id"])["job"]["outcome"]
@@ -95,7 +91,7 @@ def test_a_fault_is_recorded_and_reset_allows_a_new_job(parts):
     controller.reset()
     assert controller.status()["state"] == "idle" and controller.status()["faults"] == []
     controller.submit("b.nc", f"X{link.held[0] / 1000 + 1}")
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     assert controller.status()["last_job"]["outcome"] == "completed"
 
 
@@ -111,7 +107,7 @@ def test_override_is_checked_and_clamped_to_the_plan_limit(parts):
     assert link.rate == pytest.approx(0.5)
     assert controller.status()["override"]["effective_percent"] == pytest.approx(50.0)
     controller.abort()
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     assert controller.status()["last_job"]["outcome"] == "aborted"
 
 
@@ -147,9 +143,9 @@ def test_a_record_holds_the_config_times_final_position_feedback_and_override_hi
     controller, link = parts
     link.cycle_s = 0.005
     job = controller.submit("line.nc", "X5")["job"]
-    _wait(lambda: (controller.status()["job"] or {}).get("cycle", 0) > 20)
+    wait_for(lambda: (controller.status()["job"] or {}).get("cycle", 0) > 20)
     controller.override(50)
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     info = controller.job_info(job["id"])["job"]
     folder, outcome = Path(info["folder"]), info["outcome"]
     config = json.loads((folder / "config.json").read_text())
@@ -172,20 +168,20 @@ def test_the_override_resets_to_100_percent_for_each_job_unless_kept(parts):
     controller.override(40)
     controller.submit("a.nc", "X1")
     assert controller.status()["override"]["requested_percent"] == 100.0 and link.rate == 1.0
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     controller.override(40)
     controller.submit("b.nc", "X2", keep_override=True)
     status = controller.status()
     assert status["override"]["requested_percent"] == 40.0 and link.rate == pytest.approx(0.4)
     assert status["job"] is None or status["job"]["override_percent"] == 40.0
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
 
 
 def test_a_following_error_fault_has_no_code_its_error_in_counts_and_mm_and_a_job_cycle(parts):
     controller, link = parts
     link.fault_at, link.fault_kind, link.fault_code = 30, "following_error", -2345
     job = controller.submit("a.nc", "X5")["job"]
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     fault = controller.job_info(job["id"])["job"]["outcome"]["fault"]
     assert fault["code"] is None and fault["kind"] == "following_error"
     assert fault["measured"] == {"following_error_counts": -2345, "following_error_mm": -2.345}
@@ -198,7 +194,7 @@ def test_an_emcy_fault_carries_its_code(parts):
     controller, link = parts
     link.fault_at = 10
     job = controller.submit("a.nc", "X5")["job"]
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     fault = controller.job_info(job["id"])["job"]["outcome"]["fault"]
     assert (fault["code"], fault["code_hex"], fault["measured"], fault["cycle"]) == (0x2310, "0x2310", None, 10)
     controller.reset()
@@ -207,7 +203,7 @@ def test_an_emcy_fault_carries_its_code(parts):
 def test_jobs_lists_the_newest_first_and_marks_the_running_one(parts):
     controller, link = parts
     first = controller.submit("a.nc", "X1")["job"]["id"]
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     link.cycle_s = 0.01
     second = controller.submit("b.nc", "X2")["job"]["id"]
     listing = controller.jobs()
@@ -218,7 +214,7 @@ def test_jobs_lists_the_newest_first_and_marks_the_running_one(parts):
     with pytest.raises(InputError, match="'limit'"):
         controller.jobs(0)
     controller.stop()
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
 
 
 def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
@@ -229,7 +225,7 @@ def test_with_the_real_planner_the_record_names_the_line_reached(tmp_path):
         job = controller.submit("part.nc", "G21 G90\nG01 X2 F3000\n\nG01 X2 Y3\nM30\nG01 X9\n")["job"]
         # the submit's summary says how much of the file was read (issue 26.5)
         assert job["summary"]["reading"] == {"lines_total": 6, "last_line": 5, "ended_by": "M30", "lines_not_read": 1}
-        _wait(_ended(controller))
+        wait_for(_ended(controller))
         outcome = controller.job_info(job["id"])["job"]["outcome"]
         assert outcome["line_reached"]["where"] == "part.nc:4" and outcome["line_reached"]["text"] == "G01 X2 Y3"
         assert controller.status()["last_job"]["line_reached"] == "part.nc:4"
@@ -244,7 +240,7 @@ def test_feedback_log_false_records_no_feedback(tmp_path):
     controller = Controller(config, link, fake_planner(config), JobRecords(tmp_path))
     try:
         job = controller.submit("a.nc", "X1")["job"]
-        _wait(_ended(controller))
+        wait_for(_ended(controller))
         info = controller.job_info(job["id"])["job"]
         assert "feedback.csv" not in info["files"] and info["outcome"]["feedback_rows"] is None
         assert link.feedback is None
@@ -262,9 +258,9 @@ def test_after_an_abort_the_progress_shows_where_the_job_stopped(parts, monkeypa
     settle = controller._settled_status
     monkeypatch.setattr(controller, "_settled_status", lambda: (recorded.wait(5.0), settle())[1])
     job = controller.submit("line.nc", "X5")["job"]
-    _wait(lambda: (controller.status()["job"] or {}).get("cycle", 0) >= 50)
+    wait_for(lambda: (controller.status()["job"] or {}).get("cycle", 0) >= 50)
     controller.abort()
-    _wait(lambda: link.job is None)  # the master let go of it; its record is not written yet
+    wait_for(lambda: link.job is None)  # the master let go of it; its record is not written yet
     status = controller.status()
     recorded.set()
     assert status["job"]["id"] == job["id"] and status["state"] == "fault"
@@ -272,7 +268,7 @@ def test_after_an_abort_the_progress_shows_where_the_job_stopped(parts, monkeypa
 
 
 def link_sent(controller, job_id):
-    _wait(_ended(controller))
+    wait_for(_ended(controller))
     return controller.job_info(job_id)["job"]["outcome"]["sent"]
 
 

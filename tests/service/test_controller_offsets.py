@@ -7,21 +7,20 @@ from pathlib import Path
 import pytest
 
 from nurbsmotion.config import load_config
-from nurbsmotion.errors import InputError
-from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.errors import InputError, Refused
+from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.machine_state import load_state
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.records import JobRecords
 from tests.service.fakes import FakeLink, with_data_dir
+from tests.helpers import wait_for
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def _wait_idle(controller, timeout_s=10.0):
-    deadline = time.monotonic() + timeout_s
-    while controller.status()["state"] != "idle" or controller.status()["job"] is not None:
-        assert time.monotonic() < deadline, "timed out"
-        time.sleep(0.005)
+def _idle(controller) -> bool:
+    status = controller.status()
+    return status["state"] == "idle" and status["job"] is None
 
 
 @pytest.fixture
@@ -38,20 +37,20 @@ def controller(tmp_path):
 def test_a_completed_programs_offsets_are_persisted_and_used_by_the_next(controller):
     job = controller.submit("setup.nc", "G21 G90\nG10 L2 P2 X5 Y1\nG55\nG1 X1 F3000\n")["job"]
     assert job["summary"]["end_mm"][0] == pytest.approx(6.0)
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
     saved = load_state(controller.config.data_dir)
     assert saved.coordinates.active_name == "G55" and saved.coordinates.work_offsets_mm[1] == (5.0, 1.0, 0.0)
     assert controller.status()["coordinates"]["active"] == "G55"
     job = controller.submit("next.nc", "G21 G90\nG1 X2 Y0 F3000\n")["job"]  # starts in G55 with its offset
     assert job["summary"]["end_mm"][:2] == pytest.approx([7.0, 1.0])
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
 
 
 def test_a_stopped_job_keeps_the_state_it_started_from(controller):
     controller.submit("long.nc", "G21 G90\nG1 X20 F600\nG10 L2 P1 X9\n")
     time.sleep(0.05)
     controller.stop()
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
     assert controller.status()["last_job"]["outcome"] == "stopped"
     assert load_state(controller.config.data_dir).coordinates.work_offsets_mm[0] == (0.0, 0.0, 0.0)
 
@@ -66,7 +65,7 @@ def test_offsets_are_set_cleared_and_selected_between_jobs_only(controller):
     with pytest.raises(Refused, match="offsets: a job is running; offsets change only between jobs"):
         controller.offsets({"clear": "G56"})
     assert controller.offsets({})["offsets"]["work_offsets_mm"]["G56"] == [10.0, -5.0, 0.0]  # showing is fine
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
     assert controller.offsets({"clear": "G56"})["offsets"]["work_offsets_mm"]["G56"] == [0.0, 0.0, 0.0]
     with pytest.raises(InputError, match="field 'system': required with x, y or z"):
         controller.offsets({"x": 1.0})
@@ -76,10 +75,10 @@ def test_the_switches_of_the_submission_reach_the_reader(controller):
     program = "G21 G90\n/G1 X5 F3000\nG1 X1 F3000\nM1\nG1 X2\n"
     job = controller.submit("part.nc", program)["job"]
     assert [p["reason"] for p in job["summary"]["pauses"]] == ["M1 at part.nc:4"] and job["summary"]["blocks"] == 2
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
     job = controller.submit("part.nc", program, block_delete=False, optional_stop=False)["job"]
     assert job["summary"]["blocks"] == 3 and job["summary"]["pauses"] == []  # the '/' line ran too, M1 is nothing
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)
 
 
 def test_the_tool_table_of_the_machine_applies(controller, tmp_path):
@@ -90,4 +89,4 @@ def test_the_tool_table_of_the_machine_applies(controller, tmp_path):
         "tools:\n  - {number: 3, length_mm: 2.5, diameter_mm: 6}\n", "t.yaml"))
     job = controller.submit("t.nc", "G21 G90\nG43 H3\nG1 Z1 F3000\n")["job"]
     assert job["summary"]["end_mm"][2] == pytest.approx(3.5)
-    _wait_idle(controller)
+    wait_for(lambda: _idle(controller), 10.0, "the controller idle", 0.005)

@@ -7,11 +7,11 @@ import pytest
 
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.program import ReadOptions, parse_gcode
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.program_gate import check_machine_can_run
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.config.spindle import SpindleConfig
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = load_config(ROOT / "config" / "demo.yaml")

@@ -16,7 +16,8 @@ from nurbsmotion.config import NotifyConfig
 from nurbsmotion.log import kv
 from nurbsmotion.service.client import Client
 from nurbsmotion.service.webhooks import QUEUE_LIMIT, WebhookLogHandler, WebhookSender, http_post, payload_of
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 
 class Receiver(http.server.ThreadingHTTPServer):
@@ -145,7 +146,7 @@ def test_the_daemon_posts_a_job_end_and_retries_a_receiver_that_failed(receiver,
     extra = f"notify: {{webhooks: [{receiver.url}], retry_s: 0.2}}\n"
     with daemon_in_process(tmp_path / "data", extra, "hook") as daemon, Client(daemon.config.control.socket) as client:
         job = client.call("submit", name="hook.nc", program="G21 G90\nG01 X2 F1200\nG01 X0\n")["job"]["id"]
-        wait_until(lambda: receiver.bodies, 30.0, "the webhook")
+        wait_for(lambda: receiver.bodies, 30.0, "the webhook")
     [body] = receiver.bodies
     assert body["event"] == "job_ended" and body["job"] == job and body["program"] == "hook.nc"
     assert body["outcome"] == "completed" and body["machine"].endswith("machine.yaml")

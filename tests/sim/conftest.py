@@ -9,6 +9,8 @@ drive a ``ManualClock`` instead."""
 
 from __future__ import annotations
 
+import functools
+
 import configparser
 import contextlib
 import struct
@@ -16,13 +18,14 @@ import threading
 import time
 import uuid
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import Iterator
 
 import can
 import canopen
 import pytest
 
 from nurbsmotion.sim import SimDrive, SimNetwork, default_eds_path
+from tests.helpers import wait_for as _wait_for
 
 TIMEOUT_S = 2.0
 
@@ -32,13 +35,7 @@ def rpdo(controlword: int, setpoint: int) -> bytes:
     return struct.pack("<Hi", controlword, setpoint)
 
 
-def wait_until(condition: Callable[[], object], timeout_s: float = TIMEOUT_S, what: str = "condition") -> None:
-    """Poll ``condition`` until it is true; fail the test after ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout_s} s waiting for {what}")
-        time.sleep(0.001)
+wait_for = functools.partial(_wait_for, timeout_s=TIMEOUT_S, poll_s=0.001)  # the one helper, sim's waits
 
 
 class ManualClock:
@@ -94,7 +91,7 @@ class Bench:
         node.sdo.RESPONSE_TIMEOUT = 1.0
         self.master.add_node(node)
         self.nodes[node_id] = node
-        wait_until(lambda: bytes([0]) in self.frames.of(0x700 + node_id), what=f"boot-up of node {node_id}")
+        wait_for(lambda: bytes([0]) in self.frames.of(0x700 + node_id), what=f"boot-up of node {node_id}")
         return drive, node
 
     def add_enabled(self, node_id: int, mode: int = 8, **drive_kwargs: object) -> tuple[SimDrive, canopen.RemoteNode]:
@@ -126,7 +123,7 @@ class Bench:
         operational = [d.nmt_state == 0x05 and not d.silent for d in drives]
         self.sync_time_s = self.sync_time_s + self.sync_period_s if at_s is None else at_s
         self.send(0x80, b"" if counter is None else bytes([counter]), at_s=self.sync_time_s)
-        wait_until(
+        wait_for(
             lambda: all(d.stats.syncs > b or not op for d, b, op in zip(drives, before, operational)),
             what="SYNC processed",
         )
@@ -141,11 +138,11 @@ class Bench:
         sim_net = self.sim.network
         assert sim_net is not None
         sim_net.send_message(marker, token)  # sent after the drives' frames: arrives after them
-        wait_until(lambda: token in self.frames.of(marker), what="frames flushed")
+        wait_for(lambda: token in self.frames.of(marker), what="frames flushed")
 
     def operational(self, node_id: int) -> None:
         self.nmt(0x01, node_id)
-        wait_until(lambda: self.sim.drives[node_id].nmt_state == 0x05, what="OPERATIONAL")
+        wait_for(lambda: self.sim.drives[node_id].nmt_state == 0x05, what="OPERATIONAL")
 
     def enable(self, node_id: int, mode: int = 8) -> None:
         """By SDO: mode, shutdown, switch on, enable operation (+ bit 4 in IP)."""

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.sim import Cia402Axis, DriveStats, ServoModel, SetpointRecorder
 
 S = State

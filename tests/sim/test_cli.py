@@ -21,7 +21,7 @@ from nurbsmotion.cli.sim import parse_faults, serve
 from nurbsmotion.config import load_config
 from nurbsmotion.sim import SimNetwork, read_csv
 
-from conftest import FrameLog, rpdo, wait_until
+from conftest import FrameLog, rpdo, wait_for
 
 
 def write_config(tmp_path: Path, channel: str) -> Path:
@@ -51,7 +51,7 @@ def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_
                               kwargs={"record_dir": tmp_path / "rec", "on_ready": ready.append})
     server.start()
     try:
-        wait_until(lambda: ready, what="drives up")
+        wait_for(lambda: ready, what="drives up")
         net = ready[0]
         z = canopen.RemoteNode(2, str(net[2].eds_path))
         master.add_node(z)
@@ -60,15 +60,15 @@ def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_
         assert z.sdo[0x6061].raw == 8 and (z.sdo[0x60C2][1].raw, z.sdo[0x60C2][2].raw) == (1, -3)
         assert net[2].period_s == pytest.approx(0.001)
         master.send_message(0x000, bytes([0x01, 0]))
-        wait_until(lambda: all(d.nmt_state == 0x05 for d in net.drives.values()), what="operational")
+        wait_for(lambda: all(d.nmt_state == 0x05 for d in net.drives.values()), what="operational")
         for word in (0x06, 0x07, 0x0F):
             master.send_message(0x201, rpdo(word, 0))
             master.send_message(0x80, b"")
         master.send_message(0x201, rpdo(0x0F, 77))
         master.send_message(0x80, b"")
-        wait_until(lambda: frames.of(0x82), what="EMCY of node 2")
+        wait_for(lambda: frames.of(0x82), what="EMCY of node 2")
         assert frames.of(0x82)[0][:2] == (0x2310).to_bytes(2, "little")
-        wait_until(lambda: len(net[1].recorder) == 2, what="set-points of node 1")
+        wait_for(lambda: len(net[1].recorder) == 2, what="set-points of node 1")
     finally:
         stop.set()
         server.join(timeout=5)

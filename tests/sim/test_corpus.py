@@ -12,7 +12,7 @@ import pytest
 from canopen.objectdictionary import ODVariable
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim.eds import supported_modes
 from nurbsmotion.sim.velocity import REQUIRED_OBJECTS
 

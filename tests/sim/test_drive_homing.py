@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.homing import HomingDriveValues, HomingOutcome, HomingProcedure, homing_plan
 from nurbsmotion.sim.homing import HomeSensors
 

@@ -8,11 +8,11 @@ import canopen
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, parse_fault_spec
 
-from conftest import Bench, rpdo, wait_until
+from conftest import Bench, rpdo, wait_for
 
 
 def emcys(bench: Bench, node_id: int) -> list[tuple[int, int]]:
@@ -44,21 +44,21 @@ def test_fault_reset_on_rising_edge_clears_and_sends_emcy_reset(bench: Bench) ->
     node.sdo[0x6040].raw = 0x80
     assert state_of_statusword(node.sdo[0x6041].raw) is State.SWITCH_ON_DISABLED
     assert node.sdo[0x603F].raw == 0
-    wait_until(lambda: (0, 0) in emcys(bench, 2), what="EMCY error reset")
+    wait_for(lambda: (0, 0) in emcys(bench, 2), what="EMCY error reset")
     assert drive.transitions[-3:] == [13, 14, 15]
 
 
 def test_fault_at_time(bench: Bench) -> None:
     drive, node = bench.add_enabled(3)
     bench.sim.inject(FaultInjection("fault", node_id=3, at_s=0.0, code=0x3210))
-    wait_until(lambda: emcys(bench, 3), what="timed fault EMCY")
+    wait_for(lambda: emcys(bench, 3), what="timed fault EMCY")
     assert emcys(bench, 3) == [(0x3210, 0x05)]
 
 
 def test_heartbeat_stop_makes_the_node_silent(bench: Bench) -> None:
     drive, node = bench.add_enabled(4)
     node.sdo[0x1017].raw = 10
-    wait_until(lambda: len(bench.frames.of(0x704)) >= 3, what="heartbeats")
+    wait_for(lambda: len(bench.frames.of(0x704)) >= 3, what="heartbeats")
     drive.inject(FaultInjection("heartbeat_stop"))
     bench.flush()
     silent_from = len(bench.frames.frames)
@@ -72,7 +72,7 @@ def test_heartbeat_stop_makes_the_node_silent(bench: Bench) -> None:
     node_frames = [cid for cid, _, _ in bench.frames.frames[silent_from:] if cid & 0x7F == 4]
     assert node_frames == []
     drive.power_on()
-    wait_until(lambda: bench.frames.of(0x704)[-1:] == [b"\x00"] or b"\x7f" in bench.frames.of(0x704)[-1:], what="boot after power on")
+    wait_for(lambda: bench.frames.of(0x704)[-1:] == [b"\x00"] or b"\x7f" in bench.frames.of(0x704)[-1:], what="boot after power on")
     assert drive.state is State.SWITCH_ON_DISABLED and drive.nmt_state == 0x7F
 
 
@@ -243,7 +243,7 @@ def test_fault_injected_before_start_fires_right_after_boot(channel: str) -> Non
                 frames.append(msg)
             return [bytes(m.data[:2]) for m in frames if m.arbitration_id == 0x8C]
 
-        wait_until(lambda: emcy_codes() == [b"\x10\x42", b"\x10\x32"], what="both EMCYs after the boot-up")
+        wait_for(lambda: emcy_codes() == [b"\x10\x42", b"\x10\x32"], what="both EMCYs after the boot-up")
         assert frames[0].arbitration_id == 0x70C and bytes(frames[0].data) == b"\x00"
         assert drive.state is State.FAULT
     finally:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import struct
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer, decode_consumer_entry
 
-from conftest import Bench, wait_until
+from conftest import Bench, wait_for
 
 MASTER_ID = 0x7F
 
@@ -36,7 +36,7 @@ def test_drive_faults_with_emcy_8130_when_the_master_heartbeat_stops(bench: Benc
     bench.enable(2)
     for _ in range(3):
         bench.send(0x700 + MASTER_ID, b"\x05")
-    wait_until(lambda: bench.frames.of(0x82), what="EMCY after the master went silent")
+    wait_for(lambda: bench.frames.of(0x82), what="EMCY after the master went silent")
     assert struct.unpack_from("<H", bench.frames.of(0x82)[0])[0] == 0x8130
     assert drive.state is State.FAULT
 

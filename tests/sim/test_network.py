@@ -11,7 +11,7 @@ from types import SimpleNamespace
 import can
 import pytest
 
-from nurbsmotion.cia402 import NmtState
+from nurbsmotion.can.cia402 import NmtState
 from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, SimNetwork
 from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings

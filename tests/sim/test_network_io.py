@@ -15,7 +15,7 @@ from nurbsmotion.fieldbus.io import IoNode
 from nurbsmotion.sim import SimNetwork
 from nurbsmotion.sim.homing import HomeSensors
 
-from conftest import wait_until
+from conftest import wait_for
 
 
 def _machine(tmp_path: Path, channel: str, io: bool = True):
@@ -42,14 +42,14 @@ def test_the_io_section_starts_a_node_whose_inputs_a_test_presses_by_name(tmp_pa
         try:
             io.bring_up(heartbeat_producer_ms=50)
             assert io.inputs == {"estop": False, "limit_x_min": False}
-            wait_until(lambda: node.nmt_state == 0x05, what="NMT start reached the node")
+            wait_for(lambda: node.nmt_state == 0x05, what="NMT start reached the node")
             net.set_io_input("estop", True)
-            wait_until(lambda: io.input("estop") is True, what="estop pressed via TPDO1")
+            wait_for(lambda: io.input("estop") is True, what="estop pressed via TPDO1")
             assert not node.input(0)  # the wire opened
             net.set_io_input("limit_x_min", True)
-            wait_until(lambda: io.input("limit_x_min") is True, what="limit via TPDO1")
+            wait_for(lambda: io.input("limit_x_min") is True, what="limit via TPDO1")
             io.set_outputs({"coolant_flood": True})
-            wait_until(lambda: node.output(0), what="coolant output via RPDO1")
+            wait_for(lambda: node.output(0), what="coolant output via RPDO1")
         finally:
             io.close()
             master.disconnect()

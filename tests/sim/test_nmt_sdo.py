@@ -6,7 +6,7 @@ import canopen
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from conftest import Bench, wait_until
+from conftest import Bench, wait_for
 
 START, STOP, PRE_OP, RESET_NODE, RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
 
@@ -14,7 +14,7 @@ START, STOP, PRE_OP, RESET_NODE, RESET_COMM = 0x01, 0x02, 0x80, 0x81, 0x82
 def test_boot_up_then_heartbeat_in_pre_operational(bench: Bench) -> None:
     drive, _ = bench.add(3)
     assert bench.frames.of(0x703)[0] == b"\x00"
-    wait_until(lambda: b"\x7f" in bench.frames.of(0x703), what="heartbeat")
+    wait_for(lambda: b"\x7f" in bench.frames.of(0x703), what="heartbeat")
     assert drive.nmt_state == 0x7F
 
 
@@ -22,7 +22,7 @@ def test_heartbeat_period_follows_0x1017(bench: Bench) -> None:
     _, node = bench.add(3)
     node.sdo[0x1017].raw = 10
     bench.frames.clear()
-    wait_until(lambda: len(bench.frames.of(0x703)) >= 5, timeout_s=1.0, what="5 heartbeats at 10 ms")
+    wait_for(lambda: len(bench.frames.of(0x703)) >= 5, timeout_s=1.0, what="5 heartbeats at 10 ms")
     node.sdo[0x1017].raw = 0
     count = len(bench.frames.of(0x703))
     node.sdo[0x1017].raw = 0  # an SDO round trip later no heartbeat is pending any more
@@ -35,7 +35,7 @@ def test_nmt_commands_change_the_heartbeat_state(bench: Bench, command: int, sta
     drive, node = bench.add(4)
     node.sdo[0x1017].raw = 10
     bench.nmt(command, 4)
-    wait_until(lambda: bench.frames.of(0x704)[-1:] == [bytes([state])], what=f"heartbeat state {state:#x}")
+    wait_for(lambda: bench.frames.of(0x704)[-1:] == [bytes([state])], what=f"heartbeat state {state:#x}")
     assert drive.nmt_state == state
 
 
@@ -43,7 +43,7 @@ def test_broadcast_nmt_reaches_every_drive(bench: Bench) -> None:
     a, _ = bench.add(1)
     b, _ = bench.add(2)
     bench.nmt(START, 0)
-    wait_until(lambda: a.nmt_state == b.nmt_state == 0x05, what="both operational")
+    wait_for(lambda: a.nmt_state == b.nmt_state == 0x05, what="both operational")
 
 
 @pytest.mark.parametrize("command", [RESET_NODE, RESET_COMM])
@@ -54,7 +54,7 @@ def test_reset_resends_boot_up_and_restores_communication_defaults(bench: Bench,
     bench.nmt(START, 5)
     bench.frames.clear()
     bench.nmt(command, 5)
-    wait_until(lambda: b"\x00" in bench.frames.of(0x705), what="boot-up after reset")
+    wait_for(lambda: b"\x00" in bench.frames.of(0x705), what="boot-up after reset")
     assert drive.nmt_state == 0x7F
     assert node.sdo[0x1017].raw == 100
     # reset communication keeps the application parameters, reset node restores them too
@@ -117,11 +117,11 @@ def test_sdo_is_silent_in_stopped(bench: Bench) -> None:
     node.sdo.RESPONSE_TIMEOUT = 0.2
     node.sdo.MAX_RETRIES = 1
     bench.nmt(STOP, 8)
-    wait_until(lambda: bench.sim[8].nmt_state == 0x04, what="stopped")
+    wait_for(lambda: bench.sim[8].nmt_state == 0x04, what="stopped")
     with pytest.raises(canopen.SdoCommunicationError):
         node.sdo[0x6041].raw
     bench.nmt(PRE_OP, 8)
-    wait_until(lambda: bench.sim[8].nmt_state == 0x7F, what="pre-operational")
+    wait_for(lambda: bench.sim[8].nmt_state == 0x7F, what="pre-operational")
     assert node.sdo[0x6041].raw & 0x4F == 0x40
 
 
@@ -130,7 +130,7 @@ def test_no_pdos_outside_operational(bench: Bench, state_command: int) -> None:
     drive, node = bench.add(9)
     bench.enable(9)
     bench.nmt(state_command, 9)
-    wait_until(lambda: drive.nmt_state in (0x7F, 0x04) and drive.nmt_state != 0x05, what="not operational")
+    wait_for(lambda: drive.nmt_state in (0x7F, 0x04) and drive.nmt_state != 0x05, what="not operational")
     bench.send(0x209, bytes([0x0F, 0, 0x10, 0x27, 0, 0]))  # RPDO1: enable, target 10000
     bench.send(0x80, b"")
     bench.flush()

@@ -7,7 +7,7 @@ import struct
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from conftest import Bench, wait_until
+from conftest import Bench, wait_for
 
 
 def test_master_remaps_rpdo_and_tpdo_with_canopen(bench: Bench) -> None:
@@ -95,7 +95,7 @@ def test_short_rpdo_gives_emcy_8210(bench: Bench) -> None:
     drive, _ = bench.add(6)
     bench.operational(6)
     bench.send(0x206, b"\x06\x00")
-    wait_until(lambda: bench.frames.of(0x86), what="EMCY")
+    wait_for(lambda: bench.frames.of(0x86), what="EMCY")
     code, register = struct.unpack_from("<HB", bench.frames.of(0x86)[-1])
     assert code == 0x8210 and drive.stats.rpdo_length_errors == 1
 
@@ -105,7 +105,7 @@ def test_asynchronous_rpdo_takes_effect_at_once(bench: Bench) -> None:
     node.sdo[0x1400][2].raw = 255
     bench.operational(7)
     bench.send(0x207, struct.pack("<Hi", 0x06, 0))
-    wait_until(lambda: drive.controlword == 0x06, what="controlword without SYNC")
+    wait_for(lambda: drive.controlword == 0x06, what="controlword without SYNC")
 
 
 @pytest.mark.parametrize("trans_type", [0, 254, 255])

@@ -7,10 +7,10 @@ import struct
 
 import pytest
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.sim import SetpointRecord, read_csv
 
-from conftest import Bench, rpdo, wait_until
+from conftest import Bench, rpdo, wait_for
 
 CSP, IP = 8, 7
 
@@ -29,7 +29,7 @@ def test_setpoint_received_after_sync_n_is_applied_at_sync_n_plus_1(bench: Bench
     drive, _ = bench.add_enabled(2, mode, lag_cycles=0)
     bench.sync()  # SYNC 1
     bench.send(cob + 2, rpdo(controlword, 1000))
-    wait_until(lambda: drive.stats.rpdos_received == 1, what="RPDO received")
+    wait_for(lambda: drive.stats.rpdos_received == 1, what="RPDO received")
     assert len(drive.recorder) == 0 and drive.position_actual == 0  # not before the next SYNC
     bench.sync()  # SYNC 2
     assert drive.recorder.records() == [SetpointRecord(2, mode, 1000, 1000, -1, time_ns(drive, bench))]
@@ -69,7 +69,7 @@ def test_two_rpdos_before_one_sync_the_last_wins_and_is_counted(bench: Bench) ->
     bench.sync()
     bench.send(0x204, rpdo(0x0F, 100))
     bench.send(0x204, rpdo(0x0F, 200))
-    wait_until(lambda: drive.stats.rpdos_received == 2, what="both RPDOs")
+    wait_for(lambda: drive.stats.rpdos_received == 2, what="both RPDOs")
     bench.sync()
     assert [r.setpoint_counts for r in drive.recorder.records()] == [200]
     assert drive.stats.rpdos_overwritten == 1
@@ -90,7 +90,7 @@ def test_controlword_by_rpdo_drives_the_state_machine_at_sync(bench: Bench) -> N
     bench.sync()
     for word, state in ((0x06, State.READY_TO_SWITCH_ON), (0x07, State.SWITCHED_ON), (0x0F, State.OPERATION_ENABLED)):
         bench.send(0x205, rpdo(word, 0))
-        wait_until(lambda: drive.stats.rpdos_received > 0, what="RPDO")
+        wait_for(lambda: drive.stats.rpdos_received > 0, what="RPDO")
         bench.sync()
         assert drive.state is state
         assert state_of_statusword(tpdo1(bench.frames.of(0x185)[-1])[0]) is state
@@ -122,7 +122,7 @@ def test_sync_index_restarts_when_entering_operational(bench: Bench) -> None:
     bench.sync()
     assert drive.sync_index == 2
     bench.nmt(0x80, 8)
-    wait_until(lambda: drive.nmt_state == 0x7F, what="pre-operational")
+    wait_for(lambda: drive.nmt_state == 0x7F, what="pre-operational")
     bench.operational(8)
     bench.sync()
     assert drive.sync_index == 1

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim.statemachine import apply_controlword
 
 S = State

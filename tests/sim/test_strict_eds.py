@@ -9,9 +9,9 @@ from pathlib import Path
 import pytest
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 
-from conftest import Bench, derived_eds, rpdo, variable_section, wait_until
+from conftest import Bench, derived_eds, rpdo, variable_section, wait_for
 
 UINT8, UINT16, UINT32 = 0x5, 0x6, 0x7
 
@@ -137,7 +137,7 @@ def test_ip_and_csp_cannot_run_without_a_cycle_period(bench: Bench, tmp_path: Pa
     for word in (0x06, 0x07, controlword):
         node.sdo[0x6040].raw = word
     assert drive.state is State.FAULT and drive.axis.error_code == 0x6320
-    wait_until(lambda: 0x6320 in emcy_codes(bench, 2), what="EMCY 0x6320")
+    wait_for(lambda: 0x6320 in emcy_codes(bench, 2), what="EMCY 0x6320")
     node.sdo[0x60C2][1].raw = 4  # the write the master forgot: now it runs
     for word in (0x80, 0x06, 0x07, controlword):
         node.sdo[0x6040].raw = word
@@ -229,5 +229,5 @@ def test_the_sync_counter_is_checked_against_0x1019(bench: Bench, tmp_path: Path
     bench.sync(counter=3)  # counter 2 lost on the way
     assert drive.stats.sync_counter_jumps == 1
     bench.sync()  # no counter byte although 0x1019 > 0
-    wait_until(lambda: 0x8240 in emcy_codes(bench, 2), what="EMCY 0x8240")
+    wait_for(lambda: 0x8240 in emcy_codes(bench, 2), what="EMCY 0x8240")
     assert drive.stats.sync_length_errors == 1

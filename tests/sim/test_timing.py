@@ -11,11 +11,11 @@ import struct
 import numpy as np
 import pytest
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.sim import MissingSetpoint, SetpointSource, SyncSettings, stream_report
 from nurbsmotion.sim.timing import SyncMonitor, missed_ticks
 
-from conftest import Bench, ManualClock, rpdo, wait_until
+from conftest import Bench, ManualClock, rpdo, wait_for
 
 T = 1e-3
 SW_SYNC = 1 << 8
@@ -196,7 +196,7 @@ def test_sync_loss_faults_with_emcy_8700_after_n_periods(bench: Bench) -> None:
     clock.advance(0.2 * T)
     drive.tick()
     assert drive.state is State.FAULT and drive.axis.error_code == 0x8700 and drive.stats.sync_losses == 1
-    wait_until(lambda: 0x8700 in emcy_codes(bench, 2), what="EMCY 0x8700")
+    wait_for(lambda: 0x8700 in emcy_codes(bench, 2), what="EMCY 0x8700")
 
 
 def test_without_loss_periods_a_drive_waits_for_sync_forever(bench: Bench) -> None:
@@ -230,11 +230,11 @@ def test_rpdo_event_timer_expiry_sends_emcy_8250_and_faults(bench: Bench) -> Non
     drive.tick()
     assert drive.state is State.OPERATION_ENABLED  # monitoring starts with the first RPDO
     bench.send(0x202, rpdo(0x0F, 0))
-    wait_until(lambda: drive.stats.rpdos_received == 1, what="RPDO")
+    wait_for(lambda: drive.stats.rpdos_received == 1, what="RPDO")
     clock.advance(0.0099)
     drive.tick()
     assert drive.state is State.OPERATION_ENABLED
     clock.advance(0.0002)
     drive.tick()
     assert drive.state is State.FAULT and drive.axis.error_code == 0x8250 and drive.stats.rpdo_timeouts == 1
-    wait_until(lambda: 0x8250 in emcy_codes(bench, 2), what="EMCY 0x8250")
+    wait_for(lambda: 0x8250 in emcy_codes(bench, 2), what="EMCY 0x8250")

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from nurbsmotion.cia402 import State, state_of_statusword
+from nurbsmotion.can.cia402 import State, state_of_statusword
 from nurbsmotion.sim import FaultInjection
 
-from conftest import Bench, open_bench, rpdo, wait_until
+from conftest import Bench, open_bench, rpdo, wait_for
 
 pytestmark = pytest.mark.vcan
 CHANNEL = "vcan0"
@@ -31,7 +31,7 @@ def test_boot_sdo_and_heartbeat_on_vcan(vcan_bench: Bench) -> None:
     drive, node = vcan_bench.add(1, identity=(0x11, 0x22))
     assert (node.sdo[0x1018][1].raw, node.sdo[0x1018][2].raw) == (0x11, 0x22)
     node.sdo[0x1017].raw = 20
-    wait_until(lambda: b"\x7f" in vcan_bench.frames.of(0x701), what="heartbeat")
+    wait_for(lambda: b"\x7f" in vcan_bench.frames.of(0x701), what="heartbeat")
 
 
 def test_csp_stream_on_vcan_is_applied_one_sync_later_and_recorded(vcan_bench: Bench) -> None:

@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 import yaml
 
-from nurbsmotion.cia402 import COB_TPDO
+from nurbsmotion.can.cia402 import COB_TPDO
 from nurbsmotion.config import load_config
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT
 from nurbsmotion.service.verify import held_plan_held, planned_counts
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus
-from tests.integration.daemon_helpers import DaemonProcess, wait_until
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus
+from tests.integration.daemon_helpers import DaemonProcess
+from tests.helpers import wait_for
 
 pytestmark = pytest.mark.vcan
 
@@ -140,7 +141,7 @@ def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_a
     nodes = [a.node_id for a in daemon.config.axes]
     answers = DriveAnswers(vcan0, nodes)
     try:
-        wait_until(lambda: all(answers.positions.values()), timeout_s=JOB_TIMEOUT_S,
+        wait_for(lambda: all(answers.positions.values()), timeout_s=JOB_TIMEOUT_S,
                    what="each drive's TPDO1 on vcan0 before the job", poll_s=DriveAnswers.DRAIN_EVERY_S)
         job = daemon.wait_job_end(submit_wang(daemon), timeout_s=JOB_TIMEOUT_S)
         # The drives' process may still be working through its socket's backlog (inside UML it
@@ -149,7 +150,7 @@ def test_wang_table1_runs_to_completion_and_the_drives_applied_the_plan(daemon_a
         wanted = [rows + ANSWERS_AFTER_THE_LAST_ROW for rows in
                   rows_from_first_move(planned_counts(Path(job["folder"]), daemon.config))]
         print(f"job ended: answers since moving {[answers.answered_since_moving(n) for n in nodes]} of {wanted}")
-        wait_until(lambda: all(answers.answered_since_moving(n) >= w for n, w in zip(nodes, wanted)),
+        wait_for(lambda: all(answers.answered_since_moving(n) >= w for n, w in zip(nodes, wanted)),
                    timeout_s=JOB_TIMEOUT_S, what=f"the drives to answer every planned row ({wanted})",
                    poll_s=DriveAnswers.DRAIN_EVERY_S)
         print(f"answered: {[answers.answered_since_moving(n) for n in nodes]}")  # shown with -rP or a failure
@@ -193,7 +194,7 @@ def test_killing_the_drives_process_faults_the_job_with_a_heartbeat_loss(daemon_
     assert outcome["outcome"] == "fault", outcome
     assert outcome["fault"]["kind"] == "heartbeat" and outcome["fault"]["node"] in (1, 2, 3), outcome
     assert 0 < outcome["sent"] < outcome["planned"]
-    wait_until(lambda: daemon.request("status")["state"] == "fault", FAULT_TIMEOUT_S, "the daemon in fault")
+    wait_for(lambda: daemon.request("status")["state"] == "fault", FAULT_TIMEOUT_S, "the daemon in fault")
     refused = daemon.request("submit", name=WANG_PROGRAM.name, program=WANG_PROGRAM.read_text())
     assert refused["ok"] is False and "reset" in refused["error"]
     assert daemon.proc is not None and daemon.proc.poll() is None, "the daemon must survive its drives"

@@ -12,10 +12,10 @@ import pytest
 import yaml
 
 from nurbsmotion.config import load_config
-from tests.integration.daemon_helpers import wait_until
 from tests.vcan.conftest import SLOW_GUEST_CYCLE_PERIOD_S
 from tests.vcan.test_daemon_on_vcan import VcanDaemon, start_daemon
 from tests.vcan.two_processes import SimProcess
+from tests.helpers import wait_for
 
 # Out of quarantine since 2026-11-25: at 4 ms the five nodes' traffic saturated the guest's CPU
 # and the drives' process lagged the wire by seconds (SDO answers > 5 s, stale statuswords);
@@ -70,7 +70,7 @@ def test_home_then_jog_on_vcan(machine):
         "mdi: axis X, Y, Z not homed (require_homing is on): run nurbsmotion home first"
 
     assert daemon.request("home")["axes"] == ["Z", "X", "Y"]
-    homing = wait_until(lambda: (h := daemon.request("status")["homing"])["busy"] is False and h,
+    homing = wait_for(lambda: (h := daemon.request("status")["homing"])["busy"] is False and h,
                         HOMING_TIMEOUT_S, "the homing to end", poll_s=0.2)
     assert homing["error"] is None, daemon.log()[-6000:]
     assert homing["axes"] == {"X": "homed", "Y": "homed", "Z": "homed"}
@@ -103,9 +103,9 @@ def test_home_then_jog_on_vcan(machine):
     job = daemon.request("submit", name="hold.nc", program="G21 G90\nG01 X40 F600\nG01 Y20\n")
     assert job["ok"], (job, daemon.log()[-4000:])
     job_id = job["job"]["id"]
-    wait_until(lambda: _axes(daemon)["X"][0] > 15.0, JOB_TIMEOUT_S, "the program moving", poll_s=0.05)
+    wait_for(lambda: _axes(daemon)["X"][0] > 15.0, JOB_TIMEOUT_S, "the program moving", poll_s=0.05)
     assert daemon.request("hold")["state"] == "pausing"
-    held = wait_until(lambda: (s := daemon.request("status"))["state"] == "held" and s, JOB_TIMEOUT_S,
+    held = wait_for(lambda: (s := daemon.request("status"))["state"] == "held" and s, JOB_TIMEOUT_S,
                       "the job held", poll_s=0.05)
     assert held["job"]["id"] == job_id
     # 'held' is the master's phase at its horizon, ahead of the wire: wait until the drive's
@@ -116,7 +116,7 @@ def test_home_then_jog_on_vcan(machine):
         after = _axes(daemon)
         return after if before["X"][0] == after["X"][0] and abs(after["X"][0] - after["X"][1]) < 0.01 else None
 
-    rest = wait_until(settled, JOB_TIMEOUT_S, "the drive at rest where the hold ended", poll_s=0.05)
+    rest = wait_for(settled, JOB_TIMEOUT_S, "the drive at rest where the hold ended", poll_s=0.05)
     assert 15.0 < rest["X"][0] < 40.0
     time.sleep(0.5)
     assert _axes(daemon)["X"][0] == rest["X"][0]  # held: nothing more was commanded

@@ -4,27 +4,23 @@ send_periodic on socketcan), e-stop in TPDO1, outputs by RPDO1."""
 
 from __future__ import annotations
 
-import time
+import functools
+
 
 import canopen
 import pytest
 
 from nurbsmotion.fieldbus.io import IoNode
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.sim.io_node import SimIoNode
+from tests.helpers import wait_for as _wait_for
+
+wait_for = functools.partial(_wait_for, timeout_s=3.0, poll_s=0.002)  # this module's waits
 
 pytestmark = pytest.mark.vcan
 
 IO = IoConfig(21, inputs=(IoSignal("estop", 0, active_low=True), IoSignal("limit_z_max", 5)),
               outputs=(IoSignal("coolant_flood", 0),))
-
-
-def _wait(condition, what: str, timeout_s: float = 3.0) -> None:
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out waiting for {what}")
-        time.sleep(0.002)
 
 
 def test_io_node_on_vcan0(vcan0: str) -> None:
@@ -42,11 +38,11 @@ def test_io_node_on_vcan0(vcan0: str) -> None:
         io = IoNode(master, IO, on_change=lambda name, active: changes.append((name, active)))
         io.bring_up(heartbeat_producer_ms=20)
         assert io.inputs == {"estop": False, "limit_z_max": False}
-        _wait(lambda: heartbeats[-1:] == [b"\x05"], "OPERATIONAL heartbeat")
+        wait_for(lambda: heartbeats[-1:] == [b"\x05"], what="OPERATIONAL heartbeat")
         sim.set_input(0, False)
-        _wait(lambda: io.input("estop") is True, "e-stop through TPDO1")
+        wait_for(lambda: io.input("estop") is True, what="e-stop through TPDO1")
         io.set_outputs({"coolant_flood": True})
-        _wait(lambda: sim.output(0), "coolant output through RPDO1")
+        wait_for(lambda: sim.output(0), what="coolant output through RPDO1")
         assert changes == [("estop", True)]
         io.close()
     finally:

@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 import nurbsmotion
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus
 from tests.vcan.conftest import CYCLE_PERIOD_S
 from tests.vcan.two_processes import AXES, strictly_increasing_job, write_vcan_config
 

@@ -11,8 +11,8 @@ import pytest
 import yaml
 
 from nurbsmotion.config import load_config
-from tests.integration.daemon_helpers import wait_until
 from tests.vcan.test_daemon_on_vcan import JOB_TIMEOUT_S, WANG_PROGRAM, VcanDaemon, start_daemon
+from tests.helpers import wait_for
 
 pytestmark = pytest.mark.vcan
 # Inside User-Mode Linux the drives' process may be descheduled for hundreds of ms on a busy
@@ -77,7 +77,7 @@ def test_sigkill_of_the_daemon_faults_every_drive_within_the_consumer_time(daemo
         wanted = {f"sim.heartbeat_lost node={n} producer={master}": n for n in nodes}
         return {n: line for text, n in wanted.items() for line in sim.log[first_line:] if text in line}
     try:
-        wait_until(lambda: set(lost()) == set(nodes), consumer_s + SCHEDULING_S + 10.0, "every drive to report the loss")
+        wait_for(lambda: set(lost()) == set(nodes), consumer_s + SCHEDULING_S + 10.0, "every drive to report the loss")
     except AssertionError as missing:
         raise AssertionError(f"{missing}\n{diagnosis()}") from None
     delays = {n: round(logged_at(line) - killed, 3) for n, line in lost().items()}

@@ -1,4 +1,4 @@
-"""The batched SocketCAN bus (nurbsmotion/socketcan_batch.py) on a real vcan0: every frame
+"""The batched SocketCAN bus (nurbsmotion/can/socketcan_batch.py) on a real vcan0: every frame
 received once, in order, with its kernel timestamp, however many wait in the socket; frames
 the receive thread sends leave after its batch, in order; another thread's frame leaves at
 once, but never before a frame the receive thread sent earlier."""
@@ -11,7 +11,7 @@ import time
 import can
 import pytest
 
-from nurbsmotion.socketcan_batch import BATCH_FRAMES, BatchedSocketcanBus
+from nurbsmotion.can.socketcan_batch import BATCH_FRAMES, BatchedSocketcanBus
 
 pytestmark = pytest.mark.vcan
 
@@ -110,7 +110,7 @@ def test_another_threads_frame_leaves_at_once_after_the_receive_threads_earlier_
 def test_frames_read_but_not_handed_out_count_as_waiting(vcan0):
     """The drives' arrival clock (arrival_clock.py) asks the bus whether frames wait: the
     frames of a batch already read into the bus are invisible to select() but still wait."""
-    from nurbsmotion.arrival_clock import socket_pending
+    from nurbsmotion.can.arrival_clock import socket_pending
 
     bus = BatchedSocketcanBus(channel=vcan0)
     sender = can.Bus(interface="socketcan", channel=vcan0)
@@ -134,7 +134,7 @@ def test_the_batch_notifier_hands_out_every_frame_in_order_with_one_wake_up_per_
     """socketcan_batch.BatchNotifier (what the master and `nurbsmotion sim` run): every frame to
     every listener once, in order; a burst waiting in the socket is one wake-up; the read time
     of each batch is kept (the master's arrival clock uses it instead of a clock read per frame)."""
-    from nurbsmotion.socketcan_batch import BatchNotifier
+    from nurbsmotion.can.socketcan_batch import BatchNotifier
 
     bus = BatchedSocketcanBus(channel=vcan0)
     got: list[tuple[int, bytes, float]] = []

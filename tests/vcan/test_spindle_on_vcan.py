@@ -11,9 +11,9 @@ import pytest
 import yaml
 
 from nurbsmotion.config import load_config
-from tests.integration.daemon_helpers import wait_until
 from tests.vcan.conftest import SLOW_GUEST_CYCLE_PERIOD_S
 from tests.vcan.test_daemon_on_vcan import JOB_TIMEOUT_S, VcanDaemon, start_daemon
+from tests.helpers import wait_for
 
 # Out of quarantine since 2026-11-25: at 4 ms the five nodes' traffic saturated the guest's CPU
 # and the spindle's SDO answers came later than 3 s; the machine here runs at
@@ -42,7 +42,7 @@ def test_a_spindle_program_waits_for_speed_and_switches_coolant_on_vcan(vcan0, t
     sim = sim_process(daemon.config_path)
     try:
         start_daemon(daemon)
-        status = wait_until(lambda: (s := daemon.request("status"))["spindle"]["actual_rpm"] is not None and s,
+        status = wait_for(lambda: (s := daemon.request("status"))["spindle"]["actual_rpm"] is not None and s,
                             20.0, "the spindle's first 0x606C")
         assert status["spindle"]["drive_state"] == "OPERATION ENABLED" and status["io"]["estop_active"] is False
         response = daemon.request("submit", name="mill.nc", program=PROGRAM)

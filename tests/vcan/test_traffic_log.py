@@ -11,7 +11,7 @@ import can
 import numpy as np
 import pytest
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.pdo import RPDO_FORMAT
 from tests.vcan.two_processes import (AXES, JobRun, assert_applied_once_in_order, retrying_a_stuck_bring_up, run_job,
                                       write_vcan_config)

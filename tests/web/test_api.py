@@ -17,7 +17,8 @@ from aiohttp import web
 from nurbsmotion.web.app import WebSettings, make_app
 from tests.web.ports import free_port
 from nurbsmotion.web.auth import KeyStore, Role
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.integration.daemon_helpers import daemon_in_process
+from tests.helpers import wait_for
 
 PROGRAM = "G21 G90\nG01 X4 Y3 F3000\nG01 X0 Y0\n"
 LONG = "G21 G90\nG01 X60 F600\n"
@@ -59,7 +60,7 @@ async def get_json(session: aiohttp.ClientSession, method: str, url: str, **kw: 
 
 
 def back_at_origin(daemon) -> None:
-    wait_until(lambda: daemon.controller.status()["job"] is None, 30.0, "the job to end")
+    wait_for(lambda: daemon.controller.status()["job"] is None, 30.0, "the job to end")
 
 
 def test_status_jobs_and_a_program_run_through_the_api(daemon):
@@ -185,7 +186,7 @@ def test_a_dropped_websocket_during_a_continuous_jog_stops_the_axis(daemon):
             await asyncio.sleep(0.2)
             await ws.send_json({"id": 2, "cmd": "jog_renew"})
         await ws.close()  # the tablet's Wi-Fi drops: no more renewals
-        await asyncio.to_thread(wait_until, lambda: daemon.controller.status()["job"] is None, 10.0,
+        await asyncio.to_thread(wait_for, lambda: daemon.controller.status()["job"] is None, 10.0,
                                 "the jog stopped by its lease")
         status = await asyncio.to_thread(daemon.controller.status)
         x = status["axes"][0]["commanded_mm"]

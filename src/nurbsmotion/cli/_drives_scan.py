@@ -123,7 +123,7 @@ def run_scan(args: argparse.Namespace) -> int:
 
 def _write_config(out_path: Path, reports: list[NodeReport], matches: dict[int, eds_catalog.EdsMatch],
                   args: argparse.Namespace) -> None:
-    from nurbsmotion.starting_config import BusSettings, starting_config
+    from nurbsmotion.cli._starting_config import BusSettings, starting_config
 
     stamp = time.strftime("on %Y-%m-%d %H:%M UTC", time.gmtime())
     text = starting_config(reports, matches, BusSettings(args.interface, args.channel, args.bitrate), out_path, stamp)

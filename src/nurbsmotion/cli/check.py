@@ -55,7 +55,8 @@ def check_on_machine(args: argparse.Namespace, config: MachineConfig, options: R
     own checks: spindle, coolant, holds, limits); InputError names the program line."""
     import numpy as np
 
-    from nurbsmotion.service.planner import axis_columns, plan_job
+    from nurbsmotion.service.job_common import axis_columns
+    from nurbsmotion.service.planner import plan_job
 
     start_mm = np.array(args.start, dtype=float)[axis_columns(config)]
     text = Path(args.program).read_text(encoding="utf-8-sig")  # read_program read it already: it is readable

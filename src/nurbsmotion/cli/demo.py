@@ -23,8 +23,9 @@ from nurbsmotion import data
 from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
+from nurbsmotion.errors import Refused
 from nurbsmotion.service.client import Client, RequestFailed
-from nurbsmotion.homing_config import HomingConfig
+from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.service.daemon import Daemon
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.verify import drive_report
@@ -107,7 +108,7 @@ def _home_jog_mdi(config: MachineConfig) -> None:
     """Home every axis, jog X+10, one MDI line: each through the control API as a client would."""
     from nurbsmotion.cli.home import follow_homing
     from nurbsmotion.errors import InputError
-    from nurbsmotion.homing_config import homing_method_name
+    from nurbsmotion.config.homing import homing_method_name
 
     with Client(config.control.socket) as client:
         names = client.call("home")["axes"]
@@ -176,8 +177,6 @@ def plan_line(plan: dict[str, Any]) -> str:
 def _stop_failed_job(daemon: Daemon, job: dict[str, Any], err: BaseException) -> None:
     """The demo failed (or was interrupted) while its job runs: stop the job along the path
     with a reason that says so, not the daemon's "asked to end", and name its record."""
-    from nurbsmotion.service.controller import Refused
-
     why = "was interrupted (Ctrl-C)" if isinstance(err, KeyboardInterrupt) else f"failed: {type(err).__name__}: {err}"
     controller = daemon.controller
     if controller is None:
@@ -235,7 +234,7 @@ def _plot(folder: Path, config: MachineConfig) -> Path | None:
     from nurbsmotion.planning.measure import measure
     from nurbsmotion.planning.plot import plot_run
     from nurbsmotion.planning.trace import read_trace
-    from nurbsmotion.service.planner import parse
+    from nurbsmotion.service.job_common import parse
 
     plan = json.loads((folder / "plan.json").read_text(encoding="utf-8"))
     trace = read_trace(folder / "trace.csv")

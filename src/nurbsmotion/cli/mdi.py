@@ -7,7 +7,7 @@ import argparse
 from nurbsmotion.cli._control import add_socket_arguments, with_client
 from nurbsmotion.cli.run import start_and_follow
 
-MDI_NAME = "<mdi>"  # service.planner.MDI_NAME (not imported: the client stays light)
+MDI_NAME = "<mdi>"  # service.job_common.MDI_NAME (not imported: the client stays light)
 HELP = "run G-code lines (MDI) from where the axes are; each argument is one line"
 
 

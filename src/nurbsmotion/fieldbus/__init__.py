@@ -5,7 +5,8 @@ program and sim are never imported here.
 """
 
 from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, cyclic_bus_load, frame_bits
-from nurbsmotion.fieldbus.master import Job, Master
+from nurbsmotion.fieldbus.job import Job
+from nurbsmotion.fieldbus.master import Master
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, JobResult, MasterStatus
 
 __all__ = ["AxisStatus", "BusLoad", "CycleStats", "FaultReport", "Job", "JobResult", "Master", "MasterStatus",

@@ -20,8 +20,8 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, datatypes
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import AxisConfig
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan, PdoSetup, ReadBack, Write, describe_value
@@ -60,6 +60,31 @@ class BootupWatch:
         for event in self._events.values():
             event.wait(max(0.0, end - time.monotonic()))
         return [n for n, e in self._events.items() if not e.is_set()]
+
+    def twin_error(self) -> FieldbusError | None:
+        """Two boot-ups of one node after one NMT reset: two devices with that node id."""
+        for node_id, count in self.count.items():
+            if count > 1:
+                return FieldbusError(f"node {node_id}: bring-up step 'boot-up': {count} boot-up messages after one "
+                                     f"NMT reset: two devices with the same node id?")
+        return None
+
+
+def reset_and_await_bootup(network: canopen.Network, bootup: BootupWatch, axes: Iterable[AxisConfig],
+                           timeout_s: float) -> None:
+    """NMT reset communication to every axis, then each one's boot-up, or a FieldbusError
+    naming the missing nodes."""
+    axes = list(axes)
+    bootup.arm()
+    for axis in axes:
+        network[axis.node_id].nmt.send_command(c.NmtCommand.RESET_COMMUNICATION)
+    missing = bootup.wait(timeout_s)
+    if missing:
+        names = {a.node_id: a.name for a in axes}
+        listed = ", ".join(f"{n} (axis {names[n]})" for n in missing)
+        raise FieldbusError(f"node {missing[0]}: bring-up step 'boot-up': no boot-up message within "
+                            f"{timeout_s * 1000:.0f} ms after NMT reset communication "
+                            f"(missing: node {listed}; unpowered, unplugged or wrong node id?)")
 
 
 class SdoTrail:
@@ -236,3 +261,23 @@ def read_position(trail: SdoTrail) -> int:
 
 def read_statusword(trail: SdoTrail) -> int:
     return read(trail, "read statusword", c.STATUSWORD)
+
+
+def set_up_drive(network: canopen.Network, trail: SdoTrail, axis: AxisConfig, plan: DrivePlan,
+                 master_heartbeat: bool) -> tuple[int, int]:
+    """Check identity and mode, write the plan, read where the drive stands: (position actual,
+    statusword). ``master_heartbeat``: the master sends one, so a drive that cannot watch it
+    is named."""
+    network[axis.node_id].emcy.reset()  # canopen keeps every EMCY in a list: start it empty
+    check_identity(trail, axis)
+    check_supported_mode(trail, plan)
+    configure(trail, plan)
+    position, statusword = read_position(trail), read_statusword(trail)
+    log.info(kv("drive_configured", node=axis.node_id, axis=axis.name, mode=axis.mode,
+                rpdos=len(plan.layout.rpdos), tpdos=len(plan.layout.tpdos),
+                skipped=",".join(s.what for s in plan.skipped), position=position,
+                statusword=f"0x{statusword:04X}"))
+    unwatched = next((s for s in plan.skipped if s.what == "0x1016:01" and master_heartbeat), None)
+    if unwatched is not None:  # an operator must know which drive keeps moving if the daemon dies
+        log.warning(kv("master_heartbeat_unwatched", node=axis.node_id, axis=axis.name, reason=unwatched.reason))
+    return position, statusword

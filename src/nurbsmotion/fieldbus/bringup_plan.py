@@ -22,19 +22,19 @@ import enum
 import struct
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable
+from typing import Callable
 
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
-from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
+from nurbsmotion.config import MachineConfig, axis_where
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.busload import HEARTBEAT_DLC, SYNC_DLC, fits_following_error_tpdo, frame_bits
+from nurbsmotion.fieldbus.drive_state import mode_of
+from nurbsmotion.fieldbus.homing_check import AxisHoming, plan_homing
 from nurbsmotion.fieldbus.pdo import interpolation_period, mapping_entry
 
-if TYPE_CHECKING:
-    from nurbsmotion.fieldbus.homing_check import AxisHoming
 
 QUICK_STOP_OPTIONS = (2, 1, 3, 4)  # preferred first: 2 = quick-stop ramp 0x6085, then SWITCH ON DISABLED
 MAX_PDO_BITS = 64
@@ -186,10 +186,6 @@ class _Refusal(Exception):
     def __init__(self, message: str, field_name: str = "") -> None:
         super().__init__(message)
         self.field_name = field_name
-
-
-def mode_of(axis: AxisConfig) -> c.Mode:
-    return c.Mode.INTERPOLATED_POSITION if axis.mode == "ip" else c.Mode.CYCLIC_SYNC_POSITION
 
 
 def pdo_cob_id(kind: str, number: int, node_id: int) -> int:
@@ -430,8 +426,6 @@ def plan_drive(config: MachineConfig, i: int, following_error_window_counts: int
     eds = Path(axis.eds).name if axis.eds else "(no EDS)"
     if od is None:
         raise InputError(axis_where(config, i, "eds"), "no object dictionary loaded (use load_config/parse_config)")
-    from nurbsmotion.fieldbus.homing_check import plan_homing  # it imports this module
-
     try:
         plan = _plan(config, i, od, eds, following_error_window_counts, following_error_tpdo)
     except _Refusal as refusal:
@@ -586,4 +580,4 @@ def describe_value(od: ObjectDictionary | None, index: int, subindex: int, value
 
 
 __all__ = ["AxisPdoLayout", "DrivePlan", "Field", "PdoFrame", "PdoSetup", "ReadBack", "Skipped", "Write",
-           "describe_value", "mapping_entry", "mode_of", "offered_modes", "plan_drive", "plan_machine", "plan_within_load", "rpdo_packer"]
+           "describe_value", "mapping_entry", "offered_modes", "plan_drive", "plan_machine", "plan_within_load", "rpdo_packer"]

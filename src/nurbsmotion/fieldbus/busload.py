@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
-from nurbsmotion.spindle_config import MONITOR_POLL_S, SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import MONITOR_POLL_S, SpindleConfig, SpindleMode
 
 SYNC_DLC = 0
 RPDO_DLC = 6  # controlword u16 + set-point i32

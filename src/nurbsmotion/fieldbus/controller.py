@@ -23,12 +23,12 @@ from __future__ import annotations
 import collections
 import enum
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, Sequence, Union
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.drive_state import (CW_DISABLE_VOLTAGE, CW_ENABLED, CW_QUICK_STOP, CW_SHUTDOWN, enable_step,
                                               is_ready, running_controlword)
-from nurbsmotion.fieldbus.homing import HomingProcedure
+from nurbsmotion.fieldbus.homing import HomingOutcome, HomingProcedure
 from nurbsmotion.fieldbus.playback import Playback, PlaybackState
 
 OE_MASK, OE_VALUE = 0x6F, 0x27  # statusword coding of OPERATION ENABLED
@@ -69,6 +69,87 @@ class Event(enum.Enum):
     RESUME = "resume"
     HOME = "home"  # home one axis (from holding)
     HOME_END = "home end"  # the homed axis follows set-points again
+
+
+class Req(enum.Enum):
+    """What the API, the supervisor and a homing run ask of the controller (its ``arg``)."""
+
+    JOB = "job"  # start streaming the job (arg: the job)
+    STOP = "stop"  # controlled stop of the job (arg: the job)
+    FAULT_STOP = "fault_stop"  # controlled stop of whatever job runs, outcome 'faulted'
+    HOLD = "hold"  # ramp the job to rest on the path and keep it (arg: the job)
+    RESUME = "resume"  # continue a held job (arg: the job)
+    ABORT = "abort"  # quick stop if the job runs (arg: the job)
+    QUICK_STOP = "quick_stop"  # quick stop every axis (arg: the job's outcome, None: 'aborted')
+    RATE = "rate"  # playback rate, the feed override (arg: the rate)
+    ENABLE = "enable"  # bring-up or fault reset
+    DISABLE = "disable"  # shutdown
+    HOME = "home"  # start homing (arg: the axis)
+    HOME_START = "home_start"  # the homing procedure steps from now on (arg: the procedure)
+    HOME_CANCEL = "home_cancel"  # the procedure ends (bit 4 low)
+    HOME_HOLD = "home_hold"  # the homed axis holds there (arg: counts)
+    HOME_END = "home_end"  # the homed axis follows set-points again
+    CYCLIC_VELOCITY = "cyclic_velocity"  # the spindle's 0x60FF target changed (the scheduler's, not the axes')
+
+
+@dataclass(frozen=True)
+class Request:
+    kind: Req
+    arg: Any = None
+
+
+HOMING_REQUESTS = frozenset((Req.HOME, Req.HOME_START, Req.HOME_CANCEL, Req.HOME_HOLD, Req.HOME_END))
+
+
+# ------------------------------------------------------------------ notices: what the cycle loop acts on
+@dataclass(frozen=True)
+class PhaseChanged:
+    phase: Phase
+    cycle: int
+    job: Any  # the job as of this transition
+
+
+@dataclass(frozen=True)
+class Ready:
+    """Every axis follows set-points (bring-up done)."""
+
+
+@dataclass(frozen=True)
+class EnableFailed:
+    axis: int
+    cycle: int
+    stuck: bool  # stuck in one state (the step's time-out), else the phase's time-out
+
+
+@dataclass(frozen=True)
+class QuickStopped:
+    cycle: int
+
+
+@dataclass(frozen=True)
+class Refused:
+    job: Any  # a job asked for when the axes were not holding
+
+
+@dataclass(frozen=True)
+class Quit:
+    """The drives are disabled: the cycle loop ends."""
+
+
+@dataclass(frozen=True)
+class HomingEnded:
+    axis: int
+    outcome: HomingOutcome
+    cycle: int
+
+
+@dataclass(frozen=True)
+class HomeRefused:
+    axis: int
+    phase: Phase
+
+
+Notice = Union[PhaseChanged, Ready, EnableFailed, QuickStopped, Refused, Quit, HomingEnded, HomeRefused]
 
 
 P, E = Phase, Event
@@ -147,8 +228,8 @@ class JobLike(Protocol):
 class CycleController:
     """Phase and per-axis commands; ``sp``/``cw`` are reused lists (no allocation per cycle).
 
-    ``notices`` collects what the caller must act on outside the cycle: ('ready',),
-    ('enable_failed', axis, cycle, stuck in one state), ('quick_stop', cycle), ('refused', job), ('quit',).
+    ``notices`` collects what the caller must act on outside the cycle (the :data:`Notice`
+    classes above).
     """
 
     def __init__(self, n_axes: int, ip_mode: list[bool], accel_limits: list[float], period_s: float,
@@ -171,13 +252,13 @@ class CycleController:
         self.job: Any = None  # the job streaming or stopping (a JobLike)
         self.rate = 1.0  # playback rate for the next jobs (feed override)
         self.homing: HomingSlot | None = None  # phase HOMING: the axis being homed
-        self.notices: collections.deque[tuple[Any, ...]] = collections.deque()
+        self.notices: collections.deque[Notice] = collections.deque()
 
     # ------------------------------------------------------------------ the cycle
-    def step(self, k: int, fb: Feedback, requests: list[tuple[str, Any]] | tuple = ()) -> tuple[list[int], list[int]]:
+    def step(self, k: int, fb: Feedback, requests: Sequence[Request] = ()) -> tuple[list[int], list[int]]:
         """Handle ``requests`` (in order), then return (controlwords, set-points) of cycle k."""
-        for what, arg in requests:
-            self.handle(what, arg, k, fb)
+        for request in requests:
+            self.handle(request, k, fb)
         phase = self.phase
         sp, cw = self.sp, self.cw
         if phase is Phase.STREAMING:
@@ -218,26 +299,25 @@ class CycleController:
             cw[:] = [CW_SHUTDOWN] * self.n
             if all((s or 0) & OE_MASK != OE_VALUE for s in fb.status) and k - self.phase_cycle > 2 \
                     or k - self.phase_cycle > self.stuck_cycles:
-                self.notices.append(("quit",))
+                self.notices.append(Quit())
         return cw, sp
 
-    def handle(self, what: str, arg: Any, k: int, fb: Feedback) -> None:
-        """One request: job, stop, abort, quick_stop, fault_stop, rate, hold, resume, enable, disable,
-        home / home_start / home_cancel / home_hold / home_end (one axis' homing, see HomingSlot)."""
-        phase = self.phase
-        if what.startswith("home"):
+    def handle(self, request: Request, k: int, fb: Feedback) -> None:
+        """One request (:class:`Req`); the homing ones act on one axis' homing (HomingSlot)."""
+        phase, what, arg = self.phase, request.kind, request.arg
+        if what in HOMING_REQUESTS:
             self._handle_homing(what, arg, k)
             return
-        if what == "job":
+        if what is Req.JOB:
             if phase is Phase.HOLDING and self.job is None:
                 self.job = arg
                 self._set_phase(Event.JOB, k)
             else:
-                self.notices.append(("refused", arg))
-        elif what in ("stop", "fault_stop"):
-            if self.job is None or not (what == "fault_stop" or self.job is arg):
+                self.notices.append(Refused(arg))
+        elif what is Req.STOP or what is Req.FAULT_STOP:
+            if self.job is None or not (what is Req.FAULT_STOP or self.job is arg):
                 return
-            outcome = "stopped" if what == "stop" else "faulted"
+            outcome = "stopped" if what is Req.STOP else "faulted"
             if phase is Phase.STREAMING:
                 self._controlled_stop(k, outcome)
             elif phase is Phase.PAUSING:  # the hold's ramp becomes the stop's
@@ -246,30 +326,30 @@ class CycleController:
             elif phase is Phase.HELD:  # at rest already: the job ends here
                 self.job.outcome, self.job.finish_cycle = outcome, k
                 self._set_phase(Event.STOP, k)
-        elif what == "hold":
+        elif what is Req.HOLD:
             if phase is Phase.STREAMING and self.job is arg:
                 if self.job.playback.index < 0:  # nothing sent yet: held before the first row
                     self._set_phase(Event.PAUSE_ROW, k)
                 else:
                     self.job.playback.start_stop(self.accel_limits, self.period_s)
                     self._set_phase(Event.HOLD, k)
-        elif what == "resume":
+        elif what is Req.RESUME:
             if phase is Phase.HELD and self.job is arg:
                 self.job.playback.resume(self.rate)
                 self._set_phase(Event.RESUME, k)
-        elif what == "abort":
+        elif what is Req.ABORT:
             if self.job is arg and phase in RUNNING_PHASES:
                 self._quick_stop(k, "aborted")
-        elif what == "quick_stop":
+        elif what is Req.QUICK_STOP:
             if phase in RUNNING_PHASES or phase is Phase.ENABLING:
                 self._quick_stop(k, arg or "aborted")
-        elif what == "rate":
+        elif what is Req.RATE:
             self.rate = arg
             if self.job is not None:
                 self.job.playback.target = arg
-        elif what == "enable":
+        elif what is Req.ENABLE:
             self._enter_enabling(k, fb)
-        elif what == "disable":
+        elif what is Req.DISABLE:
             self._end_job("aborted", k)
             self._set_phase(Event.DISABLE, k)
 
@@ -334,7 +414,7 @@ class CycleController:
         self.phase_cycle = k
         if phase is not Phase.HOMING:
             self.homing = None
-        self.notices.append(("phase", phase, k, self.job))  # the job as of this transition
+        self.notices.append(PhaseChanged(phase, k, self.job))
 
     def _enter_enabling(self, k: int, fb: Feedback) -> None:
         for i in range(self.n):
@@ -356,7 +436,7 @@ class CycleController:
 
     def _quick_stop(self, k: int, outcome: str) -> None:
         self._set_phase(Event.QUICK_STOP, k)
-        self.notices.append(("quick_stop", k))
+        self.notices.append(QuickStopped(k))
         self._end_job(outcome, k)
 
     def _end_job(self, outcome: str, k: int) -> None:
@@ -372,24 +452,24 @@ class CycleController:
             self.job = None
 
     # ------------------------------------------------------------------ homing one axis
-    def _handle_homing(self, what: str, arg: Any, k: int) -> None:
+    def _handle_homing(self, what: Req, arg: Any, k: int) -> None:
         slot = self.homing
-        if what == "home":
+        if what is Req.HOME:
             if self.phase is Phase.HOLDING and self.job is None:
                 self.homing = HomingSlot(int(arg))
                 self._set_phase(Event.HOME, k)
             else:
-                self.notices.append(("home_refused", arg, self.phase))
+                self.notices.append(HomeRefused(arg, self.phase))
         elif slot is None or self.phase is not Phase.HOMING:
             return  # the homing ended meanwhile (fault, quick stop, reset): the master sees the phase
-        elif what == "home_start":
+        elif what is Req.HOME_START:
             slot.procedure = arg
-        elif what == "home_cancel":
+        elif what is Req.HOME_CANCEL:
             if slot.procedure is not None:
                 slot.procedure.cancel()
-        elif what == "home_hold":
+        elif what is Req.HOME_HOLD:
             slot.procedure, slot.hold_counts = None, int(arg)
-        elif what == "home_end":
+        elif what is Req.HOME_END:
             i = slot.axis
             self.hold[i] = slot.hold_counts if slot.hold_counts is not None else self.hold[i]
             self._set_phase(Event.HOME_END, k)
@@ -409,7 +489,7 @@ class CycleController:
             cw[i] = step.controlword
             sp[i] = fb.pos[i]  # ignored in mode 6; follows the drive so no target is stale
             if step.outcome is not None:
-                self.notices.append(("homing_outcome", i, step.outcome, k))
+                self.notices.append(HomingEnded(i, step.outcome, k))
 
     def _enabling(self, k: int, fb: Feedback) -> None:
         sp, cw = self.sp, self.cw
@@ -438,13 +518,13 @@ class CycleController:
                 self.since_status[i], self.since_cycle[i] = sw, k
             elif (stuck := k - self.since_cycle[i] > self.stuck_cycles) or \
                     k - self.phase_cycle > self.enable_timeout_cycles:
-                self.notices.append(("enable_failed", i, k, stuck))  # stuck: the step's time-out, else the phase's
+                self.notices.append(EnableFailed(i, k, stuck))
                 self._set_phase(Event.ENABLE_FAILED, k)
                 return
         if ready:
             self.hold[:] = self.sp
             self._set_phase(Event.READY, k)
-            self.notices.append(("ready",))
+            self.notices.append(Ready())
 
     def _stopped_or_silent(self, i: int, fb: Feedback) -> bool:
         """Axis i no longer enabled nor quick-stopping, or its TPDO1 stopped coming."""

@@ -12,7 +12,7 @@ cycle from the value the previous one had there and moving towards its target by
 packs a cycle again (the kernel queue repacks the cycles it recomputes and its tail) gets the
 same frame, and a new target never jumps: the master applies it (:meth:`apply`) in the cycle
 thread at the first cycle it (re)computes from then on, and recomputes every queued cycle
-from there (fieldbus.master: a request rewinds). A quick stop is a segment with an unlimited
+from there (fieldbus.cycle_loop: a request rewinds). A quick stop is a segment with an unlimited
 step (the drive's own quick-stop ramp 0x6085 decelerates).
 """
 
@@ -24,9 +24,9 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.spindle_config import SpindleConfig, SpindleMode
+from nurbsmotion.config.spindle import SpindleConfig, SpindleMode
 
 TARGET_VELOCITY_FORMAT = struct.Struct("<i")  # 0x60FF INTEGER32, counts/s
 KEEP_SEGMENTS = 16  # older segments are gone from every ring and history by then

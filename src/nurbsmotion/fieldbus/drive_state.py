@@ -10,8 +10,9 @@ ready only when statusword bit 12 (IP active) answers it.
 
 from __future__ import annotations
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import State
+from nurbsmotion.config import AxisConfig
 
 CW_ENABLED = int(c.Controlword.ENABLE_OPERATION)
 CW_ENABLED_IP = CW_ENABLED | c.CW_ENABLE_IP
@@ -56,3 +57,8 @@ def state_name(statusword: int | None) -> str:
         return "NO STATUSWORD YET"
     state = c.state_of_statusword(statusword)
     return state.value if state is not None else f"UNKNOWN STATUSWORD 0x{statusword:04X}"
+
+
+def mode_of(axis: AxisConfig) -> c.Mode:
+    """The CiA-402 mode (0x6060) of an axis' ``mode``: ip or csp."""
+    return c.Mode.INTERPOLATED_POSITION if axis.mode == "ip" else c.Mode.CYCLIC_SYNC_POSITION

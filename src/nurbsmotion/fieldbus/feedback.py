@@ -14,7 +14,7 @@ from typing import Any, Callable
 
 import can
 
-from nurbsmotion.arrival_clock import ArrivalClock, WallClockOffset
+from nurbsmotion.can.arrival_clock import ArrivalClock, WallClockOffset
 from nurbsmotion.fieldbus.pdo import TPDO1_FORMAT, TPDO2_FORMAT
 
 EVENT_EMCY, EVENT_NMT, EVENT_BAD_TPDO = 1, 2, 3
@@ -53,14 +53,15 @@ class Feedback:
         # the master's own reception lag, so heartbeats are judged as they arrived (arrival_clock)
         self.arrival = ArrivalClock(lambda: False)
 
-    def watch_reception(self, pending: Callable[[], bool],
-                        read_time: Callable[[], float] | None = None) -> "ArrivalListener":
+    def watch_reception(self, pending: Callable[[], bool], read_time: Callable[[], float] | None = None,
+                        wall_time: Callable[[], float] | None = None) -> "ArrivalListener":
         """Judge on the arrival timeline of the bus whose waiting frames ``pending()`` reports;
         returns the listener to add to the bus's notifier (it stamps every frame handled).
         ``read_time()``: perf_counter when the bus read the frame's batch (the batched
-        SocketCAN bus reads the clock once per batch), else the clock is read per frame."""
+        SocketCAN bus reads the clock once per batch), else the clock is read per frame;
+        ``wall_time``: the clock of the frames' timestamps (both injected by tests)."""
         self.arrival = ArrivalClock(pending)
-        return ArrivalListener(self.arrival, read_time or time.perf_counter)
+        return ArrivalListener(self.arrival, read_time or time.perf_counter, wall_time)
 
     def judging_time_s(self) -> float:
         """Now on the frames' arrival timeline (perf_counter based, arrival_clock)."""
@@ -150,10 +151,11 @@ class ArrivalListener(can.Listener):
     passes here, and inside User-Mode Linux each clock read is a trapped system call
     (docs/vcan.md, "The drives' lag")."""
 
-    def __init__(self, clock: ArrivalClock, read_time: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(self, clock: ArrivalClock, read_time: Callable[[], float] = time.perf_counter,
+                 wall_time: Callable[[], float] | None = None) -> None:
         self.clock = clock
         self._read_time = read_time
-        self._wall_offset = WallClockOffset()
+        self._wall_offset = WallClockOffset(wall_time)
 
     def on_message_received(self, msg: can.Message) -> None:
         now = self._read_time()

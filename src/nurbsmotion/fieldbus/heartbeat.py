@@ -23,7 +23,7 @@ from typing import Callable
 
 import can
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import set_thread_realtime
 
@@ -35,6 +35,18 @@ RENEW_S = 0.5  # the watchdog renews this often while alive() holds
 
 def heartbeat_message(node_id: int, state: int = c.NmtState.OPERATIONAL) -> can.Message:
     return can.Message(arbitration_id=c.COB_HEARTBEAT + node_id, is_extended_id=False, data=bytes([state]))
+
+
+def started_heartbeat(bus: can.BusABC, node_id: int, period_ms: int, alive: Callable[[], bool],
+                      rt_priority: int | None) -> "MasterHeartbeat | None":
+    """The master's heartbeat, started (None: ``period_ms`` 0, no heartbeat); its threads run
+    just below the cycle thread's ``rt_priority``."""
+    if period_ms == 0:
+        return None
+    heartbeat = MasterHeartbeat(bus, node_id, period_ms / 1000.0, alive,
+                                thread_priority=None if rt_priority is None else rt_priority - 1)
+    heartbeat.start()
+    return heartbeat
 
 
 class MasterHeartbeat:

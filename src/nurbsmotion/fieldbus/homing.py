@@ -35,11 +35,11 @@ import math
 import struct
 from dataclasses import dataclass
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import State
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.drive_state import enable_step
-from nurbsmotion.homing_config import HomingConfig
+from nurbsmotion.config.homing import HomingConfig
 
 HOMING_METHOD = 0x6098
 HOMING_SPEEDS = 0x6099  # sub 1: search for switch, sub 2: search for zero

@@ -30,15 +30,15 @@ from pathlib import Path
 
 from canopen.objectdictionary import ObjectDictionary, datatypes
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.config import AxisConfig, MachineConfig, axis_where
 from nurbsmotion.errors import InputError
-from nurbsmotion.fieldbus.bringup_plan import mode_of
+from nurbsmotion.fieldbus.drive_state import mode_of
 from nurbsmotion.fieldbus.homing import (HOME_OFFSET, HOMING_ACCELERATION, HOMING_METHOD, HOMING_SPEEDS, MODE_HOMING,
                                          HomingPlan, OffsetObject, here_offset_counts, homing_drive_values,
                                          homing_plan)
-from nurbsmotion.homing_config import HERE, HomingConfig
+from nurbsmotion.config.homing import HERE, HomingConfig
 
 HOMING_MODE_BIT = 5  # 0x6502 bit of homing mode (CiA 402-2)
 STRUCT_CODES = {datatypes.INTEGER8: "<b", datatypes.INTEGER16: "<h", datatypes.INTEGER32: "<i",

@@ -26,11 +26,11 @@ import threading
 import time
 from typing import Callable
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import bringup
 from nurbsmotion.fieldbus.bringup_plan import ReadBack
-from nurbsmotion.fieldbus.controller import Phase
+from nurbsmotion.fieldbus.controller import Phase, Req, Request
 from nurbsmotion.fieldbus.drive_state import is_ready
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
 from nurbsmotion.log import kv
@@ -53,7 +53,7 @@ class HomingRun:
     """One axis' homing (module docstring); :meth:`run` blocks until the axis holds again."""
 
     def __init__(self, axis: int, name: str, plan: HomingPlan, procedure: HomingProcedure,
-                 trail: bringup.SdoTrail, ip_mode: bool, request: Callable[[str, object], None],
+                 trail: bringup.SdoTrail, ip_mode: bool, request: Callable[[Request], None],
                  wire_cycle: Callable[[], int], phase: Callable[[], Phase],
                  statusword: Callable[[], int | None], period_s: float, ready_timeout_s: float = READY_TIMEOUT_S) -> None:
         """``ready_timeout_s``: how long the drive may take to follow set-points again after
@@ -75,7 +75,7 @@ class HomingRun:
         self._refused: Phase | None = None
         self._done = threading.Event()
 
-    # the cycle loop's notices (master._notices)
+    # the cycle loop's notices (fieldbus.cycle_loop)
     def on_outcome(self, outcome: HomingOutcome) -> None:
         if self._outcome is None:
             self._outcome = outcome
@@ -97,7 +97,7 @@ class HomingRun:
 
     def _run(self) -> HomingOutcome:
         where = f"axis {self.name}: node {self.trail.node_id}: homing method {self.procedure.method}"
-        self._request("home", self.axis)
+        self._request(Request(Req.HOME, self.axis))
         self._wait_for_phase(Phase.HOMING, where)
         self._settle()
         try:
@@ -109,7 +109,7 @@ class HomingRun:
             self._restore(where)
             raise FieldbusError(f"{where}: {_sdo_step(err)}") from None
         self._done.clear()
-        self._request("home_start", self.procedure)
+        self._request(Request(Req.HOME_START, self.procedure))
         outcome = self._wait_for_outcome(where)
         self._restore(where)
         return outcome
@@ -163,17 +163,17 @@ class HomingRun:
             return  # a fault ended the phase: the drives are quick-stopped; reset brings them up again
         try:
             position = self._read_position()
-            self._request("home_hold", position)
+            self._request(Request(Req.HOME_HOLD, position))
             self._settle()
             for write in self.plan.restore:
                 bringup._write(self.trail, write)  # type: ignore[arg-type]
                 bringup._read_back(self.trail, ReadBack(write.step, c.MODES_OF_OPERATION_DISPLAY, 0, write.value))
         except FieldbusError as err:
-            self._request("quick_stop", "faulted")
+            self._request(Request(Req.QUICK_STOP, "faulted"))
             log.error(kv("homing_restore_failed", axis=self.name, error=err))
             raise FieldbusError(f"{where}: the streaming mode could not be restored ({_sdo_step(err)}); the axes "
                                 f"were quick-stopped: send reset") from None
-        self._request("home_end", None)
+        self._request(Request(Req.HOME_END))
         self._wait_for_phase(Phase.HOLDING, where)
         self._settle()
         end = time.monotonic() + self._ready_timeout_s

@@ -23,12 +23,12 @@ from canopen import objectdictionary as odt
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.feedback import arrival_perf_s
 from nurbsmotion.fieldbus.node_heartbeat import HeartbeatWatch
-from nurbsmotion.io_config import IoConfig, IoSignal
+from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)

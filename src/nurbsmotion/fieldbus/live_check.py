@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import canopen
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.config import MachineConfig, axis_where
 from nurbsmotion.fieldbus.bringup_plan import DrivePlan
 from nurbsmotion.fieldbus.scan import PROFILE_DRIVE, PROFILE_IO, PROFILE_NAMES, NodeReport, ScanSettings, \

@@ -13,7 +13,7 @@ when :func:`heartbeat_problem` finds one:
 
 It is armed again by :meth:`start` (after the node was brought up again).
 
-Heartbeats are judged as they arrived (nurbsmotion.arrival_clock, as the axes' supervisor
+Heartbeats are judged as they arrived (nurbsmotion.can.arrival_clock, as the axes' supervisor
 does): :meth:`heard` takes the frame's arrival time and ``clock`` is the judging time (the
 master's arrival timeline), so a receive thread held back by load does not turn heartbeats
 that arrived in time into a lost node.
@@ -27,7 +27,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)

@@ -33,7 +33,7 @@ import math
 from typing import Any
 
 from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
-from nurbsmotion.fieldbus.stop_ramp import RATE_RAMP_SHARE, StopRamp, setpoints_at, stop_slope
+from nurbsmotion.fieldbus.stop_ramp import RATE_RAMP_SHARE, StopRamp, setpoints_at, slope_of_steps, stop_slope
 
 PlaybackState = tuple[float, float, float, int, bool, float, float, float, int]
 
@@ -132,8 +132,8 @@ class Playback:
             step = chunk.max_step[j] if chunk.max_step else 0.0
             if step > self.max_step[j]:
                 self.max_step[j] = step
-                if self.accel_limits and step > 0.0:
-                    self.ramp_dr = min(self.ramp_dr, self.accel_limits[j] * self.period_s**2 / step)
+                if self.accel_limits:
+                    self.ramp_dr = min(self.ramp_dr, slope_of_steps([step], [self.accel_limits[j]], self.period_s))
             if chunk.max_accel and chunk.max_accel[j] > self.planned_accel[j]:
                 self.planned_accel[j] = chunk.max_accel[j]
 

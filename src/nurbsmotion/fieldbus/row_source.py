@@ -14,7 +14,7 @@ the cycle thread (after :meth:`RowFeed.take_first` on the thread that starts the
 queue is a deque (atomic append/popleft) with a semaphore bounding the chunks ahead.
 
 Memory: the window keeps ``keep_rows`` rows behind the playback (the master may rewind its
-queued cycles, fieldbus.master HISTORY_CYCLES) and up to ``ahead_rows`` planned rows ahead of
+queued cycles, fieldbus.cycle_loop HISTORY_CYCLES) and up to ``ahead_rows`` planned rows ahead of
 it plus the newest chunk and its tail; at most ``max_chunks`` chunks wait in the queue. Nothing grows with the job's length except the
 pause rows (one int per program pause).
 """

@@ -27,7 +27,7 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary
 from canopen.sdo import SdoAbortedError, SdoClient, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
 

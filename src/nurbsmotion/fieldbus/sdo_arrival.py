@@ -1,4 +1,4 @@
-"""SDO client time-outs judged on the frames' arrival timeline (nurbsmotion.arrival_clock).
+"""SDO client time-outs judged on the frames' arrival timeline (nurbsmotion.can.arrival_clock).
 
 canopen's ``SdoClient`` waits ``RESPONSE_TIMEOUT`` for an answer on the waiting thread's own
 clock (``queue.get``), and the answer reaches that queue only once the master's receive thread

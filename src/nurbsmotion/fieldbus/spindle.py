@@ -34,14 +34,14 @@ import can
 import canopen
 from canopen.sdo import SdoAbortedError, SdoCommunicationError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion import drive_od
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can import drive_od
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.pdo import interpolation_period
 from nurbsmotion.log import kv
-from nurbsmotion.spindle_config import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
+from nurbsmotion.config.spindle import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
                                         TARGET_VELOCITY, VELOCITY_ACTUAL, SpindleConfig, SpindleMode)
 
 log = logging.getLogger(__name__)

@@ -25,11 +25,16 @@ def ramp_slope(counts: np.ndarray, accel_counts_s2: np.ndarray, period_s: float)
     if len(counts) < 2:
         return 1.0
     max_step = np.abs(np.diff(np.asarray(counts, dtype=np.int64), axis=0)).max(axis=0).astype(float)
-    moving = max_step > 0
-    if not moving.any():
-        return 1.0
-    slopes = np.asarray(accel_counts_s2, dtype=float)[moving] * period_s**2 / max_step[moving]
-    return float(min(1.0, slopes.min()))
+    return slope_of_steps(max_step.tolist(), [float(a) for a in accel_counts_s2], period_s)
+
+
+def slope_of_steps(max_step_counts: list[float], accel_counts_s2: list[float], period_s: float) -> float:
+    """dr = min(1, min_j a_j·T² / max|Δc_j|) over the axes that move (module docstring)."""
+    dr = 1.0
+    for step, accel in zip(max_step_counts, accel_counts_s2):
+        if step > 0:
+            dr = min(dr, accel * period_s**2 / step)
+    return dr
 
 
 def stop_slope(max_step_counts: list[float], planned_accel_counts_s2: list[float], accel_limit_counts_s2: list[float],

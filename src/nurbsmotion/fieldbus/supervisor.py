@@ -15,8 +15,8 @@ import logging
 import time
 from typing import Any
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.fieldbus.controller import OE_MASK, OE_VALUE, RUNNING_PHASES, Phase
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.fieldbus.controller import OE_MASK, OE_VALUE, RUNNING_PHASES, Phase, Req, Request
 from nurbsmotion.fieldbus.drive_state import enable_step, state_name
 from nurbsmotion.fieldbus.feedback import EVENT_BAD_TPDO, EVENT_EMCY, EVENT_NMT, Feedback, arrival_perf_s
 from nurbsmotion.fieldbus.reports import FaultReport
@@ -75,9 +75,9 @@ class Supervisor:
         self.late_warned.clear()
 
     # ------------------------------------------------------------------ once per cycle
-    def check(self, k: int, phase: Phase, job: Any) -> list[tuple[str, Any]]:
+    def check(self, k: int, phase: Phase, job: Any) -> list[Request]:
         """Events and per-axis checks at wire cycle k; returns the controller requests."""
-        reactions: list[tuple[str, Any]] = []
+        reactions: list[Request] = []
         events = self.fb.events
         while events:
             self._event(events.popleft(), k, phase, job, reactions)
@@ -88,7 +88,7 @@ class Supervisor:
         return reactions
 
     def _event(self, event: tuple[int, int, int], k: int, phase: Phase, job: Any,
-               reactions: list[tuple[str, Any]]) -> None:
+               reactions: list[Request]) -> None:
         kind, i, value = event
         node, name = self.node_ids[i], self.names[i]
         if kind == EVENT_BAD_TPDO:
@@ -107,7 +107,7 @@ class Supervisor:
             self.report(node, name, "heartbeat", value, k, f"node {node} (axis {name}): heartbeat reports {what} "
                         f"at cycle {k}", phase, job, reactions)
 
-    def _check_axes(self, k: int, phase: Phase, job: Any, reactions: list[tuple[str, Any]], running: bool) -> None:
+    def _check_axes(self, k: int, phase: Phase, job: Any, reactions: list[Request], running: bool) -> None:
         """Per axis: statusword bits, computed following error (running only), heartbeat."""
         fb = self.fb
         now = time.perf_counter()
@@ -144,7 +144,7 @@ class Supervisor:
         return self.fb.judging_time_s() - self.fb.hb_time[i]
 
     def check_statusword(self, i: int, k: int, running: bool, phase: Phase, job: Any,
-                         reactions: list[tuple[str, Any]]) -> None:
+                         reactions: list[Request]) -> None:
         """Following error bit 13, fault bit 3, and (running) leaving OPERATION ENABLED."""
         sw = self.fb.status[i] or 0
         node, name = self.node_ids[i], self.names[i]
@@ -161,7 +161,7 @@ class Supervisor:
                         f"now {state_name(sw)} at cycle {k}", phase, job, reactions)
 
     def _check_following_error(self, i: int, k: int, phase: Phase, job: Any,
-                               reactions: list[tuple[str, Any]]) -> None:
+                               reactions: list[Request]) -> None:
         """|set-point in force at the answered SYNC - actual| > window for longer than the time-out.
 
         The TPDO answers the latest SYNC on the wire before its receive timestamp (so a
@@ -220,7 +220,7 @@ class Supervisor:
 
     # ------------------------------------------------------------------ reports and reactions
     def report(self, node: int | None, axis: str | None, kind: str, code: int, k: int, message: str,
-               phase: Phase, job: Any, reactions: list[tuple[str, Any]]) -> None:
+               phase: Phase, job: Any, reactions: list[Request]) -> None:
         """Record a fault once per (node, kind) until reset(), then choose the reaction."""
         if (node, kind) in self.reported:
             return
@@ -234,9 +234,9 @@ class Supervisor:
             return
         if kind in ("emcy", "heartbeat") and self._drives_follow(k):
             if phase in (Phase.STREAMING, Phase.PAUSING, Phase.HELD):  # a held job ends too
-                reactions.append(("fault_stop", None))
+                reactions.append(Request(Req.FAULT_STOP))
             return
-        reactions.append(("quick_stop", "faulted"))
+        reactions.append(Request(Req.QUICK_STOP, "faulted"))
 
     def _drives_follow(self, k: int) -> bool:
         """Every drive enabled, without following error, and its TPDO1 fresh."""

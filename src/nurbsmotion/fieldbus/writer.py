@@ -22,7 +22,7 @@ from typing import Callable, Protocol
 
 import can
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.fieldbus.cycle import DeadlineGrid, LatenessStats, wait_until
 from nurbsmotion.fieldbus.supervisor import CycleHistory
 

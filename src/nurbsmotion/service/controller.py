@@ -20,7 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.errors import FieldbusError, InputError
+from nurbsmotion.errors import FieldbusError, InputError, Refused
 from nurbsmotion.fieldbus.reports import FaultReport, JobResult, MasterStatus
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
@@ -33,11 +33,12 @@ from nurbsmotion.service.machine_io import AxisMotion
 from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
-from nurbsmotion.service.planner import MDI_NAME, PlannedJob
+from nurbsmotion.service.job_common import MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.start_line import resume_of, start_line_options
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
+from nurbsmotion.config.spindle import SpindleConfig
 
 log = logging.getLogger(__name__)
 
@@ -45,10 +46,6 @@ JobPlan = PlannedJob | StreamedJob  # planned whole before motion, or while it r
 Planner = Callable[[str, str, np.ndarray, ReadOptions], JobPlan]  # (name, text, start mm, reader options) -> plan
 SETTLE_S = 0.5  # the longest a job's end waits for the axes to reach their last set-point (final_position)
 OUTCOME_OF_RESULT = {"done": "completed", "stopped": "stopped", "aborted": "aborted", "faulted": "fault"}
-
-
-class Refused(InputError):
-    """A request that is well-formed but not possible now (busy, no job, in fault)."""
 
 
 @dataclass
@@ -695,7 +692,8 @@ def config_dict(config: MachineConfig, offset_counts: Any = None) -> dict[str, A
     offsets = [a.offset_counts for a in config.axes] if offset_counts is None else [int(o) for o in offset_counts]
     plain_axes = tuple(dataclasses.replace(a, od=None, offset_counts=o)  # the EDS as read: not a value
                        for a, o in zip(config.axes, offsets))
-    spindle = dataclasses.replace(config.spindle, od=None) if hasattr(config.spindle, "od") else config.spindle
+    spindle = dataclasses.replace(config.spindle, od=None) if isinstance(config.spindle, SpindleConfig) \
+        else config.spindle
     out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
     out.pop("lines", None)
     if isinstance(out["spindle"], dict):

@@ -21,12 +21,12 @@ from typing import Any, Callable
 import numpy as np
 
 from nurbsmotion.config import MachineConfig
-from nurbsmotion.errors import InputError
+from nurbsmotion.errors import InputError, Refused
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import cap_switch_interval
 from nurbsmotion.service.checked_store import CheckedStore
-from nurbsmotion.service.controller import Controller, Refused
+from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.devices import open_devices
 from nurbsmotion.service.job_queue import JobQueue
 from nurbsmotion.service.link import open_link

@@ -9,7 +9,6 @@ must act on (an e-stop or limit input, a spindle that stops on its own) go to
 from __future__ import annotations
 
 import logging
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -19,20 +18,21 @@ from nurbsmotion.fieldbus.io import IoNode
 from nurbsmotion.fieldbus.spindle import SpindleDrive
 from nurbsmotion.log import kv
 from nurbsmotion.service.machine_io import AxisMotion, MachineIo, SafetyTrip
-from nurbsmotion.spindle_config import SpindleConfig
+from nurbsmotion.service.motion import BusHost
+from nurbsmotion.config.spindle import SpindleConfig
 
 log = logging.getLogger(__name__)
 
 
 class MachineDevices:
-    def __init__(self, config: MachineConfig, link: Any) -> None:
-        """``link``: the brought-up fieldbus.Master (its ``network``, ``receive_from``, ``quick_stop``)."""
+    def __init__(self, config: MachineConfig, link: BusHost) -> None:
+        """``link``: the brought-up fieldbus.Master, the bus the devices join."""
         self.config = config
         self.link = link
         self.on_trip: Callable[[SafetyTrip], None] = lambda trip: None
         self.on_spindle_fault: Callable[[str], None] = lambda message: None
         self.axis_direction: Callable[[str], int] = lambda axis: 0  # the way an axis moves now (+1/-1/0)
-        network = getattr(link, "network", None)
+        network = link.network
         if network is None:
             raise FieldbusError("devices: the master is not connected")
         self.spindle: SpindleDrive | None = None
@@ -43,11 +43,11 @@ class MachineDevices:
                                         master_heartbeat=self.master_heartbeat(),
                                         cycle_period_s=config.cycle_period_s,
                                         sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
-                                        cyclic=getattr(link, "cyclic_velocity", None))
+                                        cyclic=link.cyclic_velocity)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
-                          judging_time_s=getattr(link, "judging_time_s", time.perf_counter))
+                          judging_time_s=link.judging_time_s)
             self.io = MachineIo(config, node, on_trip=lambda trip: self.on_trip(trip),
                                 moving=lambda axis: self.axis_direction(axis))
 
@@ -141,7 +141,7 @@ class MachineDevices:
             self.io.node.close()
 
 
-def open_devices(config: MachineConfig, link: Any) -> MachineDevices | None:
+def open_devices(config: MachineConfig, link: BusHost) -> MachineDevices | None:
     """The spindle and I/O node of ``config`` brought up on ``link``'s network (None: neither)."""
     if not isinstance(config.spindle, SpindleConfig) and config.io is None:
         return None

@@ -1,7 +1,7 @@
 """The daemon's homing: which axes are homed, ``home [AXIS...]`` in the configured order,
 and the refusal of jobs, MDI and absolute jogs until every axis is homed.
 
-Each axis' ``homing:`` (homing_config) is either a drive method (CiA-402 mode 6, run by
+Each axis' ``homing:`` (config.homing) is either a drive method (CiA-402 mode 6, run by
 the master: fieldbus.Master.home, planned and checked against the drive's EDS by
 fieldbus.homing_check) or ``here`` (no motion: the held position becomes
 ``offset_mm`` by moving the axis map's offset: counts = sign·mm·counts_per_mm + offset).
@@ -29,7 +29,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus.homing import HomingProcedure, here_offset_counts
 from nurbsmotion.fieldbus.homing_check import plan_homing
-from nurbsmotion.homing_config import homing_method_name
+from nurbsmotion.config.homing import homing_method_name
 from nurbsmotion.log import kv
 from nurbsmotion.service.motion import MotionLink
 

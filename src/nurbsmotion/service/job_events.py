@@ -24,7 +24,7 @@ import numpy as np
 from nurbsmotion.log import kv
 from nurbsmotion.program import EventKind, ProgramEvent, SpindleDirection
 from nurbsmotion.service.devices import MachineDevices
-from nurbsmotion.service.planner import JobPause, PlannedJob, spindle_wait_reason
+from nurbsmotion.service.job_common import JobPause, PlannedJob, spindle_wait_reason
 from nurbsmotion.service.records import now_iso
 
 log = logging.getLogger(__name__)

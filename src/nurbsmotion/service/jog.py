@@ -22,16 +22,16 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
+
+import numpy as np
 
 from nurbsmotion.config import AxisConfig, MachineConfig
-from nurbsmotion.errors import InputError
+from nurbsmotion.errors import InputError, Refused
 from nurbsmotion.log import kv
 from nurbsmotion.service.machine_io import AxisMotion
-from nurbsmotion.service.planner import JOG_NAME
+from nurbsmotion.service.job_common import JOG_NAME
 
-if TYPE_CHECKING:
-    from nurbsmotion.service.controller import Controller
 
 log = logging.getLogger(__name__)
 
@@ -123,10 +123,24 @@ def find_axis(config: MachineConfig, name: str) -> tuple[int, AxisConfig]:
     raise InputError("field 'axis'", f"no axis {name!r}; the axes are {', '.join(a.name for a in config.axes)}")
 
 
+class JogHost(Protocol):
+    """What jogging needs of the daemon's controller (service.controller.Controller)."""
+
+    config: MachineConfig
+
+    def held_position_mm(self) -> np.ndarray: ...
+    def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
+               optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None,
+               start_line: int | None = None) -> dict[str, Any]: ...
+    def running_job_id(self) -> str | None: ...
+    def running_job_name(self) -> str | None: ...
+    def stop(self, reason: str = "stop") -> dict[str, Any]: ...
+
+
 class Jogging:
     """Starts jogs through the controller and keeps the continuous jog's lease."""
 
-    def __init__(self, controller: "Controller") -> None:
+    def __init__(self, controller: JogHost) -> None:
         self.controller = controller
         self._lease_until = 0.0
         self._job_id: str | None = None  # the continuous jog whose lease is kept
@@ -139,8 +153,6 @@ class Jogging:
         i, axis = find_axis(controller.config, request.axis)
         held_mm = float(controller.held_position_mm()[i])
         target = jog_target_mm(request, axis, held_mm)
-        from nurbsmotion.service.controller import Refused
-
         try:
             response = controller.submit(JOG_NAME, jog_gcode(axis.name, target, request.speed_mm_s),
                                          keep_override=True, needs_homing=request.absolute,
@@ -162,8 +174,6 @@ class Jogging:
 
     def renew(self) -> dict[str, Any]:
         """Extend the continuous jog's lease by LEASE_S from now."""
-        from nurbsmotion.service.controller import Refused
-
         with self._lock:
             if self._job_id is None or self.controller.running_job_id() != self._job_id:
                 raise Refused("jog_renew", "no continuous jog is running")
@@ -172,8 +182,6 @@ class Jogging:
 
     def stop(self) -> dict[str, Any]:
         """``jog stop``: the running jog (any kind) decelerates with the stop ramp."""
-        from nurbsmotion.service.controller import Refused
-
         job = self.controller.running_job_name()
         if job != JOG_NAME:
             raise Refused("jog stop", "no jog is running" if job is None else f"the running job is {job}, not a jog "
@@ -192,8 +200,6 @@ class Jogging:
                 if expired:
                     self._job_id = None
             if expired:
-                from nurbsmotion.service.controller import Refused
-
                 log.warning(kv("jog_lease_expired", job=job_id, lease_s=LEASE_S))
                 try:
                     self.controller.stop(reason="jog_lease")

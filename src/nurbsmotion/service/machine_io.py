@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.fieldbus.io import IoNode
-from nurbsmotion.io_config import IoSignal, limit_axis_side
+from nurbsmotion.config.io import IoSignal, limit_axis_side
 from nurbsmotion.log import kv
 from nurbsmotion.program import CoolantMode
 from nurbsmotion.service.program_gate import COOLANT_OUTPUTS

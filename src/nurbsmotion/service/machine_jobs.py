@@ -26,7 +26,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.job_events import JobEvents, RowEvent, event_rows, with_spindle_waits
 from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
-from nurbsmotion.service.planner import JOG_NAME, MDI_NAME, PlannedJob
+from nurbsmotion.service.job_common import JOG_NAME, MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 
 JobPlan = PlannedJob | StreamedJob

@@ -1,5 +1,6 @@
 """What the service needs from the fieldbus: the MotionLink protocol (fieldbus.Master has
-this shape) and the simulation hooks available when ``simulate: true``.
+this shape), the BusHost part of it other nodes join (service.devices) and the simulation
+hooks available when ``simulate: true``.
 
 The service only ever sees counts, status snapshots (fieldbus.reports records) and job
 handles; open_link() in service.link builds the real thing.
@@ -9,9 +10,11 @@ from __future__ import annotations
 
 from typing import Callable, Protocol
 
+import canopen
 import numpy as np
 
 from nurbsmotion.axes import AxisMap
+from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
 from nurbsmotion.fieldbus.reports import JobResult, MasterStatus
 from nurbsmotion.fieldbus.row_source import RowFeed
@@ -31,7 +34,19 @@ class JobHandle(Protocol):
     def resume(self) -> None: ...
 
 
-class MotionLink(Protocol):
+class BusHost(Protocol):
+    """The bus the axes run on, as the spindle and I/O node join it (service.devices)."""
+
+    cyclic_velocity: CyclicVelocity | None  # the csv spindle's per-SYNC 0x60FF slot
+
+    @property
+    def network(self) -> canopen.Network | None: ...  # None until connected
+    def receive_from(self, node_id: int, cob_ids: tuple[int, ...] = ()) -> None: ...  # its frames pass the filter
+    def judging_time_s(self) -> float: ...  # now on the frames' arrival timeline (heartbeat judging)
+    def quick_stop(self, reason: str) -> None: ...  # every axis, now (an e-stop input)
+
+
+class MotionLink(BusHost, Protocol):
     axis_map: AxisMap
 
     def bring_up(self) -> None: ...

@@ -21,12 +21,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.geometry.nurbs import NurbsCurve
-from nurbsmotion.program import Program
+from nurbsmotion.program import AXES, Program
 from nurbsmotion.program.model import SourceRef
 from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.service.program_gate import check_machine_can_run
 
 BRACKET_MM = 1e-6  # extremes known to this; far below one count of any real axis
 SAMPLES_PER_SPAN = 16
@@ -154,3 +156,25 @@ def hull_box(program: Program, columns: list[int],
     """(min, max) per configured axis over every block's control points: a box holding the path."""
     lows, highs = hulls if hulls is not None else block_hulls(program)
     return lows[:, columns].min(axis=0), highs[:, columns].max(axis=0)
+
+
+def check_before_motion(name: str, program: Program, config: MachineConfig, columns: list[int],
+                        axis_map: AxisMap) -> None:
+    """Everything about the program knowable without planning it, before any motion: the
+    program gate (service.program_gate), a program axis without a machine axis, the soft
+    limits from the path's verified bounding box and the int32 count range (InputError)."""
+    check_machine_can_run(program, config)
+    if not program.blocks:
+        raise InputError(name, "the program has no motion")
+    hulls = block_hulls(program)
+    moved = moving_unconfigured_axis(program, columns, hulls)
+    if moved is not None:
+        raise InputError(name, f"the program moves {AXES[moved]}, which this machine has no axis for")
+    beyond = soft_limit_violation(program, config, columns, hulls)
+    if beyond is not None:
+        raise beyond
+    low, high = hull_box(program, columns, hulls)
+    try:
+        axis_map.to_counts(np.array([low, high]), check_limits=False)
+    except InputError as err:
+        raise InputError(f"{name}: {err.where}", err.message) from None

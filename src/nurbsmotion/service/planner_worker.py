@@ -57,7 +57,8 @@ from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program, ReadOptions
 from nurbsmotion.program.records import BlockRecords
-from nurbsmotion.service.planner import machine_has_devices, spindle_wait_reason
+from nurbsmotion.service.job_common import machine_has_devices, parse, spindle_wait_reason
+from nurbsmotion.service.path_bounds import check_before_motion
 
 log = logging.getLogger(__name__)
 
@@ -380,9 +381,6 @@ class BlockLengths:
 
 def read_and_check(request: PlanRequest) -> Program:
     """The request's program, parsed and checked before motion (InputError otherwise)."""
-    from nurbsmotion.service.planner import parse
-    from nurbsmotion.service.streamed_job import check_before_motion  # it imports this module
-
     r = request
     # No cyclic collection while parsing: it keeps ~10 objects a word, and the collector's
     # passes over the worker's heap took ~0.1 s of a long program's parse (Wang x 460 in the

@@ -20,6 +20,7 @@ from __future__ import annotations
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.program import CoolantMode, EventKind, Program, ProgramEvent, SpindleDirection
+from nurbsmotion.config.spindle import SpindleConfig
 
 COOLANT_OUTPUTS = {CoolantMode.MIST: ("coolant", "mist", "coolant_mist"),
                    CoolantMode.FLOOD: ("coolant", "flood", "coolant_flood")}
@@ -33,7 +34,7 @@ def coolant_output(config: MachineConfig, mode: CoolantMode) -> str | None:
 
 def spindle_refusal(event: ProgramEvent, config: MachineConfig) -> str | None:
     """Why the configured spindle cannot run this M3/M4/S event (None: it can)."""
-    if config.spindle in (None, "none"):
+    if not isinstance(config.spindle, SpindleConfig):  # None or 'none'
         said = "spindle: none" if config.spindle == "none" else "no spindle: key"
         return f"{event.code} needs a spindle, and this machine has none ({said} in {config.source})"
     rpm, max_rpm = event.spindle_rpm or 0.0, config.spindle.max_rpm

@@ -28,7 +28,6 @@ from typing import Any, Callable
 
 import numpy as np
 
-from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
@@ -37,12 +36,11 @@ from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
 from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.program.summary import reading_dict
+from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.checked_store import CheckedStore
-from nurbsmotion.service.path_bounds import block_hulls, hull_box, moving_unconfigured_axis, soft_limit_violation
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
                                                 PlannerWorker, PlanRequest, TracePath, as_error, receive_program)
-from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 
 log = logging.getLogger(__name__)
@@ -72,26 +70,6 @@ def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfi
         a_bound.append(min(a, axis_a) if axis_a else a)
     return max_rate(np.array(v_bound), np.array(a_bound), [a.max_velocity_mm_s for a in config.axes],
                     [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
-
-
-def check_before_motion(name: str, program: Program, config: MachineConfig, columns: list[int],
-                        axis_map: AxisMap) -> None:
-    """Everything about the program knowable without planning it (module docstring)."""
-    check_machine_can_run(program, config)
-    if not program.blocks:
-        raise InputError(name, "the program has no motion")
-    hulls = block_hulls(program)
-    moved = moving_unconfigured_axis(program, columns, hulls)
-    if moved is not None:
-        raise InputError(name, f"the program moves {AXES[moved]}, which this machine has no axis for")
-    beyond = soft_limit_violation(program, config, columns, hulls)
-    if beyond is not None:
-        raise beyond
-    low, high = hull_box(program, columns, hulls)
-    try:
-        axis_map.to_counts(np.array([low, high]), check_limits=False)
-    except InputError as err:
-        raise InputError(f"{name}: {err.where}", err.message) from None
 
 
 class StreamedJob:
@@ -302,8 +280,6 @@ class StreamedJob:
         (blocks while the queue is full; dropped once the job ended)."""
         if self.feed.cancelled.is_set():
             return
-        from nurbsmotion.service.planner import JobPause  # the shared pause record
-
         self.pauses.extend(JobPause(row, reason, tool, wait) for row, reason, tool, wait in chunk.pauses)
         self._take_events(chunk.block_rows, chunk.block_ids)
         for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
@@ -371,8 +347,6 @@ def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarr
                  chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> PlanRequest:
     """The worker's request for ``text`` started at ``start_mm`` (machine axes; None: 0) with
     ``options``, with its entry in the checked-program ``store`` (service.checked_store)."""
-    from nurbsmotion.service.planner import axis_columns
-
     columns = axis_columns(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:

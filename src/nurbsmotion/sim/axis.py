@@ -11,8 +11,8 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import EmcyCode, Mode, State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import EmcyCode, Mode, State
 from nurbsmotion.log import kv
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim.eds import STANDARD_MODES

@@ -5,7 +5,9 @@ This module adds what a real drive does and ``LocalNode`` does not (reference, s
 its own NMT slave (boot-up, heartbeat, PDOs only in OPERATIONAL, SDO silent in STOPPED),
 RPDO data written into the drive at the next SYNC (CiA 301), TPDOs on SYNC per the mapping
 and transmission type the master wrote, EMCY, the heartbeat consumer and fault injection.
-The CiA-402 application itself (state machine, set-points, servo) is ``axis.Cia402Axis``.
+The CiA-402 application itself (state machine, set-points, servo) is ``axis.Cia402Axis``;
+the object dictionary and the SDO server's checks are ``drive_objects``, the PDOs
+``drive_pdos``, the pieces every simulated node shares ``slave``.
 
 All handlers run in the network's receive thread (SYNC, RPDO, SDO, NMT) or in the
 network's ticker thread (heartbeat, timed faults); one lock per drive serialises them.
@@ -16,94 +18,48 @@ from __future__ import annotations
 import bisect
 import logging
 import math
-import struct
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import can
 import canopen
-from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState, State
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.arrival_clock import ArrivalClock, socket_pending
+from nurbsmotion.can.cia402 import EmcyCode, NmtCommand, NmtState, State
 from nurbsmotion.log import kv
+from nurbsmotion.sim import axis as axis_module
 from nurbsmotion.sim import eds as eds_rules
 from nurbsmotion.sim import homing, velocity
 from nurbsmotion.sim import pdo as pdo_layout
-from nurbsmotion.sim import axis as axis_module
-from nurbsmotion.arrival_clock import ArrivalClock, socket_pending
-from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis, UnsupportedMode
+from nurbsmotion.sim.axis import EMCY_SYNC_LOSS, Cia402Axis
+from nurbsmotion.sim.drive_objects import SYNC_COUNTER_OVERFLOW, DriveObjects
+from nurbsmotion.sim.drive_pdos import DrivePdos
 from nurbsmotion.sim.eds import default_eds_path, find_variable
 from nurbsmotion.sim.faults import DEFAULT_FAULT_CODE, DEFAULT_SDO_ABORT_CODE, FaultInjection
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 from nurbsmotion.sim.recording import SetpointRecorder, SyncRecorder
 from nurbsmotion.sim.rpdo_timers import RpdoTimers
-from nurbsmotion.sim.slave import GatedLocalNode
 from nurbsmotion.sim.servo import ServoModel
+from nurbsmotion.sim.slave import EMCY_STRUCT, Subscriptions, addressed_command
 from nurbsmotion.sim.stats import DriveStats
 from nurbsmotion.sim.timing import SyncMonitor, SyncSettings
 
 log = logging.getLogger(__name__)
 
-EMCY_STRUCT = struct.Struct("<HB5x")
-ABORT_NO_SUBINDEX = 0x06090011
-ABORT_WRITE_ONLY = 0x06010001
-ABORT_PARAMETER_INCOMPATIBLE = 0x06040043
-ABORT_VALUE_RANGE = 0x06090030  # CiA 301: value range of parameter exceeded
-IP_LINEAR = 0  # 0x60C0 sub-mode
 SYNC_WINDOW_LENGTH = 0x1007  # µs after SYNC in which synchronous RPDOs count (0 = no window)
-SYNC_COUNTER_OVERFLOW = 0x1019  # 0 = SYNC without counter, 2..240 = counter 1..value
 EMCY_SYNC_LENGTH = 0x8240  # CiA 301: unexpected SYNC data length
 EMCY_RPDO_TIMEOUT = 0x8250  # CiA 301: RPDO time-out
 TICK_MAX_S = 0.05  # the ticker looks at a drive at least this often
-RPDO_EVENT_TIMER_SUB = 5  # 0x14xx:05, ms: deadline for the next RPDO (0 = none)
 FE_WINDOW_DISABLED = 0xFFFF_FFFF  # no 0x6065: no following-error monitor
 DEFAULT_QUICK_STOP_OPTION = 2  # no 0x605A: CiA 402 default (quick-stop ramp, then disabled)
 DEFAULT_QUICK_STOP_DECEL = math.inf  # no 0x6085: the drive stops at once
 _FOREVER = math.inf
-
-
-def _subindices(entry: ODArray | ODRecord | ODVariable) -> list[int]:
-    """The sub-indices of a record or array entry (none for a plain variable)."""
-    return list(entry.subindices) if isinstance(entry, (ODArray, ODRecord)) else []
-
-
-@dataclass
-class _TpdoSlot:
-    layout: pdo_layout.PdoLayout
-    message: can.Message
-    getters: list[Callable[[], Any]]
-    sync_count: int = 0
-    last_data: bytes = b""
-
-
-@dataclass
-class _RpdoSlot:
-    layout: pdo_layout.PdoLayout
-    setters: list[Callable[[Any], None]]
-
-
-class _DriveNode(GatedLocalNode):
-    """The drive's gated LocalNode (sim.slave): SDO writes validated before and applied after
-    by the drive; an entry never written reads as its EDS value."""
-
-    def get_data(self, index: int, subindex: int, check_readable: bool = False) -> bytes:
-        """As LocalNode, but an entry never written holds its EDS value, or 0 if the EDS gives
-        none (``eds.initial_data``), instead of an abort."""
-        obj = self._find_object(index, subindex)
-        if check_readable and not obj.readable:
-            raise SdoAbortedError(ABORT_WRITE_ONLY)
-        for callback in self._read_callbacks:
-            result = callback(index=index, subindex=subindex, od=obj)
-            if result is not None:
-                return obj.encode_raw(result)
-        stored = self.data_store.get(index, {}).get(subindex)
-        return stored if stored is not None else eds_rules.initial_data(obj)
+NMT_STATES = {NmtCommand.START: NmtState.OPERATIONAL, NmtCommand.STOP: NmtState.STOPPED,
+              NmtCommand.PRE_OPERATIONAL: NmtState.PRE_OPERATIONAL}  # the NMT commands that change state
 
 
 class SimDrive:
@@ -148,17 +104,14 @@ class SimDrive:
         self.node_id = node_id
         self.name = name or f"node{node_id}"
         self.eds_path = Path(eds) if eds else default_eds_path()
-        self.od = canopen.import_od(str(self.eds_path), node_id)
-        self.node = _DriveNode(node_id, self.od, self)
-        self._stored = self._encode_parameters(parameters or {})
-        if identity is not None:
-            self._stored[(c.IDENTITY, 1)] = struct.pack("<I", identity[0])
-            self._stored[(c.IDENTITY, 2)] = struct.pack("<I", identity[1])
+        self.objects = DriveObjects(node_id, self.eds_path, parameters or {}, identity)
+        self.od = self.objects.od
+        self.node = self.objects.node
         self.servo = ServoModel(lag_cycles, max_velocity_counts_s)
         self.recorder = SetpointRecorder(enabled=record)
         self.timeline = SyncRecorder(enabled=record)
         self.stats = DriveStats()
-        self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self._stored_mode(),
+        self.axis = Cia402Axis(self.servo, self.recorder, self.stats, self._send_emcy, self.name, self.objects.stored_mode(),
                                self.timeline)
         self.axis.params.missing_setpoint = (sync or SyncSettings()).missing_setpoint
         self.axis.home_sensors = home_sensors or homing.HomeSensors()
@@ -166,7 +119,7 @@ class SimDrive:
         self._velocity_modes_missing = frozenset(
             mode for mode, objects in velocity.REQUIRED_OBJECTS.items()
             if any(find_variable(self.od, index, 0) is None for index in objects))
-        self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self._od_value_or(index, sub, 0),
+        self.axis.homing_setup = lambda: homing.setup_from_objects(lambda index, sub: self.objects.value_or(index, sub, 0),
                                                                    home_object)
         self.network: canopen.Network | None = None
         self.nmt_state = NmtState.BOOTUP
@@ -185,11 +138,8 @@ class SimDrive:
         self._last_sync_counter: int | None = None
         self._period_source = eds_rules.cycle_period_source(self.od)
         self._lock = threading.RLock()
-        self._subscriptions: list[tuple[int, Callable[..., None]]] = []
+        self._subscriptions = Subscriptions()
         self._sync_cob: int | None = None
-        self._rpdo_by_cob: dict[int, _RpdoSlot] = {}
-        self._tpdos: list[_TpdoSlot] = []
-        self._pending: dict[int, tuple[list[Callable[[Any], None]], tuple]] = {}
         self._sync_index = 0
         self._fault_seq = 0
         self._heartbeat_consumer = HeartbeatConsumer()
@@ -198,29 +148,11 @@ class SimDrive:
         self._next_heartbeat = 0.0
         self._emcy_cob = pdo_layout.COB_ID_INVALID_BIT
         self._init_injections()
-        axis = self.axis
-        self._live_read: dict[tuple[int, int], Callable[[], Any]] = {
-            (c.STATUSWORD, 0): lambda: axis.statusword,
-            (c.CONTROLWORD, 0): lambda: axis.controlword,
-            (c.MODES_OF_OPERATION, 0): lambda: axis.mode,
-            (c.MODES_OF_OPERATION_DISPLAY, 0): lambda: axis.mode_display,
-            (c.POSITION_ACTUAL, 0): lambda: axis.position_actual,
-            (c.FOLLOWING_ERROR_ACTUAL, 0): lambda: axis.following_error,
-            (c.TARGET_POSITION, 0): lambda: axis.target_position,
-            (c.IP_DATA_RECORD, 1): lambda: axis.ip_setpoint,
-            (velocity.TARGET_VELOCITY, 0): lambda: axis.target_velocity,
-            (velocity.VELOCITY_ACTUAL, 0): lambda: axis.velocity_actual,
-            (c.ERROR_CODE, 0): lambda: axis.error_code,
-            (c.ERROR_REGISTER, 0): lambda: axis.error_register,
-            (c.PREDEFINED_ERROR_FIELD, 0): lambda: len(axis.error_history),
-        }
-        self._live_write: dict[tuple[int, int], Callable[[Any], None]] = {
-            (c.CONTROLWORD, 0): axis.set_controlword,
-            (c.MODES_OF_OPERATION, 0): self._set_mode,
-            (c.TARGET_POSITION, 0): axis.set_target_position,
-            (c.IP_DATA_RECORD, 1): axis.set_ip_setpoint,
-            (velocity.TARGET_VELOCITY, 0): axis.set_target_velocity,
-        }
+        self.objects.serve(self.axis)
+        self.objects.refusal = self._check_refusal
+        self.objects.written = self._after_sdo_write
+        self.pdos = DrivePdos(self.objects, self._subscriptions, self.stats, self._rpdo_timers, self._on_rpdo,
+                              self._load_parameters)
 
     # ------------------------------------------------------------------ public API
     @property
@@ -280,11 +212,11 @@ class SimDrive:
         with self._lock:
             if self.network is not None:
                 raise RuntimeError(f"{self.name} is already attached")
-            self.network = network
+            self.network = self._subscriptions.network = network
             self._arrival = ArrivalClock(socket_pending(network.bus) if self._frame_times else lambda: False)
             self.node.associate_network(network)
-            self._subscribe(c.COB_NMT, self._on_nmt)
-            self._subscribe(self.node.sdo.rx_cobid, self._on_sdo_request)
+            self._subscriptions.add(c.COB_NMT, self._on_nmt)
+            self._subscriptions.add(self.node.sdo.rx_cobid, self._on_sdo_request)
             self._t0 = self._clock()
             self._wall_to_clock_s = time.monotonic() - time.time()
             self._boot(reset_application=True)
@@ -297,13 +229,12 @@ class SimDrive:
         with self._lock:
             if self.network is None:
                 return
-            for can_id, callback in list(self._subscriptions):
-                self._unsubscribe(can_id, callback)
-            self._rpdo_by_cob.clear()
+            self._subscriptions.clear()
+            self.pdos.forget()
             self._consumed_cobs = []
             self._sync_cob = None
             self.node.remove_network()
-            self.network = None
+            self.network = self._subscriptions.network = None
 
     def inject(self, fault: FaultInjection) -> None:
         """Inject ``fault`` at once, at its SYNC index, or ``at_s`` seconds after the drive
@@ -357,7 +288,7 @@ class SimDrive:
 
     def _judge_timeouts(self, now: float) -> float:
         """Heartbeat consumer, SYNC loss and RPDO timers at ``now`` seen through the reception
-        lag (nurbsmotion.arrival_clock); returns when (drive clock) the next of them falls due."""
+        lag (nurbsmotion.can.arrival_clock); returns when (drive clock) the next of them falls due."""
         arrival_now = self._arrival.judging_time(now)
         self._judge_at(arrival_now)
         due = min(self._heartbeat_consumer.next_deadline(), self._sync_monitor.loss_deadline(self.period_s),
@@ -398,7 +329,7 @@ class SimDrive:
     def value(self, index: int, subindex: int = 0) -> Any:
         """An object's current value, as an SDO upload would read it."""
         with self._lock:
-            return self._od_value(index, subindex)
+            return self.objects.value(index, subindex)
 
     def write_recording(self, path: str | Path) -> Path:
         """Write the applied set-points as CSV (see ``recording``)."""
@@ -409,26 +340,6 @@ class SimDrive:
         return self.timeline.write_csv(path)
 
     # ------------------------------------------------------------------ boot and NMT
-    def _encode_parameters(self, parameters: dict[tuple[int, int], int]) -> dict[tuple[int, int], bytes]:
-        encoded = {}
-        for (index, subindex), value in parameters.items():
-            var = find_variable(self.od, index, subindex)
-            if var is None:
-                raise ValueError(f"node {self.node_id}: no object 0x{index:04X} sub {subindex} in {self.eds_path}")
-            encoded[(index, subindex)] = var.encode_raw(value)
-        return encoded
-
-    def _stored_mode(self) -> int:
-        """0x6060 after a reset: the stored value, the EDS value or default, else 0 (no mode)."""
-        var = find_variable(self.od, c.MODES_OF_OPERATION, 0)
-        if var is None:
-            return 0
-        stored = self._stored.get((c.MODES_OF_OPERATION, 0))
-        if stored:
-            return int(var.decode_raw(stored))
-        value = var.value if var.value is not None else var.default
-        return int(value or 0)
-
     def _init_injections(self) -> None:
         self._ignore_syncs: float = 0
         self._drop_rpdos = 0
@@ -441,18 +352,11 @@ class SimDrive:
         """Reset communication (and the application): stored values back, boot-up message,
         PRE-OPERATIONAL."""
         self.nmt_state = NmtState.BOOTUP
-        store = self.node.data_store
-        for index in list(store):
-            if reset_application or 0x1000 <= index <= 0x1FFF:
-                del store[index]
-        for (index, subindex), data in self._stored.items():
-            if reset_application or 0x1000 <= index <= 0x1FFF:
-                store.setdefault(index, {})[subindex] = data
+        self.objects.reset(reset_application)
         if reset_application:
-            self.axis.reset(self._stored_mode())
+            self.axis.reset(self.objects.stored_mode())
             self._sync_index = 0
-        self._pending.clear()
-        self._rebuild_all_pdos()
+        self._rebuild_pdos()
         self._configure_heartbeat_consumer()
         self._send(c.COB_HEARTBEAT + self.node_id, bytes([NmtState.BOOTUP]))
         self.nmt_state = NmtState.PRE_OPERATIONAL
@@ -460,35 +364,26 @@ class SimDrive:
         log.info(kv("sim.boot", node=self.node_id, reset_application=reset_application))
 
     def _on_nmt(self, can_id: int, data: bytes, timestamp: float) -> None:
-        if len(data) < 2 or data[1] not in (0, self.node_id):
+        command = addressed_command(data, self.node_id)
+        if command is None:
             return
         with self._lock:
             if self.silent:
                 return
-            command = data[0]
-            if command == NmtCommand.START:
-                self._enter_nmt(NmtState.OPERATIONAL)
-            elif command == NmtCommand.STOP:
-                self._enter_nmt(NmtState.STOPPED)
-            elif command == NmtCommand.PRE_OPERATIONAL:
-                self._enter_nmt(NmtState.PRE_OPERATIONAL)
-            elif command == NmtCommand.RESET_NODE:
-                self._boot(reset_application=True)
-            elif command == NmtCommand.RESET_COMMUNICATION:
-                self._boot(reset_application=False)
+            if command in NMT_STATES:
+                self._enter_nmt(NMT_STATES[command])
+            elif command in (NmtCommand.RESET_NODE, NmtCommand.RESET_COMMUNICATION):
+                self._boot(reset_application=command == NmtCommand.RESET_NODE)
 
     def _enter_nmt(self, new: NmtState) -> None:
         if new == self.nmt_state:
             return
         if new == NmtState.OPERATIONAL:
             self._sync_index = 0
-            self._pending.clear()
+            self.pdos.restart()
             self._sync_monitor.reset()
             self._rpdo_timers.reset()
             self._last_sync_counter = None
-            for slot in self._tpdos:
-                slot.sync_count = 0
-                slot.last_data = b""
         log.info(kv("sim.nmt", node=self.node_id, state=new.name, previous=self.nmt_state.name))
         self.nmt_state = new
 
@@ -497,22 +392,15 @@ class SimDrive:
             self._send(c.COB_HEARTBEAT + self.node_id, bytes([self.nmt_state]))
             self.stats.heartbeats_sent += 1
 
-    def _consumer_entries(self) -> list[int]:
-        """The 0x1016 entries (none if the EDS has no 0x1016)."""
-        if c.CONSUMER_HEARTBEAT_TIME not in self.od:
-            return []
-        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0]
-        return [self._od_value(c.CONSUMER_HEARTBEAT_TIME, n) for n in subs]
-
     def _configure_heartbeat_consumer(self) -> None:
         """Watch the producers listed in 0x1016 (EMCY 0x8130 and fault when one goes silent)."""
-        self._heartbeat_consumer.configure(self._consumer_entries())
+        self._heartbeat_consumer.configure(self.objects.consumer_entries())
         for cob in self._consumed_cobs:
-            self._unsubscribe(cob, self._on_peer_heartbeat)
+            self._subscriptions.remove(cob, self._on_peer_heartbeat)
         self._consumed_cobs = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
         if self.network is not None:
             for cob in self._consumed_cobs:
-                self._subscribe(cob, self._on_peer_heartbeat)
+                self._subscriptions.add(cob, self._on_peer_heartbeat)
 
     def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:
@@ -535,29 +423,7 @@ class SimDrive:
         self._send(self._emcy_cob & 0x7FF, EMCY_STRUCT.pack(code, register))
         self.stats.emcys_sent += 1
 
-    def _subscribe(self, can_id: int, callback: Callable[..., None]) -> None:
-        assert self.network is not None
-        self.network.subscribe(can_id, callback)
-        self._subscriptions.append((can_id, callback))
-
-    def _unsubscribe(self, can_id: int, callback: Callable[..., None]) -> None:
-        if (can_id, callback) in self._subscriptions:
-            self._subscriptions.remove((can_id, callback))
-            assert self.network is not None
-            self.network.unsubscribe(can_id, callback)
-
     # ------------------------------------------------------------------ parameters
-    def _od_value(self, index: int, subindex: int = 0) -> Any:
-        var = find_variable(self.od, index, subindex)
-        assert var is not None, (hex(index), subindex)
-        return var.decode_raw(self.node.get_data(index, subindex))
-
-    def _od_value_or(self, index: int, subindex: int, missing: Any) -> Any:
-        """An object's value, ``missing`` if the EDS does not have it."""
-        if find_variable(self.od, index, subindex) is None:
-            return missing
-        return self._od_value(index, subindex)
-
     def _frame_time(self, timestamp: float) -> float:
         """When a frame arrived, on the drive's clock: its receive timestamp (wall clock,
         kernel time on SocketCAN) unless a clock was injected."""
@@ -569,17 +435,17 @@ class SimDrive:
         """0x60C2 (value·10^exponent s) if the EDS has it, else 0x1006 (µs), else the
         measured SYNC interval (a drive that can only lock onto SYNC)."""
         if self._period_source == c.IP_TIME_PERIOD:
-            value = self._od_value(c.IP_TIME_PERIOD, 1)
-            exponent = self._od_value_or(c.IP_TIME_PERIOD, 2, -3)
+            value = self.objects.value(c.IP_TIME_PERIOD, 1)
+            exponent = self.objects.value_or(c.IP_TIME_PERIOD, 2, -3)
             return max(value * 10.0**exponent, 0.0)
         if self._period_source == c.COMM_CYCLE_PERIOD:
-            return self._od_value(c.COMM_CYCLE_PERIOD) * 1e-6
+            return self.objects.value(c.COMM_CYCLE_PERIOD) * 1e-6
         return self._sync_monitor.measured_period_s
 
     def _load_parameters(self) -> None:
         """Cache the parameters SYNC handling uses (after boot and every SDO write)."""
         params = self.axis.params
-        value = self._od_value_or
+        value = self.objects.value_or
         params.cycle_period_s = self._cycle_period_s()
         params.fe_window_counts = value(c.FOLLOWING_ERROR_WINDOW, 0, FE_WINDOW_DISABLED)
         params.fe_timeout_ms = value(c.FOLLOWING_ERROR_TIMEOUT, 0, 0)
@@ -600,31 +466,18 @@ class SimDrive:
         sync_cob = value(c.SYNC_COB_ID, 0, c.COB_SYNC) & 0x7FF
         if sync_cob != self._sync_cob and self.network is not None:
             if self._sync_cob is not None:
-                self._unsubscribe(self._sync_cob, self._on_sync)
-            self._subscribe(sync_cob, self._on_sync)
+                self._subscriptions.remove(self._sync_cob, self._on_sync)
+            self._subscriptions.add(sync_cob, self._on_sync)
             self._sync_cob = sync_cob
-
-    def _homing_method_accepted(self, method: int) -> bool:
-        """0x6098 takes the methods ``sim.homing`` implements and the drive's own default
-        (a drive takes back what it reports; starting an unimplemented one is a homing error)."""
-        var = find_variable(self.od, homing.HOMING_OBJECTS[0][0], 0)
-        default = var.value if var is not None and var.value is not None else (var.default if var is not None else None)
-        return homing.supported(method) or method == default
 
     def _homing_period_s(self) -> float:
         """The drive's own cycle in homing mode: 0x1006, else the measured SYNC interval,
         else 1 ms."""
-        period_us = self._od_value_or(c.COMM_CYCLE_PERIOD, 0, 0)
+        period_us = self.objects.value_or(c.COMM_CYCLE_PERIOD, 0, 0)
         if period_us > 0:
             return period_us * 1e-6
         measured = self._sync_monitor.measured_period_s
         return measured if measured > 0 else axis_module.DEFAULT_CYCLE_S
-
-    def _set_mode(self, mode: int) -> None:
-        try:
-            self.axis.set_mode(mode)
-        except UnsupportedMode:
-            raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID) from None
 
     # ------------------------------------------------------------------ SDO server
     def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
@@ -633,67 +486,15 @@ class SimDrive:
                 return
             self.node.sdo.on_request(can_id, data, timestamp)
 
-    def _on_sdo_read(self, index: int, subindex: int, od: Any) -> Any:
-        getter = self._live_read.get((index, subindex))
-        if getter is not None:
-            return getter()
-        if index == c.PREDEFINED_ERROR_FIELD:
-            history = self.axis.error_history
-            return history[subindex - 1] if subindex <= len(history) else 0
-        return None
-
-    def _before_sdo_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
-        """Validate an SDO write (raise SdoAbortedError to refuse) and apply live objects."""
-        self._check_refusal(index, subindex)
-        value = od.decode_raw(data)
-        pdo_layout.check_parameter_write(self.od, self._od_value, index, subindex, value)
-        eds_rules.check_range(od, value)
-        if index == c.CONSUMER_HEARTBEAT_TIME and subindex > 0:
-            self._check_consumer_entry(subindex, value)
-        elif index == SYNC_COUNTER_OVERFLOW:
-            self._check_sync_counter_overflow(value)
-        elif index == c.PREDEFINED_ERROR_FIELD:
-            if subindex != 0 or value != 0:
-                raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
-            self.axis.error_history.clear()
-        elif index in (c.SYNC_COB_ID, c.EMCY_COB_ID) and value & pdo_layout.COB_ID_EXTENDED_BIT:
-            raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)
-        elif index == c.IP_SUB_MODE and value != IP_LINEAR:
-            raise SdoAbortedError(pdo_layout.ABORT_VALUE_INVALID)  # only linear interpolation
-        elif index == homing.HOMING_OBJECTS[0][0] and not self._homing_method_accepted(value):
-            raise SdoAbortedError(ABORT_VALUE_RANGE)  # a method this drive does not have (as Elmo beyond 35)
-        setter = self._live_write.get((index, subindex))
-        if setter is not None:
-            setter(value)
-
     def _after_sdo_write(self, index: int, subindex: int) -> None:
         log.debug(kv("sim.sdo_write", node=self.node_id, object=f"0x{index:04X}:{subindex:02X}"))
         if pdo_layout.is_pdo_parameter(index):
-            self._rebuild_all_pdos()
+            self._rebuild_pdos()
         elif index == c.CONSUMER_HEARTBEAT_TIME:
             self._configure_heartbeat_consumer()
         else:
             self._load_parameters()
             self.axis.refuse_cyclic_without_period()
-
-    def _check_consumer_entry(self, subindex: int, value: int) -> None:
-        """CiA 301 7.5.2.33: two 0x1016 entries with the same producer and a time > 0 are
-        refused (0x06040043)."""
-        producer = (value >> 16) & 0xFF
-        if producer == 0 or value & 0xFFFF == 0:
-            return
-        subs = [n for n in _subindices(self.od[c.CONSUMER_HEARTBEAT_TIME]) if n > 0 and n != subindex]
-        for n in subs:
-            other = self._od_value(c.CONSUMER_HEARTBEAT_TIME, n)
-            if (other >> 16) & 0xFF == producer and other & 0xFFFF:
-                raise SdoAbortedError(ABORT_PARAMETER_INCOMPATIBLE)
-
-    def _check_sync_counter_overflow(self, value: int) -> None:
-        """CiA 301 7.5.2.22: 0x1019 changes only while 0x1006 is 0 (0x08000022); 0 or 2..240."""
-        if self._od_value_or(c.COMM_CYCLE_PERIOD, 0, 0) != 0:
-            raise SdoAbortedError(pdo_layout.ABORT_DEVICE_STATE)
-        if value == 1 or value > 240:
-            raise SdoAbortedError(eds_rules.ABORT_VALUE_INVALID)
 
     def _check_refusal(self, index: int, subindex: int) -> None:
         for refusal in self._sdo_refusals:
@@ -704,71 +505,18 @@ class SimDrive:
                     self._sdo_refusals.remove(refusal)
                 raise SdoAbortedError(code)
 
-    # ------------------------------------------------------------------ PDO layouts
-    def _mapping(self, map_index: int) -> list[int]:
-        count = self._od_value(map_index, 0)
-        return [self._od_value_or(map_index, n, 0) for n in range(1, count + 1)]
-
-    def _layout(self, comm_index: int, number: int) -> pdo_layout.PdoLayout:
-        cob_id = self._od_value_or(comm_index, 1, pdo_layout.COB_ID_INVALID_BIT)
-        transmission_type = self._od_value_or(comm_index, 2, 255)
-        mapping = self._mapping(comm_index + pdo_layout.MAPPING_OFFSET)
-        return pdo_layout.build_layout(self.od, number, cob_id, transmission_type, mapping)
-
-    def _pdo_numbers(self, comm_range: range) -> list[tuple[int, int]]:
-        """(number, communication index) of the PDOs the EDS has (both objects present)."""
-        return [(index - comm_range.start + 1, index) for index in comm_range
-                if index in self.od and index + pdo_layout.MAPPING_OFFSET in self.od]
-
-    def _rebuild_all_pdos(self) -> None:
-        """Recompute every PDO's struct, setters/getters and subscription (after a remap)."""
-        for cob_id in list(self._rpdo_by_cob):
-            self._unsubscribe(cob_id, self._on_rpdo)
-        self._rpdo_by_cob.clear()
-        self._tpdos = []
-        event_timers: dict[int, float] = {}
-        for number, comm in self._pdo_numbers(pdo_layout.RPDO_COMM_RANGE):
-            layout = self._layout(comm, number)
-            if layout.enabled and layout.keys:
-                if layout.cob_id not in self._rpdo_by_cob and self.network is not None:
-                    self._subscribe(layout.cob_id, self._on_rpdo)
-                self._rpdo_by_cob[layout.cob_id] = _RpdoSlot(layout, [self._setter(key) for key in layout.keys])
-                event_timers[number] = self._od_value_or(comm, RPDO_EVENT_TIMER_SUB, 0) / 1000.0
-        for number, comm in self._pdo_numbers(pdo_layout.TPDO_COMM_RANGE):
-            layout = self._layout(comm, number)
-            if layout.enabled and layout.keys:
-                message = can.Message(arbitration_id=layout.cob_id, is_extended_id=False, data=bytearray(layout.size))
-                self._tpdos.append(_TpdoSlot(layout, message, [self._getter(key) for key in layout.keys]))
-        self._rpdo_timers.configure(event_timers)
-        self._pending.clear()
+    # ------------------------------------------------------------------ PDOs (sim.drive_pdos)
+    def _rebuild_pdos(self) -> None:
+        """Every PDO from its objects again (after boot or a remap), then the parameters."""
+        self.pdos.rebuild(self.network is not None)
         self._load_parameters()
-
-    def _setter(self, key: tuple[int, int]) -> Callable[[Any], None]:
-        live = self._live_write.get(key)
-        if live is not None:
-            return live
-        var = find_variable(self.od, *key)
-        assert var is not None
-        store = self.node.data_store
-
-        def store_value(value: Any) -> None:
-            store.setdefault(key[0], {})[key[1]] = var.encode_raw(value)
-            self._load_parameters()
-
-        return store_value
-
-    def _getter(self, key: tuple[int, int]) -> Callable[[], Any]:
-        live = self._live_read.get(key)
-        if live is not None:
-            return live
-        return lambda: self._od_value(*key)
 
     # ------------------------------------------------------------------ PDO traffic
     def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
         with self._lock:
             if self.silent or self.nmt_state != NmtState.OPERATIONAL:
                 return
-            slot = self._rpdo_by_cob.get(can_id)
+            slot = self.pdos.rpdo_by_cob.get(can_id)
             if slot is None:
                 return
             self.stats.rpdos_received += 1
@@ -785,20 +533,7 @@ class SimDrive:
                 self.stats.rpdos_outside_window += 1
                 return
             self._rpdo_timers.received(slot.layout.number, now)
-            values = slot.layout.codec.unpack_from(data)
-            if slot.layout.synchronous:
-                if slot.layout.number in self._pending:
-                    self.stats.rpdos_overwritten += 1
-                self._pending[slot.layout.number] = (slot.setters, values)
-            else:
-                self._apply_values(slot.setters, values)
-
-    def _apply_values(self, setters: list[Callable[[Any], None]], values: tuple) -> None:
-        for setter, value in zip(setters, values):
-            try:
-                setter(value)
-            except SdoAbortedError:
-                self.stats.pdo_values_refused += 1
+            self.pdos.receive(slot, data)
 
     def _outside_sync_window(self, now: float) -> bool:
         """CiA 301 0x1007: a synchronous RPDO later than the window after SYNC is discarded."""
@@ -838,12 +573,10 @@ class SimDrive:
         if self.axis.mode_display == homing.MODE_HOMING:
             self.axis.params.homing_period_s = self._homing_period_s()
         self.axis.run_missed_cycles(timing)  # they ran before this SYNC: with the old RPDO data
-        if self._pending:
-            for setters, values in self._pending.values():
-                self._apply_values(setters, values)
-            self._pending.clear()
+        self.pdos.apply_pending()
         self.axis.step(self._sync_index, sync_counter, timing)
-        self._send_tpdos()
+        if self.network is not None:
+            self.pdos.send_tpdos(self.network)
 
     def _check_sync_counter(self, data: bytes) -> int:
         """The SYNC counter byte (-1 without). With 0x1019 in the EDS the length must fit it
@@ -863,32 +596,6 @@ class SimDrive:
                 self.stats.sync_counter_jumps += 1
                 log.warning(kv("sim.sync_counter_jump", node=self.node_id, previous=last, counter=counter))
         return counter
-
-    def _send_tpdos(self) -> None:
-        """TPDOs of this SYNC: type 1..240 every n-th SYNC; 0, 254, 255 when the data
-        changed; 241..253 never."""
-        network = self.network
-        if network is None:
-            return
-        for slot in self._tpdos:
-            kind = slot.layout.transmission_type
-            if 1 <= kind <= 240:
-                slot.sync_count += 1
-                if slot.sync_count < kind:
-                    continue
-                slot.sync_count = 0
-            elif 241 <= kind <= 253:
-                continue
-            data = slot.message.data
-            slot.layout.codec.pack_into(data, 0, *[getter() for getter in slot.getters])
-            if kind == 0 or kind >= 254:
-                if data == slot.last_data:
-                    continue
-                slot.last_data = bytes(data)
-            with network.send_lock:
-                if network.bus is not None:
-                    network.bus.send(slot.message)
-            self.stats.tpdos_sent += 1
 
     # ------------------------------------------------------------------ fault injection
     def _apply_injection(self, fault: FaultInjection) -> None:

@@ -15,7 +15,7 @@ from canopen import objectdictionary as od_types
 from canopen.objectdictionary import ObjectDictionary, ODVariable
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
+from nurbsmotion.can import cia402 as c
 
 EDS_NAME = "nurbsmotion-servo.eds"
 

@@ -32,8 +32,8 @@ from canopen import objectdictionary as odt
 from canopen.objectdictionary import ObjectDictionary, ODRecord, ODVariable
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion import cia402 as c
-from nurbsmotion.cia402 import EmcyCode, NmtCommand, NmtState
+from nurbsmotion.can import cia402 as c
+from nurbsmotion.can.cia402 import EmcyCode, NmtCommand, NmtState
 from nurbsmotion.log import kv
 from nurbsmotion.sim import pdo as pdo_layout
 from nurbsmotion.sim.heartbeat import HeartbeatConsumer

@@ -22,7 +22,7 @@ from nurbsmotion.sim.drive import SimDrive
 from nurbsmotion.sim.faults import FaultInjection
 from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
-from nurbsmotion.socketcan_batch import BatchedSocketcanBus, BatchNotifier
+from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 from nurbsmotion.sim.timing import SyncSettings
 
 log = logging.getLogger(__name__)
@@ -96,7 +96,7 @@ class SimNetwork:
         self._wake = threading.Event()
         self._ticker: threading.Thread | None = None
         self.started_at = time.monotonic()
-        self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (nurbsmotion/socketcan_batch.py)
+        self.rx_batch = True  # SocketCAN: read every waiting frame per wake-up (nurbsmotion/can/socketcan_batch.py)
         # SCHED_FIFO priority of the drives' receive and ticker threads (None: normal). For drives
         # sharing a process with a SCHED_FIFO master (the daemon with simulate: true): a real
         # drive has its own CPU, so its SYNC/RPDO handling and heartbeat never wait behind the
@@ -216,7 +216,7 @@ class SimNetwork:
             return self
         network = canopen.Network()
         network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        if self.interface == "socketcan":  # a batch of frames per wake-up (nurbsmotion/socketcan_batch.py)
+        if self.interface == "socketcan":  # a batch of frames per wake-up (nurbsmotion/can/socketcan_batch.py)
             network.bus = BatchedSocketcanBus(channel=self.channel, batch=self.rx_batch, **self.bus_kwargs)
         else:
             network.bus = can.Bus(interface=self.interface, channel=self.channel, bitrate=self.bitrate,

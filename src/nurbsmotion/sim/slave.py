@@ -1,5 +1,4 @@
-"""CiA-301 slave pieces every simulated node needs (the I/O node uses them; the drive has
-its own copies in drive.py, which can move onto these).
+"""CiA-301 slave pieces every simulated node needs (the I/O node and the drive use them).
 
 - :class:`GatedLocalNode`: canopen's ``LocalNode`` (object dictionary + SDO server) whose
   SDO writes go through the owner (``_before_sdo_write`` may refuse with an SDO abort,
@@ -20,7 +19,7 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, ODArray
 from canopen.sdo import SdoAbortedError
 
-from nurbsmotion.cia402 import NmtCommand
+from nurbsmotion.can.cia402 import NmtCommand
 from nurbsmotion.sim import pdo as pdo_layout
 
 ABORT_NO_SUBINDEX = 0x06090011

@@ -7,7 +7,7 @@ completed quick-stop ramp, 13/14 (fault) are triggered by the drive, not the con
 
 from __future__ import annotations
 
-from nurbsmotion.cia402 import State
+from nurbsmotion.can.cia402 import State
 
 S = State
 CW_FAULT_RESET_BIT = 0x80

@@ -23,18 +23,17 @@ import enum
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import drive_od
-from nurbsmotion.config import _MISSING, _Doc, _fields, _number, _optional, _string, default_eds_path
+from nurbsmotion.can import drive_od
+from nurbsmotion.config.yaml_reading import MISSING, Doc, fields, number, optional, string
+from nurbsmotion.can.drive_od import default_eds_path
 from nurbsmotion.errors import InputError
 
 MONITOR_POLL_S = 0.05  # the master reads 0x6041 / 0x606C this often (fieldbus.spindle; counted in the bus load)
 
-if TYPE_CHECKING:
-    from nurbsmotion.config import MachineConfig
 
 TARGET_VELOCITY = 0x60FF
 VELOCITY_ACTUAL = 0x606C
@@ -84,11 +83,11 @@ class SpindleConfig:
         return max(1, self.counts_s(self.accel_rpm_s))
 
 
-_POSITIVE = (_number, {"minimum": 0.0})
+_POSITIVE = (number, {"minimum": 0.0})
 _READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
-    "node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
-    "eds": (_optional(_string), {}),
-    "mode": (_string, {"choices": tuple(m.value for m in SpindleMode)}),
+    "node_id": (number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
+    "eds": (optional(string), {}),
+    "mode": (string, {"choices": tuple(m.value for m in SpindleMode)}),
     "counts_per_rev": _POSITIVE,
     "max_rpm": _POSITIVE,
     "accel_rpm_s": _POSITIVE,
@@ -97,12 +96,12 @@ _READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
 REQUIRED = ("node_id", "counts_per_rev", "max_rpm", "accel_rpm_s")
 
 
-def read_spindle_drive(doc: _Doc) -> Any:
-    """``spindle: {node_id, ...}`` -> SpindleConfig (or _MISSING after located errors)."""
+def read_spindle_drive(doc: Doc) -> Any:
+    """``spindle: {node_id, ...}`` -> SpindleConfig (or MISSING after located errors)."""
     before = len(doc.errors)
-    values = _fields(doc, _READERS, required=REQUIRED)
+    values = fields(doc, _READERS, required=REQUIRED)
     if len(doc.errors) > before or any(k not in values for k in REQUIRED):
-        return _MISSING
+        return MISSING
     if "mode" in values:
         values["mode"] = SpindleMode(values["mode"])
     return SpindleConfig(**values)
@@ -120,27 +119,23 @@ def description_problems(od: ObjectDictionary, mode: SpindleMode) -> list[str]:
     return problems
 
 
-def load_spindle_description(cfg: "MachineConfig", base_dir: Path | None) -> "MachineConfig":
-    """Check the spindle's node id against the axes and io node, read its EDS (relative to the
-    configuration's folder) and check it has what its mode needs; InputError at the YAML line."""
-    spindle = cfg.spindle
-    if not isinstance(spindle, SpindleConfig):
-        return cfg
-    used = {a.node_id: f"axis {a.name}" for a in cfg.axes}
-    if cfg.io is not None:
-        used[cfg.io.node_id] = "the io node"
-    if spindle.node_id in used:
-        raise InputError(cfg.where("spindle.node_id"), f"node id {spindle.node_id} is already used by "
-                                                         f"{used[spindle.node_id]}")
+def load_spindle_description(spindle: SpindleConfig, node_users: dict[int, str], where: Callable[[str], str],
+                             base_dir: Path | None) -> SpindleConfig:
+    """Check the spindle's node id against the other nodes (``node_users``: node id -> who),
+    read its EDS (relative to the configuration's folder) and check it has what its mode
+    needs; InputError at the YAML line (``where(path)``: ``file:line: path``)."""
+    if spindle.node_id in node_users:
+        raise InputError(where("spindle.node_id"), f"node id {spindle.node_id} is already used by "
+                                                    f"{node_users[spindle.node_id]}")
     path = Path(spindle.eds) if spindle.eds else Path(default_eds_path())
     if spindle.eds and base_dir is not None and not path.is_absolute():
         path = (base_dir / path).resolve()
-    where = cfg.where("spindle.eds" if spindle.eds else "spindle")
+    place = where("spindle.eds" if spindle.eds else "spindle")
     try:
         od = drive_od.load_description(path, spindle.node_id)
     except drive_od.DescriptionError as err:
-        raise InputError(where, str(err)) from None
+        raise InputError(place, str(err)) from None
     problems = description_problems(od, spindle.mode)
     if problems:
-        raise InputError(where, f"{path.name} {'; '.join(problems)} (spindle node {spindle.node_id})")
-    return replace(cfg, spindle=replace(spindle, eds=str(path), od=od))
+        raise InputError(place, f"{path.name} {'; '.join(problems)} (spindle node {spindle.node_id})")
+    return replace(spindle, eds=str(path), od=od)

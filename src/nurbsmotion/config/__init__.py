@@ -3,26 +3,34 @@
 Every error names the file, the YAML line and the field path, e.g.
 ``config/demo.yaml:14: axes[1].counts_per_mm: must be > 0, got -5``.
 Unknown keys are errors too (a typo must not silently fall back to a default).
+
+This module reads the machine's top level (bus, axes, monitoring, control, web, notify ...)
+and composes the sections that have their own modules: ``yaml_reading`` (the readers every
+section uses), ``homing`` (``axes[i].homing``, ``axes[i].sim``), ``io`` (the I/O node),
+``spindle`` (the spindle drive) and ``tooling`` (``tools:``, ``spindle: none``).
 """
 
 from __future__ import annotations
 
-import reprlib
-import sys
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import yaml
 from canopen.objectdictionary import ObjectDictionary
 
-from nurbsmotion import drive_od
+from nurbsmotion.can import drive_od
+from nurbsmotion.config.yaml_reading import MISSING, Doc, boolean, fields, number, optional, sequence_of, string
+from nurbsmotion.can.drive_od import default_eds_path
 from nurbsmotion.errors import InputError, InputErrors
+from nurbsmotion.config.homing import AxisSimSensors, HomingConfig, read_axis_sim, read_homing
+from nurbsmotion.config.io import IoConfig, check_io_limits, check_io_node, read_io
 from nurbsmotion.service.protocol import DEFAULT_SOCKET
+from nurbsmotion.config.spindle import SpindleConfig, load_spindle_description
+from nurbsmotion.config.tooling import load_tool_file, read_spindle, read_tools
 
-if TYPE_CHECKING:  # the homing and io sections live in their own modules (they import this one)
-    from nurbsmotion.homing_config import AxisSimSensors, HomingConfig
-    from nurbsmotion.io_config import IoConfig
+if TYPE_CHECKING:  # read when a configuration names a tool table (config.tooling.load_tool_file)
+    from nurbsmotion.program.tools import ToolTable
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")
 AXIS_MODES = ("ip", "csp")
@@ -106,7 +114,7 @@ class AxisConfig:
     quick_stop_decel: int | None = None  # 0x6085 in the drive's own units; None: left to the drive
     sdo: tuple[SdoEntry, ...] = ()
     od: ObjectDictionary | None = field(default=None, compare=False, repr=False)  # the EDS as canopen reads it
-    sim: AxisSimSensors | None = None  # the simulated drive's switches and index pulses (homing_config)
+    sim: AxisSimSensors | None = None  # the simulated drive's switches and index pulses (config.homing)
 
 
 TRAFFIC_LOG_FORMATS = ("none", "log", "asc")
@@ -173,26 +181,26 @@ def parse_listen(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
-def _listen(doc: _Doc) -> Any:
-    value = _string(doc)
-    if value is _MISSING:
+def _listen(doc: Doc) -> Any:
+    value = string(doc)
+    if value is MISSING:
         return value
     try:
         return parse_listen(value)
     except ValueError as err:
         doc.fail(str(err))
-        return _MISSING
+        return MISSING
 
 
-def _origins(doc: _Doc) -> Any:
+def _origins(doc: Doc) -> Any:
     items = doc.sequence()
-    origins = tuple(_string(item) for item in items)
-    return _MISSING if _MISSING in origins else origins
+    origins = tuple(string(item) for item in items)
+    return MISSING if MISSING in origins else origins
 
 
-def _web(doc: _Doc) -> Any:
-    found = _fields(doc, {"listen": (_listen, {}), "require_auth": (_boolean, {}),
-                          "max_upload_mb": (_number, {"minimum": 0}), "cors_origins": (_origins, {})})
+def _web(doc: Doc) -> Any:
+    found = fields(doc, {"listen": (_listen, {}), "require_auth": (boolean, {}),
+                          "max_upload_mb": (number, {"minimum": 0}), "cors_origins": (_origins, {})})
     host, port = found.pop("listen", (WebConfig.host, WebConfig.port))
     return WebConfig(host=host, port=port, **found)
 
@@ -211,34 +219,27 @@ class NotifyConfig:
     retry_s: float = 2.0
 
 
-def _url(doc: _Doc) -> Any:
-    value = _string(doc)
-    if value is _MISSING:
+def _url(doc: Doc) -> Any:
+    value = string(doc)
+    if value is MISSING:
         return value
     scheme, sep, rest = value.partition("://")
     if scheme not in ("http", "https") or not sep or not rest.split("/")[0]:
         doc.fail(f"must be an http:// or https:// URL with a host, got {value!r}")
-        return _MISSING
+        return MISSING
     return value
 
 
-def _events(doc: _Doc) -> Any:
-    names = tuple(_string(item, choices=NOTIFIED_EVENTS) for item in doc.sequence())
-    return _MISSING if _MISSING in names else names
+def _events(doc: Doc) -> Any:
+    names = tuple(string(item, choices=NOTIFIED_EVENTS) for item in doc.sequence())
+    return MISSING if MISSING in names else names
 
 
-def _notify(doc: _Doc) -> Any:
-    found = _fields(doc, {"webhooks": (_sequence_of(_url), {}), "events": (_events, {}),
-                          "timeout_s": (_number, {"minimum": 0}), "attempts": (_number, {"integer": True, "minimum": 0}),
-                          "retry_s": (_number, {"minimum": 0})})
+def _notify(doc: Doc) -> Any:
+    found = fields(doc, {"webhooks": (sequence_of(_url), {}), "events": (_events, {}),
+                          "timeout_s": (number, {"minimum": 0}), "attempts": (number, {"integer": True, "minimum": 0}),
+                          "retry_s": (number, {"minimum": 0})})
     return NotifyConfig(**found)
-
-
-def _sequence_of(reader: Callable[[_Doc], Any]) -> Callable[[_Doc], Any]:
-    def read(doc: _Doc) -> Any:
-        values = tuple(reader(item) for item in doc.sequence())
-        return _MISSING if _MISSING in values else values
-    return read
 
 
 @dataclass(frozen=True)
@@ -256,9 +257,9 @@ class MachineConfig:
     io: IoConfig | None = None
     simulate: bool = False
     master: MasterConfig = MasterConfig()
-    tools: str | None = None  # tool table file (tooling_config); tool_table: its contents
-    tool_table: Any = field(default=None, compare=False, repr=False)
-    spindle: Any = None  # 'none' or absent: no spindle drive; else a spindle_config.SpindleConfig
+    tools: str | None = None  # tool table file (config.tooling); tool_table: its contents
+    tool_table: ToolTable | None = field(default=None, compare=False, repr=False)
+    spindle: SpindleConfig | str | None = None  # 'none' or absent (None): no spindle drive
     require_homing: bool | None = None  # None: required on socketcan without simulate (service.homing)
     machine: MachineSettings = MachineSettings()
     lines: dict[str, int] = field(default_factory=dict, compare=False, repr=False)
@@ -290,196 +291,72 @@ class MachineConfig:
 # YAML with line numbers
 
 
-class _Doc:
-    """A composed YAML node plus its field path; reads typed values with located errors."""
-
-    def __init__(self, source: str, node: yaml.Node, path: str, errors: list[InputError], lines: dict[str, int]):
-        self.source, self.node, self.path, self.errors, self.lines = source, node, path, errors, lines
-        lines.setdefault(path, node.start_mark.line + 1)
-
-    def where(self, node: yaml.Node | None = None, path: str | None = None) -> str:
-        n = node or self.node
-        return f"{self.source}:{n.start_mark.line + 1}: {path if path is not None else self.path}"
-
-    def fail(self, message: str, node: yaml.Node | None = None, path: str | None = None) -> None:
-        self.errors.append(InputError(self.where(node, path), message))
-
-    def child_path(self, key: str | int) -> str:
-        if isinstance(key, int):
-            return f"{self.path}[{key}]"
-        return f"{self.path}.{key}" if self.path else key
-
-    def mapping(self, allowed: tuple[str, ...]) -> dict[str, "_Doc"]:
-        if not isinstance(self.node, yaml.MappingNode):
-            self.fail("must be a mapping of key: value")
-            return {}
-        out: dict[str, _Doc] = {}
-        for key_node, value_node in self.node.value:
-            key = key_node.value if isinstance(key_node, yaml.ScalarNode) else None
-            if key not in allowed:
-                self.fail(f"unknown key {key!r}; expected one of: {', '.join(allowed)}", key_node, self.child_path(str(key)))
-            elif key in out:
-                self.fail("duplicate key", key_node, self.child_path(key))
-            else:
-                out[key] = _Doc(self.source, value_node, self.child_path(key), self.errors, self.lines)
-        return out
-
-    def sequence(self) -> list["_Doc"]:
-        if not isinstance(self.node, yaml.SequenceNode):
-            self.fail("must be a list")
-            return []
-        return [_Doc(self.source, n, self.child_path(i), self.errors, self.lines) for i, n in enumerate(self.node.value)]
-
-    def value(self) -> Any:
-        try:
-            return yaml.safe_load(yaml.serialize(self.node))
-        except (yaml.YAMLError, ValueError, RecursionError) as err:  # '!!int 1.5', nested thousands deep
-            self.fail(f"unreadable value ({' '.join(str(err).split())[:200]})")
-            return None
-
-
-_MISSING = object()
-_SHOWN = reprlib.Repr()  # a value in an error message: short even for an alias bomb or a huge list
-_SHOWN.maxlevel, _SHOWN.maxlist, _SHOWN.maxdict, _SHOWN.maxstring, _SHOWN.maxlong = 2, 4, 4, 60, 60
-
-
-def _number(doc: _Doc, *, integer: bool = False, minimum: float | None = None, exclusive_min: bool = True,
-            maximum: float | None = None) -> Any:
-    value = doc.value()
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (integer and not isinstance(value, int)):
-        doc.fail(f"must be {'an integer' if integer else 'a number'}, got {_SHOWN.repr(value)}")
-        return _MISSING
-    if not abs(value) <= sys.float_info.max:  # inf, nan, or an integer beyond the float range
-        doc.fail(f"must be finite, got {_SHOWN.repr(value)}")
-        return _MISSING
-    if minimum is not None and (value <= minimum if exclusive_min else value < minimum):
-        doc.fail(f"must be {'>' if exclusive_min else '>='} {minimum:g}, got {_SHOWN.repr(value)}")
-        return _MISSING
-    if maximum is not None and value > maximum:
-        doc.fail(f"must be <= {maximum:g}, got {_SHOWN.repr(value)}")
-        return _MISSING
-    return value
-
-
-def _string(doc: _Doc, choices: tuple[str, ...] | None = None) -> Any:
-    value = doc.value()
-    if not isinstance(value, str) or not value:
-        doc.fail(f"must be a non-empty string, got {_SHOWN.repr(value)}")
-        return _MISSING
-    if choices is not None and value not in choices:
-        doc.fail(f"must be one of {', '.join(choices)}, got {_SHOWN.repr(value)}")
-        return _MISSING
-    return value
-
-
-def _boolean(doc: _Doc) -> Any:
-    value = doc.value()
-    if not isinstance(value, bool):
-        doc.fail(f"must be true or false, got {_SHOWN.repr(value)}")
-        return _MISSING
-    return value
-
-
-def _optional(reader: Callable[..., Any]) -> Callable[..., Any]:
-    def read(doc: _Doc, **kw: Any) -> Any:
-        return None if doc.value() is None else reader(doc, **kw)
-    return read
-
-
-def _section_reader(name: str) -> Callable[[_Doc], Any]:
-    """The reader of the ``homing`` / ``io`` / ``tools`` / ``spindle`` sections (their modules import this one)."""
-    if name in ("tools", "spindle"):
-        from nurbsmotion import tooling_config
-        return tooling_config.read_tools if name == "tools" else tooling_config.read_spindle
-    if name in ("homing", "sim"):
-        from nurbsmotion.homing_config import read_axis_sim, read_homing
-        return read_homing if name == "homing" else read_axis_sim
-    from nurbsmotion.io_config import read_io
-    return read_io
-
-
-def _fields(doc: _Doc, readers: dict[str, tuple[Callable[..., Any], dict[str, Any]]],
-            required: tuple[str, ...] = ()) -> dict[str, Any]:
-    """Read the keys of a mapping with their readers; collect errors; drop failed values."""
-    found = doc.mapping(tuple(readers))
-    for key in required:
-        if key not in found:
-            doc.fail(f"missing required key {key!r}")
-    out: dict[str, Any] = {}
-    for key, sub in found.items():
-        reader, kw = readers[key]
-        value = reader(sub, **kw)
-        if value is not _MISSING:
-            out[key] = value
-    return out
-
-
-def _limits_pair(doc: _Doc) -> Any:
+def _limits_pair(doc: Doc) -> Any:
     items = doc.sequence() if isinstance(doc.node, yaml.SequenceNode) else []  # one error for a non-list
     if len(items) != 2:
         doc.fail("must be a list [min_mm, max_mm]")
-        return _MISSING
-    low, high = (_number(i) for i in items)
-    if low is _MISSING or high is _MISSING:
-        return _MISSING
+        return MISSING
+    low, high = (number(i) for i in items)
+    if low is MISSING or high is MISSING:
+        return MISSING
     if not low < high:
         doc.fail(f"min must be < max, got [{low}, {high}]")
-        return _MISSING
+        return MISSING
     return (float(low), float(high))
 
 
-def _identity(doc: _Doc) -> Any:
-    values = _fields(doc, {"vendor_id": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
-                           "product_code": (_number, {"integer": True, "minimum": 0, "exclusive_min": False})},
+def _identity(doc: Doc) -> Any:
+    values = fields(doc, {"vendor_id": (number, {"integer": True, "minimum": 0, "exclusive_min": False}),
+                           "product_code": (number, {"integer": True, "minimum": 0, "exclusive_min": False})},
                      required=("vendor_id", "product_code"))
-    return IdentityConfig(**values) if len(values) == 2 else _MISSING
+    return IdentityConfig(**values) if len(values) == 2 else MISSING
 
 
-def _sdo_entry(doc: _Doc) -> Any:
-    values = _fields(doc, {"index": (_number, {"integer": True, "minimum": 0x1000, "exclusive_min": False,
+def _sdo_entry(doc: Doc) -> Any:
+    values = fields(doc, {"index": (number, {"integer": True, "minimum": 0x1000, "exclusive_min": False,
                                                "maximum": 0xFFFF}),
-                           "subindex": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
+                           "subindex": (number, {"integer": True, "minimum": 0, "exclusive_min": False,
                                                   "maximum": 255}),
-                           "value": (_number, {"integer": True, "minimum": -(2**63), "exclusive_min": False,
+                           "value": (number, {"integer": True, "minimum": -(2**63), "exclusive_min": False,
                                                "maximum": 2**64 - 1}),
-                           "type": (_string, {"choices": tuple(drive_od.TYPE_CODES)})},
+                           "type": (string, {"choices": tuple(drive_od.TYPE_CODES)})},
                      required=("index", "value"))
     if "index" not in values or "value" not in values:
-        return _MISSING
+        return MISSING
     return SdoEntry(values["index"], values.get("subindex", 0), values["value"], values.get("type"), doc.where())
 
 
-def _sdo_list(doc: _Doc) -> Any:
+def _sdo_list(doc: Doc) -> Any:
     entries = [_sdo_entry(item) for item in doc.sequence()]
-    return tuple(e for e in entries if e is not _MISSING)
+    return tuple(e for e in entries if e is not MISSING)
 
 
 _AXIS_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
-    "name": (_string, {}),
-    "node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
-    "mode": (_string, {"choices": AXIS_MODES}),
-    "counts_per_mm": (_number, {"minimum": 0}),
-    "invert": (_boolean, {}),
-    "offset_counts": (_number, {"integer": True, "minimum": -(2**31), "exclusive_min": False, "maximum": 2**31 - 1}),
-    "soft_limits_mm": (_optional(_limits_pair), {}),
-    "max_velocity_mm_s": (_optional(_number), {"minimum": 0}),
-    "homing": (_optional(lambda doc: _section_reader("homing")(doc)), {}),
-    "max_accel_mm_s2": (_optional(_number), {"minimum": 0}),
-    "following_error_window_mm": (_number, {"minimum": 0}),
-    "following_error_timeout_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
-    "eds": (_optional(_string), {}),
-    "identity": (_optional(_identity), {}),
-    "quick_stop_decel": (_optional(_number), {"integer": True, "minimum": 0, "maximum": 2**32 - 1}),
+    "name": (string, {}),
+    "node_id": (number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
+    "mode": (string, {"choices": AXIS_MODES}),
+    "counts_per_mm": (number, {"minimum": 0}),
+    "invert": (boolean, {}),
+    "offset_counts": (number, {"integer": True, "minimum": -(2**31), "exclusive_min": False, "maximum": 2**31 - 1}),
+    "soft_limits_mm": (optional(_limits_pair), {}),
+    "max_velocity_mm_s": (optional(number), {"minimum": 0}),
+    "homing": (optional(read_homing), {}),
+    "max_accel_mm_s2": (optional(number), {"minimum": 0}),
+    "following_error_window_mm": (number, {"minimum": 0}),
+    "following_error_timeout_ms": (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
+    "eds": (optional(string), {}),
+    "identity": (optional(_identity), {}),
+    "quick_stop_decel": (optional(number), {"integer": True, "minimum": 0, "maximum": 2**32 - 1}),
     "sdo": (_sdo_list, {}),
-    "sim": (_optional(lambda doc: _section_reader("sim")(doc)), {}),
+    "sim": (optional(read_axis_sim), {}),
 }
 
 
-def _axes(doc: _Doc) -> Any:
+def _axes(doc: Doc) -> Any:
     axes = []
     items = doc.sequence()
     for item in items:
-        values = _fields(item, _AXIS_READERS, required=("name", "node_id"))
+        values = fields(item, _AXIS_READERS, required=("name", "node_id"))
         if "name" in values and "node_id" in values:
             axes.append((item, AxisConfig(**values)))
     if isinstance(doc.node, yaml.SequenceNode) and not items:
@@ -497,30 +374,30 @@ def _axes(doc: _Doc) -> Any:
     return tuple(a for _, a in axes)
 
 
-def _section(cls: type, readers: dict[str, tuple[Callable[..., Any], dict[str, Any]]]) -> Callable[[_Doc], Any]:
-    def read(doc: _Doc) -> Any:
-        return cls(**_fields(doc, readers))
+def _section(cls: type, readers: dict[str, tuple[Callable[..., Any], dict[str, Any]]]) -> Callable[[Doc], Any]:
+    def read(doc: Doc) -> Any:
+        return cls(**fields(doc, readers))
     return read
 
 
-_POSITIVE: tuple[Callable[..., Any], dict[str, Any]] = (_number, {"minimum": 0})
+_POSITIVE: tuple[Callable[..., Any], dict[str, Any]] = (number, {"minimum": 0})
 
 _INTERPOLATION_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
-    "algorithm": (_string, {"choices": ALGORITHMS}),
+    "algorithm": (string, {"choices": ALGORITHMS}),
     "feed_mm_min": _POSITIVE,
     "rapid_feed_mm_min": _POSITIVE,
     "chord_error_mm": _POSITIVE,
     "max_accel_mm_s2": _POSITIVE,
-    "max_jerk_mm_s3": (_optional(_number), {"minimum": 0}),
+    "max_jerk_mm_s3": (optional(number), {"minimum": 0}),
     "acc_time_s": _POSITIVE,
-    "junction_deviation_mm": (_number, {"minimum": 0, "exclusive_min": False}),
-    "path_tolerance_mm": (_number, {"minimum": 0, "exclusive_min": False}),
-    "smoothing": (_boolean, {}),
+    "junction_deviation_mm": (number, {"minimum": 0, "exclusive_min": False}),
+    "path_tolerance_mm": (number, {"minimum": 0, "exclusive_min": False}),
+    "smoothing": (boolean, {}),
 }
 
 
-def _interpolation(doc: _Doc) -> Any:
-    values = _fields(doc, _INTERPOLATION_READERS)
+def _interpolation(doc: Doc) -> Any:
+    values = fields(doc, _INTERPOLATION_READERS)
     for per_min in ("feed_mm_min", "rapid_feed_mm_min"):
         if per_min in values:
             values[per_min.replace("_mm_min", "_mm_s")] = values.pop(per_min) / 60.0
@@ -528,41 +405,41 @@ def _interpolation(doc: _Doc) -> Any:
 
 
 _TOP_READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
-    "cycle_period_ms": (_number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
-    "bus": (_section(BusConfig, {"interface": (_string, {}), "channel": (_string, {}),
-                                 "sync_source": (_string, {"choices": SYNC_SOURCES}),
-                                 "sync_window_us": (_number, {"integer": True, "minimum": 0, "exclusive_min": False,
+    "cycle_period_ms": (number, {"minimum": 0.25, "exclusive_min": False, "maximum": 100}),
+    "bus": (_section(BusConfig, {"interface": (string, {}), "channel": (string, {}),
+                                 "sync_source": (string, {"choices": SYNC_SOURCES}),
+                                 "sync_window_us": (number, {"integer": True, "minimum": 0, "exclusive_min": False,
                                                               "maximum": 2**32 - 1}),
-                                 "bitrate": (_number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
+                                 "bitrate": (number, {"integer": True, "minimum": 10_000, "exclusive_min": False,
                                                        "maximum": 1_000_000}),
-                                 "drive_step_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                 "drive_step_timeout_ms": (number, {"integer": True, "minimum": 10,
                                                                      "exclusive_min": False, "maximum": 60_000}),
-                                 "sdo_timeout_ms": (_number, {"integer": True, "minimum": 10,
+                                 "sdo_timeout_ms": (number, {"integer": True, "minimum": 10,
                                                               "exclusive_min": False, "maximum": 60_000})}), {}),
     "interpolation": (_interpolation, {}),
     "axes": (_axes, {}),
-    "io": (_optional(lambda doc: _section_reader("io")(doc)), {}),
+    "io": (optional(read_io), {}),
     "monitoring": (_section(MonitoringConfig, {
-        "heartbeat_producer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
-        "heartbeat_consumer_ms": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
-        "max_bus_load": (_number, {"minimum": 0, "maximum": 1}),
-        "traffic_log": (_string, {"choices": TRAFFIC_LOG_FORMATS}),
-        "feedback_log": (_boolean, {}),
-        "master_heartbeat_ms": (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
-        "master_heartbeat_consumer_multiple": (_number, {"integer": True, "minimum": 3, "exclusive_min": False,
+        "heartbeat_producer_ms": (number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
+        "heartbeat_consumer_ms": (number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 65535}),
+        "max_bus_load": (number, {"minimum": 0, "maximum": 1}),
+        "traffic_log": (string, {"choices": TRAFFIC_LOG_FORMATS}),
+        "feedback_log": (boolean, {}),
+        "master_heartbeat_ms": (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 65535}),
+        "master_heartbeat_consumer_multiple": (number, {"integer": True, "minimum": 3, "exclusive_min": False,
                                                          "maximum": 100}),
     }), {}),
-    "master": (_section(MasterConfig, {"node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False,
+    "master": (_section(MasterConfig, {"node_id": (number, {"integer": True, "minimum": 1, "exclusive_min": False,
                                                              "maximum": 127})}), {}),
-    "control": (_section(ControlConfig, {"socket": (_string, {}), "group": (_optional(_string), {})}), {}),
-    "data_dir": (_string, {}),
+    "control": (_section(ControlConfig, {"socket": (string, {}), "group": (optional(string), {})}), {}),
+    "data_dir": (string, {}),
     "web": (_web, {}),
     "notify": (_notify, {}),
-    "simulate": (_boolean, {}),
-    "require_homing": (_boolean, {}),
-    "machine": (_section(MachineSettings, {"safe_z_mm": (_number, {})}), {}),
-    "tools": (_optional(lambda doc: _section_reader("tools")(doc)), {}),
-    "spindle": (_optional(lambda doc: _section_reader("spindle")(doc)), {}),
+    "simulate": (boolean, {}),
+    "require_homing": (boolean, {}),
+    "machine": (_section(MachineSettings, {"safe_z_mm": (number, {})}), {}),
+    "tools": (optional(read_tools), {}),
+    "spindle": (optional(read_spindle), {}),
 }
 
 
@@ -574,7 +451,6 @@ def _check_cross_fields(cfg: MachineConfig, errors: list[InputError]) -> None:
     if cfg.bus.interface == "udp_multicast":
         fail("bus.interface", "bus interface 'udp_multicast' is refused: its traffic leaves the machine")
     if cfg.io is not None:
-        from nurbsmotion.io_config import check_io_limits, check_io_node
         check_io_node(cfg.io, tuple(a.node_id for a in cfg.axes), fail)
         check_io_limits(cfg.io, cfg.axis_names(), fail)
     mon = cfg.monitoring
@@ -612,8 +488,8 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
         raise InputError(source, "empty configuration")
     errors: list[InputError] = []
     lines: dict[str, int] = {}
-    doc = _Doc(source, root, "", errors, lines)
-    values = _fields(doc, _TOP_READERS, required=("axes",))
+    doc = Doc(source, root, "", errors, lines)
+    values = fields(doc, _TOP_READERS, required=("axes",))
     if errors:
         raise InputErrors(errors)
     period_ms = values.pop("cycle_period_ms", 4.0)
@@ -643,16 +519,20 @@ def parse_config(text: str, source: str = "<config>", base_dir: Path | None = No
     cfg = _with_descriptions(cfg, base_dir, errors)
     if errors:
         raise InputErrors(errors)
-    from nurbsmotion.spindle_config import load_spindle_description
-    from nurbsmotion.tooling_config import load_tool_file
-    return load_spindle_description(load_tool_file(cfg, base_dir), base_dir)
+    if cfg.tools is not None:
+        tools, table = load_tool_file(cfg.tools, cfg.where("tools"), base_dir)
+        cfg = replace(cfg, tools=tools, tool_table=table)
+    if isinstance(cfg.spindle, SpindleConfig):
+        cfg = replace(cfg, spindle=load_spindle_description(cfg.spindle, _node_users(cfg), cfg.where, base_dir))
+    return cfg
 
 
-def default_eds_path() -> str:
-    """The packaged description of nurbsmotion's simulated servo (eds/nurbsmotion-servo.eds)."""
-    from nurbsmotion import data
-
-    return str(data.path("nurbsmotion-servo.eds"))
+def _node_users(cfg: MachineConfig) -> dict[int, str]:
+    """Who uses each node id besides the spindle: the axes and the io node."""
+    used = {a.node_id: f"axis {a.name}" for a in cfg.axes}
+    if cfg.io is not None:
+        used[cfg.io.node_id] = "the io node"
+    return used
 
 
 def axis_where(cfg: MachineConfig, i: int, field_name: str = "") -> str:
@@ -665,8 +545,6 @@ def axis_where(cfg: MachineConfig, i: int, field_name: str = "") -> str:
 def _with_descriptions(cfg: MachineConfig, base_dir: Path | None, errors: list[InputError]) -> MachineConfig:
     """Read each axis' EDS/DCF (relative to the configuration's folder; the packaged one when
     not given) with canopen's import_od, and check its ``sdo:`` list against it."""
-    from dataclasses import replace
-
     axes = []
     for i, axis in enumerate(cfg.axes):
         path = Path(axis.eds) if axis.eds else Path(default_eds_path())

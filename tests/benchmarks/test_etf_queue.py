@@ -9,7 +9,7 @@ import socket
 
 import pytest
 
-from nurbsmotion.fieldbus.etf_queue import (
+from benchmarks.etf_queue import (
     CAN_FRAME,
     EXTENDED_ERR,
     SCM_TIMESTAMPING,

@@ -30,7 +30,7 @@ from typing import Any
 
 import yaml
 
-from nurbsmotion.config import _MISSING, _SHOWN, _boolean, _Doc, _fields, _number, _string
+from nurbsmotion.config.yaml_reading import Doc, MISSING, SHOWN, boolean, fields, number, string
 
 MAX_BITS = 64  # eight UNSIGNED8 groups: one 8-byte PDO
 _NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -70,40 +70,40 @@ class IoConfig:
         return self.groups(self.outputs)
 
 
-_BIT: tuple[Callable[..., Any], dict[str, Any]] = (_number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": MAX_BITS - 1})
+_BIT: tuple[Callable[..., Any], dict[str, Any]] = (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": MAX_BITS - 1})
 
 
-def _signal(name: str, doc: _Doc) -> Any:
+def _signal(name: str, doc: Doc) -> Any:
     if isinstance(doc.node, yaml.MappingNode):
-        values = _fields(doc, {"bit": _BIT, "active_low": (_boolean, {}), "limit": (_string, {})}, required=("bit",))
-        return IoSignal(name, **values) if "bit" in values else _MISSING
+        values = fields(doc, {"bit": _BIT, "active_low": (boolean, {}), "limit": (string, {})}, required=("bit",))
+        return IoSignal(name, **values) if "bit" in values else MISSING
     bit = _BIT[0](doc, **_BIT[1])
-    return _MISSING if bit is _MISSING else IoSignal(name, bit)
+    return MISSING if bit is MISSING else IoSignal(name, bit)
 
 
-def _signals(doc: _Doc) -> Any:
+def _signals(doc: Doc) -> Any:
     """``{name: bit | {bit, active_low}}`` -> tuple of IoSignal; names and bits unique."""
     if doc.value() is None:
         return ()
     if not isinstance(doc.node, yaml.MappingNode):
         doc.fail("must be a mapping of name: bit")
-        return _MISSING
+        return MISSING
     signals: list[IoSignal] = []
     names: set[str] = set()
     bits: dict[int, str] = {}
     for key_node, value_node in doc.node.value:
         name = key_node.value if isinstance(key_node, yaml.ScalarNode) else ""
         path = doc.child_path(str(name))
-        sub = _Doc(doc.source, value_node, path, doc.errors, doc.lines)
+        sub = Doc(doc.source, value_node, path, doc.errors, doc.lines)
         if not _NAME.match(name):
-            doc.fail(f"signal name {_SHOWN.repr(name)} must be an identifier (letters, digits, _)", key_node, path)
+            doc.fail(f"signal name {SHOWN.repr(name)} must be an identifier (letters, digits, _)", key_node, path)
             continue
         if name in names:
             doc.fail("duplicate signal name", key_node, path)
             continue
         names.add(name)
         signal = _signal(name, sub)
-        if signal is _MISSING:
+        if signal is MISSING:
             continue
         if signal.bit in bits:
             sub.fail(f"bit {signal.bit} is already used by {bits[signal.bit]!r}")
@@ -114,18 +114,18 @@ def _signals(doc: _Doc) -> Any:
 
 
 _READERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
-    "node_id": (_number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
+    "node_id": (number, {"integer": True, "minimum": 1, "exclusive_min": False, "maximum": 127}),
     "inputs": (_signals, {}),
     "outputs": (_signals, {}),
 }
 
 
-def read_io(doc: _Doc) -> Any:
-    """``io`` -> IoConfig (or _MISSING after recording located errors)."""
+def read_io(doc: Doc) -> Any:
+    """``io`` -> IoConfig (or MISSING after recording located errors)."""
     before = len(doc.errors)
-    values = _fields(doc, _READERS, required=("node_id",))
+    values = fields(doc, _READERS, required=("node_id",))
     if len(doc.errors) > before or "node_id" not in values:
-        return _MISSING
+        return MISSING
     return IoConfig(**values)
 
 

@@ -31,7 +31,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from nurbsmotion.config import _MISSING, _SHOWN, _boolean, _Doc, _fields, _number
+from nurbsmotion.config.yaml_reading import Doc, MISSING, SHOWN, boolean, fields, number
 
 HERE = "here"
 STANDARD_METHODS = tuple(range(1, 36)) + (37,)  # CiA 402-2: 1..35, 37 (36 reserved)
@@ -68,42 +68,42 @@ class HomingConfig:
         return self.on_drive and self.method not in NO_MOTION_METHODS
 
 
-def _method(doc: _Doc) -> Any:
+def _method(doc: Doc) -> Any:
     value = doc.value()
     if value == HERE:
         return HERE
     if isinstance(value, bool) or not isinstance(value, int):
-        doc.fail(f"must be a CiA-402 homing method number or 'here', got {_SHOWN.repr(value)}")
-        return _MISSING
+        doc.fail(f"must be a CiA-402 homing method number or 'here', got {SHOWN.repr(value)}")
+        return MISSING
     if not (value in STANDARD_METHODS or -128 <= value <= -1):
         doc.fail(f"homing method {value} is not defined by CiA 402 (1..35, 37; -128..-1 manufacturer specific)")
-        return _MISSING
+        return MISSING
     return value
 
 
-def _sign(doc: _Doc) -> Any:
+def _sign(doc: Doc) -> Any:
     value = doc.value()
     if value not in (-1, 1) or isinstance(value, bool):
-        doc.fail(f"must be -1 or 1, got {_SHOWN.repr(value)}")
-        return _MISSING
+        doc.fail(f"must be -1 or 1, got {SHOWN.repr(value)}")
+        return MISSING
     return value
 
 
-def _vendor_object(doc: _Doc) -> Any:
+def _vendor_object(doc: Doc) -> Any:
     value = doc.value()
     low, high = VENDOR_OBJECTS
     if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
-        shown = f"0x{value:04X}" if isinstance(value, int) and not isinstance(value, bool) else _SHOWN.repr(value)
+        shown = f"0x{value:04X}" if isinstance(value, int) and not isinstance(value, bool) else SHOWN.repr(value)
         doc.fail(f"must be a manufacturer-specific object 0x{low:04X}..0x{high:04X}, got {shown} (0x607C is used "
                  f"by itself where the drive's EDS lists it)")
-        return _MISSING
+        return MISSING
     return value
 
 
-_POSITIVE = (_number, {"minimum": 0})
+_POSITIVE = (number, {"minimum": 0})
 _READERS = {
     "method": (_method, {}),
-    "offset_mm": (_number, {}),
+    "offset_mm": (number, {}),
     "speed_search_mm_s": _POSITIVE,
     "speed_zero_mm_s": _POSITIVE,
     "accel_mm_s2": _POSITIVE,
@@ -111,16 +111,16 @@ _READERS = {
     "speed_unit_counts_s": _POSITIVE,
     "accel_unit_counts_s2": _POSITIVE,
     "home_offset_sign": (_sign, {}),
-    "order": (_number, {"integer": True, "minimum": 0, "exclusive_min": False}),
-    "ignore_limits": (_boolean, {}),
+    "order": (number, {"integer": True, "minimum": 0, "exclusive_min": False}),
+    "ignore_limits": (boolean, {}),
     "home_offset_object": (_vendor_object, {}),
 }
 
 
-def read_homing(doc: _Doc) -> Any:
-    """``axes[i].homing`` -> HomingConfig (or _MISSING after recording located errors)."""
+def read_homing(doc: Doc) -> Any:
+    """``axes[i].homing`` -> HomingConfig (or MISSING after recording located errors)."""
     before = len(doc.errors)
-    values = _fields(doc, _READERS, required=("method",))
+    values = fields(doc, _READERS, required=("method",))
     method = values.get("method")
     missing = [key for key in DRIVE_KEYS if key not in values]
     if method not in (None, HERE, *NO_MOTION_METHODS) and missing and len(doc.errors) == before:
@@ -129,7 +129,7 @@ def read_homing(doc: _Doc) -> Any:
         doc.fail(f"home_offset_object 0x{values['home_offset_object']:04X} needs home_offset_sign (1: the home reads "
                  f"the value written, -1: it reads minus it; see the drive's manual)")
     if len(doc.errors) > before or method is None:
-        return _MISSING
+        return MISSING
     return HomingConfig(**values)
 
 
@@ -146,22 +146,22 @@ class AxisSimSensors:
 
 
 _SIM_READERS = {
-    "negative_limit_mm": (_number, {}),
-    "positive_limit_mm": (_number, {}),
+    "negative_limit_mm": (number, {}),
+    "positive_limit_mm": (number, {}),
     "index_pitch_mm": _POSITIVE,
-    "index_phase_mm": (_number, {}),
+    "index_phase_mm": (number, {}),
 }
 
 
-def read_axis_sim(doc: _Doc) -> Any:
-    """``axes[i].sim`` -> AxisSimSensors (or _MISSING after recording located errors)."""
+def read_axis_sim(doc: Doc) -> Any:
+    """``axes[i].sim`` -> AxisSimSensors (or MISSING after recording located errors)."""
     before = len(doc.errors)
-    values = _fields(doc, _SIM_READERS)
+    values = fields(doc, _SIM_READERS)
     low, high = values.get("negative_limit_mm"), values.get("positive_limit_mm")
     if low is not None and high is not None and low >= high:
         doc.fail(f"negative_limit_mm {low:g} must be below positive_limit_mm {high:g}")
     if len(doc.errors) > before:
-        return _MISSING
+        return MISSING
     return AxisSimSensors(**values)
 
 

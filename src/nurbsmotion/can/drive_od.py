@@ -13,6 +13,8 @@ from pathlib import Path
 import canopen
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable, ObjectDictionary, datatypes
 
+from nurbsmotion import data
+
 # YAML ``type:`` names of the CiA 301 integer data types (§7.1.4.3) and their codes.
 TYPE_CODES: dict[str, int] = {
     "bool": datatypes.BOOLEAN, "int8": datatypes.INTEGER8, "int16": datatypes.INTEGER16,
@@ -32,6 +34,11 @@ class DescriptionError(Exception):
 @functools.lru_cache(maxsize=64)
 def _load(path: str, node_id: int, mtime_ns: int) -> ObjectDictionary:
     return canopen.import_od(path, node_id)
+
+
+def default_eds_path() -> str:
+    """The packaged description of nurbsmotion's simulated servo (eds/nurbsmotion-servo.eds)."""
+    return str(data.path("nurbsmotion-servo.eds"))
 
 
 def load_description(path: str | Path, node_id: int) -> ObjectDictionary:

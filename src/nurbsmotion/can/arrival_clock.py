@@ -79,7 +79,7 @@ class ArrivalClock:
 
 def socket_pending(bus: object) -> Callable[[], bool]:
     """``pending()`` for a python-can bus: the bus's own ``frames_waiting()`` (the batched
-    SocketCAN bus, nurbsmotion.socketcan_batch: frames it has read but not yet handed out are
+    SocketCAN bus, nurbsmotion.can.socketcan_batch: frames it has read but not yet handed out are
     invisible to select()), the receive queue of python-can's in-process virtual bus,
     select() on its file descriptor (SocketCAN), else always False."""
     import select
@@ -111,14 +111,16 @@ class WallClockOffset:
     clock. Refreshed, not read per frame: inside User-Mode Linux each clock read is a trapped
     system call, and the offset moves only with NTP slewing (ppm)."""
 
-    __slots__ = ("_offset_s", "_read_s")
+    __slots__ = ("_offset_s", "_read_s", "_wall_time")
 
-    def __init__(self) -> None:
+    def __init__(self, wall_time: Callable[[], float] | None = None) -> None:
+        """``wall_time``: the wall clock (None: time.time; a test injects its own)."""
         self._offset_s = 0.0
         self._read_s = -1e18
+        self._wall_time = wall_time
 
     def at(self, now_s: float) -> float:
         """The offset, read again when ``now_s`` (perf_counter) is OFFSET_REFRESH_S past the last read."""
         if now_s - self._read_s > OFFSET_REFRESH_S:
-            self._offset_s, self._read_s = time.time() - now_s, now_s
+            self._offset_s, self._read_s = (self._wall_time or time.time)() - now_s, now_s
         return self._offset_s

@@ -1,5 +1,5 @@
 """A SocketCAN bus for the per-cycle traffic: python-can's, with a few system calls per
-cycle instead of two per frame. Used by the master (fieldbus.master) and the simulated
+cycle instead of two per frame. Used by the master (fieldbus.connection) and the simulated
 drives (sim.network) on ``interface: socketcan``; transport only, no CANopen in it.
 
 python-can's ``SocketcanBus`` waits in ``select`` before every ``recvmsg`` and polls the
@@ -58,7 +58,7 @@ import can
 from can.interfaces.socketcan import constants
 from can.interfaces.socketcan.socketcan import SocketcanBus, build_can_frame, dissect_can_frame
 
-from nurbsmotion.arrival_clock import WallClockOffset
+from nurbsmotion.can.arrival_clock import WallClockOffset
 
 MSG_WAITFORONE = 0x10000  # linux/socket.h: block for the first message only
 TIMEVAL = struct.Struct("@ll")  # struct timeval for SO_RCVTIMEO
