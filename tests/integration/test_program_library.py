@@ -10,7 +10,8 @@ from typing import Any
 import pytest
 
 from nurbsmotion.service.client import Client
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.helpers import wait_for
+from tests.integration.daemon_helpers import daemon_in_process
 
 SQUARE = "G21 G90\nG01 X4 Y3 F3000\nG01 X0 Y0\n"  # ends where it started: started again from there
 LONG = "G21 G90\nG01 X40 F600\nG01 X0\n"  # ~8 s
@@ -23,7 +24,7 @@ def call(daemon: Any, cmd: str, **fields: Any) -> dict[str, Any]:
 
 
 def job_end(daemon: Any, job_id: str, timeout_s: float = 30.0) -> dict[str, Any]:
-    wait_until(lambda: daemon.controller.last_job() is not None and daemon.controller.last_job()["id"] == job_id,
+    wait_for(lambda: daemon.controller.last_job() is not None and daemon.controller.last_job()["id"] == job_id,
                timeout_s, f"the end of job {job_id}")
     return daemon.controller.job_info(job_id)["job"]
 
@@ -121,13 +122,13 @@ def test_the_queue_runs_programs_in_order_stops_at_an_abort_and_survives_a_resta
         assert [e["program"] for e in moved["entries"]] == ["square.nc", "long.nc", "long.nc"]
         assert call(daemon, "status")["queue"] == {"entries": 3, "next": "square.nc", "paused": "paused by the operator"}
         assert call(daemon, "queue.resume")["ok"]
-        wait_until(lambda: daemon.controller.running_job_name() == "long.nc", 20.0, "the second entry to run")
+        wait_for(lambda: daemon.controller.running_job_name() == "long.nc", 20.0, "the second entry to run")
         assert daemon.controller.last_job()["name"] == "square.nc"
         assert daemon.controller.last_job()["outcome"] == "completed"
         during = call(daemon, "programs.add", name="while-running.nc", program=SQUARE)  # the checker process
         assert during["ok"] and daemon.controller.running_job_name() == "long.nc"
         assert call(daemon, "abort")["ok"]
-        wait_until(lambda: daemon.programs.queue.paused is not None, 10.0, "the queue to pause")
+        wait_for(lambda: daemon.programs.queue.paused is not None, 10.0, "the queue to pause")
         queue = call(daemon, "queue.list")["queue"]
         assert queue["paused"].endswith("(long.nc) ended aborted: aborted on request (quick stop)"), queue
         assert [e["id"] for e in queue["entries"]] == [ids[2]]
@@ -148,7 +149,7 @@ def test_a_job_stopped_at_once_still_stores_its_checked_program(data_dir):
         assert call(daemon, "stop")["ok"]
         job_end(daemon, first["job"]["id"])
         assert call(daemon, "mdi", text="G53 G0 X0 Y0 Z0")["ok"]  # back where it started
-        wait_until(lambda: daemon.controller.idle(), 20.0, "the MDI to end")
+        wait_for(lambda: daemon.controller.idle(), 20.0, "the MDI to end")
         second = call(daemon, "submit", name="long.nc", program=LONG)
         assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
             (False, True)

@@ -9,7 +9,8 @@ import asyncio
 import aiohttp
 import pytest
 
-from tests.integration.daemon_helpers import daemon_in_process, wait_until
+from tests.helpers import wait_for
+from tests.integration.daemon_helpers import daemon_in_process
 from tests.web.test_api import get_json, run
 
 SQUARE = b"G21 G90\nG01 X4 Y3 F3000\nG01 X0 Y0\n"
@@ -22,7 +23,7 @@ def daemon(tmp_path_factory):
 
 
 def idle_after(daemon, job_id: str) -> dict:
-    wait_until(lambda: (daemon.controller.last_job() or {}).get("id") == job_id, 30.0, f"job {job_id}'s end")
+    wait_for(lambda: (daemon.controller.last_job() or {}).get("id") == job_id, 30.0, f"job {job_id}'s end")
     return daemon.controller.last_job()
 
 
@@ -65,7 +66,7 @@ def test_the_queue_over_the_api(daemon):
         assert status == 200 and len(listing["queue"]["entries"]) == 1 and listing["queue"]["paused"]
         status, resumed = await get_json(s, "POST", f"{base}/api/v1/queue/resume")
         assert status == 200 and resumed["queue"]["paused"] is None
-        await asyncio.to_thread(wait_until, lambda: (daemon.controller.last_job() or {}).get("name") == "q.nc",
+        await asyncio.to_thread(wait_for, lambda: (daemon.controller.last_job() or {}).get("name") == "q.nc",
                                 30.0, "the queue's job to end")
         assert daemon.controller.last_job()["outcome"] == "completed" and not daemon.programs.queue.entries
     run(daemon, body)
