@@ -16,7 +16,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 from numpy.typing import NDArray
@@ -224,6 +224,13 @@ class ReadExtent:
     lines_not_read: int  # lines after last_line with anything on them (blank lines and a bare '%' left out)
 
 
+@runtime_checkable
+class BlocksWithLengths(Protocol):
+    """Blocks that know every block's length at once (program.records.BlockRecords)."""
+
+    def lengths_mm(self) -> NDArray[np.float64]: ...
+
+
 @dataclass(frozen=True, eq=False)
 class Program:
     """An ordered list of blocks; consecutive blocks meet (end of one = start of the next).
@@ -260,9 +267,7 @@ class Program:
 
     @property
     def length_mm(self) -> float:
-        from nurbsmotion.program.records import BlockRecords
-
-        if isinstance(self.blocks, BlockRecords):
+        if isinstance(self.blocks, BlocksWithLengths):  # program.records.BlockRecords: in closed form
             return float(self.blocks.lengths_mm().sum())
         return float(sum(b.length_mm for b in self.blocks))
 

@@ -35,6 +35,7 @@ from nurbsmotion import __version__
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
 from nurbsmotion.program import Program, ReadOptions
+from nurbsmotion.service.records import config_dict
 
 log = logging.getLogger(__name__)
 
@@ -48,8 +49,6 @@ IRRELEVANT_CONFIG = ("monitoring", "web", "notify", "control", "data_dir", "sour
 def config_fingerprint(config: MachineConfig) -> str:
     """SHA-256 of the configuration as a job records it (config.json), without the sections
     no check reads (IRRELEVANT_CONFIG): axes, limits, interpolation, spindle, io, tools..."""
-    from nurbsmotion.service.controller import config_dict  # the daemon's own; the controller imports this module
-
     relevant = {k: v for k, v in config_dict(config).items() if k not in IRRELEVANT_CONFIG}
     return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=repr).encode()).hexdigest()
 

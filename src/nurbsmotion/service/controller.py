@@ -9,7 +9,6 @@ fault not yet acknowledged by ``reset``).
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import shutil
 import threading
@@ -37,8 +36,7 @@ from nurbsmotion.service.job_common import MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.start_line import resume_of, start_line_options
-from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
-from nurbsmotion.config.spindle import SpindleConfig
+from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, config_dict, now_iso
 
 log = logging.getLogger(__name__)
 
@@ -684,23 +682,6 @@ def check_program_name(name: str) -> None:
     """A program name is a file name: it appears in every error line and names the record file."""
     if not name or len(name) > 255 or any(ord(ch) < 32 or ch == "\x7f" for ch in name):
         raise InputError("field 'name'", "must be a file name of 1-255 printable characters")
-
-
-def config_dict(config: MachineConfig, offset_counts: Any = None) -> dict[str, Any]:
-    """The configuration a job ran with, every default filled in (config.json of a record);
-    ``offset_counts``: the axis map's offsets in force (homing moves them: service.homing)."""
-    offsets = [a.offset_counts for a in config.axes] if offset_counts is None else [int(o) for o in offset_counts]
-    plain_axes = tuple(dataclasses.replace(a, od=None, offset_counts=o)  # the EDS as read: not a value
-                       for a, o in zip(config.axes, offsets))
-    spindle = dataclasses.replace(config.spindle, od=None) if isinstance(config.spindle, SpindleConfig) \
-        else config.spindle
-    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
-    out.pop("lines", None)
-    if isinstance(out["spindle"], dict):
-        out["spindle"].pop("od", None)
-    for axis in out["axes"]:
-        axis.pop("od", None)
-    return out
 
 
 def fault_record(fault: FaultReport, start_cycle: int | None, mm_per_count: float | None,
