@@ -30,7 +30,8 @@ from typing import Iterator
 import numpy as np
 
 from nurbsmotion.planning.limits import PlanLimits
-from nurbsmotion.planning.lookahead.blend import MAX_DEFLECTION_DEG, blend_pieces, corner_tolerances, piece_shapes
+from nurbsmotion.planning.lookahead import blend
+from nurbsmotion.planning.lookahead.blend import blend_pieces, corner_tolerances, piece_shapes
 from nurbsmotion.planning.lookahead.path import BlockPiece
 from nurbsmotion.planning.lookahead.runs import (MIN_BLOCK_LENGTH_MM, ProgramStops, Run, end_tangents, junction_speed,
                                                  program_pieces, split_runs)
@@ -152,6 +153,6 @@ class PathSections:
         _, t_in, _ = shapes.take(np.array([0])).state_at(shapes.length_mm[:1])
         _, t_out, _ = shapes.take(np.array([1])).state_at(np.zeros(1))
         deflection = float(np.arccos(np.clip(np.dot(t_in[0], t_out[0]), -1.0, 1.0)))
-        return deflection > math.radians(MAX_DEFLECTION_DEG) + CUT_MARGIN_RAD
+        return deflection > math.radians(blend.MAX_DEFLECTION_DEG) + CUT_MARGIN_RAD  # read at each use: a test may change it
 
 
