@@ -4,6 +4,7 @@ first chunk sets up a bounded number of blocks, whatever the program's length.""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +13,11 @@ import pytest
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import api
 from nurbsmotion.planning.lookahead.planner import settings_for
-from nurbsmotion.planning.lookahead.runs import ProgramStops, split_runs
+from nurbsmotion.planning.lookahead.runs import ProgramStops, program_pieces, split_runs
 from nurbsmotion.planning.lookahead.setup import SECTION_BLOCKS, PathSections, max_program_feed
 from nurbsmotion.planning.trajectory import Trajectory
-from nurbsmotion.program import read_program
+from nurbsmotion.program import parse_gcode, read_program
+from nurbsmotion.program.records import BlockRecords
 
 GCODE = Path(__file__).resolve().parents[2] / "data" / "gcode"
 LIMITS = PlanLimits(period_s=0.001, chord_error_mm=0.001, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0,
@@ -65,6 +67,23 @@ def test_streamed_set_points_are_the_whole_set_ups_to_the_bit():
     assert np.array_equal(got.u, want.u)
 
 
+def test_a_short_first_window_streams_the_whole_set_ups_set_points():
+    """As a streamed job plans (first chunk 200 cycles, then resumed with 2,000): against the
+    same two-window scheme on the whole program's runs, to the bit, with the line reached."""
+    program = read_program(GCODE / "grbl_HSM_test.nc")
+    reference, settings = whole_runs(program, LIMITS)
+    short = settings_for(LIMITS, settings.max_feed_mm_s, 200)
+    first = api._chunks(reference, short, None, api._Figures())
+    head, resume = next(first)
+    rest, cursor = api.resume_runs(reference, resume)
+    want = Trajectory.concatenate([head] + [c for c, _ in api._chunks(rest, settings, cursor, api._Figures(),
+                                                                       resume.before)])
+    got = Trajectory.concatenate([c for c, _ in api.PlanStream(program, LIMITS, 2000, 200).chunks()])
+    assert np.array_equal(got.position_mm, want.position_mm)
+    assert np.array_equal(got.block, want.block)
+    assert np.array_equal(got.u, want.u)
+
+
 def test_the_first_chunk_sets_up_a_bounded_number_of_blocks(tmp_path):
     """A long program (a CAM program 20 times): its first chunk reads a few sections only."""
     text = (GCODE / "grbl_HSM_test.nc").read_text().replace("M30", "").replace("M2", "")
@@ -75,3 +94,26 @@ def test_the_first_chunk_sets_up_a_bounded_number_of_blocks(tmp_path):
     next(iter(stream.chunks()))
     assert len(program.blocks) > 20 * SECTION_BLOCKS
     assert 0 < stream.blocks_set_up <= 4 * SECTION_BLOCKS
+
+
+def test_the_program_stops_from_the_columns_are_those_from_the_blocks():
+    text = "G64 P0.02\nG1 X10 F600\nG61\nG1 Y10\nG4 P0.5\nG64\nG1 X0\nG64 P0.005\nG1 Y0\nM0\nG1 X5\n"
+    program = parse_gcode(text, "stops.nc")
+    assert isinstance(program.blocks, BlockRecords)
+    as_blocks = replace(program, blocks=tuple(program.blocks))
+    got, want = ProgramStops.of(program, LIMITS), ProgramStops.of(as_blocks, LIMITS)
+    assert got == want
+    assert got.stop_after and got.tolerance_mm and got.dwell_s_before
+
+
+@pytest.mark.parametrize("text", [
+    "G1 X10 F600\nG2 X20 I5 F1200\nG1 X30 F900\n",  # an arc the fastest
+    "G1 X10 F600\nG1 X10 F99999\nG1 Y5 F300\n",  # the fastest block does not move
+    "G0 X5\nG1 X10 F60\n",  # a rapid the fastest
+    "G4 P1\n",  # no motion
+])
+def test_the_highest_feed_from_the_columns_is_the_pieces(text):
+    program = parse_gcode(text, "feeds.nc")
+    limits = PlanLimits(rapid_feed_mm_s=150.0)
+    want = max((p.feed_mm_s for p in program_pieces(program, limits)), default=1.0)
+    assert max_program_feed(program, limits) == want
