@@ -27,7 +27,9 @@ is the deviation of the junction into it.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -127,8 +129,17 @@ class ProgramStops:
         return cls(stop_after, program.dwell_s_before(), deviations, given)
 
     def dwell_between(self, after_block: int, up_to_block: int) -> float:
-        """Dwell before the blocks after_block + 1 .. up_to_block."""
-        return sum(s for b, s in (self.dwell_s_before or {}).items() if after_block < b <= up_to_block)
+        """Dwell before the blocks after_block + 1 .. up_to_block (bisected: a call per junction)."""
+        if not self.dwell_s_before:
+            return 0.0
+        blocks, seconds = self.dwells
+        return sum(seconds[bisect_right(blocks, after_block):bisect_right(blocks, up_to_block)])
+
+    @cached_property
+    def dwells(self) -> tuple[list[int], list[float]]:
+        """(block indices in order, the dwell before each)."""
+        ordered = sorted((self.dwell_s_before or {}).items())
+        return [b for b, _ in ordered], [s for _, s in ordered]
 
 
 def dwell_cycles(dwell_s: float, period_s: float, after_motion: bool) -> int:
