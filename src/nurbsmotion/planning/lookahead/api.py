@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass, replace
-from typing import Iterator
+from typing import Iterable, Iterator
 
 import numpy as np
 from numpy.typing import NDArray
@@ -16,7 +17,8 @@ from nurbsmotion.planning.lookahead.blend import blend_pieces
 from nurbsmotion.planning.lookahead.path import BlockPiece, to_3d
 from nurbsmotion.planning.lookahead.planner import (FALLBACK_SLOWER, FALLBACK_SPLIT, FALLBACK_STOP, Cursor,
                                                     PlanSettings, PlanningError, WindowPlan, plan_run, settings_for)
-from nurbsmotion.planning.lookahead.runs import ProgramStops, Run, program_pieces, split_runs, trailing_dwell_cycles
+from nurbsmotion.planning.lookahead.runs import ProgramStops, Run, dwell_cycles, program_pieces
+from nurbsmotion.planning.lookahead.setup import PathSections, max_program_feed
 from nurbsmotion.planning.lookahead.sampling import Samples
 from nurbsmotion.planning.lookahead.smoothing import smoothed_pieces
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
@@ -45,10 +47,6 @@ def window_trajectory(plan: WindowPlan, period_s: float, started: float) -> Traj
     return Trajectory(algorithm=ALGORITHM, period_s=period_s, block=plan.blocks, u=plan.samples.u.copy(),
                       position_mm=plan.samples.position_mm, feed_mm_s=feed,
                       planning_time_s=time.perf_counter() - started)
-
-
-def max_feed(pieces: list[BlockPiece]) -> float:
-    return max((p.feed_mm_s for p in pieces), default=1.0)
 
 
 class _Figures:
@@ -144,11 +142,13 @@ def rest_chunk(piece: BlockPiece, u: float, point: NDArray[np.float64], cycles: 
                       np.repeat(point.reshape(1, 3), cycles, axis=0), np.zeros(cycles))
 
 
-def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures,
+def _chunks(runs: Iterable[Run], settings: PlanSettings, first: Cursor | None, figures: _Figures,
             before: NDArray[np.float64] | None = None, trailing_rest: int = 0) -> Iterator[tuple[Trajectory, Resume]]:
     before = np.zeros((0, 3)) if before is None else before
     period = settings.limits.period_s
+    last: Run | None = None
     for index, run in enumerate(runs):
+        last = run
         started = time.perf_counter()
         cursor = first if index == 0 and first is not None else None
         if run.rest_cycles_before and cursor is None:
@@ -162,8 +162,8 @@ def _chunks(runs: list[Run], settings: PlanSettings, first: Cursor | None, figur
                 before = np.concatenate([before, plan.samples.position_mm])[-3:]
                 yield window_trajectory(plan, period, started), resume_after(plan, before, settings.tau_f, period)
             started = time.perf_counter()
-    if trailing_rest and runs:
-        piece = runs[-1].pieces[-1]
+    if trailing_rest and last is not None:
+        piece = last.pieces[-1]
         yield (rest_chunk(piece, piece.u_end, before[-1], trailing_rest, period),
                Resume(piece.block, piece.u_end, before, None, settings.tau_f, ordinal=piece.ordinal))
 
@@ -184,12 +184,36 @@ def path_pieces(program: Program, limits: PlanLimits, stops: ProgramStops) -> li
     return blend_pieces(smoothed_pieces(pieces, program, limits, stops), limits, stops)
 
 
-def _setup(program: Program, limits: PlanLimits, chunk_cycles: int) -> tuple[list[Run], PlanSettings, int]:
-    """Runs, settings, and the set-points of a dwell after the last move."""
-    stops = ProgramStops.of(program, limits)
-    pieces = path_pieces(program, limits, stops)
-    settings = settings_for(limits, max_feed(pieces), chunk_cycles)
-    return split_runs(pieces, limits, settings.min_pass_mm_s, stops), settings, trailing_dwell_cycles(pieces, stops, limits.period_s)
+@dataclass
+class SetUp:
+    """What a plan starts from: the runs (set up section by section as they are taken,
+    setup.PathSections), the settings, and the set-points of a dwell after the last move."""
+
+    sections: PathSections
+    settings: PlanSettings
+    trailing: int
+
+    @classmethod
+    def of(cls, program: Program, limits: PlanLimits, chunk_cycles: int) -> "SetUp":
+        stops = ProgramStops.of(program, limits)
+        settings = settings_for(limits, max_program_feed(program, limits), chunk_cycles)
+        trailing = dwell_cycles(stops.dwell_between(last_moving_block(program, limits), 1 << 62), limits.period_s, False)
+        return cls(PathSections(program, limits, stops, settings.min_pass_mm_s), settings, trailing)
+
+
+def last_moving_block(program: Program, limits: PlanLimits) -> int:
+    """The last block with motion (-1: none): the last piece's last block."""
+    for i in range(len(program.blocks) - 1, -1, -1):
+        if program_pieces(program, limits, i, i + 1):
+            return i
+    return -1
+
+
+def peeked(runs: Iterable[Run]) -> Iterator[Run] | None:
+    """``runs`` as an iterator, or None when there are none."""
+    it = iter(runs)
+    first = next(it, None)
+    return None if first is None else itertools.chain([first], it)
 
 
 def _rest_chunk(program: Program, limits: PlanLimits) -> Trajectory:
@@ -220,17 +244,27 @@ def plan_lookahead_chunks(program: Program, limits: PlanLimits, chunk_cycles: in
 
     Memory is bounded by the look-ahead window (chunk length + twice the stopping distance
     from the highest feed), not by the program's length."""
-    runs, settings, trailing = _setup(program, limits, chunk_cycles)
+    setup = SetUp.of(program, limits, chunk_cycles)
+    settings, trailing = setup.settings, setup.trailing
     figures = _figures if _figures is not None else _Figures()
-    if not runs:
+    runs = peeked(_counted(setup.sections.runs(), figures))
+    if runs is None:
         yield _rest_chunk(program, limits)
         return
     first = None
     if state is not None:
-        runs, first = start_from_state(program, runs, state, settings)
-    figures.runs = len(runs)
+        listed, first = start_from_state(program, list(runs), state, settings)
+        figures.runs = len(listed)
+        runs = iter(listed)
     for chunk, _ in _named_lines(program, _chunks(runs, settings, first, figures, trailing_rest=trailing)):
         yield chunk
+
+
+def _counted(runs: Iterator[Run], figures: _Figures) -> Iterator[Run]:
+    """``runs``, each counted in ``figures.runs`` as it is set up."""
+    for run in runs:
+        figures.runs += 1
+        yield run
 
 
 def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles: int = DEFAULT_CHUNK_CYCLES,
@@ -241,8 +275,10 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     real last set-points and the real filter memory. The acceleration and jerk limits must
     be those of the resumed plan (the filter memory depends on A/J); the feed, chord error and
     axis limits may change."""
-    runs, settings, trailing = _setup(program, limits, chunk_cycles)
-    if not runs:
+    setup = SetUp.of(program, limits, chunk_cycles)
+    settings, trailing = setup.settings, setup.trailing
+    runs = peeked(setup.sections.runs())
+    if runs is None:
         return
     if resume is None:
         yield from _named_lines(program, _chunks(runs, settings, None, _Figures(), trailing_rest=trailing))
@@ -250,10 +286,11 @@ def plan_lookahead_resumable(program: Program, limits: PlanLimits, chunk_cycles:
     if abs(resume.tau_f - settings.tau_f) > 1e-12:
         raise InputError("limits", "resuming needs the acceleration and jerk limits of the resumed plan "
                          "(the jerk filter's memory depends on A/J); use plan_from_state to re-plan")
-    runs, first = resume_runs(runs, resume)
-    if not runs:
+    after, first = resume_runs(runs, resume)
+    rest = peeked(after)
+    if rest is None:
         return
-    yield from _named_lines(program, _chunks(runs, settings, first, _Figures(), resume.before, trailing))
+    yield from _named_lines(program, _chunks(rest, settings, first, _Figures(), resume.before, trailing))
 
 
 def is_resumed_piece(piece: BlockPiece, resume: Resume) -> bool:
@@ -264,25 +301,27 @@ def is_resumed_piece(piece: BlockPiece, resume: Resume) -> bool:
     return piece.block == resume.block and piece.u_start <= resume.u <= piece.u_end
 
 
-def resume_runs(runs: list[Run], resume: Resume) -> tuple[list[Run], Cursor | None]:
-    """The runs from a Resume on, and the cursor that starts the first of them."""
-    for r, run in enumerate(runs):
+def resume_runs(runs: Iterable[Run], resume: Resume) -> tuple[Iterator[Run], Cursor | None]:
+    """The runs from a Resume on, and the cursor that starts the first of them (the runs
+    before it are taken from ``runs``, the ones after it are left to be taken)."""
+    it = iter(runs)
+    for run in it:
         for p, piece in enumerate(run.pieces):
             if not is_resumed_piece(piece, resume):
                 continue
             at_piece_end = resume.u >= piece.u_end
             if resume.cursor is None and at_piece_end and p + 1 == len(run.pieces):
-                return runs[r + 1:], None  # at rest at a run's end: the next run starts there
+                return it, None  # at rest at a run's end: the next run starts there
             if at_piece_end and p + 1 < len(run.pieces):
                 p, u = p + 1, run.pieces[p + 1].u_start
             else:
                 u = resume.u
             tail = Run(run.pieces[p:], run.junction_speed_mm_s[p:])
             if resume.cursor is None:
-                return [tail] + runs[r + 1:], Cursor(0, u, before=resume.before)
+                return itertools.chain([tail], it), Cursor(0, u, before=resume.before)
             last = Samples(np.zeros(1, np.int32), np.array([u]), resume.before[-1:], np.zeros(1))
             cursor = replace(resume.cursor, piece_index=0, u=u, run_s_mm=0.0, carry=None, previous=last)
-            return [tail] + runs[r + 1:], cursor
+            return itertools.chain([tail], it), cursor
     raise InputError("resume", f"block {resume.block + 1} is not part of this program's motion")
 
 
@@ -305,35 +344,44 @@ class PlanStream:
         self.first_chunk_cycles = first_chunk_cycles
         self.figures = _Figures()
         self.planning_time_s = 0.0
+        self.setup: SetUp | None = None
 
     def chunks(self) -> Iterator[tuple[Trajectory, Resume | None]]:
-        runs, settings, trailing = _setup(self.program, self.limits, self.chunk_cycles)
-        self.figures.runs = len(runs)
-        if not runs:
+        started = time.perf_counter()
+        self.setup = SetUp.of(self.program, self.limits, self.chunk_cycles)
+        runs = peeked(_counted(self.setup.sections.runs(), self.figures))
+        if runs is None:
             yield _rest_chunk(self.program, self.limits), None
             return
-        started = time.perf_counter()
-        for chunk, resume in _named_lines(self.program, self._all_chunks(runs, settings, trailing)):
+        for chunk, resume in _named_lines(self.program, self._all_chunks(runs, self.setup.settings, self.setup.trailing)):
             self.planning_time_s += time.perf_counter() - started
             yield chunk, resume
             started = time.perf_counter()
         self.planning_time_s += time.perf_counter() - started
 
-    def _all_chunks(self, runs: list[Run], settings: PlanSettings, trailing: int) -> Iterator[tuple[Trajectory, Resume]]:
-        """All chunks; the first with a short window when asked (see the class docstring)."""
+    def _all_chunks(self, runs: Iterator[Run], settings: PlanSettings, trailing: int) -> Iterator[tuple[Trajectory, Resume]]:
+        """All chunks; the first with a short window when asked (see the class docstring): the
+        runs it took are planned again from its Resume with the full window."""
         first_cycles = self.first_chunk_cycles
         if first_cycles is None or first_cycles >= self.chunk_cycles:
             yield from _chunks(runs, settings, None, self.figures, trailing_rest=trailing)
             return
-        short_runs, short, _ = _setup(self.program, self.limits, first_cycles)
-        first = _chunks(short_runs, short, None, self.figures, trailing_rest=trailing)
+        taken: list[Run] = []
+        short = settings_for(self.limits, settings.max_feed_mm_s, first_cycles)
+        first = _chunks(_recorded(runs, taken), short, None, self.figures, trailing_rest=trailing)
         chunk, resume = next(first)
         yield chunk, resume
-        rest, cursor = resume_runs(runs, resume)
-        if rest:
+        after, cursor = resume_runs(itertools.chain(list(taken), runs), resume)
+        rest = peeked(after)
+        if rest is not None:
             yield from _chunks(rest, settings, cursor, self.figures, resume.before, trailing)
         else:  # the first chunk ended the last run: only a trailing dwell may follow
             yield from first
+
+    @property
+    def blocks_set_up(self) -> int:
+        """Program blocks whose pieces have been set up so far (setup.PathSections)."""
+        return self.setup.sections.blocks_set_up if self.setup is not None else 0
 
     def __iter__(self) -> Iterator[Trajectory]:
         for chunk, _ in self.chunks():
@@ -342,6 +390,13 @@ class PlanStream:
     @property
     def notes(self) -> dict[str, float | str]:
         return notes_for(self.limits, self.figures, self.figures.runs)
+
+
+def _recorded(runs: Iterator[Run], taken: list[Run]) -> Iterator[Run]:
+    """``runs``, each also appended to ``taken``."""
+    for run in runs:
+        taken.append(run)
+        yield run
 
 
 def plan_lookahead(program: Program, limits: PlanLimits) -> Trajectory:

@@ -27,7 +27,9 @@ is the deviation of the junction into it.
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -35,6 +37,7 @@ from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead.path import BlockPiece
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.program import BlockKind, Program
+from nurbsmotion.program.records import BlockRecords
 
 MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped (no motion)
 
@@ -90,10 +93,12 @@ def junction_speed(t_in: np.ndarray, t_out: np.ndarray, limits: PlanLimits, min_
     return v if v > stop_below and d > 0 else 0.0
 
 
-def program_pieces(program: Program, limits: PlanLimits) -> list[BlockPiece]:
-    """Every block with motion, as a whole piece with its feed."""
+def program_pieces(program: Program, limits: PlanLimits, first: int = 0, stop: int | None = None) -> list[BlockPiece]:
+    """Every block with motion (of blocks ``first`` up to ``stop``), as a whole piece with its feed."""
     pieces = []
-    for index, block in enumerate(program.blocks):
+    blocks = program.blocks
+    for index in range(first, len(blocks) if stop is None else min(stop, len(blocks))):
+        block = blocks[index]
         if np.ptp(block.curve.control_points, axis=0).max() <= MIN_BLOCK_LENGTH_MM:
             continue  # every control point in one place: no motion
         feed = limits.feed_for(block.feed_mm_s, rapid=block.kind == BlockKind.RAPID)
@@ -112,14 +117,29 @@ class ProgramStops:
 
     @classmethod
     def of(cls, program: Program, limits: PlanLimits) -> "ProgramStops":
-        given = {i: b.blend_tolerance_mm for i, b in enumerate(program.blocks) if b.blend_tolerance_mm is not None}
+        blocks = program.blocks
+        if isinstance(blocks, BlockRecords):  # from the columns: no Block built
+            marked = np.flatnonzero(~np.isnan(blocks.blend_tolerances_mm))
+            given = dict(zip(marked.tolist(), blocks.blend_tolerances_mm[marked].tolist()))
+            stop_after = frozenset(np.flatnonzero(blocks.exact_stops).tolist())
+        else:
+            given = {i: b.blend_tolerance_mm for i, b in enumerate(blocks) if b.blend_tolerance_mm is not None}
+            stop_after = frozenset(i for i, b in enumerate(blocks) if b.exact_stop)
         deviations = {i: min(p, limits.junction_deviation_mm) for i, p in given.items()}
-        return cls(frozenset(i for i, b in enumerate(program.blocks) if b.exact_stop), program.dwell_s_before(),
-                   deviations, given)
+        return cls(stop_after, program.dwell_s_before(), deviations, given)
 
     def dwell_between(self, after_block: int, up_to_block: int) -> float:
-        """Dwell before the blocks after_block + 1 .. up_to_block."""
-        return sum(s for b, s in (self.dwell_s_before or {}).items() if after_block < b <= up_to_block)
+        """Dwell before the blocks after_block + 1 .. up_to_block (bisected: a call per junction)."""
+        if not self.dwell_s_before:
+            return 0.0
+        blocks, seconds = self.dwells
+        return sum(seconds[bisect_right(blocks, after_block):bisect_right(blocks, up_to_block)])
+
+    @cached_property
+    def dwells(self) -> tuple[list[int], list[float]]:
+        """(block indices in order, the dwell before each)."""
+        ordered = sorted((self.dwell_s_before or {}).items())
+        return [b for b, _ in ordered], [s for _, s in ordered]
 
 
 def dwell_cycles(dwell_s: float, period_s: float, after_motion: bool) -> int:
@@ -132,13 +152,17 @@ def dwell_cycles(dwell_s: float, period_s: float, after_motion: bool) -> int:
 
 
 def split_runs(pieces: list[BlockPiece], limits: PlanLimits, min_pass_mm_s: float = 0.0,
-               stops: ProgramStops = ProgramStops()) -> list[Run]:
+               stops: ProgramStops = ProgramStops(), after: BlockPiece | None = None) -> list[Run]:
     """Group pieces into runs separated by exact stops (junctions slower than ``min_pass_mm_s``
-    are stops too, and so are the program's own stops and dwells)."""
+    are stops too, and so are the program's own stops and dwells). ``after``: the piece the
+    first one follows at rest (pieces set up section by section), None at the program start."""
     runs: list[Run] = []
     current: list[BlockPiece] = []
     speeds: list[float] = []
-    rest = dwell_cycles(stops.dwell_between(-1, pieces[0].block), limits.period_s, False) if pieces else 0
+    rest = 0
+    if pieces:
+        last = -1 if after is None else after.last_block
+        rest = dwell_cycles(stops.dwell_between(last, pieces[0].block), limits.period_s, after is not None)
     arriving = np.zeros(0)  # the end tangent of the piece before (each piece's tangents once)
     for piece in pieces:
         leaving, end = end_tangents(piece)
