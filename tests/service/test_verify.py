@@ -10,7 +10,7 @@ import json
 import numpy as np
 
 from nurbsmotion.config import parse_config
-from nurbsmotion.service.records import config_dict
+from nurbsmotion.service.record_config import config_dict
 from nurbsmotion.service.verify import offsets_in_force, rest_waits
 
 CONFIG = "axes:\n  - {name: X, node_id: 1, offset_counts: 7}\n  - {name: Y, node_id: 2}\n"

@@ -35,7 +35,7 @@ from nurbsmotion import __version__
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
 from nurbsmotion.program import Program, ReadOptions
-from nurbsmotion.service.records import config_dict
+from nurbsmotion.service.record_config import config_dict
 
 log = logging.getLogger(__name__)
 

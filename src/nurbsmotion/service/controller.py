@@ -36,7 +36,8 @@ from nurbsmotion.service.job_common import MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.start_line import resume_of, start_line_options
-from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, config_dict, now_iso
+from nurbsmotion.service.record_config import config_dict
+from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords, now_iso
 
 log = logging.getLogger(__name__)
 

@@ -12,7 +12,6 @@ and renamed.
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import re
@@ -22,8 +21,6 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from nurbsmotion.config import MachineConfig
-from nurbsmotion.config.spindle import SpindleConfig
 from nurbsmotion.errors import InputError
 
 PROGRAM_FILE = "program"  # suffix added from the submitted name (.nc, .yaml ...)
@@ -340,20 +337,3 @@ def nth_line(path: Path, index: int) -> str | None:
     except OSError:
         return None
     return None
-
-
-def config_dict(config: MachineConfig, offset_counts: Any = None) -> dict[str, Any]:
-    """The configuration a job ran with, every default filled in (config.json of a record);
-    ``offset_counts``: the axis map's offsets in force (homing moves them: service.homing)."""
-    offsets = [a.offset_counts for a in config.axes] if offset_counts is None else [int(o) for o in offset_counts]
-    plain_axes = tuple(dataclasses.replace(a, od=None, offset_counts=o)  # the EDS as read: not a value
-                       for a, o in zip(config.axes, offsets))
-    spindle = dataclasses.replace(config.spindle, od=None) if isinstance(config.spindle, SpindleConfig) \
-        else config.spindle
-    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
-    out.pop("lines", None)
-    if isinstance(out["spindle"], dict):
-        out["spindle"].pop("od", None)
-    for axis in out["axes"]:
-        axis.pop("od", None)
-    return out
