@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT))
 
 from benchmarks._report import write_section  # noqa: E402
-from benchmarks.bench_first_motion import (CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line,  # noqa: E402
+from benchmarks.bench_first_motion import (CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line, master_job,  # noqa: E402
                                            program_copies)
 
 PROGRAM = ROOT / "tests" / "data" / "gcode" / "fusion360_led_floor_1121_btn8copies_20bit.nc"
@@ -54,10 +54,10 @@ def first_setpoint_s(client: Any, master: Any, cmd: str, **fields: Any) -> tuple
     moves), then a controlled stop and the axes back at 0 (MDI)."""
     started = time.perf_counter()
     answer = client.call(cmd, **fields)
-    job = master._job
+    job = master_job(master)
     while job is None or job.index < 1:
         time.sleep(0.0005)
-        job = master._job
+        job = master_job(master)
     seconds = time.perf_counter() - started
     client.call("stop")
     idle(client)
