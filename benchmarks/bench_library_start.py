@@ -238,7 +238,7 @@ def main() -> None:
         body = ("CPU seconds (time.process_time) of each step before a streamed job's first set-point, one process, "
                 "bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord error): what `start NAME` and a "
                 "second `run FILE` skip (read + check) and what they still pay (the entry's load, the transfer to "
-                "the daemon, the planner's first chunk: its set-up over the whole program).\n\n" + cpu_table(results))
+                "the daemon, the planner's first chunk: its first sections, setup.PathSections).\n\n" + cpu_table(results))
         write_section("library_start_cpu", "Library starts: where the time to the first set-point goes (CPU)", body,
                       "python benchmarks/bench_library_start.py --cpu --copies "
                       + " ".join(str(c) for c in args.copies))
