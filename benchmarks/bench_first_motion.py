@@ -50,6 +50,7 @@ import tempfile
 import time
 import uuid
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -59,6 +60,12 @@ from benchmarks._report import write_section  # noqa: E402
 from benchmarks.bench_plan_command import wang_copies  # noqa: E402
 
 TOOLS_YAML = "tools:\n" + "".join(f"  - {{number: {n}, length_mm: {40 + n}, diameter_mm: 6}}\n" for n in range(1, 100))
+def master_job(master: Any) -> Any:
+    """The master's job playing now (None: none), whichever attribute holds it."""
+    loop = getattr(master, "_loop", None)
+    return loop.job if loop is not None else getattr(master, "_job", None)
+
+
 TARGET_FIRST_S = 1.0
 TARGET_MB = 200.0
 CONFIG = """\
@@ -149,10 +156,10 @@ def one_run(copies: int, first_motion_only: bool = False, program: Path | None =
             submit_s = time.perf_counter() - started
             job_id = answer["job"]["id"]
             master = masters[0]
-            job = master._job
+            job = master_job(master)
             while job is None or job.index < 1:  # the first row is the held position: row 1 moves
                 time.sleep(0.0005)
-                job = master._job
+                job = master_job(master)
             first_motion_s = time.perf_counter() - started
             if first_motion_only:
                 client.call("stop")

@@ -42,7 +42,7 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT))
 
 from benchmarks._report import write_section  # noqa: E402
-from benchmarks.bench_first_motion import (CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line,  # noqa: E402
+from benchmarks.bench_first_motion import (CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line, master_job,  # noqa: E402
                                            program_copies)
 
 PROGRAM = ROOT / "tests" / "data" / "gcode" / "fusion360_led_floor_1121_btn8copies_20bit.nc"
@@ -54,10 +54,10 @@ def first_setpoint_s(client: Any, master: Any, cmd: str, **fields: Any) -> tuple
     moves), then a controlled stop and the axes back at 0 (MDI)."""
     started = time.perf_counter()
     answer = client.call(cmd, **fields)
-    job = master._job
+    job = master_job(master)
     while job is None or job.index < 1:
         time.sleep(0.0005)
-        job = master._job
+        job = master_job(master)
     seconds = time.perf_counter() - started
     client.call("stop")
     idle(client)
@@ -238,7 +238,7 @@ def main() -> None:
         body = ("CPU seconds (time.process_time) of each step before a streamed job's first set-point, one process, "
                 "bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord error): what `start NAME` and a "
                 "second `run FILE` skip (read + check) and what they still pay (the entry's load, the transfer to "
-                "the daemon, the planner's first chunk: its set-up over the whole program).\n\n" + cpu_table(results))
+                "the daemon, the planner's first chunk: its first sections, setup.PathSections).\n\n" + cpu_table(results))
         write_section("library_start_cpu", "Library starts: where the time to the first set-point goes (CPU)", body,
                       "python benchmarks/bench_library_start.py --cpu --copies "
                       + " ".join(str(c) for c in args.copies))

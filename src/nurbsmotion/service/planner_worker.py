@@ -213,9 +213,11 @@ class WorkerJob:
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
             limits = limits_from_config(self.config)
-            self.path = PlannedPath.of(program, limits)  # the trace measures set-points on the blended path
+            planner = self.stream = PlanStream(program, limits, self.request.chunk_cycles,
+                                               self.request.first_chunk_cycles)
+            # the trace measures set-points on the blended path, its pieces as the plan sets them up
+            self.path = PlannedPath.streamed(program, lambda: planner.pieces_set_up)
             self.measure = MeasureStream(self.path.program)
-            self.stream = PlanStream(program, limits, self.request.chunk_cycles, self.request.first_chunk_cycles)
             finished = self._plan_all()
             if finished:
                 self._trace_rows(self._on_program(self.measure.finish()))

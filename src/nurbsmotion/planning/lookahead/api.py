@@ -383,6 +383,12 @@ class PlanStream:
         """Program blocks whose pieces have been set up so far (setup.PathSections)."""
         return self.setup.sections.blocks_set_up if self.setup is not None else 0
 
+    @property
+    def pieces_set_up(self) -> list[BlockPiece]:
+        """The planned pieces set up so far, in order (setup.PathSections.pieces): a chunk's
+        set-points lie on them."""
+        return self.setup.sections.pieces if self.setup is not None else []
+
     def __iter__(self) -> Iterator[Trajectory]:
         for chunk, _ in self.chunks():
             yield chunk

@@ -11,8 +11,8 @@ piece's curve. Without blends it is the program itself and ``rows`` changes noth
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Callable
+from dataclasses import replace
+from typing import Callable, Sequence
 
 import numpy as np
 from numpy.typing import NDArray
@@ -30,6 +30,11 @@ from nurbsmotion.program import Block, BlockKind, Program
 ON_CURVE_MM = 1e-9  # a set-point this close to a blend's curve at its u is on the blend
 
 UMap = Callable[[NDArray[np.float64]], NDArray[np.float64]]
+
+
+def piece_block(program: Program, curve: NurbsCurve, piece: BlockPiece) -> Block:
+    """A planned piece as a block of the planned path (``curve``: its trimmed curve)."""
+    return Block(BlockKind.NURBS, curve, piece.feed_mm_s, program.blocks[piece.block].source)
 
 
 def trimmed_curve(piece: BlockPiece) -> tuple[NurbsCurve, UMap]:
@@ -51,14 +56,23 @@ def trimmed_curve(piece: BlockPiece) -> tuple[NurbsCurve, UMap]:
     return part, lambda u: np.asarray(part.u_at_arc_length(np.asarray(curve.arc_length(u)) - s0), float)
 
 
-@dataclass(frozen=True, eq=False)
 class PlannedPath:
-    """The planned pieces as a Program (``program``) and how set-points move onto it."""
+    """The planned pieces as a Program (``program``) and how set-points move onto it.
 
-    program: Program
-    pieces: tuple[BlockPiece, ...]
-    u_maps: tuple[UMap, ...]
-    blended: bool
+    ``streamed``: the pieces of a plan set up section by section (lookahead.PlanStream), made
+    blocks of ``program`` as the chunks reach them, so nothing walks the whole program before
+    the first chunk. A program with pieces is then always measured on them, blended or not:
+    an unblended piece is its block's whole curve (u unchanged, ``on_program`` gives its block
+    back), so the figures are those on the program itself."""
+
+    def __init__(self, program: Program, pieces: Sequence[BlockPiece], u_maps: Sequence[UMap], blended: bool,
+                 set_up: Callable[[], Sequence[BlockPiece]] | None = None, source: Program | None = None) -> None:
+        self.program, self.blended, self.source = program, blended, source  # source: streamed, the program planned
+        self.pieces: list[BlockPiece] = list(pieces)
+        self.u_maps: list[UMap] = list(u_maps)
+        self.set_up = set_up  # streamed: the pieces set up so far (grows), made blocks by ``catch_up``
+        self.candidates: dict[int, list[int]] = {}  # block -> the pieces along it (piece_rows)
+        self.add_candidates(0)
 
     @classmethod
     def for_algorithm(cls, program: Program, limits: PlanLimits, algorithm: str) -> "PlannedPath":
@@ -72,23 +86,46 @@ class PlannedPath:
         if not any(p.corners is not None or p.covered is not None for p in pieces):
             return cls(program, pieces, (), False)
         curves, maps = zip(*(trimmed_curve(p) for p in pieces))
-        blocks = tuple(Block(BlockKind.NURBS, c, p.feed_mm_s, program.blocks[p.block].source)
-                       for c, p in zip(curves, pieces))
-        return cls(Program(program.name, blocks, program.start_position), pieces, tuple(maps), True)
+        blocks = tuple(piece_block(program, c, p) for c, p in zip(curves, pieces))
+        return cls(Program(program.name, blocks, program.start_position), pieces, maps, True)
+
+    @classmethod
+    def streamed(cls, program: Program, set_up: Callable[[], Sequence[BlockPiece]]) -> "PlannedPath":
+        """The path of a PlanStream of ``program``: ``set_up`` returns its pieces set up so
+        far (PlanStream.pieces_set_up); ``rows`` makes the new ones blocks first."""
+        return cls(Program(program.name, [], program.start_position), (), (), True, set_up, program)
+
+    def catch_up(self) -> None:
+        """Streamed: the pieces set up since the last call made blocks of ``program``."""
+        if self.set_up is None or self.source is None:
+            return
+        pieces, first = self.set_up(), len(self.pieces)
+        blocks = self.program.blocks
+        assert isinstance(blocks, list)
+        for p in pieces[first:]:
+            curve, u_map = trimmed_curve(p)
+            blocks.append(piece_block(self.source, curve, p))
+            self.pieces.append(p)
+            self.u_maps.append(u_map)
+        self.add_candidates(first)
+
+    def add_candidates(self, first: int) -> None:
+        """Pieces ``first``.. among the candidates of the blocks they lie along."""
+        for k in range(first, len(self.pieces)):
+            p = self.pieces[k]
+            for b in (p.covered.blocks.tolist() if p.covered is not None else [p.block]):
+                self.candidates.setdefault(b, []).append(k)
 
     def piece_rows(self, trajectory: Trajectory) -> NDArray[np.intp]:
         """Index into ``pieces`` of every set-point: among the pieces along its block (the
         block's own piece, a blend into it, smoothed pieces covering it), the one whose curve
         passes through the set-point at its u."""
-        candidates: dict[int, list[int]] = {}
-        for k, p in enumerate(self.pieces):
-            for b in (p.covered.blocks.tolist() if p.covered is not None else [p.block]):
-                candidates.setdefault(b, []).append(k)
-        first = {b: ks[0] for b, ks in candidates.items()}
-        rows = np.array([first.get(b, -1) for b in trajectory.block.tolist()], dtype=np.intp)
+        blocks = trajectory.block.tolist()
+        found = {b: self.candidates.get(b, []) for b in set(blocks)}
+        rows = np.array([ks[0] if (ks := found[b]) else -1 for b in blocks], dtype=np.intp)
         if np.any(rows < 0):
             raise ValueError("a set-point's block has no planned piece")
-        for b, ks in candidates.items():
+        for b, ks in found.items():
             if len(ks) < 2:
                 continue
             at = np.flatnonzero(trajectory.block == b)
@@ -106,8 +143,9 @@ class PlannedPath:
 
     def rows(self, trajectory: Trajectory) -> Trajectory:
         """``trajectory`` with every set-point's block and u on ``program`` (the planned pieces)."""
-        if not self.blended or len(trajectory) == 0:
-            return trajectory
+        self.catch_up()
+        if not self.blended or len(trajectory) == 0 or (self.set_up is not None and not self.pieces):
+            return trajectory  # streamed without pieces: a program without motion rests on its block 0
         rows = self.piece_rows(trajectory)
         u = trajectory.u.copy()
         for k in np.unique(rows).tolist():
@@ -119,11 +157,13 @@ class PlannedPath:
         """Measured rows with their program block again (the trace's ``block`` column: on a
         smoothed piece the block reached); u stays on the planned piece (on a blend: the
         blend's parameter)."""
-        if not self.blended:
+        if not self.blended or (self.set_up is not None and not self.pieces):
             return figures
         rows = figures.rows
-        blocks = np.array([p.block for p in self.pieces], dtype=np.int32)[rows.block]
-        for k, piece in enumerate(self.pieces):
+        used = np.unique(rows.block)
+        blocks = np.array([self.pieces[k].block for k in used.tolist()], dtype=np.int32)[np.searchsorted(used, rows.block)]
+        for k in used.tolist():
+            piece = self.pieces[k]
             at = np.flatnonzero(rows.block == k)
             if piece.covered is not None and len(at):
                 curve = piece.curve

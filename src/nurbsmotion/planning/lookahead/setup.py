@@ -71,7 +71,8 @@ def max_program_feed(program: Program, limits: PlanLimits) -> float:
 
 class PathSections:
     """The runs of a program set up section by section (module docstring); ``blocks_set_up``
-    counts the program blocks read so far."""
+    counts the program blocks read so far; ``pieces`` are the planned pieces of the sections set up
+    so far, in order (blended: api.planned_pieces of the whole program once all are set up)."""
 
     def __init__(self, program: Program, limits: PlanLimits, stops: ProgramStops, min_pass_mm_s: float) -> None:
         self.program, self.limits, self.stops, self.min_pass_mm_s = program, limits, stops, min_pass_mm_s
@@ -82,6 +83,7 @@ class PathSections:
         self.checked = 1  # smoothed[:checked] is the next section at least
         self.ordinal = 0
         self.last: BlockPiece | None = None  # the last piece of the sections set up
+        self.pieces: list[BlockPiece] = []  # every planned piece set up so far (lookahead.planned_path.PlannedPath)
 
     def runs(self) -> Iterator[Run]:
         """Every run of the program, in order."""
@@ -92,6 +94,7 @@ class PathSections:
             pieces = blend_pieces(section, self.limits, self.stops)
             pieces = [replace(p, ordinal=p.ordinal + self.ordinal) for p in pieces]
             self.ordinal += len(pieces)
+            self.pieces.extend(pieces)
             yield from split_runs(pieces, self.limits, self.min_pass_mm_s, self.stops, self.last)
             self.last = pieces[-1]
 

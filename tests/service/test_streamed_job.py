@@ -1,0 +1,27 @@
+"""streamed_job: the highest feed of a program from its block columns is the one of its Blocks."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from nurbsmotion.planning import PlanLimits
+from nurbsmotion.program import Program, read_program
+from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.service.streamed_job import highest_feed_mm_s
+
+GCODE = Path(__file__).resolve().parents[1] / "data" / "gcode"
+LIMITS = PlanLimits(period_s=0.001, chord_error_mm=0.001, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0,
+                    default_feed_mm_s=7.0, rapid_feed_mm_s=333.0)
+
+
+@pytest.mark.parametrize("name", ["fusion360_led_floor_1121_btn8copies_20bit.nc", "grbl_HSM_test.nc",
+                                  "linuxcnc_nurbs_G5_butterfly-xy.ngc", "camotics_vcarve.ngc"])
+@pytest.mark.parametrize("rapid_feed_mm_s", [333.0, 1.0])
+def test_the_highest_feed_from_the_columns_is_the_blocks(name, rapid_feed_mm_s):
+    limits = PlanLimits(**{**LIMITS.__dict__, "rapid_feed_mm_s": rapid_feed_mm_s})
+    program = read_program(GCODE / name)
+    assert isinstance(program.blocks, BlockRecords)
+    blocks = Program(program.name, tuple(program.blocks), program.start_position)
+    assert highest_feed_mm_s(program, limits) == highest_feed_mm_s(blocks, limits)
