@@ -36,9 +36,9 @@ from nurbsmotion.can import cia402 as c
 from nurbsmotion.can.cia402 import EmcyCode, NmtCommand, NmtState
 from nurbsmotion.log import kv
 from nurbsmotion.sim import pdo as pdo_layout
-from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 from nurbsmotion.sim.slave import (
     EMCY_STRUCT,
+    ConsumedHeartbeats,
     GatedLocalNode,
     Subscriptions,
     addressed_command,
@@ -127,8 +127,8 @@ class SimIoNode:
         self._lock = threading.RLock()
         self._subscriptions = Subscriptions()
         self._heartbeat_task: Any = None
-        self._heartbeat_consumer = HeartbeatConsumer()
-        self._consumed: list[int] = []
+        self._heartbeats = ConsumedHeartbeats(self._subscriptions, self._lock, lambda timestamp: self._clock())
+        self._heartbeat_consumer = self._heartbeats.consumer  # the one object; tests wait on it
         self._tpdo: pdo_layout.PdoLayout | None = None
         self._rpdo: pdo_layout.PdoLayout | None = None
         self._sync_count = 0
@@ -187,6 +187,7 @@ class SimIoNode:
                 return
             self._stop_heartbeat()
             self._subscriptions.clear()
+            self._heartbeats.forget()
             self.node.remove_network()
             self.network = self._subscriptions.network = None
 
@@ -253,18 +254,7 @@ class SimIoNode:
             self._heartbeat_task = None
 
     def _configure_consumer(self) -> None:
-        entries = [self._value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, CONSUMER_ENTRIES + 1)]
-        self._heartbeat_consumer.configure(entries)
-        for cob in self._consumed:
-            self._subscriptions.remove(cob, self._on_peer_heartbeat)
-        self._consumed = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
-        if self.network is not None:
-            for cob in self._consumed:
-                self._subscriptions.add(cob, self._on_peer_heartbeat)
-
-    def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
-        with self._lock:
-            self._heartbeat_consumer.seen(can_id - c.COB_HEARTBEAT, self._clock())
+        self._heartbeats.configure([self._value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, CONSUMER_ENTRIES + 1)])
 
     # ------------------------------------------------------------------ SDO
     def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
