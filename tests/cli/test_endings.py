@@ -88,7 +88,14 @@ def fake_daemon() -> Iterator[Callable[..., FakeDaemon]]:
 
 
 def start(*args: str, **popen: Any) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, *args], env=subprocess_environment(), **popen)
+    """The command as a user at a terminal starts it: SIGINT at its default even when this test
+    run was started with it ignored (``nohup ... &``), which the CLI rightly keeps ignored."""
+    return subprocess.Popen([sys.executable, *args], env=subprocess_environment(), preexec_fn=_sigint_default,
+                            **popen)
+
+
+def _sigint_default() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def errors_of(stderr: bytes) -> list[str]:
