@@ -55,6 +55,25 @@ class AxisParameters:
     velocity_profile: velocity.VelocityProfile = velocity.VelocityProfile(0.0, 0.0, 0.0, 0.0)  # 0x6083/4, 0x606D/E
     homing_period_s: float = 1e-3  # 0x1006 (else the SYNC interval): the drive's own cycle in homing mode
 
+    def servo_cycle_s(self) -> float:
+        """The cycle the servo steps by: the IP/CSP cycle period (never 0 while IP/CSP runs),
+        1 ms in other modes when none is configured."""
+        return self.cycle_period_s if self.cycle_period_s > 0 else DEFAULT_CYCLE_S
+
+    def within_limits(self, setpoint: int) -> bool:
+        """0x607D: min <= set-point <= max (limits disabled while min >= max)."""
+        low, high = self.limit_min_counts, self.limit_max_counts
+        return low >= high or low <= setpoint <= high
+
+
+def ticks_to_simulate(missed: int, missing_setpoint: MissingSetpoint, lag_cycles: int) -> int:
+    """Of ``missed`` cycles without a SYNC, how many to simulate. Holding, the motor rests
+    after the lag line has drained: simulating more changes nothing (a long pause between
+    jobs costs no time). Extrapolating moves every tick."""
+    if missing_setpoint is MissingSetpoint.HOLD:
+        return min(missed, lag_cycles + 2)
+    return min(missed, MAX_EXTRAPOLATED_TICKS)
+
 
 def error_register_bits(code: int) -> int:
     """0x1001 bits for an EMCY code (CiA 301: bit 0 generic, 1 current, 2 voltage,
@@ -124,7 +143,7 @@ class Cia402Axis:
         self._hold_position()
         self._homing = homing.idle(self.servo.actual, self.home_shift)
         self.position_actual = int(round(self.servo.actual))
-        self._update_statusword()
+        self.refresh_statusword()
 
     # ------------------------------------------------------------------ written objects
     def set_controlword(self, controlword: int) -> None:
@@ -133,7 +152,7 @@ class Cia402Axis:
         if taken:
             self._change_state(new_state, taken)
         self.refuse_cyclic_without_period()
-        self._update_statusword()
+        self.refresh_statusword()
 
     def set_mode(self, mode: int) -> None:
         """0x6060; 0x6061 follows at once. Raises UnsupportedMode for a mode not in 0x6502."""
@@ -145,7 +164,7 @@ class Cia402Axis:
             log.info(kv("sim.mode", node=self.name, mode=mode))
         self.mode = self.mode_display = mode
         self.refuse_cyclic_without_period()
-        self._update_statusword()
+        self.refresh_statusword()
 
     def cycle_period_missing(self) -> bool:
         """IP/CSP needs the cycle period (0x60C2, else 0x1006): without it a real drive cannot
@@ -232,7 +251,7 @@ class Cia402Axis:
         holding or extrapolating; called before the SYNC's RPDO data takes effect."""
         if self.state is not State.OPERATION_ENABLED:  # the quick-stop ramp advances per SYNC only
             return
-        for _ in range(self._ticks_to_simulate(timing.missed_ticks)):
+        for _ in range(ticks_to_simulate(timing.missed_ticks, self.params.missing_setpoint, self.servo.lag_cycles)):
             self._run_cycle(False)
 
     def step(self, sync_index: int, sync_counter: int, timing: SyncTiming | None = None) -> None:
@@ -249,14 +268,7 @@ class Cia402Axis:
                                  _ns(timing.time_s))
         self.timeline.append(sync_index, _ns(timing.time_s), _ns(timing.interval_s), timing.missed_ticks, int(source),
                              demand, self.position_actual, self.following_error, sync_counter)
-        self._update_statusword()
-
-    def _ticks_to_simulate(self, missed: int) -> int:
-        """Holding, the motor rests after the lag line has drained: simulating more changes
-        nothing (a long pause between jobs costs no time). Extrapolating moves every tick."""
-        if self.params.missing_setpoint is MissingSetpoint.HOLD:
-            return min(missed, self.servo.lag_cycles + 2)
-        return min(missed, MAX_EXTRAPOLATED_TICKS)
+        self.refresh_statusword()
 
     def _run_cycle(self, fresh: bool) -> tuple[SetpointSource, int]:
         """One cycle of the drive's position loop (one cycle period: the drive interpolates
@@ -284,7 +296,7 @@ class Cia402Axis:
                 self._check_following_error()
                 return inactive, int(round(self._demand))
             source, demand = self._cycle_demand(fresh)
-            if not self._within_limits(int(round(demand))):
+            if not self.params.within_limits(int(round(demand))):
                 self.stats.setpoints_refused += 1
                 self.raise_fault(EmcyCode.SOFTWARE_LIMIT)
                 return inactive, int(round(self._demand))
@@ -298,7 +310,7 @@ class Cia402Axis:
             self._check_following_error()
             return source, int(round(demand))
         if self.state is State.QUICK_STOP_ACTIVE:  # the ramp advances per SYNC only (docs/sim.md)
-            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self._cycle_s())
+            stopped = self.servo.ramp_down(self.params.quick_stop_decel_counts_s2, self.params.servo_cycle_s())
             self._demand = self.servo.actual
             self.position_actual = int(round(self.servo.actual))
             if stopped and not quick_stop_stays_active(self.params.quick_stop_option):
@@ -312,9 +324,9 @@ class Cia402Axis:
         state = velocity.VelocityState(self.servo.actual, self.servo.velocity_counts_s, self._in_window_s)
         if self.mode_display == velocity.MODE_PROFILE_VELOCITY:
             state = velocity.profile_velocity_tick(state, self.target_velocity, bool(self.controlword & c.CW_HALT),
-                                                   self.params.velocity_profile, self._cycle_s())
+                                                   self.params.velocity_profile, self.params.servo_cycle_s())
         else:
-            state = velocity.cyclic_velocity_tick(state, self.target_velocity, self._cycle_s())
+            state = velocity.cyclic_velocity_tick(state, self.target_velocity, self.params.servo_cycle_s())
         self._in_window_s = state.in_window_s
         self.servo.hold(state.position)
         self.servo.velocity_counts_s = state.velocity_counts_s
@@ -345,17 +357,7 @@ class Cia402Axis:
         return SetpointSource.HELD, self._demand
 
     def _move(self, demand: float) -> None:
-        self.position_actual = int(round(self.servo.step(demand, self._cycle_s())))
-
-    def _cycle_s(self) -> float:
-        """The cycle the servo steps by: the IP/CSP cycle period (never 0 while IP/CSP runs),
-        1 ms in other modes when none is configured."""
-        return self.params.cycle_period_s if self.params.cycle_period_s > 0 else DEFAULT_CYCLE_S
-
-    def _within_limits(self, setpoint: int) -> bool:
-        """0x607D: min <= set-point <= max (limits disabled while min >= max)."""
-        low, high = self.params.limit_min_counts, self.params.limit_max_counts
-        return low >= high or low <= setpoint <= high
+        self.position_actual = int(round(self.servo.step(demand, self.params.servo_cycle_s())))
 
     def _check_following_error(self) -> None:
         """0x60F4 = demand - actual; fault 0x8611 when |e| > 0x6065 for longer than 0x6066 ms
@@ -371,10 +373,8 @@ class Cia402Axis:
             self.raise_fault(EmcyCode.FOLLOWING_ERROR, following_error=True)
 
     def refresh_statusword(self) -> None:
-        """Recompute the statusword after a change the drive made (e.g. sync lock)."""
-        self._update_statusword()
-
-    def _update_statusword(self) -> None:
+        """Recompute the statusword (after every change; the drive calls it after one it
+        made, e.g. sync lock)."""
         word = c.STATUSWORD_OF_STATE[self.state] | c.SW_REMOTE
         if self.state in STATES_WITH_VOLTAGE:
             word |= c.SW_VOLTAGE_ENABLED
@@ -407,7 +407,7 @@ class Cia402Axis:
             self._hold_position()
             self._reset_homing()
             self.following_error = error_at_fault  # 0x60F4 keeps the error that caused the fault
-        self._update_statusword()
+        self.refresh_statusword()
         self._emit_emcy(code, self.error_register)
         log.warning(kv("sim.fault", node=self.name, code=f"0x{code:04X}"))
 

@@ -36,9 +36,10 @@ from nurbsmotion.can import cia402 as c
 from nurbsmotion.can.cia402 import EmcyCode, NmtCommand, NmtState
 from nurbsmotion.log import kv
 from nurbsmotion.sim import pdo as pdo_layout
-from nurbsmotion.sim.heartbeat import HeartbeatConsumer
+from nurbsmotion.sim.io_pdos import ERROR_REGISTER_COMMUNICATION, READ_INPUT_8, WRITE_OUTPUT_8, IoPdos
 from nurbsmotion.sim.slave import (
     EMCY_STRUCT,
+    ConsumedHeartbeats,
     GatedLocalNode,
     Subscriptions,
     addressed_command,
@@ -47,11 +48,8 @@ from nurbsmotion.sim.slave import (
 
 log = logging.getLogger(__name__)
 
-READ_INPUT_8 = 0x6000
-WRITE_OUTPUT_8 = 0x6200
 DEVICE_TYPE_DIGITAL_IO = 0x0003_0191  # CiA 401 (0x191), bit 16 digital inputs, bit 17 digital outputs
 MAX_GROUPS = 8  # one 8-byte PDO
-EVENT_DRIVEN = (254, 255)
 CONSUMER_ENTRIES = 4
 
 
@@ -127,14 +125,10 @@ class SimIoNode:
         self._lock = threading.RLock()
         self._subscriptions = Subscriptions()
         self._heartbeat_task: Any = None
-        self._heartbeat_consumer = HeartbeatConsumer()
-        self._consumed: list[int] = []
-        self._tpdo: pdo_layout.PdoLayout | None = None
-        self._rpdo: pdo_layout.PdoLayout | None = None
-        self._sync_count = 0
-        self._changed_since_sync = False
-        self._pending_outputs: tuple | None = None
+        self._heartbeats = ConsumedHeartbeats(self._subscriptions, self._lock, lambda timestamp: self._clock())
+        self._heartbeat_consumer = self._heartbeats.consumer  # the one object; tests wait on it
         self.tpdos_sent = 0
+        self._pdos = IoPdos(self, self.od, self._value, self._inputs, self._outputs, self._subscriptions, self._lock)
 
     # ------------------------------------------------------------------ test API
     def set_input(self, bit: int, active: bool) -> None:
@@ -153,7 +147,7 @@ class SimIoNode:
                 raise ValueError(f"{self.name}: expected {self.input_groups} input bytes, got {len(groups)}")
             if bytes(groups) != bytes(self._inputs):
                 self._inputs[:] = groups
-                self._inputs_changed()
+                self._pdos.inputs_changed()
 
     def input(self, bit: int) -> bool:
         group, mask = divmod(bit, 8)
@@ -178,7 +172,7 @@ class SimIoNode:
             self.node.associate_network(network)
             self._subscriptions.add(c.COB_NMT, self._on_nmt)
             self._subscriptions.add(self.node.sdo.rx_cobid, self._on_sdo_request)
-            self._subscriptions.add(c.COB_SYNC, self._on_sync)
+            self._subscriptions.add(c.COB_SYNC, self._pdos.on_sync)
             self._boot(reset_application=True)
 
     def detach(self) -> None:
@@ -187,6 +181,7 @@ class SimIoNode:
                 return
             self._stop_heartbeat()
             self._subscriptions.clear()
+            self._heartbeats.forget()
             self.node.remove_network()
             self.network = self._subscriptions.network = None
 
@@ -196,7 +191,7 @@ class SimIoNode:
             for producer in self._heartbeat_consumer.newly_failed(now):
                 log.warning(kv("sim.io.heartbeat_lost", node=self.node_id, producer=producer))
                 self._error_outputs()
-                self._send_emcy(EmcyCode.HEARTBEAT, 0x11)
+                self.send_emcy(EmcyCode.HEARTBEAT, ERROR_REGISTER_COMMUNICATION)
             return min(now + 0.05, self._heartbeat_consumer.next_deadline())
 
     # ------------------------------------------------------------------ NMT
@@ -207,10 +202,10 @@ class SimIoNode:
                 del self.node.data_store[index]
         if reset_application:
             self._error_outputs()
-        self._pending_outputs = None
-        self._rebuild_pdos()
+        self._pdos.pending_outputs = None
+        self._pdos.rebuild()
         self._configure_consumer()
-        self._send(c.COB_HEARTBEAT + self.node_id, bytes([NmtState.BOOTUP]))
+        self.send(c.COB_HEARTBEAT + self.node_id, bytes([NmtState.BOOTUP]))
         self._enter(NmtState.PRE_OPERATIONAL)
         self._start_heartbeat()
 
@@ -236,7 +231,7 @@ class SimIoNode:
             return
         log.info(kv("sim.io.nmt", node=self.node_id, state=state.name, previous=self.nmt_state.name))
         self.nmt_state = state
-        self._sync_count = 0
+        self._pdos.sync_count = 0
         if self._heartbeat_task is not None:
             self._heartbeat_task.update([int(state)])
 
@@ -253,18 +248,7 @@ class SimIoNode:
             self._heartbeat_task = None
 
     def _configure_consumer(self) -> None:
-        entries = [self._value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, CONSUMER_ENTRIES + 1)]
-        self._heartbeat_consumer.configure(entries)
-        for cob in self._consumed:
-            self._subscriptions.remove(cob, self._on_peer_heartbeat)
-        self._consumed = [c.COB_HEARTBEAT + n for n in self._heartbeat_consumer.timeouts_s]
-        if self.network is not None:
-            for cob in self._consumed:
-                self._subscriptions.add(cob, self._on_peer_heartbeat)
-
-    def _on_peer_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
-        with self._lock:
-            self._heartbeat_consumer.seen(can_id - c.COB_HEARTBEAT, self._clock())
+        self._heartbeats.configure([self._value(c.CONSUMER_HEARTBEAT_TIME, n) for n in range(1, CONSUMER_ENTRIES + 1)])
 
     # ------------------------------------------------------------------ SDO
     def _on_sdo_request(self, can_id: int, data: bytes, timestamp: float) -> None:
@@ -290,7 +274,7 @@ class SimIoNode:
 
     def _after_sdo_write(self, index: int, subindex: int) -> None:
         if pdo_layout.is_pdo_parameter(index):
-            self._rebuild_pdos()
+            self._pdos.rebuild()
         elif index == c.PRODUCER_HEARTBEAT_TIME:
             self._start_heartbeat()
         elif index == c.CONSUMER_HEARTBEAT_TIME:
@@ -300,76 +284,10 @@ class SimIoNode:
         return od_value(self.node, self.od, index, subindex)
 
     # ------------------------------------------------------------------ PDOs
-    def _layout(self, comm: int, mapping: int) -> pdo_layout.PdoLayout | None:
-        entries = [self._value(mapping, n) for n in range(1, self._value(mapping, 0) + 1)]
-        layout = pdo_layout.build_layout(self.od, 1, self._value(comm, 1), self._value(comm, 2), entries)
-        return layout if layout.enabled and layout.keys else None
-
-    def _rebuild_pdos(self) -> None:
-        if self._rpdo is not None:
-            self._subscriptions.remove(self._rpdo.cob_id, self._on_rpdo)
-        self._rpdo = self._layout(c.RPDO_COMM, c.RPDO_MAPPING)
-        self._tpdo = self._layout(c.TPDO_COMM, c.TPDO_MAPPING)
-        if self._rpdo is not None and self.network is not None:
-            self._subscriptions.add(self._rpdo.cob_id, self._on_rpdo)
-
     def _set_group(self, group: int, value: int) -> None:
         if self._inputs[group] != value:
             self._inputs[group] = value
-            self._inputs_changed()
-
-    def _inputs_changed(self) -> None:
-        self._changed_since_sync = True
-        if self._tpdo is not None and self._tpdo.transmission_type in EVENT_DRIVEN:
-            self._send_tpdo()
-
-    def _send_tpdo(self) -> None:
-        if self._tpdo is None or self.nmt_state != NmtState.OPERATIONAL:
-            return
-        values = [self._inputs[sub - 1] if index == READ_INPUT_8 else self._value(index, sub)
-                  for index, sub in self._tpdo.keys]
-        self._send(self._tpdo.cob_id, self._tpdo.codec.pack(*values))
-        self.tpdos_sent += 1
-
-    def _on_rpdo(self, can_id: int, data: bytes, timestamp: float) -> None:
-        with self._lock:
-            rpdo = self._rpdo
-            if rpdo is None or self.nmt_state != NmtState.OPERATIONAL:
-                return
-            if len(data) < rpdo.size:
-                self._send_emcy(EmcyCode.PDO_LENGTH, 0x11)
-                return
-            values = rpdo.codec.unpack_from(data)
-            if rpdo.synchronous:
-                self._pending_outputs = values
-            else:
-                self._apply_outputs(values)
-
-    def _apply_outputs(self, values: tuple) -> None:
-        assert self._rpdo is not None
-        for (index, sub), value in zip(self._rpdo.keys, values):
-            if index == WRITE_OUTPUT_8:
-                self._outputs[sub - 1] = value
-
-    def _on_sync(self, can_id: int, data: bytes, timestamp: float) -> None:
-        with self._lock:
-            if self.nmt_state != NmtState.OPERATIONAL:
-                return
-            if self._pending_outputs is not None and self._rpdo is not None:
-                self._apply_outputs(self._pending_outputs)
-            self._pending_outputs = None
-            tpdo = self._tpdo
-            if tpdo is None:
-                return
-            kind = tpdo.transmission_type
-            if 1 <= kind <= 240:
-                self._sync_count += 1
-                if self._sync_count >= kind:
-                    self._sync_count = 0
-                    self._send_tpdo()
-            elif kind == 0 and self._changed_since_sync:
-                self._send_tpdo()
-            self._changed_since_sync = False
+            self._pdos.inputs_changed()
 
     # ------------------------------------------------------------------ helpers
     def _error_outputs(self) -> None:
@@ -378,11 +296,11 @@ class SimIoNode:
             log.warning(kv("sim.io.outputs_off", node=self.node_id))
         self._outputs[:] = bytes(self.output_groups)
 
-    def _send(self, can_id: int, data: bytes) -> None:
+    def send(self, can_id: int, data: bytes) -> None:
         if self.network is not None:
             self.network.send_message(can_id, data)
 
-    def _send_emcy(self, code: int, register: int) -> None:
+    def send_emcy(self, code: int, register: int) -> None:
         cob = self._value(c.EMCY_COB_ID)
         if not cob & pdo_layout.COB_ID_INVALID_BIT and self.nmt_state != NmtState.STOPPED:
-            self._send(cob & 0x7FF, EMCY_STRUCT.pack(code, register))
+            self.send(cob & 0x7FF, EMCY_STRUCT.pack(code, register))

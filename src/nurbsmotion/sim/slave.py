@@ -5,6 +5,7 @@
   ``_after_sdo_write`` applies effects), whose reads may be live (``_on_sdo_read``), and
   whose own SDO/NMT handlers are off so the owner can gate them by NMT state.
 - :class:`Subscriptions`: the CAN ids a node listens to, removed together on detach.
+- :class:`ConsumedHeartbeats`: the heartbeat consumer (0x1016) on the bus.
 - :func:`addressed_command`: the NMT command of a frame if it is for this node.
 - :func:`od_value`: an object's current value, decoded with its OD entry.
 """
@@ -12,6 +13,8 @@
 from __future__ import annotations
 
 import struct
+import threading
+import time
 from collections.abc import Callable
 from typing import Any, Protocol
 
@@ -19,8 +22,10 @@ import canopen
 from canopen.objectdictionary import ObjectDictionary, ODArray
 from canopen.sdo import SdoAbortedError
 
+from nurbsmotion.can import cia402 as c
 from nurbsmotion.can.cia402 import NmtCommand
 from nurbsmotion.sim import pdo as pdo_layout
+from nurbsmotion.sim.heartbeat import HeartbeatConsumer
 
 ABORT_NO_SUBINDEX = 0x06090011
 EMCY_STRUCT = struct.Struct("<HB5x")  # CiA 301 EMCY: error code, error register, 5 bytes
@@ -89,6 +94,42 @@ class Subscriptions:
     def clear(self) -> None:
         for can_id, callback in list(self._items):
             self.remove(can_id, callback)
+
+
+class ConsumedHeartbeats:
+    """The producers a node watches (0x1016) and their heartbeat frames: each frame is
+    stamped by ``frame_time(timestamp)`` under ``lock``."""
+
+    def __init__(self, subscriptions: Subscriptions, lock: threading.RLock,
+                 frame_time: Callable[[float], float]) -> None:
+        self.consumer = HeartbeatConsumer()
+        self.rx_lag_s: dict[int, float] = {}  # producer -> reception lag of its last heartbeat
+        self._subscriptions = subscriptions
+        self._lock = lock
+        self._frame_time = frame_time
+        self._cobs: list[int] = []
+
+    def configure(self, entries: list[int]) -> None:
+        """Watch the producers of these 0x1016 entries (subscribed if attached)."""
+        self.consumer.configure(entries)
+        for cob in self._cobs:
+            self._subscriptions.remove(cob, self.on_heartbeat)
+        self._cobs = [c.COB_HEARTBEAT + n for n in self.consumer.timeouts_s]
+        if self._subscriptions.network is not None:
+            for cob in self._cobs:
+                self._subscriptions.add(cob, self.on_heartbeat)
+
+    def forget(self) -> None:
+        """Detached: the subscriptions are gone."""
+        self._cobs = []
+
+    def on_heartbeat(self, can_id: int, data: bytes, timestamp: float) -> None:
+        with self._lock:
+            producer = can_id - c.COB_HEARTBEAT
+            self.consumer.seen(producer, self._frame_time(timestamp))
+            # how late this process handles the frame after the kernel received it (SocketCAN
+            # stamps frames with wall-clock time; a process inside a starved guest lags by seconds)
+            self.rx_lag_s[producer] = time.time() - timestamp if timestamp > 1e9 else 0.0
 
 
 def addressed_command(data: bytes, node_id: int) -> NmtCommand | None:
