@@ -356,29 +356,21 @@ class RecordsBuilder:
         """One block; a LineShape or ArcShape is kept as numbers, a NurbsCurve as itself."""
         if isinstance(shape, NurbsCurve):
             start, end = shape.control_points[0].tolist(), shape.control_points[-1].tolist()
-            self.forms.append(FORM_CURVE)
-            self.shape_index.append(len(self.curves))
+        else:
+            start, end = shape.start.tolist(), shape.end.tolist()
+        if len(start) != 3:
+            raise ValueError(f"a block has 3 coordinates X Y Z, got {len(start)}")
+        if isinstance(shape, NurbsCurve):
+            form, index = FORM_CURVE, len(self.curves)
             self.curves.append(shape)
         elif isinstance(shape, ArcShape):
-            start, end = shape.start.tolist(), shape.end.tolist()
-            self.forms.append(FORM_ARC)
-            self.shape_index.append(len(self.arc_axes))
+            form, index = FORM_ARC, len(self.arc_axes)
             self.arc_values.extend((*shape.centre.tolist(), shape.sweep_rad, shape.rise_mm))
             self.arc_axes.append(NORMALS.index(tuple(shape.normal)))
         else:
-            start, end = shape.start.tolist(), shape.end.tolist()
-            self.forms.append(FORM_LINE)
-            self.shape_index.append(SHAPE_NONE)
-        if len(start) != 3:
-            raise ValueError(f"a block has 3 coordinates X Y Z, got {len(start)}")
-        self.kinds.append(KIND_CODES[kind])
-        self.points.extend(start)
-        self.points.extend(end)
-        self.feeds.append(math.nan if feed_mm_s is None else feed_mm_s)
-        self.exact.append(exact_stop)
-        self.blends.append(math.nan if blend_tolerance_mm is None else blend_tolerance_mm)
-        self.smoothings.append(math.nan if smoothing_tolerance_mm is None else smoothing_tolerance_mm)
-        self.lines.append(source.line)
+            form, index = FORM_LINE, SHAPE_NONE
+        self._row(KIND_CODES[kind], form, index, (*start, *end), math.nan if feed_mm_s is None else feed_mm_s,
+                  exact_stop, blend_tolerance_mm, smoothing_tolerance_mm, source.line)
         if not self.is_own_line(source):
             self.overrides[len(self.kinds) - 1] = source
 
@@ -388,31 +380,31 @@ class RecordsBuilder:
         """A line or rapid (``kind_code``: KIND_CODES) of this file's line ``line`` (its own
         text), from plain numbers: gcode_fast's path, without building a shape or SourceRef.
         ``feed_mm_s``: NaN for None."""
-        self.kinds.append(kind_code)
-        self.forms.append(FORM_LINE)
-        self.shape_index.append(SHAPE_NONE)
-        self.points.extend((sx, sy, sz, ex, ey, ez))
-        self.feeds.append(feed_mm_s)
-        self.exact.append(exact_stop)
-        self.blends.append(math.nan if blend_tolerance_mm is None else blend_tolerance_mm)
-        self.smoothings.append(math.nan if smoothing_tolerance_mm is None else smoothing_tolerance_mm)
-        self.lines.append(line)
+        self._row(kind_code, FORM_LINE, SHAPE_NONE, (sx, sy, sz, ex, ey, ez), feed_mm_s, exact_stop,
+                  blend_tolerance_mm, smoothing_tolerance_mm, line)
 
     def reserve_arc(self, sx: float, sy: float, sz: float, ex: float, ey: float, ez: float, feed_mm_s: float,
                     exact_stop: bool, blend_tolerance_mm: float | None, smoothing_tolerance_mm: float | None,
                     line: int) -> None:
         """An arc of this file's line ``line`` whose row of numbers add_arc_row gives later, in
         the order reserved (gcode_fast computes a run's arcs together)."""
-        self.kinds.append(KIND_CODES[BlockKind.ARC])
-        self.forms.append(FORM_ARC)
-        self.shape_index.append(len(self.arc_axes) + self.arcs_reserved)
-        self.points.extend((sx, sy, sz, ex, ey, ez))
+        self._row(KIND_CODES[BlockKind.ARC], FORM_ARC, len(self.arc_axes) + self.arcs_reserved,
+                  (sx, sy, sz, ex, ey, ez), feed_mm_s, exact_stop, blend_tolerance_mm, smoothing_tolerance_mm, line)
+        self.arcs_reserved += 1
+
+    def _row(self, kind_code: int, form: int, shape_index: int, points: tuple[float, ...], feed_mm_s: float,
+             exact_stop: bool, blend_tolerance_mm: float | None, smoothing_tolerance_mm: float | None,
+             line: int) -> None:
+        """One block's numbers in every column (NaN for a tolerance of None: the machine's)."""
+        self.kinds.append(kind_code)
+        self.forms.append(form)
+        self.shape_index.append(shape_index)
+        self.points.extend(points)
         self.feeds.append(feed_mm_s)
         self.exact.append(exact_stop)
         self.blends.append(math.nan if blend_tolerance_mm is None else blend_tolerance_mm)
         self.smoothings.append(math.nan if smoothing_tolerance_mm is None else smoothing_tolerance_mm)
         self.lines.append(line)
-        self.arcs_reserved += 1
 
     def add_arc_row(self, centre: Sequence[float], sweep_rad: float, rise_mm: float, normal_axis: int) -> None:
         """The numbers of the first arc reserved and not given yet."""
