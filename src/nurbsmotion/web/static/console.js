@@ -204,7 +204,8 @@ function showProgram(name, text, check) {
   // the preview of a program's text, drawn now (the daemon's check may follow)
   const started = performance.now();
   program = { name, text, path: parseGcode(text), check };
-  $("program-name").textContent = name + ": " + program.path.count + " moves";
+  // the page's own count: arcs are drawn as chords, so it is not the daemon's block count
+  $("program-name").textContent = name + ": " + program.path.count + " preview segments";
   view.fitted = false; trail = [];
   render();
   drawPreview();
