@@ -126,3 +126,28 @@ def test_the_drive_is_told_to_watch_the_masters_heartbeat_and_the_cycle_period()
             assert sim[NODE].period_s == pytest.approx(SYNC_S)  # 0x60C2: the ramp steps by the SYNC period
         finally:
             spindle.close()
+
+
+def test_a_late_answer_to_an_earlier_read_does_not_fail_the_next_write(caplog):
+    """The vcan lane's spindle failure: a monitor read timed out, its answer came during the
+    next request (a write of 0x60FF) and canopen took it as that write's answer ("Unexpected
+    response 0x4B"). Here that answer arrives right after the write's request is sent: the
+    client drops it (one log line) and takes the drive's own answer."""
+    late_answer = bytes([0x4B, 0x41, 0x60, 0x00, 0x37, 0x06, 0x00, 0x00])  # 0x6041 = 0x0637, 2 bytes
+    with spindle_bus(CONFIG) as (master, sim):
+        spindle = SpindleDrive(master, CONFIG)
+        spindle.bring_up()
+        try:
+            plain_send = master.send_message
+
+            def send_message(can_id: int, data: bytes, remote: bool = False) -> None:
+                plain_send(can_id, data, remote)
+                if can_id == 0x600 + NODE and bytes(data[:3]) == b"\x23\xff\x60":  # initiate download of 0x60FF
+                    spindle.node.sdo.on_response(0x580 + NODE, late_answer, 0.0)
+
+            master.send_message = send_message  # type: ignore[method-assign]
+            spindle.command_rpm(3000)
+            assert spindle.wait_at_speed(3.0) and spindle.status().fault is None
+        finally:
+            spindle.close()
+    assert any("sdo_answer_dropped node=5" in r.getMessage() for r in caplog.records)

@@ -13,17 +13,27 @@ only when the bus is known past ``request sent + RESPONSE_TIMEOUT`` on the arriv
 handled; then real time on from there), as its heartbeat consumer judges. A receive thread that
 hands nothing over for STUCK_S past the deadline (process clock) ends the wait too: it is hung,
 not late.
+
+Answers are matched to their request on the way (fieldbus.sdo_match): a frame that answers
+another request (a late answer to one that timed out) is dropped with one log line, and the
+wait goes on to the same deadline.
 """
 
 from __future__ import annotations
 
+import logging
 import queue
 import struct
 import time
 from typing import Callable
 
 from canopen.sdo import SdoAbortedError, SdoClient, SdoCommunicationError
-from canopen.sdo.constants import RESPONSE_ABORTED
+from canopen.sdo.constants import REQUEST_ABORTED, RESPONSE_ABORTED
+
+from nurbsmotion.fieldbus import sdo_match
+from nurbsmotion.log import kv
+
+log = logging.getLogger(__name__)
 
 STUCK_S = 5.0  # a receive thread silent this long past the deadline is hung: give up on the process clock
 MIN_WAIT_S = 0.005  # least wait while the arrival timeline stands still (frames wait unread)
@@ -33,12 +43,18 @@ def judge_on_arrival(sdo: SdoClient, judging_time_s: Callable[[], float],
                      clock: Callable[[], float] = time.perf_counter) -> None:
     """Make ``sdo`` (one node's canopen client) time its answers out on ``judging_time_s()``
     (the ``clock`` timeline, perf_counter: Feedback.judging_time_s) from the moment each
-    request is sent, or the last answer was taken (module docstring); an abort is raised as
-    canopen raises it."""
+    request is sent, or the last answer was taken (module docstring); an answer to another
+    request is dropped; an abort is raised as canopen raises it."""
     plain_send = sdo.send_request
     sent_s = [0.0]  # the last request's send time, or the last answer's (a block transfer's next segment)
+    transfer_obj = [sdo_match.NO_OBJECT]  # the object of the transfer under way (its initiate request's)
+    expected: list[sdo_match.ExpectedAnswer | None] = [None]
 
     def send_request(request: bytes) -> None:
+        if request[0] & sdo_match.COMMAND_MASK != REQUEST_ABORTED:  # the client's abort has no answer
+            if sdo_match.is_initiate(request):
+                transfer_obj[0] = sdo_match.multiplexer(request)
+            expected[0] = sdo_match.expected_answer(request, transfer_obj[0])
         sent_s[0] = clock()
         plain_send(request)
 
@@ -47,10 +63,16 @@ def judge_on_arrival(sdo: SdoClient, judging_time_s: Callable[[], float],
         while True:
             try:
                 response = sdo.responses.get(timeout=max(deadline_s - judging_time_s(), MIN_WAIT_S))
-                break
             except queue.Empty:
                 if judging_time_s() >= deadline_s or clock() >= deadline_s + STUCK_S:
                     raise SdoCommunicationError("No SDO response received") from None
+                continue
+            want = expected[0]
+            if want is None or want.accepts(response):
+                break
+            log.warning(kv("sdo_answer_dropped", node=sdo.rx_cobid - 0x600, answer=sdo_match.describe(response),
+                           waiting_for=f"0x{want.obj[0]:04X}:{want.obj[1]:02X}",
+                           reason="answers another request (a late answer to one that timed out?)"))
         sent_s[0] = clock()  # a block upload's segments come without a request each: time the next from here
         if response[0] == RESPONSE_ABORTED:  # as canopen's read_response: the server's abort code
             raise SdoAbortedError(struct.unpack_from("<L", response, 4)[0])

@@ -40,6 +40,7 @@ from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.pdo import interpolation_period
+from nurbsmotion.fieldbus.sdo_arrival import judge_on_arrival
 from nurbsmotion.log import kv
 from nurbsmotion.config.spindle import (MONITOR_POLL_S, PROFILE_ACCELERATION, PROFILE_DECELERATION, SUPPORTED_DRIVE_MODES,
                                         TARGET_VELOCITY, VELOCITY_ACTUAL, SpindleConfig, SpindleMode)
@@ -84,12 +85,16 @@ class SpindleDrive:
     def __init__(self, network: canopen.Network, config: SpindleConfig,
                  on_fault: Callable[[str], None] | None = None, master_heartbeat: tuple[int, int] | None = None,
                  cycle_period_s: float | None = None, sdo_timeout_s: float = SDO_TIMEOUT_S,
-                 cyclic: CyclicVelocity | None = None) -> None:
+                 cyclic: CyclicVelocity | None = None,
+                 judging_time_s: Callable[[], float] = time.perf_counter) -> None:
         """``master_heartbeat``: (master node id, consumer time ms) for 0x1016:01, so the drive
         stops on its own when the daemon dies (as the axes do); None writes nothing.
         ``cycle_period_s``: the SYNC period, written to 0x60C2 and 0x1006 where the drive has
         them (a csv drive steps by it; a drive that takes 0x60C2's default would ramp wrong).
-        ``cyclic``: the master's per-SYNC 0x60FF slot (csv only; module docstring)."""
+        ``cyclic``: the master's per-SYNC 0x60FF slot (csv only; module docstring).
+        ``judging_time_s``: now on the master's arrival timeline (``Master.judging_time_s``):
+        SDO answers time out on it and are matched to their request, as the axes' are
+        (fieldbus.sdo_arrival; the default, the process clock, still matches them)."""
         assert config.od is not None  # loaded with the configuration
         self.config = config
         self.cyclic = cyclic if config.mode is SpindleMode.CSV else None
@@ -98,6 +103,7 @@ class SpindleDrive:
         self.on_fault = on_fault
         self.node = canopen.RemoteNode(config.node_id, config.od)
         self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+        judge_on_arrival(self.node.sdo, judging_time_s)
         network.add_node(self.node)
         self._sdo_lock = threading.Lock()  # one SDO transfer at a time (monitor vs commands)
         self._lock = threading.Lock()

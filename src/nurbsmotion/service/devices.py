@@ -43,7 +43,7 @@ class MachineDevices:
                                         master_heartbeat=self.master_heartbeat(),
                                         cycle_period_s=config.cycle_period_s,
                                         sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
-                                        cyclic=link.cyclic_velocity)
+                                        cyclic=link.cyclic_velocity, judging_time_s=link.judging_time_s)
         if config.io is not None:
             link.receive_from(config.io.node_id, (0x180 + config.io.node_id,))
             node = IoNode(network, config.io, sdo_timeout_s=config.bus.sdo_timeout_ms / 1000.0,
