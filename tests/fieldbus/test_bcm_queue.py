@@ -7,6 +7,7 @@ from __future__ import annotations
 import struct
 
 from nurbsmotion.fieldbus.bcm_queue import REST_LEASE_S, BcmQueueWriter
+from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.supervisor import CycleHistory
 from nurbsmotion.fieldbus.writer import CyclicFrames
 
@@ -43,8 +44,8 @@ class FakeEcho:
         self.pending = 0
 
 
-def writer() -> tuple[BcmQueueWriter, CycleHistory, FakeBcmSocket]:
-    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)])
+def writer(frames: CyclicFrames | None = None) -> tuple[BcmQueueWriter, CycleHistory, FakeBcmSocket]:
+    frames = frames or CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)])
     history = CycleHistory(4096, N_AXES)
     queue = BcmQueueWriter("vcan-test", frames, history, PERIOD_S, 0.5 * PERIOD_S, bus=None)  # type: ignore[arg-type]
     fake = FakeBcmSocket()
@@ -120,8 +121,8 @@ def test_a_cycle_slot_frame_is_packed_with_its_cycle_in_every_ring_slot() -> Non
         assert struct.unpack_from("<i", queue.buf, frame + 8)[0] == 1000 * x
 
 
-def running_queue_at(c: int) -> tuple[BcmQueueWriter, CycleHistory, FakeEcho]:
-    queue, history, _ = writer()
+def running_queue_at(c: int, frames: CyclicFrames | None = None) -> tuple[BcmQueueWriter, CycleHistory, FakeEcho]:
+    queue, history, _ = writer(frames)
     echo = queue.echo
     assert isinstance(echo, FakeEcho)
     hold = [100, 200, 300]
@@ -164,3 +165,48 @@ def test_the_change_guard_never_grows_beyond_its_bound() -> None:
     echo.pending = 40
     queue.commit(10, queue.h, 14, hold_tail(0x0F, [0, 0, 0]))
     assert queue.change_guard == MAX_GUARD_CYCLES
+
+
+def queued_velocity(queue: BcmQueueWriter, ring: bytes, x: int) -> int:
+    """The csv 0x60FF (the one extra, after the axes' RPDOs) that ``ring`` holds for cycle x."""
+    from nurbsmotion.fieldbus.bcm_queue import FRAME_BYTES
+    slot = ((x - queue.op_base) % queue.cycles) * queue.fpc * FRAME_BYTES
+    return struct.unpack_from("<i", ring, slot + (1 + N_AXES) * FRAME_BYTES + 8)[0]
+
+
+def test_a_velocity_ramp_the_wire_overtook_starts_beyond_the_wire_without_a_step() -> None:
+    """The cycle thread asks for a new 0x60FF from cycle 14 (wire 10 + change guard 3 + 1) and
+    is held up until the wire reaches 16 before its TX_SETUP: cycles up to 16 have left with
+    the old value (0). Before the fix the queue then sent cycle 17 as the ramp's 3rd step (a
+    jump of 3 steps after 0, the vcan lane's 'a jump in 0x60FF'); now the ramp starts after
+    wire + guard and the wire sees one step per cycle at most."""
+    step = 100.0
+    velocity = CyclicVelocity(5, 0x205, step)
+    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
+                          [(velocity.cob_id, velocity.dlc, velocity.pack)], [velocity.postpone])
+    queue, history, echo = running_queue_at(10, frames)
+    before = bytes(queue.buf)
+    velocity.request(1000.0)
+    assert velocity.apply(14)  # as the cycle loop: from c + change_guard + 1
+    echo.pending = 6  # the wire reaches 16 between the count and the write
+    queue.commit(10, queue.h, 14, hold_tail(0x0F, [100, 200, 300]))
+    assert queue.c == 16
+    on_wire = [queued_velocity(queue, before, x) for x in range(11, 17)] + \
+        [queued_velocity(queue, bytes(queue.buf), x) for x in range(17, queue.lease_end + 1)]
+    assert max(abs(b - a) for a, b in zip(on_wire, on_wire[1:])) <= step
+    first_free = 16 + queue.guard + 1
+    assert [velocity.value_at(x) for x in (first_free - 1, first_free, first_free + 1)] == [0, 0, 100]
+    assert on_wire[-1] == 1000  # the ramp still reaches the target
+
+
+def test_a_velocity_change_ahead_of_the_wire_is_not_moved() -> None:
+    velocity = CyclicVelocity(5, 0x205, 100.0)
+    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
+                          [(velocity.cob_id, velocity.dlc, velocity.pack)], [velocity.postpone])
+    queue, history, echo = running_queue_at(10, frames)
+    velocity.request(1000.0)
+    velocity.apply(14)
+    echo.pending = 2  # wire 12: cycle 14 is still beyond wire + guard - 1
+    queue.commit(10, queue.h, 14, hold_tail(0x0F, [100, 200, 300]))
+    assert [velocity.value_at(x) for x in (14, 15)] == [0, 100]
+    assert queued_velocity(queue, bytes(queue.buf), 15) == 100

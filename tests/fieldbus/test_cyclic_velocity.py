@@ -47,3 +47,20 @@ def test_a_quick_stop_is_at_once_and_ramp_done_follows_the_wire():
     data = bytearray(4)
     cv.pack(data, 4)
     assert TARGET_VELOCITY_FORMAT.unpack(data) == (250,)
+
+
+def test_a_postponed_ramp_starts_later_from_the_value_the_wire_had_and_the_earlier_cycles_are_unchanged():
+    """The kernel queue found the wire past the new segment's start (fieldbus.bcm_queue): the
+    segment moves to the first free cycle; before it the older ramp's frames stay."""
+    cv = CyclicVelocity(5, 0x205, 100.0)
+    cv.request(1000)
+    cv.apply(3)
+    before = [cv.value_at(x) for x in range(0, 20)]
+    cv.request(-200)
+    cv.apply(6)
+    assert cv.postpone(6, 9)
+    assert [cv.value_at(x) for x in range(0, 10)] == before[:10]  # 0 0 0 0 100 ... 500 600
+    assert [cv.value_at(x) for x in range(10, 13)] == [500, 400, 300]  # one step a cycle from there
+    assert cv.target_counts_s == -200
+    assert not cv.postpone(6, 9)  # it starts at 9 now: nothing before 9 to move
+    assert not cv.postpone(12, 20)  # the newest segment starts before 12: not this change's

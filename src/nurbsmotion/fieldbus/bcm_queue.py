@@ -26,6 +26,9 @@ the last 318 cycles of a job). One ring keeps the order by construction; docs/be
   requests act from: c + change_guard + 1) grows by what was measured, up to
   MAX_GUARD_CYCLES, so the next change lands beyond the wire; the planning horizon keeps the
   guard of 3 (the stop tail beyond it is never adopted as sent before the wire reaches it).
+  The echo is also read right before that TX_SETUP: a change of the extras (the csv
+  spindle's 0x60FF ramp) the wire has reached by then starts after wire + guard instead, and
+  the cycles before keep the frames the queue held: a ramp never starts in the past.
 - **The lease.** Each renewal sets the op's ``count`` to (L - c)·(1 + n) frames, with
   L = c + cycles - 1 - pad (SETTIMER without STARTTIMER keeps the phase). If Python stops
   renewing, the kernel sends into cycle L and stops by itself: SYNC
@@ -80,6 +83,7 @@ SYNC_FILTER = struct.Struct("=II")
 SFF_EXACT_MASK = 0xC00007FF  # CAN_EFF_FLAG | CAN_RTR_FLAG | CAN_SFF_MASK
 TIMESPEC = struct.Struct("@ll")
 GUARD_CYCLES = 3
+WRITE_MARGIN_CYCLES = 1  # a change the wire is this close to when the TX_SETUP goes is moved (extras)
 MAX_GUARD_CYCLES = 16  # the change guard grows after an overtaken change (module docstring) up to this
 BATCH_CYCLES = 8  # the planning horizon moves in steps of this many cycles (fewer tail rewrites)
 WAKE_PERIOD_S = 0.008  # the cycle thread wakes about this often (whole cycles): the queue, not it, keeps time
@@ -273,9 +277,30 @@ class BcmQueueWriter:
             self._pack(x, self.tail_cw[row], self.tail_sp[row])
         self.h = horizon
         self.c_committed = c
+        if changed_queued:
+            self._keep_cycle_changes_ahead_of_wire(c, first_new, end)
         self._renew(c)
         if changed_queued:
             self._check_overtaken(c, first_new)
+
+    def _keep_cycle_changes_ahead_of_wire(self, c: int, first_changed: int, end: int) -> None:
+        """Right before the TX_SETUP: the SYNCs sent since the count. When the wire is within
+        WRITE_MARGIN_CYCLES of the first changed cycle (or past it), the extras' change (a new
+        0x60FF ramp, fieldbus.cyclic_velocity) starts after wire + guard instead and the cycles
+        before are packed again as the queue held them: no frame of the new ramp goes out
+        before one of the old (else a step in 0x60FF of as many ramp steps as cycles
+        overtaken). The axes' commands cannot move: the check after the write counts them."""
+        assert self.echo is not None
+        self.echo.drain(self._on_sync)
+        if self.c + WRITE_MARGIN_CYCLES < first_changed:
+            return
+        first_free = self.c + self.guard + 1
+        if not self.frames.postpone_extras(first_changed, first_free):
+            return
+        for x in range(max(first_changed, c + 1), end + 1):
+            self._pack_extras(x)
+        log.warning(kv("kernel_queue_change_postponed", cycle=c, wire=self.c, first_changed=first_changed,
+                       postponed_to=first_free))
 
     def _check_overtaken(self, c: int, first_changed: int) -> None:
         """After changing queued cycles from ``first_changed`` on (>= c + change_guard + 1): the
@@ -301,8 +326,14 @@ class BcmQueueWriter:
             pack(data, cw[i], sp[i])
             offset = base + j * FRAME_BYTES
             buf[offset:offset + dlc] = data
-        first_extra = len(self.frames.rpdos)
-        for j, (_, dlc, pack_cycle) in enumerate(self.frames.extras, first_extra):
+        if self.frames.extras:
+            self._pack_extras(x)
+
+    def _pack_extras(self, x: int) -> None:
+        """The frames of cycle x that are a function of x alone (CyclicFrames.extras) into its slot."""
+        base = ((x - self.op_base) % self.cycles) * self.fpc * FRAME_BYTES + FRAME_BYTES + 8
+        buf = self.buf
+        for j, (_, dlc, pack_cycle) in enumerate(self.frames.extras, len(self.frames.rpdos)):
             data = self.scratch[j]
             pack_cycle(data, x)
             offset = base + j * FRAME_BYTES

@@ -12,7 +12,9 @@ cycle from the value the previous one had there and moving towards its target by
 packs a cycle again (the kernel queue repacks the cycles it recomputes and its tail) gets the
 same frame, and a new target never jumps: the master applies it (:meth:`apply`) in the cycle
 thread at the first cycle it (re)computes from then on, and recomputes every queued cycle
-from there (fieldbus.cycle_loop: a request rewinds). A quick stop is a segment with an unlimited
+from there (fieldbus.cycle_loop: a request rewinds). When the wire has reached that cycle by the
+time the kernel queue writes it (the cycle thread held up), the queue moves the segment's start
+beyond the wire (:meth:`postpone`): the ramp starts late, never with a step. A quick stop is a segment with an unlimited
 step (the drive's own quick-stop ramp 0x6085 decelerates).
 """
 
@@ -89,6 +91,21 @@ class CyclicVelocity:
             segments = [s for s in self._segments if s.start_cycle < first_cycle]
             segments.append(RampSegment(first_cycle, start, target, math.inf if at_once else self.step_counts_s))
             self._segments = segments[-KEEP_SEGMENTS:]
+            return True
+
+    def postpone(self, first_cycle: int, first_free: int) -> bool:
+        """Cycle thread: the kernel queue found the wire (plus its guard) at or past the
+        newest segment's start (it starts in [``first_cycle``, ``first_free``)): that segment
+        starts at ``first_free`` instead, from the value the older ones give there, so the
+        cycles before keep the frames already queued (or sent). True when it moved."""
+        with self._lock:
+            newest = self._segments[-1]
+            older = [s for s in self._segments if s.start_cycle < first_cycle]
+            if not first_cycle <= newest.start_cycle < first_free or not older:
+                return False
+            self._segments = older
+            start = self._value(first_free)
+            self._segments = [*older, RampSegment(first_free, start, newest.target_counts_s, newest.step_counts_s)]
             return True
 
     def _value(self, cycle: int) -> float:
