@@ -18,6 +18,7 @@ import pytest
 import nurbsmotion
 from nurbsmotion.cli import main
 from nurbsmotion.cli.sim import parse_faults, serve
+from nurbsmotion.runtime import SIM_DRIVES_PRIORITY
 from nurbsmotion.config import load_config
 from nurbsmotion.sim import SimNetwork, read_csv
 
@@ -88,6 +89,8 @@ def test_serve_runs_the_configured_drives_with_faults_and_writes_recordings(tmp_
         (["--max-velocity-counts-s", "0"], "--max-velocity-counts-s: must be > 0"),
         (["--missing-setpoint", "guess"], "--missing-setpoint: must be one of hold, extrapolate, got 'guess'"),
         (["--sync-loss-periods", "0.5"], "--sync-loss-periods: must be >= 1, got 0.5"),
+        (["--rt-priority", "0"], "--rt-priority: must be 1..99 (SCHED_FIFO), got 0"),
+        (["--rt-priority", "100"], "--rt-priority: must be 1..99 (SCHED_FIFO), got 100"),
     ],
 )
 def test_bad_options_are_one_line_and_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str], extra: list[str], message: str) -> None:
@@ -177,3 +180,24 @@ def test_a_spindle_spec_adds_a_velocity_drive_at_a_free_node(tmp_path: Path) -> 
     assert net.spindle == spindle and net[5].name == "spindle/node5"
     with net:
         assert {3, 9} <= net[5].axis.params.modes
+
+
+def test_rt_priority_puts_the_drives_threads_at_it_or_says_why_not(tmp_path: Path) -> None:
+    """--rt-priority: the drives' receive and ticker threads SCHED_FIFO (the vcan lane's
+    drives' process, which otherwise answers SDO late behind the guest's other work)."""
+    machine = load_config(write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}"))
+    stop = threading.Event()
+    ready: list[SimNetwork] = []
+    server = threading.Thread(target=serve, args=(machine, [], stop),
+                              kwargs={"on_ready": ready.append, "rt_priority": SIM_DRIVES_PRIORITY})
+    server.start()
+    try:
+        wait_for(lambda: ready, what="drives up")
+        net = ready[0]
+        assert net.rt_priority == SIM_DRIVES_PRIORITY
+        wait_for(lambda: set(net.thread_policy) == {"receive", "ticker"}, what="both threads' policy")
+        assert all(policy == "SCHED_FIFO" or policy.startswith("normal: ") for policy in net.thread_policy.values())
+    finally:
+        stop.set()
+        server.join(timeout=5)
+    assert not server.is_alive()

@@ -50,6 +50,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drives run their own cycle locked onto SYNC: a late SYNC leaves cycles without one")
     parser.add_argument("--sync-loss-periods", type=float, default=None, metavar="N",
                         help="fault (EMCY 0x8700) when no SYNC came for N cycle periods while enabled (default: off)")
+    parser.add_argument("--rt-priority", type=int, default=None, metavar="N",
+                        help="run the drives' receive and ticker threads SCHED_FIFO N (1-99; needs root or "
+                             "CAP_SYS_NICE, else they run normal and the log says why), as a drive has its own CPU "
+                             "(default: normal priority)")
 
 
 def parse_faults(specs: list[str], machine: MachineConfig) -> list[FaultInjection]:
@@ -140,7 +144,10 @@ def sync_settings(missing_setpoint: str, sync_loss_periods: float | None, own_cy
                         loss_periods=sync_loss_periods)
 
 
-def check_options(lag_cycles: int, max_velocity_counts_s: float | None, record_dir: str | None) -> None:
+def check_options(lag_cycles: int, max_velocity_counts_s: float | None, record_dir: str | None,
+                  rt_priority: int | None = None) -> None:
+    if rt_priority is not None and not 1 <= rt_priority <= 99:
+        raise InputError("--rt-priority", f"must be 1..99 (SCHED_FIFO), got {rt_priority}")
     if lag_cycles < 0:
         raise InputError("--lag-cycles", f"must be >= 0, got {lag_cycles}")
     if max_velocity_counts_s is not None and not max_velocity_counts_s > 0:
@@ -164,14 +171,17 @@ def serve(
     sync: SyncSettings | None = None,
     home_sensors: dict[int, HomeSensors] | None = None,
     spindle: SpindleSim | None = None,
+    rt_priority: int | None = None,
 ) -> SimNetwork:
     """Run the drives until ``stop`` is set; then stop them and write the recordings
-    (set-points and SYNC timelines are recorded only when ``record_dir`` is given)."""
+    (set-points and SYNC timelines are recorded only when ``record_dir`` is given).
+    ``rt_priority``: SCHED_FIFO of the drives' threads (SimNetwork.rt_priority; None: normal)."""
     try:
         net = SimNetwork.for_machine(machine, lag_cycles=lag_cycles, max_velocity_counts_s=max_velocity_counts_s,
                                      record=record_dir is not None, sync=sync, home_sensors=home_sensors, spindle=spindle)
     except DriveSetupError as err:
         raise InputError(machine.where(f"axes[{err.axis_index}].eds"), err.message) from None
+    net.rt_priority = rt_priority
     try:
         net.start()
     except (OSError, can.CanError) as err:
@@ -202,14 +212,15 @@ def run(args: argparse.Namespace) -> int:
     faults = parse_faults(args.fault, machine)
     home_sensors = {**machine_home_sensors(machine), **parse_home_sensors(args.home_sensors, machine)}
     spindle = parse_spindle(args.spindle, machine)
-    check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir)
+    check_options(args.lag_cycles, args.max_velocity_counts_s, args.record_dir, args.rt_priority)
     sync = sync_settings(args.missing_setpoint, args.sync_loss_periods, args.own_cycle)
     setup_logging(max(1, getattr(args, "verbose", 0)))  # a service: its INFO lines (sim.ready, faults) on stderr
     stop = threading.Event()
     previous = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         serve(machine, faults, stop, lag_cycles=args.lag_cycles, max_velocity_counts_s=args.max_velocity_counts_s,
-              record_dir=args.record_dir, sync=sync, home_sensors=home_sensors, spindle=spindle)
+              record_dir=args.record_dir, sync=sync, home_sensors=home_sensors, spindle=spindle,
+              rt_priority=args.rt_priority)
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
