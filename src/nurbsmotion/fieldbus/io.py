@@ -28,6 +28,7 @@ from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus.bringup import sdo_failure
 from nurbsmotion.fieldbus.feedback import arrival_perf_s
 from nurbsmotion.fieldbus.node_heartbeat import HeartbeatWatch
+from nurbsmotion.fieldbus.sdo_arrival import judge_on_arrival
 from nurbsmotion.config.io import IoConfig, IoSignal
 from nurbsmotion.log import kv
 
@@ -103,7 +104,8 @@ class IoNode:
                  on_lost: Callable[[str], None] | None = None,
                  judging_time_s: Callable[[], float] = time.perf_counter) -> None:
         """``judging_time_s``: now on the frames' arrival timeline (the master's
-        ``judging_time_s``; perf_counter based) for the heartbeat watch."""
+        ``judging_time_s``; perf_counter based) for the heartbeat watch and the SDO time-out;
+        SDO answers are matched to their request (fieldbus.sdo_arrival)."""
         self.network = network
         self.judging_time_s = judging_time_s
         self.io = io
@@ -111,6 +113,7 @@ class IoNode:
         self.on_lost = on_lost  # the heartbeat watch found the node lost: one line naming it
         self.node = canopen.RemoteNode(io.node_id, cia401_dictionary(io))
         self.node.sdo.RESPONSE_TIMEOUT = sdo_timeout_s
+        judge_on_arrival(self.node.sdo, judging_time_s)  # as the axes' and the spindle's (fieldbus.sdo_arrival)
         network.add_node(self.node)
         self.heartbeat: HeartbeatWatch | None = None  # the master's consumer of its heartbeat (bring_up)
         self.node.nmt.add_heartbeat_callback(self._heard)
