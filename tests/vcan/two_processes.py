@@ -22,7 +22,6 @@ import nurbsmotion
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.fieldbus import CycleStats, JobResult, Master
-from nurbsmotion.runtime import SIM_DRIVES_PRIORITY
 from nurbsmotion.sim import read_csv
 from tests.vcan.conftest import CYCLE_PERIOD_S
 
@@ -75,21 +74,14 @@ def strictly_increasing_job(start_counts: list[int], cycles: int) -> np.ndarray:
 
 
 class SimProcess:
-    """`python -m nurbsmotion sim` as a child process, started and stopped by the test.
-
-    Its drives' threads run SCHED_FIFO SIM_DRIVES_PRIORITY (below the master's cycle and
-    receive threads), as the daemon runs simulated drives in its own process: a real drive has
-    its own CPU. At normal priority, in the guest's one CPU shared with the daemon's start-up,
-    its planner worker and the test, the drives' process answered SDO up to 0.9 s late on the
-    wire here (3 s and more in earlier sessions: the spindle's reads timed out), at SCHED_FIFO
-    within 5 ms (docs/reliability.md, "Flakes")."""
+    """`python -m nurbsmotion sim` as a child process, started and stopped by the test."""
 
     def __init__(self, config_path: Path, record_dir: Path, extra_args: tuple[str, ...] = ()) -> None:
         env = dict(os.environ, PYTHONPATH=str(Path(nurbsmotion.__file__).parents[1]))
         self.record_dir = record_dir
         self.process = subprocess.Popen(
             [sys.executable, "-m", "nurbsmotion", "sim", "--config", str(config_path), "--record-dir", str(record_dir),
-             "--rt-priority", str(SIM_DRIVES_PRIORITY), *extra_args],
+             *extra_args],
             stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True, env=env)
         self.log: list[str] = []
         self.ready = threading.Event()
