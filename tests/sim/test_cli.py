@@ -182,9 +182,17 @@ def test_a_spindle_spec_adds_a_velocity_drive_at_a_free_node(tmp_path: Path) -> 
         assert {3, 9} <= net[5].axis.params.modes
 
 
-def test_rt_priority_puts_the_drives_threads_at_it_or_says_why_not(tmp_path: Path) -> None:
-    """--rt-priority: the drives' receive and ticker threads SCHED_FIFO (the vcan lane's
-    drives' process, which otherwise answers SDO late behind the guest's other work)."""
+def test_rt_priority_asks_for_it_on_the_drives_threads(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """--rt-priority: the drives' receive and ticker threads ask for SCHED_FIFO N (recorded
+    here instead of granted: a real FIFO thread pinned to a CPU shared with other work makes
+    a test of timing, not of the option)."""
+    asked: list[int | None] = []
+
+    def fake_realtime(priority: int | None, thread_id: int = 0) -> str:
+        asked.append(priority)
+        return "SCHED_FIFO"
+
+    monkeypatch.setattr("nurbsmotion.sim.network.set_thread_realtime", fake_realtime)
     machine = load_config(write_config(tmp_path, f"sim-cli-{uuid.uuid4().hex}"))
     stop = threading.Event()
     ready: list[SimNetwork] = []
@@ -194,9 +202,8 @@ def test_rt_priority_puts_the_drives_threads_at_it_or_says_why_not(tmp_path: Pat
     try:
         wait_for(lambda: ready, what="drives up")
         net = ready[0]
-        assert net.rt_priority == SIM_DRIVES_PRIORITY
         wait_for(lambda: set(net.thread_policy) == {"receive", "ticker"}, what="both threads' policy")
-        assert all(policy == "SCHED_FIFO" or policy.startswith("normal: ") for policy in net.thread_policy.values())
+        assert net.rt_priority == SIM_DRIVES_PRIORITY and asked == [SIM_DRIVES_PRIORITY] * 2
     finally:
         stop.set()
         server.join(timeout=5)
