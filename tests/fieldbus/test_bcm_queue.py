@@ -174,6 +174,15 @@ def queued_velocity(queue: BcmQueueWriter, ring: bytes, x: int) -> int:
     return struct.unpack_from("<i", ring, slot + (1 + N_AXES) * FRAME_BYTES + 8)[0]
 
 
+def velocity_queue_at(c: int, step_counts_s: float) -> tuple[CyclicVelocity, BcmQueueWriter, FakeEcho]:
+    """A running queue at wire cycle c whose one extra is a csv 0x60FF (CyclicVelocity)."""
+    velocity = CyclicVelocity(5, 0x205, step_counts_s)
+    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
+                          [(velocity.cob_id, velocity.dlc, velocity.pack)], [velocity])
+    queue, _, echo = running_queue_at(c, frames)
+    return velocity, queue, echo
+
+
 def test_a_velocity_ramp_the_wire_overtook_starts_beyond_the_wire_without_a_step() -> None:
     """The cycle thread asks for a new 0x60FF from cycle 14 (wire 10 + change guard 3 + 1) and
     is held up until the wire reaches 16 before its TX_SETUP: cycles up to 16 have left with
@@ -181,10 +190,7 @@ def test_a_velocity_ramp_the_wire_overtook_starts_beyond_the_wire_without_a_step
     jump of 3 steps after 0, the vcan lane's 'a jump in 0x60FF'); now the ramp starts after
     wire + guard and the wire sees one step per cycle at most."""
     step = 100.0
-    velocity = CyclicVelocity(5, 0x205, step)
-    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
-                          [(velocity.cob_id, velocity.dlc, velocity.pack)], [velocity.postpone])
-    queue, history, echo = running_queue_at(10, frames)
+    velocity, queue, echo = velocity_queue_at(10, step)
     before = bytes(queue.buf)
     velocity.request(1000.0)
     assert velocity.apply(14)  # as the cycle loop: from c + change_guard + 1
@@ -200,13 +206,27 @@ def test_a_velocity_ramp_the_wire_overtook_starts_beyond_the_wire_without_a_step
 
 
 def test_a_velocity_change_ahead_of_the_wire_is_not_moved() -> None:
-    velocity = CyclicVelocity(5, 0x205, 100.0)
-    frames = CyclicFrames([(0x200 + n, 6, n, pack) for n in range(N_AXES)],
-                          [(velocity.cob_id, velocity.dlc, velocity.pack)], [velocity.postpone])
-    queue, history, echo = running_queue_at(10, frames)
+    velocity, queue, echo = velocity_queue_at(10, 100.0)
     velocity.request(1000.0)
     velocity.apply(14)
     echo.pending = 2  # wire 12: cycle 14 is still beyond wire + guard - 1
     queue.commit(10, queue.h, 14, hold_tail(0x0F, [100, 200, 300]))
     assert [velocity.value_at(x) for x in (14, 15)] == [0, 100]
     assert queued_velocity(queue, bytes(queue.buf), 15) == 100
+
+
+def test_a_velocity_ramp_queued_by_an_earlier_write_is_not_moved_by_a_later_change() -> None:
+    """A ramp from 15 went out in the TX_SETUP of wake-up 10; at wake-up 11 a stop of the axes
+    rewinds to 15 and the cycle thread is held up until the wire reaches 16: the wire may have
+    sent the ramp's first step already (16: 100), so the ramp stays where it is (moving it to
+    20 would send 0 after 100) and the check after the write counts the axes' cycles."""
+    velocity, queue, echo = velocity_queue_at(10, 100.0)
+    velocity.request(1000.0)
+    velocity.apply(15)
+    queue.commit(10, queue.h, 15, hold_tail(0x0F, [100, 200, 300]))  # the wire still at 10: queued as is
+    echo.pending = 1
+    echo.drain(queue._on_sync)  # wake-up 11
+    echo.pending = 5  # the wire reaches 16 before the next write
+    queue.commit(11, queue.h, 15, hold_tail(0x0F, [0, 0, 0]))
+    assert [queued_velocity(queue, bytes(queue.buf), x) for x in (15, 16, 17, 18)] == [0, 100, 200, 300]
+    assert queue.overtaken == 2  # 15 and 16 (the axes' rows) may have left old

@@ -64,3 +64,14 @@ def test_a_postponed_ramp_starts_later_from_the_value_the_wire_had_and_the_earli
     assert cv.target_counts_s == -200
     assert not cv.postpone(6, 9)  # it starts at 9 now: nothing before 9 to move
     assert not cv.postpone(12, 20)  # the newest segment starts before 12: not this change's
+
+
+def test_a_ramp_already_in_the_kernel_queue_is_never_postponed():
+    """Once a TX_SETUP carried the segment (queued), the wire may have sent its first frames:
+    moving it then would send an old 0x60FF after a new one."""
+    cv = CyclicVelocity(5, 0x205, 100.0)
+    cv.request(1000)
+    cv.apply(6)
+    cv.queued()
+    assert not cv.postpone(4, 12)
+    assert [cv.value_at(x) for x in (6, 7)] == [0, 100]

@@ -280,6 +280,7 @@ class BcmQueueWriter:
         if changed_queued:
             self._keep_cycle_changes_ahead_of_wire(c, first_new, end)
         self._renew(c)
+        self.frames.extras_queued()
         if changed_queued:
             self._check_overtaken(c, first_new)
 

@@ -72,6 +72,7 @@ class CyclicVelocity:
         self._lock = threading.Lock()
         self._segments = [RampSegment(0, 0.0, 0.0, math.inf)]
         self._pending: tuple[float, bool] | None = None
+        self._unqueued = False  # the newest segment is not in a kernel queue yet (postpone may move it)
 
     def request(self, target_counts_s: float, at_once: bool = False) -> None:
         """A new target (any thread); ``at_once``: no ramp (quick stop, disable)."""
@@ -91,22 +92,30 @@ class CyclicVelocity:
             segments = [s for s in self._segments if s.start_cycle < first_cycle]
             segments.append(RampSegment(first_cycle, start, target, math.inf if at_once else self.step_counts_s))
             self._segments = segments[-KEEP_SEGMENTS:]
+            self._unqueued = True
             return True
 
     def postpone(self, first_cycle: int, first_free: int) -> bool:
         """Cycle thread: the kernel queue found the wire (plus its guard) at or past the
-        newest segment's start (it starts in [``first_cycle``, ``first_free``)): that segment
-        starts at ``first_free`` instead, from the value the older ones give there, so the
-        cycles before keep the frames already queued (or sent). True when it moved."""
+        newest segment's start (it starts in [``first_cycle``, ``first_free``)) before that
+        segment was ever queued: it starts at ``first_free`` instead, from the value the older
+        ones give there, so the cycles before keep the frames already queued (or sent). A
+        segment already queued is never moved: the wire may have sent its first frames. True
+        when it moved."""
         with self._lock:
             newest = self._segments[-1]
             older = [s for s in self._segments if s.start_cycle < first_cycle]
-            if not first_cycle <= newest.start_cycle < first_free or not older:
+            if not self._unqueued or not first_cycle <= newest.start_cycle < first_free or not older:
                 return False
             self._segments = older
             start = self._value(first_free)
             self._segments = [*older, RampSegment(first_free, start, newest.target_counts_s, newest.step_counts_s)]
             return True
+
+    def queued(self) -> None:
+        """Cycle thread: the kernel queue holds every segment now (its TX_SETUP went out)."""
+        with self._lock:
+            self._unqueued = False
 
     def _value(self, cycle: int) -> float:
         segment = self._segments[0]

@@ -54,7 +54,7 @@ from nurbsmotion.fieldbus.playback import Playback
 from nurbsmotion.fieldbus.reports import AxisStatus, CycleStats, FaultReport, MasterStatus
 from nurbsmotion.fieldbus.row_source import RowFeed
 from nurbsmotion.fieldbus.supervisor import CycleHistory, Supervisor
-from nurbsmotion.fieldbus.writer import CycleSlot, CycleWriter, CyclicFrames, LoopWriter, Postpone
+from nurbsmotion.fieldbus.writer import CycleSlot, CycleWriter, CyclicFrames, LoopWriter, Retimed
 from nurbsmotion.log import kv
 from nurbsmotion.runtime import GC_MODES, GcQuiet, timer_threads_below
 
@@ -129,15 +129,15 @@ class Master:
                                self._late_threshold_s, self.cyclic_velocity,
                                lambda: send_quick_stop(self._conn.bus, self._frames.rpdos, self._ctl.sp))
         extras: list[CycleSlot] = []
-        postpones: list[Postpone] = []
+        retimed: list[Retimed] = []
         if self.cyclic_velocity is not None:
             self.cyclic_velocity.notify = lambda: self._loop.request(Request(Req.CYCLIC_VELOCITY))
             self.cyclic_velocity.wire_cycle = lambda: self._loop.cycle
             extras.append((self.cyclic_velocity.cob_id, self.cyclic_velocity.dlc, self.cyclic_velocity.pack))
-            postpones.append(self.cyclic_velocity.postpone)
+            retimed.append(self.cyclic_velocity)
         self._frames = CyclicFrames([(frame.cob_id, frame.dlc, i, rpdo_packer(frame))
                                      for i, plan in enumerate(self.plans) for frame in plan.layout.rpdos],
-                                    extras, postpones)
+                                    extras, retimed)
         self._heartbeat: MasterHeartbeat | None = None
         self._writer: CycleWriter | None = None
 

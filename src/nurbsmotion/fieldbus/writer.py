@@ -29,23 +29,31 @@ from nurbsmotion.fieldbus.supervisor import CycleHistory
 
 RpdoSlot = tuple[int, int, int, Callable[[bytearray, int, int], None]]  # COB-ID, DLC, axis, pack(data, cw, sp)
 CycleSlot = tuple[int, int, Callable[[bytearray, int], None]]  # COB-ID, DLC, pack(data, cycle)
-# (first changed cycle, first cycle it may change): an extra's change moved there; True when one moved
-Postpone = Callable[[int, int], bool]
+
+
+class Retimed(Protocol):
+    """An extra whose newest change can start later (fieldbus.cyclic_velocity.CyclicVelocity)."""
+
+    def postpone(self, first_changed: int, first_free: int) -> bool:
+        """A change from ``first_changed`` on, not queued yet, starts at ``first_free``; True when one moved."""
+
+    def queued(self) -> None:
+        """The kernel queue holds every change now."""
 
 
 class CyclicFrames:
     """SYNC (COB-ID 0x80, no data), then the RPDOs of every axis as bring-up mapped them
     (bringup_plan.rpdo_packer: controlword + set-point in one frame, or split in two), then
     the ``extras``: RPDOs of other nodes whose data is a function of the cycle (the csv
-    spindle's 0x60FF, fieldbus.cyclic_velocity), and for them ``postpones``: what moves a
-    change of theirs to a later cycle (the kernel queue, when the wire overtook it)."""
+    spindle's 0x60FF, fieldbus.cyclic_velocity), and ``retimed``: the owners of those whose
+    change the kernel queue may move to a later cycle (when the wire overtook it)."""
 
     def __init__(self, rpdos: list[RpdoSlot], extras: list[CycleSlot] | None = None,
-                 postpones: list[Postpone] | None = None) -> None:
+                 retimed: list[Retimed] | None = None) -> None:
         self.sync_id = c.COB_SYNC
         self.rpdos = rpdos
         self.extras = extras or []
-        self.postpones = postpones or []
+        self.retimed = retimed or []
         self.rpdo_ids = [cob_id for cob_id, _, _, _ in rpdos] + [cob_id for cob_id, _, _ in self.extras]
         self.per_cycle = 1 + len(rpdos) + len(self.extras)
 
@@ -54,10 +62,16 @@ class CyclicFrames:
         return [(cob_id, dlc) for cob_id, dlc, _, _ in self.rpdos] + [(cob_id, dlc) for cob_id, dlc, _ in self.extras]
 
     def postpone_extras(self, first_changed: int, first_free: int) -> bool:
-        """Every extra's change from ``first_changed`` on starts at ``first_free`` instead;
-        True when one moved (its frames before ``first_free`` are the ones queued before)."""
-        moved = [postpone(first_changed, first_free) for postpone in self.postpones]
+        """Every extra's change from ``first_changed`` on not queued yet starts at
+        ``first_free`` instead; True when one moved (its frames before ``first_free`` are the
+        ones queued before)."""
+        moved = [extra.postpone(first_changed, first_free) for extra in self.retimed]
         return any(moved)
+
+    def extras_queued(self) -> None:
+        """After a TX_SETUP: every extra's changes are in the kernel queue."""
+        for extra in self.retimed:
+            extra.queued()
 
     def messages(self) -> tuple[can.Message, list[can.Message]]:
         """One reusable SYNC message and one message per RPDO (the axes', then the extras)."""
