@@ -377,6 +377,19 @@ def sampled_curve_errors(errors: NDArray[np.float64], program: Program, parts: P
         raise_at(errors, parts.row[sel], sampled_distances(curve, lo, hi, a[sel], b[sel]))
 
 
+def point_piece_errors(errors: NDArray[np.float64], program: Program, parts: Pieces | SpanPieces,
+                       a: NDArray[np.float64], b: NDArray[np.float64]) -> None:
+    """Raise ``errors`` at the rows of pieces of zero parameter length (lo == hi: a step that
+    ends or starts on a block's end, such as a rest across a junction): the distance of that
+    one point from the chord, bit for bit what the sampled search finds there (all its
+    samples are that point)."""
+    for blk in np.unique(parts.block):
+        sel = parts.block == blk
+        curve = program.blocks[int(blk)].curve
+        points = curve.points(np.clip(parts.lo[sel], curve.u_min, curve.u_max))
+        raise_at(errors, parts.row[sel], segment_distances(points[:, None, :], a[sel], b[sel])[:, 0])
+
+
 def chord_errors(block: NDArray[np.integer], u: NDArray[np.float64], position_mm: NDArray[np.float64],
                  curves: ProgramCurves, sampled: bool = False) -> NDArray[np.float64]:
     """True chord error of every step, assigned to the step's end row (row 0: 0). ``sampled``:
@@ -405,5 +418,9 @@ def chord_errors(block: NDArray[np.integer], u: NDArray[np.float64], position_mm
     raise_at(errors, parts.row[exact], d[exact])
     if not exact.all():
         rest = parts.select(~exact)
-        sampled_curve_errors(errors, program, rest, p[rest.row - 1], p[rest.row])
+        point = rest.lo == rest.hi
+        for measured, pieces_of in ((point_piece_errors, point), (sampled_curve_errors, ~point)):
+            if pieces_of.any():
+                some = rest.select(pieces_of)
+                measured(errors, program, some, p[some.row - 1], p[some.row])
     return errors
