@@ -144,6 +144,8 @@ PHASES_CHILD = """
 import json, sys, time
 started = time.process_time()
 import nurbsmotion.cli.plan
+from nurbsmotion.runtime import keep_freed_memory
+keep_freed_memory()  # as the command does (cli._run_command): numpy temporaries without page faults
 import nurbsmotion.planning.measure as measure
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import PlanStream
@@ -180,13 +182,23 @@ print(json.dumps({"imports_s": imported - started, "read_s": read - imported, "p
 """
 
 
-def phases(program: Path, jerk: str | None) -> dict:
-    """CPU seconds of each phase of a plan in one fresh process (this checkout)."""
+def phases(program: Path, jerk: str | None, runs: int = 3) -> dict:
+    """CPU seconds of each phase of a plan in a fresh process (this checkout): the median of
+    ``runs`` processes, phase by phase (CPU times vary by a third on a loaded machine)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(ROOT / "src")
-    done = subprocess.run([sys.executable, "-c", PHASES_CHILD, str(program), jerk or "none"], capture_output=True,
-                          text=True, env=env, check=True)
-    return json.loads(done.stdout)
+    results = [json.loads(subprocess.run([sys.executable, "-c", PHASES_CHILD, str(program), jerk or "none"],
+                                         capture_output=True, text=True, env=env, check=True).stdout)
+               for _ in range(runs)]
+    return {key: statistics.median(r[key] for r in results) for key in results[0]}
+
+
+def has_no_jerk_option(src: str) -> bool:
+    """Whether the plan command of the checkout at ``src`` has --no-jerk-limit (its default then
+    is the daemon's jerk limit)."""
+    env = {**os.environ, "PYTHONPATH": src}
+    done = subprocess.run([sys.executable, "-m", "nurbsmotion", "plan", "--help"], capture_output=True, text=True, env=env)
+    return "--no-jerk-limit" in done.stdout
 
 
 def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
@@ -196,10 +208,11 @@ def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
             "| set-points/s (CPU) | planner's own set-points/s | target |", "|---|---|---|---|---|---|---|---|---|"]
     split = ["| jerk limit | imports | reading | planning | measuring (of it chord error) | total CPU s |",
              "|---|---|---|---|---|---|"]
+    no_jerk_before = ["--no-jerk-limit"] if previous_src and has_no_jerk_option(previous_src) else []
     for jerk in (JERK, None):
         versions = [("this", ["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"], None)]
-        if previous_src:  # the previous plan had no jerk limit by default and no --no-jerk-limit
-            versions.append(("before", ["--max-jerk-mm-s3", JERK] if jerk else [], previous_src))
+        if previous_src:  # a plan older than --no-jerk-limit had no jerk limit by default
+            versions.append(("before", ["--max-jerk-mm-s3", JERK] if jerk else no_jerk_before, previous_src))
         for name, options, src in versions:
             r = throughput_runs(program, ["--period-ms", "1", *options], src, runs)
             if r["exit"] != 0:
@@ -214,7 +227,8 @@ def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
         total = p["imports_s"] + p["read_s"] + p["plan_s"] + p["measure_s"]
         split.append(f"| {jerk or 'none'} | {p['imports_s']:.2f} | {p['read_s']:.2f} | {p['plan_s']:.2f} | "
                      f"{p['measure_s']:.2f} ({p['chord_s']:.2f}) | {total:.2f} |")
-    return "\n".join(rows) + "\n\nWhere the CPU time goes (this version, one process, seconds):\n\n" + "\n".join(split)
+    return "\n".join(rows) + ("\n\nWhere the CPU time goes (this version, seconds, the median of 3 processes "
+                               "phase by phase):\n\n") + "\n".join(split)
 
 
 def main() -> None:
@@ -258,8 +272,7 @@ def main() -> None:
                       "`nurbsmotion plan` of Wang's Table 1 curve x 100 (bench_plan_command.wang_copies) at T = 1 ms "
                       "with `--json`, the whole command in a fresh process: start-up, reading, planning, measuring, "
                       f"the report. The run of median wall time of {args.runs} (after a warm-up run), CPU the median "
-                      "of the child's user + system time. \"before\": the previous version (--previous-src), whose "
-                      "`plan` had no jerk limit by default.\n\n" + throughput
+                      "of the child's user + system time. \"before\": the previous version (--previous-src).\n\n" + throughput
                       + f"\n\nThe machine was shared with other agents' work ({load_text}): wall times are longer "
                       "than on a quiet machine, CPU times less so.\n",
                       "python benchmarks/bench_plan_command.py --skip-braid --copies --previous-src /tmp/base/src")
