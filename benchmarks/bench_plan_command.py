@@ -131,19 +131,32 @@ def braid(work: Path, previous_src: str | None = None) -> str:
 THROUGHPUT_TARGET = 1_000_000  # set-points per second of the whole command
 
 
-def throughput_runs(program: Path, options: list[str], src: str | None, runs: int) -> dict:
-    """The run of median wall time among ``runs`` (after one warm-up: bytecode caches)."""
-    run_plan(program, *options, src=src)
-    results = sorted((run_plan(program, *options, src=src) for _ in range(runs)), key=lambda r: r["wall_s"])
-    best = dict(results[len(results) // 2])
-    best["cpu_median_s"] = statistics.median(r["cpu_s"] for r in results)
-    return best
+def throughput_runs(program: Path, versions: list[tuple[str, list[str], str | None]], runs: int) -> dict[str, dict]:
+    """Per version (name, options, src): the run of median wall time among ``runs``, with the
+    median and least CPU of them. The versions' runs alternate (after one warm-up each:
+    bytecode caches), so a change of the machine's load falls on all of them alike."""
+    for _, options, src in versions:
+        run_plan(program, *options, src=src)
+    results: dict[str, list[dict]] = {name: [] for name, _, _ in versions}
+    for _ in range(runs):
+        for name, options, src in versions:
+            results[name].append(run_plan(program, *options, src=src))
+    chosen = {}
+    for name, rs in results.items():
+        best = dict(sorted(rs, key=lambda r: r["wall_s"])[len(rs) // 2])
+        best["cpu_median_s"] = statistics.median(r["cpu_s"] for r in rs)
+        best["cpu_least_s"] = min(r["cpu_s"] for r in rs)
+        best["same_figures"] = all(r.get("measured") == rs[0].get("measured") for r in rs)
+        chosen[name] = best
+    return chosen
 
 
 PHASES_CHILD = """
 import json, sys, time
 started = time.process_time()
 import nurbsmotion.cli.plan
+from nurbsmotion.runtime import keep_freed_memory
+keep_freed_memory()  # as the command does (cli._run_command): numpy temporaries without page faults
 import nurbsmotion.planning.measure as measure
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import PlanStream
@@ -180,41 +193,58 @@ print(json.dumps({"imports_s": imported - started, "read_s": read - imported, "p
 """
 
 
-def phases(program: Path, jerk: str | None) -> dict:
-    """CPU seconds of each phase of a plan in one fresh process (this checkout)."""
+def phases(program: Path, jerk: str | None, runs: int = 3) -> dict:
+    """CPU seconds of each phase of a plan in a fresh process (this checkout): the median of
+    ``runs`` processes, phase by phase (CPU times vary by a third on a loaded machine)."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONDONTWRITEBYTECODE"}
     env["PYTHONPATH"] = str(ROOT / "src")
-    done = subprocess.run([sys.executable, "-c", PHASES_CHILD, str(program), jerk or "none"], capture_output=True,
-                          text=True, env=env, check=True)
-    return json.loads(done.stdout)
+    results = [json.loads(subprocess.run([sys.executable, "-c", PHASES_CHILD, str(program), jerk or "none"],
+                                         capture_output=True, text=True, env=env, check=True).stdout)
+               for _ in range(runs)]
+    return {key: statistics.median(r[key] for r in results) for key in results[0]}
+
+
+def has_no_jerk_option(src: str) -> bool:
+    """Whether the plan command of the checkout at ``src`` has --no-jerk-limit (its default then
+    is the daemon's jerk limit)."""
+    env = {**os.environ, "PYTHONPATH": src}
+    done = subprocess.run([sys.executable, "-m", "nurbsmotion", "plan", "--help"], capture_output=True, text=True, env=env)
+    return "--no-jerk-limit" in done.stdout
 
 
 def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
     program = work / "wang_x100.nc"
     program.write_text(wang_copies(100))
-    rows = ["| version | jerk limit | cycles | wall s | CPU s | set-points/s (whole process, wall) "
-            "| set-points/s (CPU) | planner's own set-points/s | target |", "|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| version | jerk limit | cycles | wall s | CPU s (median, least) | set-points/s (whole process, wall) "
+            "| set-points/s (CPU: median, least) | planner's own set-points/s | figures | target |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     split = ["| jerk limit | imports | reading | planning | measuring (of it chord error) | total CPU s |",
              "|---|---|---|---|---|---|"]
+    no_jerk_before = ["--no-jerk-limit"] if previous_src and has_no_jerk_option(previous_src) else []
     for jerk in (JERK, None):
-        versions = [("this", ["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"], None)]
-        if previous_src:  # the previous plan had no jerk limit by default and no --no-jerk-limit
-            versions.append(("before", ["--max-jerk-mm-s3", JERK] if jerk else [], previous_src))
-        for name, options, src in versions:
-            r = throughput_runs(program, ["--period-ms", "1", *options], src, runs)
+        versions = [("this", ["--period-ms", "1", *(["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"])], None)]
+        if previous_src:  # a plan older than --no-jerk-limit had no jerk limit by default
+            versions.append(("before", ["--period-ms", "1", *(["--max-jerk-mm-s3", JERK] if jerk else no_jerk_before)],
+                             previous_src))
+        chosen = throughput_runs(program, versions, runs)
+        for name, r in chosen.items():
             if r["exit"] != 0:
-                rows.append(f"| {name} | {jerk or 'none'} | failed: {r.get('error')} | | | | | | |")
+                rows.append(f"| {name} | {jerk or 'none'} | failed: {r.get('error')} | | | | | | | |")
                 continue
             cycles = r["measured"]["cycles"]
             rate = cycles / r["wall_s"]
-            rows.append(f"| {name} | {jerk or 'none'} | {cycles:,} | {r['wall_s']:.2f} | {r['cpu_median_s']:.2f} | "
-                        f"{rate:,.0f} | {cycles / r['cpu_median_s']:,.0f} | {cycles / r['planning_time_s']:,.0f} | "
+            same = chosen["this"].get("measured") == r["measured"] and r["same_figures"]
+            rows.append(f"| {name} | {jerk or 'none'} | {cycles:,} | {r['wall_s']:.2f} | {r['cpu_median_s']:.2f}, "
+                        f"{r['cpu_least_s']:.2f} | {rate:,.0f} | {cycles / r['cpu_median_s']:,.0f}, "
+                        f"{cycles / r['cpu_least_s']:,.0f} | {cycles / r['planning_time_s']:,.0f} | "
+                        f"{'the same as this' if same else 'DIFFERENT'} | "
                         f">= {THROUGHPUT_TARGET:,} ({'met' if rate >= THROUGHPUT_TARGET else 'NOT met'}) |")
         p = phases(program, jerk)
         total = p["imports_s"] + p["read_s"] + p["plan_s"] + p["measure_s"]
         split.append(f"| {jerk or 'none'} | {p['imports_s']:.2f} | {p['read_s']:.2f} | {p['plan_s']:.2f} | "
                      f"{p['measure_s']:.2f} ({p['chord_s']:.2f}) | {total:.2f} |")
-    return "\n".join(rows) + "\n\nWhere the CPU time goes (this version, one process, seconds):\n\n" + "\n".join(split)
+    return "\n".join(rows) + ("\n\nWhere the CPU time goes (this version, seconds, the median of 3 processes "
+                               "phase by phase):\n\n") + "\n".join(split)
 
 
 def main() -> None:
@@ -257,9 +287,9 @@ def main() -> None:
         write_section("plan_throughput", "Whole-process plan throughput",
                       "`nurbsmotion plan` of Wang's Table 1 curve x 100 (bench_plan_command.wang_copies) at T = 1 ms "
                       "with `--json`, the whole command in a fresh process: start-up, reading, planning, measuring, "
-                      f"the report. The run of median wall time of {args.runs} (after a warm-up run), CPU the median "
-                      "of the child's user + system time. \"before\": the previous version (--previous-src), whose "
-                      "`plan` had no jerk limit by default.\n\n" + throughput
+                      f"the report. The run of median wall time of {args.runs} (after a warm-up run; the versions' runs "
+                      "alternate), CPU the median and the least of the child's user + system time; figures: every "
+                      "run's measured JSON figures equal this version's. \"before\": the previous version (--previous-src).\n\n" + throughput
                       + f"\n\nThe machine was shared with other agents' work ({load_text}): wall times are longer "
                       "than on a quiet machine, CPU times less so.\n",
                       "python benchmarks/bench_plan_command.py --skip-braid --copies --previous-src /tmp/base/src")

@@ -98,3 +98,18 @@ def test_at_rest_and_zero_length_chords():
     u = np.array([0.0, 0.0, 0.0, 0.1, 0.1, 0.2, 0.2000000001, 0.2000000001])
     errors = assert_same_as_sampled(steps_on(program, np.zeros(len(u)), u), program)
     assert errors[0] == 0.0 and errors[1] == 0.0 and errors[4] == 0.0
+
+
+def test_rest_across_a_junction_is_measured_as_the_sampled_search_does():
+    """A rest across a block junction (zero-length chord, pieces of zero parameter length at
+    both blocks' ends): the one point's distance, bit for bit what the sampled search finds."""
+    onward = NurbsCurve.create(3, [(40, 10, 0), (50, 0, 0), (60, 10, 0), (70, 0, 0)])
+    program = program_of(s_curve(), onward)
+    block = np.array([0, 0, 0, 1, 1, 1])
+    u = np.array([0.8, 0.9, 1.0, 0.0, 0.1, 0.2])
+    trajectory = steps_on(program, block, u)
+    trajectory.position_mm[2:4] += (0.0, 1e-9, 0.0)  # at rest beside the junction, on both sides of it
+    curves = ProgramCurves.of(program)
+    args = (trajectory.block, trajectory.u, trajectory.position_mm, curves)
+    new, old = chord_errors(*args), chord_errors(*args, sampled=True)
+    assert new[3] == old[3] and new[3] == pytest.approx(1e-9)

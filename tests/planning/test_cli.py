@@ -153,3 +153,20 @@ def test_a_jerk_limit_and_no_jerk_limit_are_one_line_exit_2(capsys):
     assert info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--no-jerk-limit" in err[0]
+
+
+def test_plan_imports_neither_the_fieldbus_nor_matplotlib(tmp_path):
+    """``plan`` without --config (the daemon's defaults) reads no drive description: canopen
+    and python-can (with asyncio under them) stay out of its start-up, and matplotlib unless
+    --plot asks for it."""
+    import subprocess
+
+    program = tmp_path / "line.nc"
+    program.write_text("G1 X1 F600\nM30\n")
+    heavy = ("canopen", "can", "asyncio", "matplotlib", "nurbsmotion.fieldbus", "nurbsmotion.sim")
+    script = ("import sys\nfrom nurbsmotion.cli import main\n"
+              "main(sys.argv[1:])\n"
+              f"print(sorted(m for m in sys.modules if m.split('.')[0] in {heavy!r} or m.startswith({heavy!r})))")
+    done = subprocess.run([sys.executable, "-c", script, "plan", str(program), "--json"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout + done.stderr

@@ -29,3 +29,21 @@ def test_trace_header_rows_and_values(tmp_path):
     np.testing.assert_allclose(data["feed"], traj.feed_mm_s)  # mm/s
     np.testing.assert_allclose(data["accel"], m.accel_mm_s2, rtol=1e-5)  # mm/s^2
     np.testing.assert_allclose(data["jerk"], m.jerk_mm_s3, rtol=1e-5)  # mm/s^3
+
+
+def test_rows_are_formatted_as_savetxt_writes_them():
+    """The trace's own formatting (one %-format of a chunk's values) against np.savetxt with
+    the same formats, the former writer and the oracle: rounding halves, -0, tiny and huge
+    values, exact integers."""
+    import io
+
+    from nurbsmotion.planning.trace import _FORMATS, formatted_rows
+
+    rng = np.random.default_rng(3)
+    table = rng.normal(0.0, 1.0, (500, len(TRACE_COLUMNS))) * 10.0 ** rng.integers(-12, 9, (500, len(TRACE_COLUMNS)))
+    table[:, 1] = rng.integers(0, 10**6, 500)  # block numbers
+    table[:5] = [[0.0005, 0, 0.125, 1.0000000005, -0.0, 2.5e-10, 0.0000005, 1.23455e-7, 0.5, 1e20]] * 5
+    expected = io.StringIO()
+    np.savetxt(expected, table, fmt=list(_FORMATS), delimiter=",")
+    assert formatted_rows(table) == expected.getvalue()
+    assert formatted_rows(table[:0]) == ""

@@ -9,22 +9,37 @@ from __future__ import annotations
 
 import functools
 from pathlib import Path
-
-import canopen
-from canopen.objectdictionary import ODArray, ODRecord, ODVariable, ObjectDictionary, datatypes
+from typing import TYPE_CHECKING
 
 from nurbsmotion import data
 
-# YAML ``type:`` names of the CiA 301 integer data types (§7.1.4.3) and their codes.
+if TYPE_CHECKING:  # canopen (and python-can under it) is imported only when a file is read
+    from canopen.objectdictionary import ODVariable, ObjectDictionary
+
+
+class DataType:
+    """CiA 301 data type codes (the object dictionary's data type entries 0x0001..0x001B),
+    as canopen.objectdictionary.datatypes has them: the configuration's ``type:`` names need
+    them, and importing canopen (python-can, asyncio, ...) for a few numbers would cost every
+    command that imports the configuration (``plan`` too) about 0.1 s of CPU."""
+
+    BOOLEAN, INTEGER8, INTEGER16, INTEGER32, UNSIGNED8, UNSIGNED16, UNSIGNED32, REAL32 = 1, 2, 3, 4, 5, 6, 7, 8
+    INTEGER24, REAL64, INTEGER40, INTEGER48, INTEGER56, INTEGER64 = 0x10, 0x11, 0x12, 0x13, 0x14, 0x15
+    UNSIGNED24, UNSIGNED40, UNSIGNED48, UNSIGNED56, UNSIGNED64 = 0x16, 0x18, 0x19, 0x1A, 0x1B
+    SIGNED = (INTEGER8, INTEGER16, INTEGER24, INTEGER32, INTEGER40, INTEGER48, INTEGER56, INTEGER64)
+    UNSIGNED = (UNSIGNED8, UNSIGNED16, UNSIGNED24, UNSIGNED32, UNSIGNED40, UNSIGNED48, UNSIGNED56, UNSIGNED64)
+
+
+# YAML ``type:`` names of the CiA 301 integer data types and their codes.
 TYPE_CODES: dict[str, int] = {
-    "bool": datatypes.BOOLEAN, "int8": datatypes.INTEGER8, "int16": datatypes.INTEGER16,
-    "int32": datatypes.INTEGER32, "int64": datatypes.INTEGER64, "uint8": datatypes.UNSIGNED8,
-    "uint16": datatypes.UNSIGNED16, "uint32": datatypes.UNSIGNED32, "uint64": datatypes.UNSIGNED64,
+    "bool": DataType.BOOLEAN, "int8": DataType.INTEGER8, "int16": DataType.INTEGER16,
+    "int32": DataType.INTEGER32, "int64": DataType.INTEGER64, "uint8": DataType.UNSIGNED8,
+    "uint16": DataType.UNSIGNED16, "uint32": DataType.UNSIGNED32, "uint64": DataType.UNSIGNED64,
 }
 TYPE_NAMES = {code: name for name, code in TYPE_CODES.items()}
-_BITS = {datatypes.BOOLEAN: 1, datatypes.INTEGER8: 8, datatypes.INTEGER16: 16, datatypes.INTEGER32: 32,
-         datatypes.INTEGER64: 64, datatypes.UNSIGNED8: 8, datatypes.UNSIGNED16: 16, datatypes.UNSIGNED32: 32,
-         datatypes.UNSIGNED64: 64, datatypes.REAL32: 32, datatypes.REAL64: 64}
+_BITS = {DataType.BOOLEAN: 1, DataType.INTEGER8: 8, DataType.INTEGER16: 16, DataType.INTEGER32: 32,
+         DataType.INTEGER64: 64, DataType.UNSIGNED8: 8, DataType.UNSIGNED16: 16, DataType.UNSIGNED32: 32,
+         DataType.UNSIGNED64: 64, DataType.REAL32: 32, DataType.REAL64: 64}
 
 
 class DescriptionError(Exception):
@@ -33,6 +48,8 @@ class DescriptionError(Exception):
 
 @functools.lru_cache(maxsize=64)
 def _load(path: str, node_id: int, mtime_ns: int) -> ObjectDictionary:
+    import canopen
+
     return canopen.import_od(path, node_id)
 
 
@@ -58,6 +75,8 @@ def find(od: ObjectDictionary, index: int, subindex: int = 0) -> ODVariable | No
 
     canopen's ODArray invents sub-entries 1..255 from its first one on access; only the
     sub-entries the file lists count here. A VAR is addressed with subindex 0."""
+    from canopen.objectdictionary import ODArray, ODRecord
+
     obj = od.get(index) if index in od.indices else None
     if obj is None:
         return None
@@ -72,6 +91,8 @@ def has(od: ObjectDictionary, index: int, subindex: int = 0) -> bool:
 
 def sub_count(od: ObjectDictionary, index: int) -> int:
     """Sub-entries 1..n the file lists for a RECORD/ARRAY (0 for a VAR or a missing object)."""
+    from canopen.objectdictionary import ODArray, ODRecord
+
     obj = od.get(index) if index in od.indices else None
     if not isinstance(obj, (ODRecord, ODArray)):
         return 0
@@ -89,9 +110,9 @@ def type_name(var: ODVariable) -> str:
 def type_range(var: ODVariable) -> tuple[int, int] | None:
     """Values the data type can hold (integer types only)."""
     n = bits(var)
-    if var.data_type in datatypes.SIGNED_TYPES and n:
+    if var.data_type in DataType.SIGNED and n:
         return -(1 << (n - 1)), (1 << (n - 1)) - 1
-    if var.data_type in datatypes.UNSIGNED_TYPES or var.data_type == datatypes.BOOLEAN:
+    if var.data_type in DataType.UNSIGNED or var.data_type == DataType.BOOLEAN:
         return 0, (1 << n) - 1
     return None
 

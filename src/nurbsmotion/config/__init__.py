@@ -17,7 +17,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
 import yaml
-from canopen.objectdictionary import ObjectDictionary
 
 from nurbsmotion.can import drive_od
 from nurbsmotion.config.yaml_reading import MISSING, Doc, boolean, fields, number, optional, sequence_of, string
@@ -30,6 +29,8 @@ from nurbsmotion.config.spindle import SpindleConfig, load_spindle_description
 from nurbsmotion.config.tooling import load_tool_file, read_spindle, read_tools
 
 if TYPE_CHECKING:  # read when a configuration names a tool table (config.tooling.load_tool_file)
+    from canopen.objectdictionary import ObjectDictionary
+
     from nurbsmotion.program.tools import ToolTable
 
 ALGORITHMS = ("taylor1", "taylor2", "wang", "zhang", "lookahead")

@@ -23,14 +23,15 @@ import enum
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
-
-from canopen.objectdictionary import ObjectDictionary
+from typing import TYPE_CHECKING, Any
 
 from nurbsmotion.can import drive_od
 from nurbsmotion.config.yaml_reading import MISSING, Doc, fields, number, optional, string
 from nurbsmotion.can.drive_od import default_eds_path
 from nurbsmotion.errors import InputError
+
+if TYPE_CHECKING:  # canopen is imported only when a description is read (drive_od)
+    from canopen.objectdictionary import ObjectDictionary
 
 MONITOR_POLL_S = 0.05  # the master reads 0x6041 / 0x606C this often (fieldbus.spindle; counted in the bus load)
 

@@ -200,34 +200,37 @@ class SpanPieces:
 
 def split_at_knots(curves: ProgramCurves, pieces: Pieces) -> SpanPieces:
     """Every curved piece (clipped to its curve's range) cut at the knots inside it, so that
-    each part lies on one span."""
+    each part lies on one span. The few pieces that cross a knot (a chunk's steps are short)
+    are cut and their parts put after the others: each part is measured on its own, so their
+    order changes no figure."""
     n = len(pieces.lo)
     lo, hi = pieces.lo.copy(), pieces.hi.copy()
     first = np.zeros(n, dtype=np.intp)
     last = np.zeros(n, dtype=np.intp)
-    order = np.argsort(pieces.block, kind="stable")
-    starts = np.flatnonzero(np.r_[True, np.diff(pieces.block[order]) != 0])
-    for begin, end in zip(starts, np.r_[starts[1:], n]):
-        sel = order[begin:end]
-        b = int(pieces.block[sel[0]])
+    blocks = np.unique(pieces.block)
+    for b in blocks.tolist():
+        sel: slice | NDArray[np.bool_] = slice(None) if len(blocks) == 1 else pieces.block == b
         knots = curves.breakpoints[b]
         spans = len(knots) - 2
         lo[sel] = np.clip(lo[sel], knots[0], knots[-1])
         hi[sel] = np.clip(hi[sel], knots[0], knots[-1])
         first[sel] = curves.span_offset[b] + np.clip(np.searchsorted(knots, lo[sel], side="right") - 1, 0, spans)
         last[sel] = curves.span_offset[b] + np.clip(np.searchsorted(knots, hi[sel], side="left") - 1, 0, spans)
-    last = np.maximum(last, first)
-    if (last == first).all():  # no piece crosses a knot (the usual chunk)
+    crossing = np.flatnonzero(last > first)
+    if not len(crossing):  # no piece crosses a knot
         return SpanPieces(first, lo, hi, pieces.row, pieces.block)
-    count = last - first + 1
-    index = np.repeat(np.arange(n), count)
-    span = np.repeat(first, count) + (np.arange(len(index)) - np.repeat(np.cumsum(count) - count, count))
+    count = last[crossing] - first[crossing] + 1
+    index = np.repeat(crossing, count)
+    span = np.repeat(first[crossing], count) + (np.arange(len(index)) - np.repeat(np.cumsum(count) - count, count))
     # inner cuts: a span's left knot, and (before the piece's last span) the next span's left knot
     left = curves.span_left[span]
     right = curves.span_left[np.minimum(span + 1, len(curves.span_left) - 1)]
     part_lo = np.where(span > first[index], left, lo[index])
     part_hi = np.where(span < last[index], right, hi[index])
-    return SpanPieces(span, part_lo, part_hi, pieces.row[index], pieces.block[index])
+    keep = last == first
+    return SpanPieces(np.concatenate([first[keep], span]), np.concatenate([lo[keep], part_lo]),
+                      np.concatenate([hi[keep], part_hi]), np.concatenate([pieces.row[keep], pieces.row[index]]),
+                      np.concatenate([pieces.block[keep], pieces.block[index]]))
 
 
 @dataclass(eq=False)
@@ -377,6 +380,19 @@ def sampled_curve_errors(errors: NDArray[np.float64], program: Program, parts: P
         raise_at(errors, parts.row[sel], sampled_distances(curve, lo, hi, a[sel], b[sel]))
 
 
+def point_piece_errors(errors: NDArray[np.float64], program: Program, parts: Pieces | SpanPieces,
+                       a: NDArray[np.float64], b: NDArray[np.float64]) -> None:
+    """Raise ``errors`` at the rows of pieces of zero parameter length (lo == hi: a step that
+    ends or starts on a block's end, such as a rest across a junction): the distance of that
+    one point from the chord, bit for bit what the sampled search finds there (all its
+    samples are that point)."""
+    for blk in np.unique(parts.block):
+        sel = parts.block == blk
+        curve = program.blocks[int(blk)].curve
+        points = curve.points(np.clip(parts.lo[sel], curve.u_min, curve.u_max))
+        raise_at(errors, parts.row[sel], segment_distances(points[:, None, :], a[sel], b[sel])[:, 0])
+
+
 def chord_errors(block: NDArray[np.integer], u: NDArray[np.float64], position_mm: NDArray[np.float64],
                  curves: ProgramCurves, sampled: bool = False) -> NDArray[np.float64]:
     """True chord error of every step, assigned to the step's end row (row 0: 0). ``sampled``:
@@ -405,5 +421,9 @@ def chord_errors(block: NDArray[np.integer], u: NDArray[np.float64], position_mm
     raise_at(errors, parts.row[exact], d[exact])
     if not exact.all():
         rest = parts.select(~exact)
-        sampled_curve_errors(errors, program, rest, p[rest.row - 1], p[rest.row])
+        point = rest.lo == rest.hi
+        for measured, pieces_of in ((point_piece_errors, point), (sampled_curve_errors, ~point)):
+            if pieces_of.any():
+                some = rest.select(pieces_of)
+                measured(errors, program, some, p[some.row - 1], p[some.row])
     return errors

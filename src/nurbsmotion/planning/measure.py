@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from nurbsmotion.planning.chord_error import ProgramCurves, chord_errors
+from nurbsmotion.planning.rows import column_max, row_norms
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program
 
@@ -160,14 +161,14 @@ class MeasureStream:
         v = np.diff(ext, axis=0)[1: n + 1] / period
         second = (ext[2:] - 2.0 * ext[1:-1] + ext[:-2]) / period**2  # a_-1 .. a_n
         a = second[1: n + 1]
-        jerk = np.linalg.norm(np.diff(second, axis=0), axis=1) / period  # j_0 .. j_n
+        jerk = row_norms(np.diff(second, axis=0)) / period  # j_0 .. j_n
         extra_jerk = float(jerk[n]) if len(jerk) > n else 0.0  # coming to rest after the last row
         jerk = jerk[:n]
         self.history = ext[n: n + 2]
         if n == 0:
             return None
         part = _rows(rows, slice(0, n))
-        speed = np.linalg.norm(v, axis=1)
+        speed = row_norms(v)
         feed = np.asarray(part.feed_mm_s, float)
         planned = feed > 1e-12
         fluctuation = np.where(planned, np.abs(speed - feed) / np.where(planned, feed, 1.0), 0.0)
@@ -176,7 +177,7 @@ class MeasureStream:
         chord = chord_errors(joined.block - first, joined.u, joined.position_mm, curves)[len(joined) - n:]
         if self.previous is None:
             fluctuation[0] = 0.0
-        figures = RowFigures(self.rows, part, chord, speed, np.linalg.norm(a, axis=1), jerk, fluctuation,
+        figures = RowFigures(self.rows, part, chord, speed, row_norms(a), jerk, fluctuation,
                              np.abs(v), np.abs(a))
         self._accumulate(figures, extra_jerk)
         self.previous = _rows(part, slice(n - 1, n))
@@ -198,8 +199,9 @@ class MeasureStream:
         later = f.chord_error_mm[1:] if f.first_row == 0 else f.chord_error_mm
         self.min_chord = min(self.min_chord, float(later.min(initial=np.inf)))
         self.length_mm += float(f.speed_mm_s.sum() * self.period_s)
-        self.axis_v = f.axis_velocity_mm_s.max(axis=0) if self.axis_v is None else np.maximum(self.axis_v, f.axis_velocity_mm_s.max(axis=0))
-        self.axis_a = f.axis_accel_mm_s2.max(axis=0) if self.axis_a is None else np.maximum(self.axis_a, f.axis_accel_mm_s2.max(axis=0))
+        v, a = column_max(f.axis_velocity_mm_s), column_max(f.axis_accel_mm_s2)
+        self.axis_v = v if self.axis_v is None else np.maximum(self.axis_v, v)
+        self.axis_a = a if self.axis_a is None else np.maximum(self.axis_a, a)
         self.rows += len(f)
         if self.keep_rows:
             self.kept.append(f)

