@@ -25,7 +25,7 @@ from nurbsmotion.geometry import NurbsCurve
 from nurbsmotion.geometry.primitives import arc_curve, arc_sweep_rad
 from nurbsmotion.program import ReadOptions, parse_gcode, parse_tool_table
 from nurbsmotion.program import arcs as arcs_module
-from nurbsmotion.program import gcode as gcode_module
+from nurbsmotion.program import gcode_moves
 from nurbsmotion.program.arcs import (PLANES, SAME_POINT_MM,
                                       ArcError, Plane, arc_nurbs, centre_from_radius, check_radii, checked_r_radius)
 from nurbsmotion.program.reader import GCODE_SUFFIXES
@@ -263,8 +263,8 @@ def test_corpus_and_examples_read_every_arc_as_the_numpy_implementation_did(monk
         checked[0] += 1
         return new
 
-    monkeypatch.setattr(gcode_module, "centre_from_radius", centre_both)
-    monkeypatch.setattr(gcode_module, "arc_nurbs", arc_both)
+    monkeypatch.setattr(gcode_moves, "centre_from_radius", centre_both)
+    monkeypatch.setattr(gcode_moves, "arc_nurbs", arc_both)
     for path in PROGRAMS:
         try:
             parse_gcode(path.read_text(errors="replace"), path.name, options=ReadOptions(tool_table=TOOLS))

@@ -255,8 +255,8 @@ def test_after_an_abort_the_progress_shows_where_the_job_stopped(parts, monkeypa
 
     controller, link = parts
     recorded = threading.Event()
-    settle = controller._settled_status
-    monkeypatch.setattr(controller, "_settled_status", lambda: (recorded.wait(5.0), settle())[1])
+    settle = controller.outcomes.settled_status
+    monkeypatch.setattr(controller.outcomes, "settled_status", lambda: (recorded.wait(5.0), settle())[1])
     job = controller.submit("line.nc", "X5")["job"]
     wait_for(lambda: (controller.status()["job"] or {}).get("cycle", 0) >= 50)
     controller.abort()

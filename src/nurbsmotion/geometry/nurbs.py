@@ -14,6 +14,8 @@ together). The rational derivatives follow from the quotient rule (reference §1
   x'   = (C'   - W' x) / W
   x''  = (C''  - 2 W' x' - W'' x) / W
   x''' = (C''' - 3 W' x'' - 3 W'' x' - W''' x) / W
+The speed |x'|, the arc length and its inverse are arc_length.py's, from the same Taylor
+coefficients.
 """
 
 from __future__ import annotations
@@ -27,6 +29,8 @@ from typing import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from nurbsmotion.geometry.arc_length import ArcLength
 
 MAX_DEGREE = 9
 MAX_DIM = 6
@@ -170,7 +174,6 @@ def rational_derivatives(homogeneous_derivs: Sequence[NDArray[np.float64]]) -> l
     return out
 
 
-_GAUSS_16 = np.polynomial.legendre.leggauss(16)
 # points per block of work: keeps the arrays in the CPU cache and the gathered Taylor
 # coefficients ((p+1) x (dim+1) x chunk doubles) under glibc's 128 KiB mmap threshold for
 # p = 2 in 3-D (4096 points: 2x slower with the default allocator, measured)
@@ -333,43 +336,6 @@ class NurbsCurve:
                 out[k, start: start + len(chunk)] = x_k.T
         return out[:, 0] if np.ndim(u) == 0 else out
 
-    @cached_property
-    def _speed_polynomials(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Per span, the Taylor coefficients of N = C' W - C W' (the numerator of x' = N / W^2,
-        degree <= 2p - 2) and of W: arrays (2p - 1, dim, spans) and (p + 1, spans)."""
-        _, coeffs = self._taylor_coefficients
-        p = self.degree
-        c, w = coeffs[:, :-1, :], coeffs[:, -1, :]
-        numerator = np.zeros((2 * p + 1, self.dim, c.shape[2]))
-        for a in range(p + 1):
-            for b in range(p + 1):
-                # d/dt of c_a t^a times w_b t^b minus c_a t^a times d/dt of w_b t^b (0 for a = b)
-                if a != b:
-                    numerator[a + b - 1] += (a - b) * c[a] * w[b]
-        return np.ascontiguousarray(numerator[: max(2 * p - 1, 1)]), np.ascontiguousarray(w)
-
-    def speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
-        """|x'(u)| for an array of u (the integrand of the arc length): |N(u)| / W(u)^2 with
-        N = C' W - C W' by Horner's scheme on the span's coefficients."""
-        uu = np.asarray(u, dtype=np.float64)
-        lefts = self._taylor_coefficients[0]
-        numerator, weight = self._speed_polynomials
-        out = np.empty(len(uu))
-        for start in range(0, len(uu), EVALUATION_CHUNK):
-            chunk = uu[start: start + EVALUATION_CHUNK]
-            i = np.clip(np.searchsorted(lefts, chunk, side="right") - 1, 0, len(lefts) - 1)
-            t = chunk - lefts.take(i)
-            n_c = numerator.take(i, axis=2)
-            w_c = weight.take(i, axis=1)
-            n = n_c[-1]
-            for j in range(len(n_c) - 2, -1, -1):
-                n = n * t + n_c[j]
-            w = w_c[-1]
-            for j in range(len(w_c) - 2, -1, -1):
-                w = w * t + w_c[j]
-            out[start: start + len(chunk)] = np.sqrt(np.einsum("ij,ij->j", n, n)) / (w * w)
-        return out
-
     def points(self, u: ArrayLike) -> NDArray[np.float64]:
         """x(u) for an array of u: (len(u), dim); (dim,) for scalar u."""
         return self.derivatives(u, 0)[0]
@@ -414,90 +380,28 @@ class NurbsCurve:
         ddx = tuple((a - 2.0 * w1 * dxi - w2 * xi) * inv for a, dxi, xi in zip(a2, dx, x))
         return x, dx, ddx
 
-    # ---- arc length -------------------------------------------------------------------------
-    def _gauss_integrals(self, starts: NDArray[np.float64], ends: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Integral of |x'(u)| over each [start, end] by 16-point Gauss-Legendre."""
-        nodes, weights = _GAUSS_16
-        half = (ends - starts) / 2.0
-        u = (starts + ends)[:, None] / 2.0 + half[:, None] * nodes[None, :]
-        return (self.speeds(u.ravel()).reshape(u.shape) @ weights) * half
-
+    # ---- arc length (arc_length.ArcLength) ---------------------------------------------------
     @cached_property
-    def _quadrature(self) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Adaptive Gauss-Legendre: (interval edges, cumulative length at each edge).
+    def _arc_length(self) -> ArcLength:
+        lefts, coeffs = self._taylor_coefficients
+        return ArcLength(lefts, coeffs, self.degree, self.breakpoints, EVALUATION_CHUNK)
 
-        Each knot span starts as 4 intervals; an interval is halved until the rule on it and
-        on its two halves agree to 1e-13 of the total length (at most 20 halvings).
-        """
-        edges = np.unique(np.concatenate([np.linspace(a, b, 5) for a, b in zip(self.breakpoints[:-1], self.breakpoints[1:])]))
-        starts, ends = edges[:-1], edges[1:]
-        whole = self._gauss_integrals(starts, ends)
-        done_starts, done_ends, done_values = [], [], []
-        tolerance = 1e-13 * max(whole.sum(), 1e-300)
-        for _ in range(20):
-            mids = (starts + ends) / 2.0
-            left, right = self._gauss_integrals(starts, mids), self._gauss_integrals(mids, ends)
-            ok = np.abs(left + right - whole) <= tolerance
-            done_starts += [starts[ok], mids[ok]]
-            done_ends += [mids[ok], ends[ok]]
-            done_values += [left[ok], right[ok]]
-            if ok.all():
-                break
-            bad = ~ok
-            starts, ends = np.concatenate([starts[bad], mids[bad]]), np.concatenate([mids[bad], ends[bad]])
-            whole = np.concatenate([left[bad], right[bad]])
-        else:
-            done_starts.append(starts)
-            done_ends.append(ends)
-            done_values.append(whole)
-        all_starts = np.concatenate(done_starts)
-        order = np.argsort(all_starts)
-        values = np.concatenate(done_values)[order]
-        edges = np.append(all_starts[order], self.u_max)
-        return edges, np.concatenate([[0.0], np.cumsum(values)])
-
-    @cached_property
-    def _cumulative_length(self) -> NDArray[np.float64]:
-        return self._quadrature[1]
+    def speeds(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """|x'(u)| for an array of u (the integrand of the arc length)."""
+        return self._arc_length.speeds(u)
 
     @property
     def length(self) -> float:
         """Total arc length (adaptive 16-point Gauss-Legendre on each knot span)."""
-        return float(self._cumulative_length[-1])
+        return self._arc_length.length
 
     def arc_length(self, u: ArrayLike) -> NDArray[np.float64] | float:
         """Arc length from u_min to u (vectorised)."""
-        uu = np.clip(np.atleast_1d(np.asarray(u, dtype=np.float64)), self.u_min, self.u_max)
-        edges, cumulative = self._quadrature
-        idx = np.clip(np.searchsorted(edges, uu, side="right") - 1, 0, len(edges) - 2)
-        s = cumulative[idx] + self._gauss_integrals(edges[idx], uu)
-        return float(s[0]) if np.ndim(u) == 0 else s
+        return self._arc_length.arc_length(u)
 
     def u_at_arc_length(self, s: ArrayLike, tolerance_mm: float = 1e-10, max_iterations: int = 50) -> NDArray[np.float64] | float:
-        """The parameter u with arc_length(u) = s: Newton on s(u) - s* safeguarded by bisection.
-
-        The bracket starts as the quadrature sub-interval that holds s*, and every Newton
-        step that leaves the bracket is replaced by its midpoint.
-        """
-        target = np.clip(np.atleast_1d(np.asarray(s, dtype=np.float64)), 0.0, self.length)
-        edges, cum = self._quadrature
-        idx = np.clip(np.searchsorted(cum, target, side="right") - 1, 0, len(edges) - 2)
-        lo, hi = edges[idx].copy(), edges[idx + 1].copy()
-        frac = np.divide(target - cum[idx], cum[idx + 1] - cum[idx], out=np.zeros_like(target),
-                         where=cum[idx + 1] > cum[idx])
-        u = lo + frac * (hi - lo)
-        for _ in range(max_iterations):
-            err = self.arc_length(u) - target
-            err = np.atleast_1d(err)
-            if np.all(np.abs(err) <= tolerance_mm):
-                break
-            lo = np.where(err < 0, u, lo)
-            hi = np.where(err > 0, u, hi)
-            speed = self.speeds(u)
-            step = np.divide(err, speed, out=np.full_like(err, np.inf), where=speed > 0)
-            newton = u - step
-            u = np.where((newton > lo) & (newton < hi), newton, 0.5 * (lo + hi))
-        return float(u[0]) if np.ndim(s) == 0 else u
+        """The parameter u with arc_length(u) = s (Newton safeguarded by bisection)."""
+        return self._arc_length.u_at_arc_length(s, tolerance_mm, max_iterations)
 
     # ---- transformations --------------------------------------------------------------------
     def reversed(self) -> "NurbsCurve":

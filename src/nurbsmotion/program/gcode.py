@@ -11,14 +11,15 @@ Every problem is reported (up to ``ReadOptions.max_errors``), one line each, in 
 order: a bad line is skipped and reading goes on. Positions in the Program are machine
 coordinates: work offsets, G92 and tool length offsets are applied here.
 
-The reader is one class from parts: this module (driver, words, modal codes, events,
-moves), gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_nurbs
-(G6.2, G5.2/G5.3); gcode_line is the evaluated line they share.
+The reader is one class from parts: this module (driver, words, modal codes, events),
+gcode_moves (G0-G3 blocks, G53), gcode_machine (S, T, M6, M3-M9, M62-M65, G4, G43),
+gcode_flow (O-word flow), gcode_offsets (G10/G28/G30/G92/G43.1), gcode_nurbs (G6.2,
+G5.2/G5.3), gcode_modal (M70-M73), gcode_start (start line), gcode_fast (plain move
+lines); gcode_line is the evaluated line they share.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -27,34 +28,28 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from nurbsmotion.errors import InputError, InputErrors
-from nurbsmotion.geometry import NurbsCurve
-from nurbsmotion.geometry.primitives import ArcShape, LineShape
-from nurbsmotion.program.arcs import PLANES, ArcError, arc_shape, centre_from_radius
 from nurbsmotion.program.coordinates import CoordinateState, Offsets
 from nurbsmotion.program.expressions import ExpressionError, Number
 from nurbsmotion.program.gcode_fast import FastLines, lines_lexed_first
 from nurbsmotion.program.gcode_flow import OwordRunning, _Frame, lines_is_loop_body
 from nurbsmotion.program.gcode_line import GcodeLine
+from nurbsmotion.program.gcode_machine import MachineCommands
 from nurbsmotion.program.gcode_modal import ModalSnapshot, ModalStateCommands
+from nurbsmotion.program.gcode_moves import ARC_CCW, ARC_CW, LINE, RAPID, MoveBuilding
 from nurbsmotion.program.gcode_nurbs import NURBS_FANUC, NURBS_LINUXCNC, NURBS_LINUXCNC_END, NurbsReading
 from nurbsmotion.program.gcode_offsets import OffsetCommands
 from nurbsmotion.program.gcode_start import StartLineReading
 from nurbsmotion.program.gcode_words import LexedLine, RawWord, Word, check_number, lex_line
-from nurbsmotion.program.model import (BlockKind, CoolantMode, EventKind, Program, ProgramEvent, ReadExtent,
+from nurbsmotion.program.model import (CoolantMode, EventKind, Program, ProgramEvent, ReadExtent,
                                        SpindleDirection)
 from nurbsmotion.program.owords import Flow, index_owords
 from nurbsmotion.program.parameters import ParameterStore
 from nurbsmotion.program.records import RecordsBuilder, SourceText
 from nurbsmotion.program.tools import ToolTable
 
-# The arc builder every G02/G03 goes through, by this name: an ArcShape (a NurbsCurve is
-# taken too: tests/program/test_arcs.py puts the NURBS oracle in its place).
-arc_nurbs: Callable[..., ArcShape | NurbsCurve] = arc_shape
 MM_PER_INCH = 25.4
-ZERO_MOVE_MM = 1e-9  # shorter G00/G01 moves are skipped
 
 # G codes as round(10 * value)
-RAPID, LINE, ARC_CW, ARC_CCW = 0, 10, 20, 30
 G_GROUPS: dict[int, str] = {
     RAPID: "motion", LINE: "motion", ARC_CW: "motion", ARC_CCW: "motion",
     NURBS_FANUC: "motion", NURBS_LINUXCNC: "motion", NURBS_LINUXCNC_END: "motion",
@@ -87,18 +82,6 @@ M_GROUPS = {0: "stopping", 1: "stopping", 2: "stopping", 30: "stopping", 6: "too
 END_CODES = {2, 30}
 ROTARY_LETTERS = "ABCUVW"
 WORD_LETTERS = "XYZIJKRFPLQSTHND"
-MOTION_WORDS = {
-    RAPID: "XYZ", LINE: "XYZ", ARC_CW: "XYZIJKRP", ARC_CCW: "XYZIJKRP",
-    NURBS_FANUC: "KXYZRPQ", NURBS_LINUXCNC: "XYZPL", NURBS_LINUXCNC_END: "",
-}
-G_NAMES = {RAPID: "G00", LINE: "G01", ARC_CW: "G02", ARC_CCW: "G03", NURBS_FANUC: "G06.2",
-           NURBS_LINUXCNC: "G5.2", NURBS_LINUXCNC_END: "G5.3"}
-
-
-def g_name(code: int) -> str:
-    return G_NAMES.get(code, f"G{code / 10:g}")
-
-
 @dataclass
 class ReadOptions:
     """What a G-code reader starts from besides the text (all optional).
@@ -129,7 +112,8 @@ class _Stop(Exception):
     """Too many problems: stop reading."""
 
 
-class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands, StartLineReading, FastLines):
+class GcodeParser(MoveBuilding, MachineCommands, NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands,
+                  StartLineReading, FastLines):
     """Reads one program; ``parse`` returns the Program or raises InputError(s).
 
     ``fast_lines``: plain move lines take gcode_fast's path (False: every line is lexed and
@@ -478,105 +462,6 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
             raise InputError(line.at(f), "F inside a NURBS definition: give the feed on its first block")
         self.feed_mm_s = f.value * self.mm_per_unit / 60.0
 
-    def apply_spindle_speed(self, line: GcodeLine, spindle_code_on_line: bool) -> None:
-        s = line.claim("S").get("S")
-        if s is None:
-            return
-        if s.value < 0:
-            raise InputError(line.at(s), f"spindle speed must be >= 0, got {s.value:g}")
-        changed = s.value != self.spindle_rpm
-        self.spindle_rpm = s.value
-        if changed and self.spindle is not SpindleDirection.OFF and not spindle_code_on_line:
-            self.add_event(line, EventKind.SPINDLE, s.text, spindle=self.spindle, spindle_rpm=self.spindle_rpm,
-                           constant_surface_speed=self.constant_surface_speed)
-
-    def tool_number(self, line: GcodeLine, w: Word) -> int:
-        if w.value != int(w.value) or w.value < 0:
-            raise InputError(line.at(w), f"a tool number is a whole number >= 0, got {w.value:g}")
-        number = int(w.value)
-        table = self.options.tool_table
-        if table is not None and number != 0 and table.get(number) is None:
-            raise InputError(line.at(w), f"tool {number} is not in the tool table {table.source}")
-        return number
-
-    def apply_tool(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
-        t = line.claim("T").get("T")
-        if t is not None:
-            self.tool_selected = self.tool_number(line, t)
-        m = m_codes.get("tool change")
-        if m is None:
-            return
-        if int(m.value) == 61:
-            q = line.claim("Q").get("Q")
-            if q is None:
-                raise InputError(line.at(m), "M61 needs Q (the tool now in the spindle)")
-            self.tool_loaded = self.tool_number(line, q)
-            return
-        tool = self.tool_selected if self.tool_selected is not None else 0
-        if tool != self.tool_loaded:
-            self.add_event(line, EventKind.TOOL_CHANGE, m.text, tool=tool)
-        self.tool_loaded = tool
-
-    def apply_spindle_and_coolant(self, line: GcodeLine, m_codes: dict[str, Word]) -> None:
-        m = m_codes.get("spindle")
-        if m is not None:
-            self.spindle = {3: SpindleDirection.CW, 4: SpindleDirection.CCW, 5: SpindleDirection.OFF}[int(m.value)]
-            self.add_event(line, EventKind.SPINDLE, m.text, spindle=self.spindle,
-                           spindle_rpm=None if self.spindle is SpindleDirection.OFF else self.spindle_rpm,
-                           constant_surface_speed=self.constant_surface_speed)
-        for key in ("coolant", "coolant 2"):
-            m = m_codes.get(key)
-            if m is not None:
-                mode = {7: CoolantMode.MIST, 8: CoolantMode.FLOOD, 9: CoolantMode.OFF}[int(m.value)]
-                self.coolant = set() if mode is CoolantMode.OFF else self.coolant | {mode}
-                self.add_event(line, EventKind.COOLANT, m.text, coolant=mode)
-
-    def apply_digital_output(self, line: GcodeLine, m: Word | None, groups: dict[str, Word]) -> None:
-        """LinuxCNC's M62/M63 (output P on/off with the next motion) and M64/M65 (at once): an
-        OUTPUT event; P is the output's bit in the io node's outputs (0x6200)."""
-        if m is None:
-            return
-        g = groups.get("non-modal")
-        if g is not None and round(g.value * 10) == 40:
-            raise InputError(line.at(m), "takes P, and so does the G4 on this line: write them on two lines")
-        p = line.claim("P").get("P")
-        if p is None:
-            raise InputError(line.at(m), "needs P: the output number")
-        if p.value != int(p.value) or p.value < 0:
-            raise InputError(line.at(p), f"an output number is a whole number >= 0, got {p.value:g}")
-        code = int(m.value)
-        self.add_event(line, EventKind.OUTPUT, m.text, output=int(p.value), output_on=code in (62, 64),
-                       output_synchronized=code in (62, 63))
-
-    def apply_dwell(self, line: GcodeLine, groups: dict[str, Word]) -> None:
-        g = groups.get("non-modal")
-        if g is None or round(g.value * 10) != 40:
-            return
-        if "X" in line.words and "motion" not in groups:  # Fanuc's 'G04 X1.5': would move the modal motion here
-            raise InputError(line.at(line.words["X"]), "G4 takes P, the dwell in seconds (Fanuc's G04 X is not read)")
-        p = line.claim("P").get("P")
-        if p is None:
-            raise InputError(line.at(g), "G4 needs P: the dwell time in seconds")
-        if p.value < 0:
-            raise InputError(line.at(p), f"dwell time must be >= 0 s, got {p.value:g}")
-        self.add_event(line, EventKind.DWELL, g.text, dwell_s=p.value)
-
-    def apply_tool_length(self, line: GcodeLine, g: Word | None) -> None:
-        if "H" in line.words and (g is None or round(g.value * 10) != 430):
-            raise InputError(line.at(line.words["H"]), "H without G43 (tool length offset from the tool table)")
-        if g is None:
-            return
-        code = round(g.value * 10)
-        if code == 490:
-            self.offsets.tool_length_mm = 0.0
-        elif code == 430:
-            h = line.claim("H").get("H")
-            number = self.tool_number(line, h) if h is not None else (self.tool_loaded or 0)
-            table = self.options.tool_table
-            if number != 0 and table is None:
-                raise InputError(line.at(h or g), f"G43 needs a tool table for tool {number} (none given)")
-            self.offsets.tool_length_mm = table.length_mm(number) if table is not None else 0.0
-
     def apply_path_control(self, line: GcodeLine, g: Word | None) -> None:
         if g is None:
             return
@@ -637,119 +522,6 @@ class GcodeParser(NurbsReading, OwordRunning, OffsetCommands, ModalStateCommands
         self.events.append(event)
         if event.stops_motion and len(self.blocks) and not self.blocks.last_exact_stop:
             self.blocks.mark_exact_stop_last()
-
-    # ---- moves ------------------------------------------------------------------------
-    def move_with_g53(self, line: GcodeLine, motion_on_line: bool, non_modal: Word | None) -> None:
-        code = round(non_modal.value * 10) if non_modal is not None else None
-        self.apply_stored_offsets(code)
-        if code != 530:
-            self.move(line, motion_on_line)
-            return
-        assert non_modal is not None
-        if self.motion not in (RAPID, LINE):
-            raise InputError(line.at(non_modal), "G53 needs G0 or G1 (machine coordinates for a straight move)")
-        if not self.absolute:
-            raise InputError(line.at(non_modal), "G53 needs G90: machine coordinates are absolute")
-        self.offsets.machine_mode = True
-        try:
-            self.move(line, motion_on_line)
-        finally:
-            self.offsets.machine_mode = False
-
-    def move(self, line: GcodeLine, motion_on_line: bool) -> None:
-        axis_words = {k: w for k, w in line.words.items() if k != "F"}
-        if self.motion is None:
-            return
-        allowed = MOTION_WORDS[self.motion]
-        for letter, w in axis_words.items():
-            if letter not in allowed or (self.motion == NURBS_LINUXCNC and letter == "XYZ"[PLANES[self.plane].normal_axis]):
-                raise InputError(line.at(w), f"{letter} not allowed in a {g_name(self.motion)} block")
-        if not motion_on_line and (not axis_words or self.motion == NURBS_LINUXCNC_END):
-            return
-        handler = {RAPID: self.straight, LINE: self.straight, ARC_CW: self.arc, ARC_CCW: self.arc,
-                   NURBS_FANUC: self.fanuc_nurbs, NURBS_LINUXCNC: self.linuxcnc_nurbs,
-                   NURBS_LINUXCNC_END: self.linuxcnc_end}[self.motion]
-        handler(line, motion_on_line)
-
-    def need_feed(self, line: GcodeLine) -> float:
-        if self.feed_mm_s is None:
-            raise InputError(line.where, f"no feed rate: F missing for {g_name(self.motion or 0)}")
-        return self.feed_mm_s
-
-    def target(self, line: GcodeLine, base: NDArray[np.float64], letters: str = "XYZ") -> NDArray[np.float64]:
-        """Programmed point in machine mm: G90 absolute (+ offsets) or G91 relative to ``base``."""
-        point = base.copy()
-        offset = self.offsets.total()
-        for axis, letter in enumerate("XYZ"):
-            w = line.words.get(letter)
-            if w is not None and letter in letters:
-                value = w.value * self.mm_per_unit
-                point[axis] = value + offset[axis] if self.absolute else base[axis] + value
-        return point
-
-    def add_block(self, kind: BlockKind, shape: NurbsCurve | LineShape | ArcShape, feed_mm_s: float | None,
-                  line: GcodeLine) -> None:
-        if not self.skipping:  # before the start line: only where the move ends counts
-            self.blocks.add(kind, shape, feed_mm_s, line.source, self.exact_stop_mode, self.blend_tolerance_mm,
-                            self.smoothing_tolerance_mm)
-        self.position = shape.end_point if isinstance(shape, NurbsCurve) else shape.end.copy()
-
-    def arcs_batched(self) -> bool:
-        """gcode_fast computes arcs a run at a time (arcs.arc_geometry, as arc_shape) when the
-        reader's arc builder is arc_shape; another (a test's oracle) takes every arc itself."""
-        return arc_nurbs is arc_shape
-
-    def add_straight(self, line: GcodeLine, end: NDArray[np.float64], rapid: bool) -> None:
-        feed = None if rapid else self.need_feed(line)
-        if math.dist(end.tolist(), self.position.tolist()) <= ZERO_MOVE_MM:
-            return
-        if self.skipping:  # before the start line: no curve to build, only where it ends
-            self.position = end
-            return
-        self.add_block(BlockKind.RAPID if rapid else BlockKind.LINE, LineShape(self.position, end), feed, line)
-
-    def straight(self, line: GcodeLine, _explicit: bool) -> None:
-        self.add_straight(line, self.target(line, self.position), rapid=self.motion == RAPID)
-
-    def arc(self, line: GcodeLine, _explicit: bool) -> None:
-        feed = self.need_feed(line)
-        plane = PLANES[self.plane]
-        clockwise = self.motion == ARC_CW
-        start = self.position
-        end = self.target(line, start)
-        offsets = [line.words[k] for k in "IJK" if k in line.words]
-        radius = line.words.get("R")
-        turns = line.words.get("P")
-        for w in offsets:
-            if w.letter not in plane.offset_letters:
-                raise InputError(line.at(w), f"{w.letter} not allowed in a {plane.code} arc (centre offsets {' '.join(plane.offset_letters)})")
-        if radius is not None and offsets:
-            raise InputError(line.at(radius), "give either R or I J K for an arc, not both")
-        if turns is not None and (turns.value != int(turns.value) or turns.value < 1):
-            raise InputError(line.at(turns), f"P (turns) must be a whole number >= 1, got {turns.value:g}")
-        inch = self.mm_per_unit != 1.0
-        start_xyz, end_xyz = start.tolist(), end.tolist()  # plain floats: arcs.py computes on them
-        try:
-            if radius is not None:
-                centre = centre_from_radius(plane, start_xyz, end_xyz, radius.value * self.mm_per_unit, clockwise, radius.text)
-                shape = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, False, inch, int(turns.value) if turns else 1)
-            elif offsets:
-                centre = start_xyz.copy()
-                origin = self.offsets.total().tolist() if self.arc_absolute else None
-                for w in offsets:
-                    axis = "IJK".index(w.letter)
-                    value = w.value * self.mm_per_unit
-                    centre[axis] = value + origin[axis] if origin is not None else start_xyz[axis] + value
-                shape = arc_nurbs(plane, start_xyz, end_xyz, centre, clockwise, True, inch, int(turns.value) if turns else 1)
-            else:
-                gword = line.g(self.motion or 0)
-                raise ArcError(f"an arc needs centre offsets {' '.join(plane.offset_letters)} or a radius R", gword.text if gword else "")
-        except ArcError as err:
-            self.position = end  # the next line starts where this one was meant to end
-            word = line.words[err.word].text if err.word in line.words else err.word
-            word = word or " ".join(w.text for w in offsets) or (radius.text if radius else "")
-            raise InputError(line.at(word), str(err)) from None
-        self.add_block(BlockKind.ARC, shape, feed, line)
 
 
 def err_line(err: InputError) -> int:

@@ -44,7 +44,7 @@ _NOT_PLAIN = re.compile(rf"[^\n{PLAIN_CHARACTERS}]")
 _BLANK_AFTER_BREAK = re.compile(r"\n[ \t]*\r?(?=\n|\Z)")
 _BLANK_FIRST = re.compile(r"[ \t]*\r?(?:\n|\Z)")
 MAX_ABS_VALUE = 1e9  # gcode_words.MAX_ABS_VALUE: larger values go to the general path (its error)
-ZERO_MOVE_MM = 1e-9  # gcode.ZERO_MOVE_MM
+ZERO_MOVE_MM = 1e-9  # gcode_moves.ZERO_MOVE_MM
 LINE_CODES = (0, 10)  # G0, G1 as round(10 * value)
 NAN = math.nan
 UNUSED_CENTRE_WORD = {17: 2, 18: 1, 19: 0}  # K in G17, J in G18, I in G19 (arcs.PLANES' offset letters)

@@ -9,7 +9,7 @@
   the spindle and outputs as they are. An e-stop also quick-stops the axes without a job.
 
 Every method is a no-op without devices, so the controller calls them unconditionally.
-Jobs are the controller's ActiveJob (handle, record, plan, events, machine_fault, stop_requested).
+Jobs are service.active_job's ActiveJob (handle, record, plan, events, machine_fault, stop_requested).
 """
 
 from __future__ import annotations
@@ -23,13 +23,12 @@ import numpy as np
 
 from nurbsmotion.errors import FieldbusError
 from nurbsmotion.log import kv
+from nurbsmotion.service.active_job import JobPlan
 from nurbsmotion.service.devices import MachineDevices
 from nurbsmotion.service.job_events import JobEvents, RowEvent, event_rows, with_spindle_waits
 from nurbsmotion.service.machine_io import AxisMotion, SafetyTrip
 from nurbsmotion.service.job_common import JOG_NAME, MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
-
-JobPlan = PlannedJob | StreamedJob
 
 log = logging.getLogger(__name__)
 DIRECTION_ROWS = 5  # axis_direction compares the set-points this many rows before and after
