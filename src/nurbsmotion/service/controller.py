@@ -32,7 +32,7 @@ from nurbsmotion.service.machine_io import AxisMotion
 from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, save_state, selected, with_offset
 from nurbsmotion.service.motion import JobHandle, MotionLink, Simulation
-from nurbsmotion.service.job_common import MDI_NAME, PlannedJob, block_lines
+from nurbsmotion.service.job_common import MDI_NAME, PlannedJob
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.rate import effective_rate
 from nurbsmotion.service.start_line import resume_of, start_line_options
@@ -458,8 +458,6 @@ class Controller:
         try:
             record = self.records.create(name, text)
             record.write_config(config_dict(self.config, self.link.axis_map.offset_counts))
-            if plan.program is not None:  # the lines an interrupted job's record names (records.py)
-                record.write_block_lines(block_lines(plan.program))
             plan.write_records(record)
             return record
         except OSError as err:

@@ -40,8 +40,9 @@ from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.checked_store import CheckedStore
-from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
-                                                PlannerWorker, PlanRequest, TracePath, as_error, receive_program)
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, PathLengths, PlanEnd,
+                                                PlannedChunk, PlannerWorker, PlanRequest, TracePath, as_error,
+                                                receive_program)
 from nurbsmotion.service.rate import max_rate
 
 log = logging.getLogger(__name__)
@@ -344,7 +345,7 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     (InputError naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
     connection = worker.connect(request)
-    program, from_store = checked_program(name, worker, connection[1])
+    program, from_store = checked_program(name, worker, connection[1], key=request.checked_key)
     if store is not None:
         store.note(from_store, name)
     job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
@@ -370,9 +371,10 @@ def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarr
 
 
 def checked_program(name: str, worker: PlannerWorker, results: Any,
-                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> tuple[Program, bool]:
-    """The worker's first answer: (the program parsed and checked, whether it came from the
-    checked-program store), or the errors refusing it."""
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "") -> tuple[Program, bool]:
+    """The worker's first answer: (the program parsed and checked, mapped from its store entry
+    ``key`` or received in slices, whether it came from the checked-program store), or the
+    errors refusing it."""
     try:
         if not results.poll(timeout_s):
             worker.abandon()
@@ -383,7 +385,10 @@ def checked_program(name: str, worker: PlannerWorker, results: Any,
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
         try:
-            return receive_program(results, answer, timeout_s), answer.from_store
+            return receive_program(results, answer, timeout_s, key), answer.from_store
+        except EntryGone as err:
+            worker.abandon()
+            raise InputError(name, str(err)) from None
         except TimeoutError as err:
             worker.abandon()
             raise InputError(name, f"the planner worker did not send {err}") from None
