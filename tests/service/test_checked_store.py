@@ -3,6 +3,7 @@ anything else (another key, a corrupt file, an older format) is read and checked
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import mmap
 import os
@@ -125,3 +126,9 @@ def test_a_truncated_or_damaged_entry_is_refused_with_one_line(tmp_path: Path, c
     caplog.set_level(logging.INFO, logger=checked_store.__name__)
     assert load_checked(path, "k") is None
     assert len(caplog.records) == 1 and "checked_entry_" in caplog.records[0].getMessage()
+
+
+def test_the_text_digest_is_the_sha256_of_the_whole_text_across_chunks(monkeypatch):
+    monkeypatch.setattr(checked_store, "DIGEST_CHUNK", 7)
+    text = "G01 X1 (Weiß, 直线)\n" * 5
+    assert text_digest(text) == hashlib.sha256(text.encode("utf-8")).hexdigest()
