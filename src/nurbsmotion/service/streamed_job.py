@@ -24,7 +24,7 @@ import collections
 import logging
 import threading
 import time
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -45,6 +45,9 @@ from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, Entr
                                                 receive_program)
 from nurbsmotion.service.rate import max_rate
 
+if TYPE_CHECKING:
+    from nurbsmotion.service.program_check import ProgramChecker
+
 log = logging.getLogger(__name__)
 
 CHUNK_CYCLES = 2000  # set-points per planned chunk after the first (2 s at 1 ms)
@@ -53,6 +56,7 @@ MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s a
 FIRST_CHUNK_TIMEOUT_S = 60.0
 END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
 FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
+LARGE_PROGRAM_CHARS = 4_000_000  # ~130,000 CAM lines: read and checked apart (checked_apart), not in the worker
 
 
 def highest_feed_mm_s(program: Program, limits: PlanLimits) -> float:
@@ -339,13 +343,16 @@ class StreamedJob:
 def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
                          chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
-                         store: CheckedStore | None = None) -> StreamedJob:
+                         store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> StreamedJob:
     """Have the worker parse and check ``text`` completely (or load it checked from ``store``,
-    service.checked_store) and start planning it; return once the first chunk is planned
-    (InputError naming file:line for anything refused; nothing moves)."""
+    service.checked_store; a large program not there is read and checked by ``checker`` first,
+    checked_apart) and start planning it; return once the first chunk is planned (InputError
+    naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
+    checked_now = checked_apart(request, checker)
     connection = worker.connect(request)
     program, from_store = checked_program(name, worker, connection[1], key=request.checked_key)
+    from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
     job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
@@ -353,6 +360,21 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     job.summary["checked_from_store"] = from_store
     job.begin()
     return job
+
+
+def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
+    """Read and check a program of LARGE_PROGRAM_CHARS or more that is not in the store in the
+    checker process (service.program_check), which stores it, so that the planner worker loads
+    it from the store as any stored program: reading a 10^6-line program peaks at ~350 MB
+    (issue 25: the worker < 300 MB, `check` < 500 MB), and the checker's time-out is the
+    check's (minutes), not the first chunk's. True when it checked it (InputError: refused)."""
+    if checker is None or request.checked_path is None or len(request.text) < LARGE_PROGRAM_CHARS \
+            or request.checked_path.exists():
+        return False
+    report = checker.check(request, tuple(a.name for a in request.config.axes))
+    if report.errors:
+        raise as_error(report.errors)
+    return not report.from_store
 
 
 def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
