@@ -138,7 +138,8 @@ ZIGZAG = "G21 G90 F6000\n" + "".join(f"G01 X{i % 2} Y{i * 0.02:.2f}\n" for i in 
 def test_from_a_store_the_daemon_maps_the_checked_program_and_the_worker_writes_blocks_csv(tmp_path, planner_worker):
     """Issue 25 item 4: the checked program reaches the daemon as its store entry, mapped (no
     copy of the blocks in the daemon, whether just checked or loaded), and the job record's
-    blocks.csv, every block's line, comes from the worker as it plans."""
+    blocks.csv, every block's line, comes from the worker as it plans. The program's text goes
+    to the worker only when it must read it."""
     plans: list[StreamedJob] = []
     with streaming_controller(tmp_path, planner_worker, CheckedStore(tmp_path / "checked", "cfg"), plans) as controller:
         for from_store in (False, True):
@@ -150,6 +151,12 @@ def test_from_a_store_the_daemon_maps_the_checked_program_and_the_worker_writes_
             assert isinstance(memory_of(plan.program.blocks.text.data), mmap.mmap)
             lines = (Path(job["folder"]) / "blocks.csv").read_text().splitlines()
             assert lines == ["line"] + [str(n) for n in range(2, 122)]  # G21 G90 F6000 on line 1
+        # the entry is there, so the worker gets the request without the text; damaged, it asks for it
+        entry, = (tmp_path / "checked").glob("*.checked")
+        entry.write_bytes(entry.read_bytes()[:-8])
+        job = ended(controller, submit(controller, ZIGZAG, "zig.nc"))
+        assert job["outcome"]["outcome"] == "completed" and plans[-1].summary["checked_from_store"] is False
+        assert isinstance(memory_of(plans[-1].program.blocks.starts), mmap.mmap)  # stored again, mapped
     assert len(list((tmp_path / "checked").glob("*.checked"))) == 1
 
 

@@ -15,8 +15,9 @@ import pytest
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.program.gcode import parse_gcode
 from nurbsmotion.service import planner_worker
-from nurbsmotion.service.planner_worker import (CheckedProgram, EntryGone, PlanRequest, ProgramBlocks, receive_program,
-                                                send_program, store_checked)
+from nurbsmotion.errors import InputError
+from nurbsmotion.service.planner_worker import (CheckedProgram, EntryGone, PlanRequest, ProgramBlocks, read_or_load,
+                                                receive_program, send_program, store_checked)
 from tests.helpers import memory_of
 
 
@@ -78,3 +79,23 @@ def test_with_a_store_entry_only_the_outline_crosses_and_the_daemon_maps_the_ent
     (tmp_path / "k.checked").write_bytes(b"")  # gone or damaged between the worker and the daemon: one line
     with pytest.raises(EntryGone, match="k.checked cannot be read"):
         receive_program(None, sent[0], timeout_s=0.0, key="k")
+
+
+def test_a_withheld_text_is_asked_for_only_when_the_entry_cannot_be_loaded(tmp_path, monkeypatch):
+    monkeypatch.setattr(planner_worker, "read_and_check", lambda r: parse_gcode(r.text, r.name, r.start_xyz))  # no machine
+    program = parse_gcode(zigzag(20), "z.nc", np.zeros(3))
+    request = PlanRequest(None, "z.nc", None, np.zeros(3), ReadOptions(), [0, 1, 2], 100, 10,  # type: ignore[arg-type]
+                          tmp_path / "k.checked", "k")
+    asked: list[str] = []
+
+    def text_of() -> str:
+        asked.append("text")
+        return zigzag(20)
+
+    store_checked(request, program)
+    assert read_or_load(request, text_of)[1] is True and asked == []
+    request.checked_path.write_bytes(b"damaged")
+    again, from_store = read_or_load(request, text_of)
+    assert not from_store and asked == ["text"] and again.blocks == program.blocks
+    with pytest.raises(InputError, match="^z.nc: the program's text was not sent and its checked entry cannot be read$"):
+        read_or_load(request)

@@ -40,7 +40,7 @@ import time
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -79,7 +79,7 @@ class PlanRequest:
 
     config: MachineConfig
     name: str
-    text: str
+    text: str | None  # None: withheld, its entry is in the store (the worker asks for it with NeedText if it must read it)
     start_xyz: np.ndarray
     options: ReadOptions
     columns: list[int]
@@ -87,6 +87,17 @@ class PlanRequest:
     first_chunk_cycles: int
     checked_path: Path | None = None  # the checked-program entry to load, or write once checked (service.checked_store)
     checked_key: str = ""
+
+
+@dataclass(frozen=True)
+class NeedText:
+    """The worker must read the program after all (its store entry is gone or unsound): the
+    daemon answers with ProgramText."""
+
+
+@dataclass(frozen=True, eq=False)
+class ProgramText:
+    text: str
 
 
 @dataclass(frozen=True)
@@ -211,7 +222,7 @@ class WorkerJob:
         errors: tuple[tuple[str, str], ...] = ()
         finished = False
         try:
-            program, from_store, entry = checked_and_stored(self.request)
+            program, from_store, entry = checked_and_stored(self.request, self._ask_for_text)
             self.request = dataclasses.replace(self.request, text="")  # read: its text is not kept for the job
             send_program(self.results, program, from_store, entry)
             self.block_lines = BlockLinesFile(program)
@@ -310,6 +321,20 @@ class WorkerJob:
                 found[row] = (row, f"{event.code} at {event.source}", None, False)
         return tuple(found[row] for row in sorted(found))
 
+    def _ask_for_text(self) -> str:
+        """The program's text from the daemon (NeedText, then its ProgramText; InputError if the
+        job is cancelled meanwhile, WorkerGone if the daemon is)."""
+        self.results.send(NeedText())
+        while True:
+            command = self.commands.recv()
+            if isinstance(command, ProgramText):
+                return command.text
+            if isinstance(command, CancelPlan):
+                self.cancelled = True
+                raise InputError(self.request.name, "cancelled before its text came")
+            if command is None:
+                raise WorkerGone()
+
     def _read_commands(self, block: bool) -> bool:
         """Apply the commands waiting (or, ``block``, wait for one); True once cancelled."""
         while block or self.commands.poll():
@@ -379,6 +404,8 @@ class BlockLengths:
 def read_and_check(request: PlanRequest) -> Program:
     """The request's program, parsed and checked before motion (InputError otherwise)."""
     r = request
+    if r.text is None:
+        raise InputError(r.name, "the program's text was not sent")  # read_or_load asks for a withheld text first
     # No cyclic collection while parsing: it keeps ~10 objects a word, and the collector's
     # passes over the worker's heap took ~0.1 s of a long program's parse (Wang x 460 in the
     # worker: checked program back in 0.88-1.13 s with them, 0.79-0.80 s without; x 100
@@ -389,10 +416,11 @@ def read_and_check(request: PlanRequest) -> Program:
     return program
 
 
-def read_or_load(request: PlanRequest) -> tuple[Program, bool]:
+def read_or_load(request: PlanRequest, text_of: Callable[[], str] | None = None) -> tuple[Program, bool]:
     """(the checked program, True) from the store when its entry is there and sound (mapped,
     and touched: the store prunes the least recently used), else (read and checked now,
-    False) (service.checked_store)."""
+    False) (service.checked_store); a request whose text was withheld gets it from
+    ``text_of`` then."""
     if request.checked_path is not None:
         from nurbsmotion.service.checked_store import load_checked
 
@@ -400,6 +428,10 @@ def read_or_load(request: PlanRequest) -> tuple[Program, bool]:
         if program is not None:
             touch(request.checked_path)
             return program, True
+    if request.text is None:
+        if text_of is None:
+            raise InputError(request.name, "the program's text was not sent and its checked entry cannot be read")
+        request = dataclasses.replace(request, text=text_of())
     return read_and_check(request), False
 
 
@@ -425,12 +457,13 @@ def store_checked(request: PlanRequest, program: Program) -> Program | None:
     return load_checked(request.checked_path, request.checked_key)
 
 
-def checked_and_stored(request: PlanRequest) -> tuple[Program, bool, Path | None]:
+def checked_and_stored(request: PlanRequest, text_of: Callable[[], str] | None = None
+                       ) -> tuple[Program, bool, Path | None]:
     """The request's checked program (from the store, or read, checked and stored now), whether
     it came from the store, and the entry that holds it (None: no store, or not writable).
     A program just read is planned from its entry too, the copy read dropped: the worker's
-    memory holds the pages it plans, not the whole program."""
-    program, from_store = read_or_load(request)
+    memory holds the pages it plans, not the whole program. ``text_of``: read_or_load's."""
+    program, from_store = read_or_load(request, text_of)
     if from_store:
         return program, True, request.checked_path
     stored = store_checked(request, program)
@@ -637,4 +670,4 @@ def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
     return found[0] if len(found) == 1 else InputErrors(found)
 
 
-__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "ProgramBlocks", "send_program", "receive_program", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]
+__all__ = ["PlannerWorker", "PlanRequest", "NeedText", "ProgramText", "CheckedProgram", "ProgramBlocks", "send_program", "receive_program", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]

@@ -21,6 +21,7 @@ The daemon's process only receives, copies and indexes rows: the planner never h
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import threading
 import time
@@ -40,9 +41,9 @@ from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.checked_store import CheckedStore
-from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, PathLengths, PlanEnd,
-                                                PlannedChunk, PlannerWorker, PlanRequest, TracePath, as_error,
-                                                receive_program)
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, NeedText, PathLengths,
+                                                PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, ProgramText, TracePath,
+                                                as_error, receive_program)
 from nurbsmotion.service.rate import max_rate
 
 if TYPE_CHECKING:
@@ -350,8 +351,8 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
     checked_now = checked_apart(request, checker)
-    connection = worker.connect(request)
-    program, from_store = checked_program(name, worker, connection[1], key=request.checked_key)
+    connection = worker.connect(withheld(request))
+    program, from_store = checked_program(name, worker, connection, key=request.checked_key, text=text)
     from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
@@ -362,13 +363,22 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     return job
 
 
+def withheld(request: PlanRequest) -> PlanRequest:
+    """The request without its text when its store entry is there: the worker loads the entry
+    and asks for the text (NeedText) only if it cannot (a 10^6-line program's 30 MB pickled,
+    sent and unpickled again took ~0.4 s before the first chunk, and held twice in memory)."""
+    if request.checked_path is None or not request.checked_path.exists():
+        return request
+    return dataclasses.replace(request, text=None)
+
+
 def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
     """Read and check a program of LARGE_PROGRAM_CHARS or more that is not in the store in the
     checker process (service.program_check), which stores it, so that the planner worker loads
     it from the store as any stored program: reading a 10^6-line program peaks at ~350 MB
     (issue 25: the worker < 300 MB, `check` < 500 MB), and the checker's time-out is the
     check's (minutes), not the first chunk's. True when it checked it (InputError: refused)."""
-    if checker is None or request.checked_path is None or len(request.text) < LARGE_PROGRAM_CHARS \
+    if checker is None or request.checked_path is None or len(request.text or "") < LARGE_PROGRAM_CHARS \
             or request.checked_path.exists():
         return False
     report = checker.check(request, tuple(a.name for a in request.config.axes))
@@ -392,16 +402,21 @@ def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarr
                        min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key)
 
 
-def checked_program(name: str, worker: PlannerWorker, results: Any,
-                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "") -> tuple[Program, bool]:
+def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any],
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = "") -> tuple[Program, bool]:
     """The worker's first answer: (the program parsed and checked, mapped from its store entry
     ``key`` or received in slices, whether it came from the checked-program store), or the
-    errors refusing it."""
+    errors refusing it. A worker that asks for the program's ``text`` (NeedText) gets it."""
+    commands, results = connection
     try:
-        if not results.poll(timeout_s):
-            worker.abandon()
-            raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
-        answer = results.recv()
+        answer = NeedText()
+        while isinstance(answer, NeedText):
+            if not results.poll(timeout_s):
+                worker.abandon()
+                raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
+            answer = results.recv()
+            if isinstance(answer, NeedText):
+                commands.send(ProgramText(text))
     except (EOFError, OSError):
         worker.job_ended()
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
