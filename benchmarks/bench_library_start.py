@@ -102,6 +102,7 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
     """Send ``cmd`` from a client process; seconds until the master's job sends its second row
     (the first that moves) and the peaks meanwhile, then a controlled stop and the axes back
     at 0 (MDI)."""
+    recover(client)
     reset_peak(os.getpid(), worker_pid)
     sender = request(socket, cmd, fields, program_file)
     job = master_job(master)
@@ -119,10 +120,20 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
         moved = time.perf_counter()
     client.call("stop")
     idle(client)
+    recover(client)
     client.call("mdi", text="G53 G0 X0 Y0 Z0")
     idle(client)
     return {"s": moved - started, "from_store": answer["job"]["summary"]["checked_from_store"],
             "blocks": answer["job"]["summary"]["blocks"], "daemon_mb": daemon_mb, "worker_mb": worker_mb}
+
+
+def recover(client: Any) -> None:
+    """Drives in fault (a loaded host's lost heartbeat, not what is measured): reset them."""
+    for _ in range(40):
+        if client.call("status")["state"] != "fault":
+            return
+        client.request("reset")  # refused while the drives come back: asked again
+        time.sleep(0.5)
 
 
 def checker_pid(daemon: Any) -> int | None:
