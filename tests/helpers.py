@@ -1,5 +1,5 @@
 """Helpers every test folder shares (``from tests.helpers import wait_for``): one polling wait,
-and a master on simulated drives."""
+a master on simulated drives, and what holds an array's memory."""
 
 from __future__ import annotations
 
@@ -39,6 +39,13 @@ class SimulatedMachine:
     master: Master
     sim: SimNetwork
     probe: can.BusABC  # a second bus on the channel: frames a test injects reach master and drives
+
+
+def memory_of(values: Any) -> object:
+    """The object that owns an array's memory, its bases followed (an mmap.mmap: a mapped file)."""
+    while getattr(values, "base", None) is not None:
+        values = values.base
+    return values.obj if isinstance(values, memoryview) else values
 
 
 @contextlib.contextmanager

@@ -9,6 +9,7 @@ from typing import Any
 
 import pytest
 
+from nurbsmotion.service import streamed_job
 from nurbsmotion.service.client import Client
 from tests.helpers import wait_for
 from tests.integration.daemon_helpers import daemon_in_process
@@ -27,6 +28,16 @@ def job_end(daemon: Any, job_id: str, timeout_s: float = 30.0) -> dict[str, Any]
     wait_for(lambda: daemon.controller.last_job() is not None and daemon.controller.last_job()["id"] == job_id,
                timeout_s, f"the end of job {job_id}")
     return daemon.controller.job_info(job_id)["job"]
+
+
+def run_twice(daemon: Any, name: str, text: str) -> tuple[bool, bool]:
+    """Submit ``text`` as ``name`` twice, each to its end: whether each came from the store."""
+    from_store = []
+    for _ in range(2):
+        job = call(daemon, "submit", name=name, program=text)["job"]
+        job_end(daemon, job["id"])
+        from_store.append(job["summary"]["checked_from_store"])
+    return from_store[0], from_store[1]
 
 
 @pytest.fixture()
@@ -54,12 +65,7 @@ def test_a_program_added_is_checked_once_and_started_by_name_without_a_second_ch
         assert daemon.store.hits == 1 and daemon.store.misses == 1  # the add read it, the start did not
 
         # run FILE uses the same store: the first submit of a new name reads it, the second not
-        first = call(daemon, "submit", name="other.nc", program=SQUARE)
-        job_end(daemon, first["job"]["id"])
-        second = call(daemon, "submit", name="other.nc", program=SQUARE)
-        job_end(daemon, second["job"]["id"])
-        assert (first["job"]["summary"]["checked_from_store"], second["job"]["summary"]["checked_from_store"]) == \
-            (False, True)
+        assert run_twice(daemon, "other.nc", SQUARE) == (False, True)
         assert daemon.store.counters()["hits"] == 2 and daemon.store.counters()["misses"] == 2
 
         assert call(daemon, "programs.remove", name="square.nc")["ok"]
@@ -163,3 +169,15 @@ def test_a_program_over_the_size_limit_is_refused_and_not_added(data_dir):
                                                   "0.001 MB limit (web.max_upload_mb)")
         assert call(daemon, "programs.add", name="small.nc", program=SQUARE)["ok"]
         assert [p["name"] for p in call(daemon, "programs.list")["programs"]] == ["small.nc"]
+
+
+def test_a_large_program_run_the_first_time_is_checked_in_the_checker_process_then_loaded(data_dir, monkeypatch):
+    """Issue 25 item 7: reading a large program peaks at hundreds of MB: in the checker process,
+    not the planner worker, which loads it from the store as any stored program."""
+    monkeypatch.setattr(streamed_job, "LARGE_PROGRAM_CHARS", 10)  # SQUARE and BAD count as large
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        refused = call(daemon, "submit", name="bad.nc", program=BAD)
+        assert not refused["ok"] and refused["error"].startswith("bad.nc:3:"), refused
+        assert daemon.programs.checker._pool is not None  # the checker read it
+        assert run_twice(daemon, "big.nc", SQUARE) == (False, True)
+        assert daemon.store.counters()["misses"] == 1 and daemon.store.counters()["hits"] == 1

@@ -4,10 +4,13 @@ every request lands in a job made of many chunks, mid-chunk or at a boundary."""
 
 from __future__ import annotations
 
+import contextlib
+import mmap
 import os
 import signal
 import time
 import uuid
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -16,13 +19,16 @@ import pytest
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.service import streamed_job
+from nurbsmotion.program import ReadOptions
+from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.link import open_link
 from nurbsmotion.service.records import JobRecords
-from nurbsmotion.service.streamed_job import prepare_streamed_job
+from nurbsmotion.service.planner_worker import PlannerWorker
+from nurbsmotion.service.streamed_job import StreamedJob, prepare_streamed_job
 from nurbsmotion.service.verify import held_plan_held, planned_counts, recorded_counts
 from tests.integration.daemon_helpers import CONFIG
-from tests.helpers import wait_for
+from tests.helpers import memory_of, wait_for
 
 CHUNK = 100
 # ~4.5 s at F1200: about 9 chunks, most of them ending while the axes move (a stop tail each)
@@ -30,17 +36,34 @@ LONG = "G21 G90\nG01 X40 Y20 F1200\nG01 X0 Y0\n"
 WITH_M0 = "G21 G90\nG01 X40 Y20 F1200\nG01 X30 Y10\nM0\nG01 X-20 Y20\nG01 X0 Y0\n"
 
 
-@pytest.fixture()
-def machine(tmp_path, planner_worker):
+@contextlib.contextmanager
+def streaming_controller(tmp_path: Path, planner_worker: PlannerWorker, store: CheckedStore | None = None,
+                         plans: list[StreamedJob] | None = None) -> Iterator[Controller]:
+    """The controller on simulated drives, its jobs streamed in CHUNKs (from ``store`` if given);
+    each job's plan appended to ``plans``."""
     text = CONFIG.format(channel=f"st-{uuid.uuid4().hex}", socket=tmp_path / "ctl.sock", data_dir=tmp_path / "var")
     config = parse_config(text, str(tmp_path / "machine.yaml"))
     link, simulation = open_link(config)
-    controller = Controller(config, link, lambda n, t, s, o: prepare_streamed_job(n, t, config, planner_worker, s, o, CHUNK),
-                            JobRecords(config.data_dir), simulation)
-    yield controller
-    controller.shutdown(5.0)
-    if simulation is not None:
-        simulation.stop()
+
+    def prepare(name: str, text: str, start: np.ndarray, options: ReadOptions) -> StreamedJob:
+        plan = prepare_streamed_job(name, text, config, planner_worker, start, options, CHUNK, store=store)
+        if plans is not None:
+            plans.append(plan)
+        return plan
+
+    controller = Controller(config, link, prepare, JobRecords(config.data_dir), simulation)
+    try:
+        yield controller
+    finally:
+        controller.shutdown(5.0)
+        if simulation is not None:
+            simulation.stop()
+
+
+@pytest.fixture()
+def machine(tmp_path, planner_worker):
+    with streaming_controller(tmp_path, planner_worker) as controller:
+        yield controller
 
 
 def submit(controller: Controller, text: str, name: str = "long.nc") -> str:
@@ -106,6 +129,35 @@ def test_progress_before_the_lengths_is_by_block_then_by_length():
     plan._take_lengths(PathLengths(np.array([1.0, 3.0, 4.0, 2.0])))
     assert plan.percent_at(15) == 10.0 and plan.percent_at(25) == 40.0  # 1 of 10 mm, 4 of 10 mm
     assert plan.summary["length_mm"] == 10.0
+
+
+# back where it started: the second run starts there too (the store's key includes the start)
+ZIGZAG = "G21 G90 F6000\n" + "".join(f"G01 X{i % 2} Y{i * 0.02:.2f}\n" for i in range(1, 120)) + "G01 X0 Y0\nM30\n"
+
+
+def test_from_a_store_the_daemon_maps_the_checked_program_and_the_worker_writes_blocks_csv(tmp_path, planner_worker):
+    """Issue 25 item 4: the checked program reaches the daemon as its store entry, mapped (no
+    copy of the blocks in the daemon, whether just checked or loaded), and the job record's
+    blocks.csv, every block's line, comes from the worker as it plans. The program's text goes
+    to the worker only when it must read it."""
+    plans: list[StreamedJob] = []
+    with streaming_controller(tmp_path, planner_worker, CheckedStore(tmp_path / "checked", "cfg"), plans) as controller:
+        for from_store in (False, True):
+            job = ended(controller, submit(controller, ZIGZAG, "zig.nc"))
+            assert job["outcome"]["outcome"] == "completed"
+            plan = plans[-1]
+            assert plan.summary["checked_from_store"] is from_store and len(plan.program.blocks) == 120
+            assert isinstance(memory_of(plan.program.blocks.starts), mmap.mmap)
+            assert isinstance(memory_of(plan.program.blocks.text.data), mmap.mmap)
+            lines = (Path(job["folder"]) / "blocks.csv").read_text().splitlines()
+            assert lines == ["line"] + [str(n) for n in range(2, 122)]  # G21 G90 F6000 on line 1
+        # the entry is there, so the worker gets the request without the text; damaged, it asks for it
+        entry, = (tmp_path / "checked").glob("*.checked")
+        entry.write_bytes(entry.read_bytes()[:-8])
+        job = ended(controller, submit(controller, ZIGZAG, "zig.nc"))
+        assert job["outcome"]["outcome"] == "completed" and plans[-1].summary["checked_from_store"] is False
+        assert isinstance(memory_of(plans[-1].program.blocks.starts), mmap.mmap)  # stored again, mapped
+    assert len(list((tmp_path / "checked").glob("*.checked"))) == 1
 
 
 def test_records_are_written_while_the_job_runs(machine):

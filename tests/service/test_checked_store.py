@@ -3,15 +3,23 @@ anything else (another key, a corrupt file, an older format) is read and checked
 
 from __future__ import annotations
 
+import hashlib
+import logging
+import mmap
 import os
+import pickle
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from nurbsmotion.program import ReadOptions
+from nurbsmotion.program.curve_yaml import parse_curve_yaml
 from nurbsmotion.program.gcode import parse_gcode
+from nurbsmotion.program.records import BlockRecords
 from nurbsmotion.service import checked_store
 from nurbsmotion.service.checked_store import CheckedStore, check_key, load_checked, save_checked, text_digest
+from tests.helpers import memory_of
 
 TEXT = "G21 G90\nG01 X4 Y3 F3000\nG02 X0 Y0 I-2 J-1.5\n"
 
@@ -65,3 +73,62 @@ def test_a_miss_prunes_the_folder_to_the_newest_entries(tmp_path: Path):
     assert sorted(p.name for p in tmp_path.iterdir())[0] == "k08.checked"
     assert len(list(tmp_path.iterdir())) == checked_store.MAX_ENTRIES
     assert (store.hits, store.misses) == (1, 1)
+
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+MIXED = (EXAMPLES / "mixed.nc").read_text()  # lines, arcs, a NURBS block (G6.2)
+
+
+def round_trip(tmp_path: Path, program, key: str = "k"):
+    path = tmp_path / f"{key}.checked"
+    save_checked(path, key, program)
+    loaded = load_checked(path, key)
+    assert loaded is not None
+    return loaded
+
+
+@pytest.mark.parametrize("program", [
+    pytest.param(lambda: parse_gcode(MIXED, "mixed.nc", np.zeros(3)), id="lines-arcs-nurbs"),
+    pytest.param(lambda: parse_gcode(MIXED, "mixed.nc", np.zeros(3), ReadOptions(start_line=12, safe_z_mm=5.0)),
+                 id="start-line-approach"),
+    pytest.param(lambda: parse_curve_yaml((EXAMPLES / "wang_table1.yaml").read_text(), "wang_table1.yaml"),
+                 id="yaml-curves"),
+    pytest.param(lambda: parse_gcode("G21 G90\nM3 S1000\nM5\n", "still.nc", np.zeros(3)), id="no-blocks"),
+])
+def test_an_entry_gives_back_the_program_it_stored(tmp_path: Path, program):
+    program = program()
+    loaded = round_trip(tmp_path, program)
+    assert BlockRecords.of_blocks(loaded.blocks) == BlockRecords.of_blocks(program.blocks)  # every number and source
+    assert [str(b.source) + b.source.text for b in loaded.blocks] == [str(b.source) + b.source.text for b in program.blocks]
+    for field in ("name", "events", "coordinates", "tool_at_end", "resume", "reading"):
+        assert getattr(loaded, field) == getattr(program, field), field
+    assert np.array_equal(loaded.start_position, program.start_position)
+
+
+def test_an_entry_is_mapped_not_read(tmp_path: Path):
+    """The blocks' arrays and the text are views of the file (only the pages read are in memory)."""
+    loaded = round_trip(tmp_path, parse_gcode(MIXED, "mixed.nc", np.zeros(3)))
+    blocks = loaded.blocks
+    assert isinstance(blocks, BlockRecords) and blocks.text is not None
+    for values in (blocks.starts, blocks.lines, blocks.arcs.centres, blocks.text.data):
+        assert isinstance(memory_of(values), mmap.mmap) and not values.flags.writeable
+    assert pickle.loads(pickle.dumps(loaded)).blocks == blocks  # sent elsewhere: as bytes
+
+
+@pytest.mark.parametrize("change", [lambda b: b[:-1], lambda b: b + b"\0", lambda b: b[:len(b) // 2],
+                                    lambda b: b.replace(b"nurbsmotion-checked", b"nurbsmotion-checkeX", 1),
+                                    lambda b: b[:70] + b"\xff" * 8 + b[78:]],
+                         ids=["one-byte-short", "one-byte-long", "half", "header", "layout"])
+def test_a_truncated_or_damaged_entry_is_refused_with_one_line(tmp_path: Path, change, caplog):
+    path = tmp_path / "k.checked"
+    save_checked(path, "k", parse_gcode(MIXED, "mixed.nc", np.zeros(3)))
+    path.write_bytes(change(path.read_bytes()))
+    caplog.set_level(logging.INFO, logger=checked_store.__name__)
+    assert load_checked(path, "k") is None
+    assert len(caplog.records) == 1 and "checked_entry_" in caplog.records[0].getMessage()
+
+
+def test_the_text_digest_is_the_sha256_of_the_whole_text_across_chunks(monkeypatch):
+    monkeypatch.setattr(checked_store, "DIGEST_CHUNK", 7)
+    text = "G01 X1 (Weiß, 直线)\n" * 5
+    assert text_digest(text) == hashlib.sha256(text.encode("utf-8")).hexdigest()

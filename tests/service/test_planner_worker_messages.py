@@ -1,9 +1,10 @@
-"""The checked program crosses from the planner worker to the daemon in slices
-(service.planner_worker.send_program / receive_program): one pickle of a long program held
-the daemon's interpreter lock for seconds."""
+"""The checked program crosses from the planner worker to the daemon as its store entry's path
+(the daemon maps the entry), or without a store in slices (service.planner_worker.send_program
+/ receive_program): one pickle of a long program held the daemon's interpreter lock for seconds."""
 
 from __future__ import annotations
 
+import mmap
 import multiprocessing
 import pickle
 import threading
@@ -11,9 +12,13 @@ import threading
 import numpy as np
 import pytest
 
+from nurbsmotion.program import ReadOptions
 from nurbsmotion.program.gcode import parse_gcode
 from nurbsmotion.service import planner_worker
-from nurbsmotion.service.planner_worker import CheckedProgram, ProgramBlocks, receive_program, send_program
+from nurbsmotion.errors import InputError
+from nurbsmotion.service.planner_worker import (CheckedProgram, EntryGone, PlanRequest, ProgramBlocks, read_or_load,
+                                                receive_program, send_program, store_checked)
+from tests.helpers import memory_of
 
 
 def zigzag(lines: int) -> str:
@@ -55,3 +60,42 @@ def test_a_slice_is_far_smaller_than_the_whole_program():
     whole = len(pickle.dumps(program))
     one_slice = len(pickle.dumps(ProgramBlocks(program.blocks[:planner_worker.BLOCKS_PER_MESSAGE])))
     assert one_slice * 4 < whole
+
+
+def test_with_a_store_entry_only_the_outline_crosses_and_the_daemon_maps_the_entry(tmp_path):
+    """Issue 25 item 4: no block is pickled through the pipe; the daemon maps the entry the
+    worker wrote, as the worker plans from it."""
+    program = parse_gcode(zigzag(1050), "z.nc", np.zeros(3))
+    request = PlanRequest(None, "z.nc", "", np.zeros(3), ReadOptions(), [0, 1, 2], 100, 10,  # type: ignore[arg-type]
+                          tmp_path / "k.checked", "k")
+    stored = store_checked(request, program)
+    assert stored is not None and isinstance(memory_of(stored.blocks.starts), mmap.mmap)
+    sent: list[object] = []
+    send_program(type("Pipe", (), {"send": lambda self, m: sent.append(m)})(), stored, False, request.checked_path)
+    assert len(sent) == 1 and isinstance(sent[0], CheckedProgram) and sent[0].entry == request.checked_path
+    assert len(pickle.dumps(sent[0])) < 10_000  # the outline only
+    received = receive_program(None, sent[0], timeout_s=0.0, key="k")
+    assert isinstance(memory_of(received.blocks.lines), mmap.mmap) and received.blocks == program.blocks
+    (tmp_path / "k.checked").write_bytes(b"")  # gone or damaged between the worker and the daemon: one line
+    with pytest.raises(EntryGone, match="k.checked cannot be read"):
+        receive_program(None, sent[0], timeout_s=0.0, key="k")
+
+
+def test_a_withheld_text_is_asked_for_only_when_the_entry_cannot_be_loaded(tmp_path, monkeypatch):
+    monkeypatch.setattr(planner_worker, "read_and_check", lambda r: parse_gcode(r.text, r.name, r.start_xyz))  # no machine
+    program = parse_gcode(zigzag(20), "z.nc", np.zeros(3))
+    request = PlanRequest(None, "z.nc", None, np.zeros(3), ReadOptions(), [0, 1, 2], 100, 10,  # type: ignore[arg-type]
+                          tmp_path / "k.checked", "k")
+    asked: list[str] = []
+
+    def text_of() -> str:
+        asked.append("text")
+        return zigzag(20)
+
+    store_checked(request, program)
+    assert read_or_load(request, text_of)[1] is True and asked == []
+    request.checked_path.write_bytes(b"damaged")
+    again, from_store = read_or_load(request, text_of)
+    assert not from_store and asked == ["text"] and again.blocks == program.blocks
+    with pytest.raises(InputError, match="^z.nc: the program's text was not sent and its checked entry cannot be read$"):
+        read_or_load(request)

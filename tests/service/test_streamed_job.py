@@ -9,6 +9,7 @@ import pytest
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.program import Program, read_program
 from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.service import streamed_job
 from nurbsmotion.service.streamed_job import highest_feed_mm_s
 
 GCODE = Path(__file__).resolve().parents[1] / "data" / "gcode"
@@ -25,3 +26,10 @@ def test_the_highest_feed_from_the_columns_is_the_blocks(name, rapid_feed_mm_s):
     assert isinstance(program.blocks, BlockRecords)
     blocks = Program(program.name, tuple(program.blocks), program.start_position)
     assert highest_feed_mm_s(program, limits) == highest_feed_mm_s(blocks, limits)
+
+
+def test_the_highest_feed_is_the_same_a_slice_at_a_time(monkeypatch):
+    program = read_program(GCODE / "fusion360_led_floor_1121_btn8copies_20bit.nc")
+    whole = highest_feed_mm_s(program, LIMITS)
+    monkeypatch.setattr(streamed_job, "FEED_ROWS", 7)
+    assert highest_feed_mm_s(program, LIMITS) == whole

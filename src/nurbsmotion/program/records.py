@@ -33,6 +33,9 @@ KINDS = tuple(KIND_CODES)  # by code
 NORMALS = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))  # by normal axis (G19, G18, G17)
 SHAPE_NONE = -1  # a line's row in shape_index: nothing more than its start and end
 FORM_LINE, FORM_ARC, FORM_CURVE = 0, 1, 2  # what a block's geometry is kept as: LineShape, ArcShape, NurbsCurve
+COLUMNS = ("kinds", "forms", "starts", "ends", "feeds_mm_s", "exact_stops", "blend_tolerances_mm",
+           "smoothing_tolerances_mm", "lines", "shape_index")  # BlockRecords' arrays, in its constructor's order
+ARC_COLUMNS = ("centres", "sweeps_rad", "normal_axes", "rises_mm")  # ArcRecords' arrays, in its order
 
 
 @dataclass(frozen=True)
@@ -41,9 +44,13 @@ class SourceText:
     the byte offset where each starts (lines split at '\\n', as the reader splits them);
     ``line(n)`` is line n (1-based), "" outside them."""
 
-    data: bytes
+    data: bytes | NDArray[np.uint8]  # bytes, or a checked-program store entry's mapped bytes (service.checked_store)
     starts: NDArray[np.int64]  # one per line, then len(data) + 1
     first_line: int = 1
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled as bytes whatever holds them (a mapped file's array is not sent as a view)."""
+        return (SourceText, (bytes(self.data), np.asarray(self.starts), self.first_line))
 
     @classmethod
     def of(cls, text: str) -> SourceText:
@@ -55,7 +62,7 @@ class SourceText:
         k = number - self.first_line
         if not 0 <= k < len(self.starts) - 1:
             return ""
-        return self.data[self.starts[k]:self.starts[k + 1] - 1].decode("utf-8", "surrogatepass")
+        return bytes(self.data[self.starts[k]:self.starts[k + 1] - 1]).decode("utf-8", "surrogatepass")
 
     @classmethod
     def joined(cls, parts: Sequence[SourceText | None]) -> SourceText | None:
@@ -77,7 +84,7 @@ class SourceText:
             if starts:
                 data += b"\n"
             base = len(data) - int(t.starts[skip])
-            data += t.data[int(t.starts[skip]):]
+            data += bytes(t.data[int(t.starts[skip]):])
             starts.extend((t.starts[skip:-1] + base).tolist())
             next_line = t.first_line + lines
         return cls(bytes(data), np.array(starts + [len(data) + 1], dtype=np.int64), texts[0].first_line)
@@ -151,6 +158,21 @@ class BlockRecords(Sequence[Block]):
                             arcs, tuple(c for p in parts for c in p.curves), parts[0].file,
                             SourceText.joined([p.text for p in parts]), overrides)
 
+    def columns(self) -> dict[str, NDArray[Any]]:
+        """Every array of the records by name (COLUMNS, then ARC_COLUMNS as ``arc_<name>``): what
+        a checked-program store entry keeps as raw bytes (service.checked_store)."""
+        out = {name: getattr(self, name) for name in COLUMNS}
+        out.update({f"arc_{name}": getattr(self.arcs, name) for name in ARC_COLUMNS})
+        return out
+
+    @classmethod
+    def from_columns(cls, columns: dict[str, NDArray[Any]], curves: tuple[NurbsCurve, ...], file: str,
+                     text: SourceText | None, source_overrides: dict[int, SourceRef]) -> BlockRecords:
+        """The records of :meth:`columns` (arrays of a mapped file work as they are)."""
+        arcs = ArcRecords(*(columns[f"arc_{name}"] for name in ARC_COLUMNS))
+        return cls(*(columns[name] for name in COLUMNS), arcs, curves, file, text,  # type: ignore[arg-type, call-arg]
+                   source_overrides)
+
     def __len__(self) -> int:
         return len(self.kinds)
 
@@ -190,7 +212,7 @@ class BlockRecords(Sequence[Block]):
                   self.arcs.centres, self.arcs.sweeps_rad,
                   self.arcs.normal_axes, self.arcs.rises_mm)
         curves = tuple((c.degree, c.control_points.tobytes(), c.weights.tobytes(), c.knots.tobytes()) for c in self.curves)
-        text = None if self.text is None else (self.text.data, self.text.starts.tobytes(), self.text.first_line)
+        text = None if self.text is None else (bytes(self.text.data), self.text.starts.tobytes(), self.text.first_line)
         return (tuple(np.ascontiguousarray(a).tobytes() for a in arrays), curves, self.file, text, self.source_overrides)
 
     def __repr__(self) -> str:

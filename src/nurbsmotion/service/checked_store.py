@@ -8,19 +8,31 @@ the axes start (the first move starts there) and the reader's options (offsets, 
 switches, start line), with the entry format and the package version. A changed file or
 configuration is a new key: rechecked, never trusted.
 
-An entry is one file ``KEY.checked``: a header line (:data:`MAGIC`, format, package version,
-key), then a pickle of the checked :class:`Program`. :func:`save_checked` and
-:func:`load_checked` are the only functions that know how a Program is stored (the
-``records`` work changes Program's insides: only these two follow). An entry that is
-unreadable, of another format or version, or of another key loads as None: the program is
-read and checked again. Writes are atomic (a temporary file renamed over the entry).
+An entry is one file ``KEY.checked``, laid out so that a process maps it instead of loading
+it (issue 25 item 4: the checked program reaches the planner worker and the daemon without
+copies): a header line (:data:`MAGIC`, format, package version, key), the length of the
+layout (8 bytes, little-endian), the :class:`EntryLayout` (a small pickle: the Program without
+its blocks, the records' NURBS curves, source overrides, and where each array lies), then,
+each at a multiple of :data:`ALIGN` bytes, the raw bytes of the block records' arrays
+(program.records.BlockRecords.columns) and of the program's text (its SourceText).
+:func:`load_checked` maps the file once (mmap, read-only) and gives arrays that are views of
+it: loading a 10^6-block entry costs the same as a 10-block one, and only the pages a process
+reads are ever in its memory (file-backed, shared by every process mapping the entry).
+
+:func:`save_checked` and :func:`load_checked` are the only functions that know how a Program
+is stored. An entry that is unreadable, of another format or version, of another key, or
+shorter or longer than its layout says (a truncated write) loads as None (one log line): the
+program is read and checked again. Writes are atomic (a temporary file renamed over the
+entry); a hit touches the entry (pruning removes the least recently used).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import logging
+import mmap
 import os
 import pickle
 import tempfile
@@ -35,12 +47,14 @@ from nurbsmotion import __version__
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.log import kv
 from nurbsmotion.program import Program, ReadOptions
+from nurbsmotion.program.records import BlockRecords, SourceText
 from nurbsmotion.service.record_config import config_dict
 
 log = logging.getLogger(__name__)
 
 MAGIC = b"nurbsmotion-checked-program"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2  # 1: a pickle of the whole Program
+ALIGN = 64  # every array starts at a multiple of this many bytes from the data's start
 SUFFIX = ".checked"
 MAX_ENTRIES = 32  # the newest kept; older ones are removed when a new one is written
 IRRELEVANT_CONFIG = ("monitoring", "web", "notify", "control", "data_dir", "source", "bus", "simulate")  # no check reads them
@@ -53,8 +67,15 @@ def config_fingerprint(config: MachineConfig) -> str:
     return hashlib.sha256(json.dumps(relevant, sort_keys=True, default=repr).encode()).hexdigest()
 
 
+DIGEST_CHUNK = 1 << 20  # characters encoded at a time: a 30 MB program is never held twice for its hash
+
+
 def text_digest(text: str) -> str:
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+    """SHA-256 of ``text`` in UTF-8, encoded a chunk at a time."""
+    h = hashlib.sha256()
+    for first in range(0, len(text), DIGEST_CHUNK):
+        h.update(text[first:first + DIGEST_CHUNK].encode("utf-8"))
+    return h.hexdigest()
 
 
 def check_key(name: str, text_sha256: str, config_sha256: str, start_xyz: np.ndarray, options: ReadOptions) -> str:
@@ -72,35 +93,112 @@ def header(key: str) -> bytes:
     return b"%s %d %s %s\n" % (MAGIC, FORMAT_VERSION, __version__.encode(), key.encode())
 
 
+@dataclass(frozen=True)
+class ArraySpan:
+    """Where one array's bytes lie, from the data's start."""
+
+    name: str
+    dtype: str  # numpy's dtype.str, e.g. '<f8'
+    shape: tuple[int, ...]
+    offset: int
+
+
+@dataclass(frozen=True, eq=False)
+class EntryLayout:
+    """Everything of an entry but its arrays' bytes (module docstring)."""
+
+    outline: Program  # blocks=()
+    file: str
+    curves: tuple[Any, ...]  # the records' NurbsCurves (NURBS blocks only)
+    source_overrides: dict[int, Any]
+    arrays: tuple[ArraySpan, ...]
+    text_first_line: int | None  # None: the records have no SourceText
+    data_bytes: int  # the data's length: the file ends there
+
+
+class EntryError(ValueError):
+    """An entry's bytes do not match its layout (cut short, or grown)."""
+
+
+def aligned(offset: int) -> int:
+    return -(-offset // ALIGN) * ALIGN
+
+
+def entry_arrays(records: BlockRecords) -> dict[str, np.ndarray]:
+    """The arrays an entry keeps: the records' columns and, if any, the text and its line starts."""
+    arrays = {name: np.ascontiguousarray(values) for name, values in records.columns().items()}
+    if records.text is not None:
+        arrays["text_data"] = np.frombuffer(records.text.data, dtype=np.uint8)
+        arrays["text_starts"] = np.ascontiguousarray(records.text.starts)
+    return arrays
+
+
 def save_checked(path: Path, key: str, program: Program) -> None:
     """Write ``program`` as the entry ``key`` at ``path`` (atomically; OSError if it cannot)."""
+    records = BlockRecords.of_blocks(program.blocks)
+    arrays = entry_arrays(records)
+    spans, offset = [], 0
+    for name, values in arrays.items():
+        spans.append(ArraySpan(name, values.dtype.str, tuple(values.shape), offset))
+        offset = aligned(offset + values.nbytes)
+    layout = EntryLayout(dataclasses.replace(program, blocks=()), records.file, records.curves,
+                         records.source_overrides, tuple(spans),
+                         None if records.text is None else records.text.first_line, offset)
+    layout_bytes = pickle.dumps(layout, protocol=pickle.HIGHEST_PROTOCOL)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-", suffix=SUFFIX)
     try:
         with os.fdopen(fd, "wb") as out:
-            out.write(header(key))
-            pickle.dump(program, out, protocol=pickle.HIGHEST_PROTOCOL)
+            head = header(key) + len(layout_bytes).to_bytes(8, "little") + layout_bytes
+            out.write(head + bytes(aligned(len(head)) - len(head)))
+            written = 0
+            for span in spans:
+                out.write(bytes(span.offset - written))
+                out.write(arrays[span.name].reshape(-1).view(np.uint8).data)
+                written = span.offset + arrays[span.name].nbytes
+            out.write(bytes(layout.data_bytes - written))
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def mapped_program(src: Any, layout: EntryLayout) -> Program:
+    """The Program of an open entry whose layout was just read: arrays are views of the file."""
+    data_start = aligned(src.tell())
+    size = os.fstat(src.fileno()).st_size
+    if size != data_start + layout.data_bytes:
+        raise EntryError(f"{size} bytes, its layout says {data_start + layout.data_bytes}")
+    view = mmap.mmap(src.fileno(), 0, access=mmap.ACCESS_READ)
+    arrays = {}
+    for span in layout.arrays:
+        dtype = np.dtype(span.dtype)
+        count = int(np.prod(span.shape, dtype=np.int64))
+        arrays[span.name] = np.frombuffer(view, dtype, count, data_start + span.offset).reshape(span.shape)
+    text = None
+    if layout.text_first_line is not None:
+        text = SourceText(arrays.pop("text_data"), arrays.pop("text_starts"), layout.text_first_line)
+    records = BlockRecords.from_columns(arrays, layout.curves, layout.file, text, layout.source_overrides)
+    return dataclasses.replace(layout.outline, blocks=records)
+
+
 def load_checked(path: Path, key: str) -> Program | None:
-    """The Program of entry ``key`` at ``path``; None when there is none, or it is of another
-    format, version or key, or unreadable (module docstring: rechecked, not trusted)."""
+    """The Program of entry ``key`` at ``path``, mapped (module docstring); None when there is
+    none, or it is of another format, version or key, or unreadable: rechecked, not trusted."""
     try:
         with open(path, "rb") as src:
             if src.readline() != header(key):
                 log.info(kv("checked_entry_stale", file=path.name))
                 return None
-            program = pickle.load(src)
+            layout = pickle.loads(src.read(int.from_bytes(src.read(8), "little")))
+            if not isinstance(layout, EntryLayout) or not isinstance(layout.outline, Program):
+                raise EntryError(f"no layout but {type(layout).__name__}")
+            return mapped_program(src, layout)
     except FileNotFoundError:
         return None
-    except Exception as err:  # noqa: BLE001 - a corrupt entry (any unpickling error) is rechecked
+    except Exception as err:  # noqa: BLE001 - a corrupt entry (any unpickling or layout error) is rechecked
         log.warning(kv("checked_entry_unreadable", file=path.name, error=repr(err)[:200]))
         return None
-    return program if isinstance(program, Program) else None
 
 
 @dataclass

@@ -159,7 +159,8 @@ class Daemon:
             log.warning(kv("planner_worker_not_ready", error=err))
 
     def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
-        return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store)
+        checker = self.programs.checker if self.programs is not None else None  # large programs' check
+        return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store, checker)
 
     def _status(self) -> dict[str, Any]:
         assert self.controller is not None

@@ -72,7 +72,9 @@ class PlannedJob:
         return int(self.counts[min(index + rows, last)][axis]) - int(self.counts[min(max(index - rows, 0), last)][axis])
 
     def write_records(self, record: Any) -> None:
-        """plan.json and the whole trace, before any motion."""
+        """blocks.csv, plan.json and the whole trace, before any motion."""
+        if self.program is not None:  # the lines an interrupted job's record names (records.py)
+            record.write_block_lines(block_lines(self.program))
         record.write_plan(self.summary, self.write_trace)
 
     def start(self, link: Any, shift: Callable[[np.ndarray], None]) -> Any:
@@ -110,16 +112,18 @@ def parse(name: str, text: str, start_mm: np.ndarray, options: ReadOptions | Non
                            f"expected one of {' '.join(GCODE_SUFFIXES + YAML_SUFFIXES)}")
 
 
-def block_lines(program: Program) -> list[int]:
-    """The program line of each block (its SourceRef's); from the block columns when the
-    program has them (a Block per block took 1.5 s of the daemon's CPU at 10^5 blocks, before
-    first motion: the job record's blocks.csv)."""
+def block_lines(program: Program, first: int = 0, last: int | None = None) -> list[int]:
+    """The program line of each block ``first`` to ``last`` (excluded; None: to the end), its
+    SourceRef's; from the block columns when the program has them (a Block per block took 1.5 s
+    of the daemon's CPU at 10^5 blocks, before first motion: the job record's blocks.csv)."""
     blocks = program.blocks
+    last = len(blocks) if last is None else min(last, len(blocks))
     if not isinstance(blocks, BlockRecords):
-        return [b.source.line for b in blocks]
-    lines = np.asarray(blocks.lines, dtype=np.int64).copy()
+        return [blocks[i].source.line for i in range(first, last)]
+    lines = np.array(blocks.lines[first:last], dtype=np.int64)
     for i, ref in blocks.source_overrides.items():
-        lines[i] = ref.line
+        if first <= i < last:
+            lines[i - first] = ref.line
     return lines.tolist()
 
 

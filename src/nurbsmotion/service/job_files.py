@@ -12,7 +12,6 @@ from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.log import kv
 from nurbsmotion.service.active_job import ActiveJob, JobPlan
 from nurbsmotion.service.feedback import FeedbackLog
-from nurbsmotion.service.job_common import block_lines
 from nurbsmotion.service.motion import MotionLink
 from nurbsmotion.service.record_config import config_dict
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords
@@ -35,8 +34,6 @@ class JobFiles:
         try:
             record = self.records.create(name, text)
             record.write_config(config_dict(self.config, self.link.axis_map.offset_counts))
-            if plan.program is not None:  # the lines an interrupted job's record names (records.py)
-                record.write_block_lines(block_lines(plan.program))
             plan.write_records(record)
             return record
         except OSError as err:

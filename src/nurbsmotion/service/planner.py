@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.streamed_job import StreamedJob, prepare_streamed_job
+
+if TYPE_CHECKING:
+    from nurbsmotion.service.program_check import ProgramChecker
 
 
 def pause_rows(program: Program, trajectory: Trajectory) -> tuple[JobPause, ...]:
@@ -92,14 +95,16 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
 
 def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
                 options: ReadOptions | None = None, worker: PlannerWorker | None = None,
-                store: CheckedStore | None = None) -> PlannedJob | StreamedJob:
+                store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> PlannedJob | StreamedJob:
     """The daemon's planner: the lookahead planner streams the job while it runs in the
     planner worker (service.streamed_job, checked completely first, or loaded checked from
-    ``store``); the papers' methods plan it whole, and so are MDI lines (one line: planned at
-    once; one without motion runs as a still job, which a streamed job cannot be)."""
+    ``store``; a large program checked by ``checker`` first); the papers' methods plan it
+    whole, and so are MDI lines (one line: planned at once; one without motion runs as a
+    still job, which a streamed job cannot be)."""
     if config.interpolation.algorithm == "lookahead" and worker is not None and name != MDI_NAME:
         return prepare_streamed_job(name, text, config, worker, start_mm, options,
-                                    store=store if name != JOG_NAME else None)  # a jog: a new line each time
+                                    store=store if name != JOG_NAME else None,  # a jog: a new line each time
+                                    checker=checker)
     return plan_job(name, text, config, start_mm, options)
 
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import multiprocessing.connection
+import os
 import pickle
 import threading
 import signal
@@ -39,7 +40,7 @@ import time
 import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
@@ -57,6 +58,7 @@ from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import Program, ReadOptions
 from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.service.block_lines import BlockLinesFile
 from nurbsmotion.service.job_common import machine_has_devices, parse, spindle_wait_reason
 from nurbsmotion.service.path_bounds import check_before_motion
 
@@ -67,7 +69,6 @@ QUIT_TIMEOUT_S = 5.0
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 BLOCKS_PER_MESSAGE = 1000  # blocks a ProgramBlocks slice carries (~15 ms of the daemon's lock to load)
 LENGTHS_BUDGET_S = 0.02  # arc-length work between two chunks (a chunk is 2 s of motion): planning stays ahead
-STORE_AHEAD_S = 4.0  # the checked program is stored once planning is this far ahead of the axes (a write: ~1 s per 10^5 blocks)
 
 
 @dataclass(frozen=True)
@@ -78,7 +79,7 @@ class PlanRequest:
 
     config: MachineConfig
     name: str
-    text: str
+    text: str | None  # None: withheld, its entry is in the store (the worker asks for it with NeedText if it must read it)
     start_xyz: np.ndarray
     options: ReadOptions
     columns: list[int]
@@ -86,6 +87,17 @@ class PlanRequest:
     first_chunk_cycles: int
     checked_path: Path | None = None  # the checked-program entry to load, or write once checked (service.checked_store)
     checked_key: str = ""
+
+
+@dataclass(frozen=True)
+class NeedText:
+    """The worker must read the program after all (its store entry is gone or unsound): the
+    daemon answers with ProgramText."""
+
+
+@dataclass(frozen=True, eq=False)
+class ProgramText:
+    text: str
 
 
 @dataclass(frozen=True)
@@ -100,15 +112,19 @@ class CancelPlan:
 
 @dataclass(frozen=True, eq=False)
 class CheckedProgram:
-    """The request's program, parsed and checked: planning starts. Its blocks follow in
-    ``ProgramBlocks`` messages (``block_count`` in all): one pickle of a 100,000-block program
-    is 21.5 MB and took 1.45 s to load, holding the daemon's interpreter lock that long (its
-    cycle thread and simulated drives stopped: heartbeats lost); slices of BLOCKS_PER_MESSAGE
-    hold it about 15 ms each."""
+    """The request's program, parsed and checked: planning starts. With ``entry`` its blocks
+    are in that checked-program store entry (service.checked_store), which the daemon maps as
+    the worker does: no block crosses the pipe (a 10^6-block program in 1,003 slices took the
+    daemon 1.3 s to receive, 0.7 s of it joining them under one hold of its interpreter lock).
+    Without (no store, or the entry could not be written) they follow in ``ProgramBlocks``
+    messages (``block_count`` in all): one pickle of a 100,000-block program is 21.5 MB and
+    took 1.45 s to load, holding the daemon's interpreter lock that long; slices of
+    BLOCKS_PER_MESSAGE hold it about 15 ms each."""
 
     program: Program  # with blocks=()
     block_count: int
     from_store: bool = False  # loaded from the checked-program store: not read and checked again
+    entry: Path | None = None  # the store entry that holds the blocks (written now if not from_store)
 
 
 @dataclass(frozen=True, eq=False)
@@ -200,16 +216,16 @@ class WorkerJob:
         self.measure: MeasureStream | None = None
         self.path: PlannedPath | None = None
         self.lengths: BlockLengths | None = None
-        self.to_store: Program | None = None  # checked now: written to the store once planning is well ahead
-        self.first_sent_s = float("nan")  # when the first chunk was sent (the axes start about then)
+        self.block_lines: BlockLinesFile | None = None
 
     def run(self) -> PlanEnd:
         errors: tuple[tuple[str, str], ...] = ()
         finished = False
         try:
-            program, from_store = read_or_load(self.request)
-            self.to_store = None if from_store else program
-            send_program(self.results, program, from_store)
+            program, from_store, entry = checked_and_stored(self.request, self._ask_for_text)
+            self.request = dataclasses.replace(self.request, text="")  # read: its text is not kept for the job
+            send_program(self.results, program, from_store, entry)
+            self.block_lines = BlockLinesFile(program)
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
             limits = limits_from_config(self.config)
@@ -220,6 +236,7 @@ class WorkerJob:
             self.measure = MeasureStream(self.path.program)
             finished = self._plan_all()
             if finished:
+                self.block_lines.reach(len(program.blocks))
                 self._trace_rows(self._on_program(self.measure.finish()))
                 self._wait_for_record()
         except InputError as err:
@@ -234,7 +251,6 @@ class WorkerJob:
             raise WorkerGone() from None
         except Exception as err:  # a bug: the job's progress falls back to blocks, its end is still reported
             log.warning(kv("path_lengths_failed", program=self.request.name, error=repr(err)))
-        self._store_checked()  # not yet stored: the job ended or was cancelled before planning got that far ahead
         self._close_trace()
         stream = self.stream
         return PlanEnd(self.planned, finished and not errors, errors,
@@ -268,27 +284,13 @@ class WorkerJob:
                 self.max_feed_mm_s = max(self.max_feed_mm_s, float(np.max(chunk.feed_mm_s)))
             self.planned += len(counts)
             before = counts[-2:]
+            if len(chunk.block) and self.block_lines is not None:
+                self.block_lines.reach(int(chunk.block[-1]) + 1)
             self._trace_rows(self._on_program(self.measure.add(self.path.rows(chunk))))
-            if self.planned == len(counts):
-                self.first_sent_s = time.monotonic()
-            if self._ahead_s() >= STORE_AHEAD_S:
-                self._store_checked()
             self._send_lengths(budget_s=LENGTHS_BUDGET_S)
             if self._read_commands(block=False):
                 return False
         return True
-
-    def _ahead_s(self) -> float:
-        """Seconds of motion planned beyond where the axes are now (about: from the first chunk on)."""
-        return self.planned * self.config.cycle_period_s - (time.monotonic() - self.first_sent_s)
-
-    def _store_checked(self) -> None:
-        """The checked program into the store, so the next start of it is not read and checked
-        again: once planning is STORE_AHEAD_S ahead of the axes (first motion never waits for
-        the write, and the axes never run out of rows during it), or at the job's end."""
-        program, self.to_store = self.to_store, None
-        if program is not None:
-            store_checked(self.request, program)
 
     def _send_lengths(self, budget_s: float | None) -> None:
         """Compute block lengths for up to ``budget_s`` (None: all); send them once all are known."""
@@ -318,6 +320,20 @@ class WorkerJob:
             else:
                 found[row] = (row, f"{event.code} at {event.source}", None, False)
         return tuple(found[row] for row in sorted(found))
+
+    def _ask_for_text(self) -> str:
+        """The program's text from the daemon (NeedText, then its ProgramText; InputError if the
+        job is cancelled meanwhile, WorkerGone if the daemon is)."""
+        self.results.send(NeedText())
+        while True:
+            command = self.commands.recv()
+            if isinstance(command, ProgramText):
+                return command.text
+            if isinstance(command, CancelPlan):
+                self.cancelled = True
+                raise InputError(self.request.name, "cancelled before its text came")
+            if command is None:
+                raise WorkerGone()
 
     def _read_commands(self, block: bool) -> bool:
         """Apply the commands waiting (or, ``block``, wait for one); True once cancelled."""
@@ -351,9 +367,13 @@ class WorkerJob:
                 self.trace_rows += len(f.rows.block)
             self.trace.out.flush()  # a daemon killed later loses no planned row of the record
             self.pending.clear()
+        if self.block_lines is not None and self.trace_path is not None:
+            self.block_lines.write(self.trace_path.parent)
 
     def _close_trace(self) -> None:
         try:
+            if self.block_lines is not None:
+                self.block_lines.close()
             if self.trace is not None:
                 self.trace.close()
         except InputError as err:
@@ -384,6 +404,8 @@ class BlockLengths:
 def read_and_check(request: PlanRequest) -> Program:
     """The request's program, parsed and checked before motion (InputError otherwise)."""
     r = request
+    if r.text is None:
+        raise InputError(r.name, "the program's text was not sent")  # read_or_load asks for a withheld text first
     # No cyclic collection while parsing: it keeps ~10 objects a word, and the collector's
     # passes over the worker's heap took ~0.1 s of a long program's parse (Wang x 460 in the
     # worker: checked program back in 0.88-1.13 s with them, 0.79-0.80 s without; x 100
@@ -394,42 +416,77 @@ def read_and_check(request: PlanRequest) -> Program:
     return program
 
 
-def read_or_load(request: PlanRequest) -> tuple[Program, bool]:
-    """(the checked program, True) from the store when its entry is there and sound, else
-    (read and checked now, False) (service.checked_store)."""
+def read_or_load(request: PlanRequest, text_of: Callable[[], str] | None = None) -> tuple[Program, bool]:
+    """(the checked program, True) from the store when its entry is there and sound (mapped,
+    and touched: the store prunes the least recently used), else (read and checked now,
+    False) (service.checked_store); a request whose text was withheld gets it from
+    ``text_of`` then."""
     if request.checked_path is not None:
         from nurbsmotion.service.checked_store import load_checked
 
-        with GcQuiet("disable"):
-            program = load_checked(request.checked_path, request.checked_key)
+        program = load_checked(request.checked_path, request.checked_key)
         if program is not None:
+            touch(request.checked_path)
             return program, True
+    if request.text is None:
+        if text_of is None:
+            raise InputError(request.name, "the program's text was not sent and its checked entry cannot be read")
+        request = dataclasses.replace(request, text=text_of())
     return read_and_check(request), False
 
 
-def store_checked(request: PlanRequest, program: Program) -> None:
-    """Write ``program`` to the request's store entry (a failure is logged: the next start reads again)."""
+def touch(path: Path) -> None:
+    try:
+        os.utime(path)
+    except OSError:
+        pass  # gone meanwhile: the program is mapped already
+
+
+def store_checked(request: PlanRequest, program: Program) -> Program | None:
+    """Write ``program`` to the request's store entry and map it back: the stored program
+    (None when there is no entry or it cannot be written: logged, the next start reads again)."""
     if request.checked_path is None:
-        return
-    from nurbsmotion.service.checked_store import save_checked
+        return None
+    from nurbsmotion.service.checked_store import load_checked, save_checked
 
     try:
         save_checked(request.checked_path, request.checked_key, program)
     except (OSError, pickle.PicklingError) as err:
         log.warning(kv("checked_program_not_stored", program=request.name, error=err))
+        return None
+    return load_checked(request.checked_path, request.checked_key)
 
 
-def send_program(results: Any, program: Program, from_store: bool = False) -> None:
-    """The checked program to the daemon: its outline, then its blocks in slices (CheckedProgram)."""
+def checked_and_stored(request: PlanRequest, text_of: Callable[[], str] | None = None
+                       ) -> tuple[Program, bool, Path | None]:
+    """The request's checked program (from the store, or read, checked and stored now), whether
+    it came from the store, and the entry that holds it (None: no store, or not writable).
+    A program just read is planned from its entry too, the copy read dropped: the worker's
+    memory holds the pages it plans, not the whole program. ``text_of``: read_or_load's."""
+    program, from_store = read_or_load(request, text_of)
+    if from_store:
+        return program, True, request.checked_path
+    stored = store_checked(request, program)
+    return (program, False, None) if stored is None else (stored, False, request.checked_path)
+
+
+def send_program(results: Any, program: Program, from_store: bool = False, entry: Path | None = None) -> None:
+    """The checked program to the daemon: its outline and the store ``entry`` holding its
+    blocks, or (no entry) its outline, then its blocks in slices (CheckedProgram)."""
     blocks = program.blocks
-    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks), from_store))
+    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks), from_store, entry))
+    if entry is not None:
+        return
     for first in range(0, len(blocks), BLOCKS_PER_MESSAGE):
         results.send(ProgramBlocks(blocks[first:first + BLOCKS_PER_MESSAGE]))
 
 
-def receive_program(results: Any, outline: CheckedProgram, timeout_s: float) -> Program:
-    """The daemon's side of send_program: the blocks joined to the outline (TimeoutError when a
-    slice is not there within ``timeout_s``; EOFError/OSError when the worker is gone)."""
+def receive_program(results: Any, outline: CheckedProgram, timeout_s: float, key: str = "") -> Program:
+    """The daemon's side of send_program: the program mapped from its store entry (``key``:
+    its key; EntryGone when it cannot be), or its blocks joined to the outline (TimeoutError
+    when a slice is not there within ``timeout_s``; EOFError/OSError when the worker is gone)."""
+    if outline.entry is not None:
+        return mapped_entry(outline, key)
     slices: list[Any] = []
     received = 0
     while received < outline.block_count:
@@ -443,6 +500,21 @@ def receive_program(results: Any, outline: CheckedProgram, timeout_s: float) -> 
     if slices and all(isinstance(part, BlockRecords) for part in slices):  # a reader's: kept as columns
         return dataclasses.replace(outline.program, blocks=BlockRecords.concatenate(slices))
     return dataclasses.replace(outline.program, blocks=tuple(b for part in slices for b in part))
+
+
+class EntryGone(Exception):
+    """The store entry the worker named cannot be mapped in the daemon."""
+
+
+def mapped_entry(outline: CheckedProgram, key: str) -> Program:
+    """The daemon's map of the entry the worker wrote or loaded (the same blocks, the same key)."""
+    from nurbsmotion.service.checked_store import load_checked
+
+    assert outline.entry is not None
+    program = load_checked(outline.entry, key)
+    if program is None or len(program.blocks) != outline.block_count:
+        raise EntryGone(f"the checked program's store entry {outline.entry} cannot be read")
+    return program
 
 
 def pause_events(program: Program, spindle_waits: bool) -> list[Any]:
@@ -598,4 +670,4 @@ def as_error(errors: tuple[tuple[str, str], ...]) -> InputError:
     return found[0] if len(found) == 1 else InputErrors(found)
 
 
-__all__ = ["PlannerWorker", "PlanRequest", "CheckedProgram", "ProgramBlocks", "send_program", "receive_program", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]
+__all__ = ["PlannerWorker", "PlanRequest", "NeedText", "ProgramText", "CheckedProgram", "ProgramBlocks", "send_program", "receive_program", "PathLengths", "PlannedChunk", "PlanEnd", "as_error", "TracePath", "CancelPlan", "serve"]

@@ -21,10 +21,11 @@ The daemon's process only receives, copies and indexes rows: the planner never h
 from __future__ import annotations
 
 import collections
+import dataclasses
 import logging
 import threading
 import time
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -40,9 +41,13 @@ from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.checked_store import CheckedStore
-from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, PathLengths, PlanEnd, PlannedChunk,
-                                                PlannerWorker, PlanRequest, TracePath, as_error, receive_program)
+from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, NeedText, PathLengths,
+                                                PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, ProgramText, TracePath,
+                                                as_error, receive_program)
 from nurbsmotion.service.rate import max_rate
+
+if TYPE_CHECKING:
+    from nurbsmotion.service.program_check import ProgramChecker
 
 log = logging.getLogger(__name__)
 
@@ -52,17 +57,23 @@ MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s a
 FIRST_CHUNK_TIMEOUT_S = 60.0
 END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
 FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
+FEED_ROWS = 65536  # highest_feed_mm_s's slice
+LARGE_PROGRAM_CHARS = 4_000_000  # ~130,000 CAM lines: read and checked apart (checked_apart), not in the worker
 
 
 def highest_feed_mm_s(program: Program, limits: PlanLimits) -> float:
     """The highest Block.feed_or_default_mm_s of the program's blocks; from the block columns
-    when it has them (a Block per block took 1.6 s of the daemon's CPU at 10^5 blocks, before
+    (a slice at a time) when it has them (a Block per block took 1.6 s of the daemon's CPU at 10^5 blocks, before
     first motion and holding the cycle thread's interpreter lock)."""
     blocks = program.blocks
     if not isinstance(blocks, BlockRecords):
         return max(b.feed_or_default_mm_s(limits.default_feed_mm_s, limits.rapid_feed_mm_s) for b in blocks)
-    machine = np.where(blocks.kinds == KINDS.index(BlockKind.RAPID), limits.rapid_feed_mm_s, limits.default_feed_mm_s)
-    return float(np.where(np.isnan(blocks.feeds_mm_s), machine, blocks.feeds_mm_s).max())
+    highest = -np.inf
+    for first in range(0, len(blocks), FEED_ROWS):  # a slice at a time: no column-sized temporaries (10^6 blocks: 25 MB)
+        kinds, feeds = blocks.kinds[first:first + FEED_ROWS], blocks.feeds_mm_s[first:first + FEED_ROWS]
+        machine = np.where(kinds == KINDS.index(BlockKind.RAPID), limits.rapid_feed_mm_s, limits.default_feed_mm_s)
+        highest = max(highest, float(np.where(np.isnan(feeds), machine, feeds).max()))
+    return highest
 
 
 def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int]) -> float:
@@ -338,13 +349,16 @@ class StreamedJob:
 def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
                          chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
-                         store: CheckedStore | None = None) -> StreamedJob:
+                         store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> StreamedJob:
     """Have the worker parse and check ``text`` completely (or load it checked from ``store``,
-    service.checked_store) and start planning it; return once the first chunk is planned
-    (InputError naming file:line for anything refused; nothing moves)."""
+    service.checked_store; a large program not there is read and checked by ``checker`` first,
+    checked_apart) and start planning it; return once the first chunk is planned (InputError
+    naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
-    connection = worker.connect(request)
-    program, from_store = checked_program(name, worker, connection[1])
+    checked_now = checked_apart(request, checker)
+    connection = worker.connect(withheld(request))
+    program, from_store = checked_program(name, worker, connection, key=request.checked_key, text=text)
+    from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
     job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
@@ -352,6 +366,30 @@ def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: Pl
     job.summary["checked_from_store"] = from_store
     job.begin()
     return job
+
+
+def withheld(request: PlanRequest) -> PlanRequest:
+    """The request without its text when its store entry is there: the worker loads the entry
+    and asks for the text (NeedText) only if it cannot (a 10^6-line program's 30 MB pickled,
+    sent and unpickled again took ~0.4 s before the first chunk, and held twice in memory)."""
+    if request.checked_path is None or not request.checked_path.exists():
+        return request
+    return dataclasses.replace(request, text=None)
+
+
+def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
+    """Read and check a program of LARGE_PROGRAM_CHARS or more that is not in the store in the
+    checker process (service.program_check), which stores it, so that the planner worker loads
+    it from the store as any stored program: reading a 10^6-line program peaks at ~350 MB
+    (issue 25: the worker < 300 MB, `check` < 500 MB), and the checker's time-out is the
+    check's (minutes), not the first chunk's. True when it checked it (InputError: refused)."""
+    if checker is None or request.checked_path is None or len(request.text or "") < LARGE_PROGRAM_CHARS \
+            or request.checked_path.exists():
+        return False
+    report = checker.check(request, tuple(a.name for a in request.config.axes))
+    if report.errors:
+        raise as_error(report.errors)
+    return not report.from_store
 
 
 def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
@@ -369,21 +407,30 @@ def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarr
                        min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key)
 
 
-def checked_program(name: str, worker: PlannerWorker, results: Any,
-                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S) -> tuple[Program, bool]:
-    """The worker's first answer: (the program parsed and checked, whether it came from the
-    checked-program store), or the errors refusing it."""
+def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any],
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = "") -> tuple[Program, bool]:
+    """The worker's first answer: (the program parsed and checked, mapped from its store entry
+    ``key`` or received in slices, whether it came from the checked-program store), or the
+    errors refusing it. A worker that asks for the program's ``text`` (NeedText) gets it."""
+    commands, results = connection
     try:
-        if not results.poll(timeout_s):
-            worker.abandon()
-            raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
-        answer = results.recv()
+        answer = NeedText()
+        while isinstance(answer, NeedText):
+            if not results.poll(timeout_s):
+                worker.abandon()
+                raise InputError(name, f"parsing and checking the program took more than {timeout_s:g} s")
+            answer = results.recv()
+            if isinstance(answer, NeedText):
+                commands.send(ProgramText(text))
     except (EOFError, OSError):
         worker.job_ended()
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
         try:
-            return receive_program(results, answer, timeout_s), answer.from_store
+            return receive_program(results, answer, timeout_s, key), answer.from_store
+        except EntryGone as err:
+            worker.abandon()
+            raise InputError(name, str(err)) from None
         except TimeoutError as err:
             worker.abandon()
             raise InputError(name, f"the planner worker did not send {err}") from None
