@@ -33,45 +33,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from nurbsmotion.log import attach_handler, parse_kv
-from nurbsmotion.service.protocol import encode
+from nurbsmotion.service.protocol import Status, encode, merge_changes, status_changes
 
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
 MAX_HZ_RANGE = (0.5, 100.0)
 MAX_PENDING_LINES = 2000  # a client this far behind is dropped (events queue; status lines merge)
 MAX_UNSENT_BYTES = 4 * 1024 * 1024  # an attached client whose socket leaves this much unsent is dropped
-Status = dict[str, Any]
 Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
-
-
-def status_changes(old: Status | None, new: Status) -> Status:
-    """The fields of ``new`` that differ from ``old``: nested dicts by key, anything else whole.
-    A key that disappeared is reported as None."""
-    if old is None:
-        return dict(new)
-    changes: Status = {}
-    for key, value in new.items():
-        before = old.get(key, _MISSING)
-        if isinstance(value, dict) and isinstance(before, dict):
-            inner = status_changes(before, value)
-            if inner:
-                changes[key] = inner
-        elif before is _MISSING or before != value:
-            changes[key] = value
-    for key in old.keys() - new.keys():
-        changes[key] = None
-    return changes
-
-
-def merge_changes(older: Status, newer: Status) -> Status:
-    """Two successive change sets as one (newer wins; nested dicts merged by key)."""
-    merged = dict(older)
-    for key, value in newer.items():
-        before = merged.get(key)
-        merged[key] = merge_changes(before, value) if isinstance(value, dict) and isinstance(before, dict) else value
-    return merged
-
-
-_MISSING = object()
 
 
 @dataclass
