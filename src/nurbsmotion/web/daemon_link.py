@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 from pathlib import Path
-from typing import Any, AsyncIterator
+from typing import Any, AsyncGenerator
 
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, encode
 
@@ -53,7 +53,7 @@ class DaemonLink:
         answer: dict[str, Any] = json.loads(line)
         return answer
 
-    async def subscribe_lines(self, max_hz: float | None = None) -> AsyncIterator[str]:
+    async def subscribe_lines(self, max_hz: float | None = None) -> AsyncGenerator[str, None]:
         """The subscription's answer (full status), then every pushed line, as the daemon's JSON
         text (relayed as it is: web.fanout), until the daemon closes the connection or the
         caller stops iterating."""

@@ -139,6 +139,8 @@ class StatusFanout:
                 reason = await self._relay_one_subscription()
             except DaemonUnreachable as err:
                 reason = str(err)
+            except ValueError as err:  # a line that is not JSON: start again from a fresh snapshot
+                reason = f"the daemon sent a line that is not JSON ({err})"
             self._status = self._answer = None
             if self._gone is None:  # told once when it goes; a client joining later gets the latest reason
                 log.warning(kv("web_daemon_gone", reason=reason, clients=len(self._clients)))
@@ -150,18 +152,19 @@ class StatusFanout:
         """Relay one daemon subscription until it ends; why it ended."""
         self.subscriptions += 1
         first = True
-        async for text in self.link.subscribe_lines():
-            message = json.loads(text)
-            if first:
-                first = False
-                if not message.get("ok"):
-                    return f"the daemon refused the subscription: {message.get('error', '?')}"
-                self._subscribed(message)
-                continue
-            if message.get("notify") == "status" and self._status is not None:
-                self._status = merge_changes(self._status, message.get("changes") or {})
-            self._broadcast(text)
-            await asyncio.sleep(0)  # let the clients' senders run between the lines of a burst
+        async with contextlib.aclosing(self.link.subscribe_lines()) as lines:  # closed at once when cancelled
+            async for text in lines:
+                message = json.loads(text)
+                if first:
+                    first = False
+                    if not message.get("ok"):
+                        return f"the daemon refused the subscription: {message.get('error', '?')}"
+                    self._subscribed(message)
+                    continue
+                if message.get("notify") == "status" and self._status is not None:
+                    self._status = merge_changes(self._status, message.get("changes") or {})
+                self._broadcast(text)
+                await asyncio.sleep(0)  # let the clients' senders run between the lines of a burst
         return "the daemon closed the connection"
 
     def _subscribed(self, answer: dict[str, Any]) -> None:
