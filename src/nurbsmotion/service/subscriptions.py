@@ -54,6 +54,7 @@ class Subscription:
     seq: int = 0
     wake: threading.Condition = field(default_factory=threading.Condition)
     writer: Writer | None = None  # attached: the publisher sends the lines (flush), nobody takes them
+    on_drop: Callable[[], None] | None = None  # attached: wakes the connection's thread when dropped
     unsent: bytes = b""
 
     def put(self, body: bytes) -> None:
@@ -66,14 +67,26 @@ class Subscription:
             self.lines.append(b'{"seq":%d,' % self.seq + body[1:])
             if len(self.lines) > MAX_PENDING_LINES:
                 self.lines.clear()
-                self.dropped = f"client too slow: more than {MAX_PENDING_LINES} lines behind"
-                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
-            self.wake.notify()
+                self._drop(f"client too slow: more than {MAX_PENDING_LINES} lines behind", notice=True)
+            elif self.writer is None:
+                self.wake.notify()  # a reader waits in take(); an attached subscriber is flushed instead
 
-    def attach(self, writer: Writer) -> None:
-        """From now on the publisher sends this subscriber's lines with ``writer`` (flush)."""
+    def attach(self, writer: Writer, on_drop: Callable[[], None] | None = None) -> None:
+        """From now on the publisher sends this subscriber's lines with ``writer`` (flush), and
+        calls ``on_drop`` (once, holding no other lock) when it drops the subscriber, so the
+        connection's thread can sleep until then instead of polling."""
         with self.wake:
-            self.writer = writer
+            self.writer, self.on_drop = writer, on_drop
+
+    def _drop(self, reason: str, notice: bool) -> None:
+        """Drop this subscriber (holding ``wake``): ``notice`` queues the 'dropped' line its
+        connection's thread sends before closing."""
+        self.dropped = reason
+        if notice:
+            self.lines.append(encode({"notify": "dropped", "error": reason}))
+        self.wake.notify()
+        if self.on_drop is not None:
+            self.on_drop()
 
     def flush(self) -> None:
         """Send what waits (the publisher's thread; attached subscribers only): what the
@@ -89,14 +102,13 @@ class Subscription:
             except BlockingIOError:
                 sent = 0
             except OSError as err:
-                self.dropped, self.unsent = f"connection lost: {err}", b""
-                self.wake.notify()
+                self.unsent = b""
+                self._drop(f"connection lost: {err}", notice=False)
                 return
             self.unsent = data[sent:]
-            if len(self.unsent) > MAX_UNSENT_BYTES and self.dropped is None:
-                self.dropped, self.unsent = f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", b""
-                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
-                self.wake.notify()
+            if len(self.unsent) > MAX_UNSENT_BYTES:
+                self.unsent = b""
+                self._drop(f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", notice=True)
 
     def take(self, timeout_s: float) -> list[bytes]:
         """The lines waiting now (after at most ``timeout_s``); empty when none came."""
