@@ -107,7 +107,7 @@ class Subscription:
                 return
             self.unsent = data[sent:]
             if len(self.unsent) > MAX_UNSENT_BYTES:
-                self.unsent = b""
+                self.unsent = self.unsent[:self.unsent.find(b"\n") + 1]  # the rest of a line the socket took part of
                 self._drop(f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", notice=True)
 
     def take(self, timeout_s: float) -> list[bytes]:
