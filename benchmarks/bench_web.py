@@ -59,6 +59,9 @@ web: {{listen: "127.0.0.1:{port}"}}
 """
 
 
+SETTLE_S = 6.0  # between rounds: longer than the gateway's web.fanout.LINGER_S
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -68,6 +71,28 @@ def free_port() -> int:
 def cpu_s(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def normal_thread_switches(pid: int) -> dict[int, int]:
+    """Context switches (voluntary + not) of each of the process's SCHED_OTHER threads, by
+    thread id: each is a wake-up of a thread that takes the interpreter lock at normal
+    priority, where the real-time cycle thread may have to wait for it."""
+    counts: dict[int, int] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            if int((task / "stat").read_text().rsplit(")", 1)[1].split()[38]) != 0:  # policy: SCHED_OTHER is 0
+                continue
+            fields = dict(line.split(":", 1) for line in (task / "status").read_text().splitlines() if ":" in line)
+        except (FileNotFoundError, ProcessLookupError):
+            continue  # a request's thread that just ended
+        counts[int(task.name)] = int(fields["voluntary_ctxt_switches"]) + int(fields["nonvoluntary_ctxt_switches"])
+    return counts
+
+
+def switches_between(before: dict[int, int], after: dict[int, int]) -> int:
+    """Switches of the threads that lived through the interval (a request's short thread is the
+    same in every round and is left out)."""
+    return sum(after[tid] - before[tid] for tid in before.keys() & after.keys())
 
 
 def program_for(seconds: float) -> str:
@@ -119,13 +144,14 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
     """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected."""
     latencies: list[float] = []
     stop = asyncio.Event()
+    await asyncio.sleep(SETTLE_S)  # the gateway closes its daemon subscription 5 s after the last client left
     tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients if kind == "WebSocket" else 0)]
     direct = [DirectSubscriber(socket_path, latencies) for _ in range(clients if kind == "direct" else 0)]
     await asyncio.sleep(1.0)
 
     def run_job() -> tuple[dict[str, Any], dict[str, Any], str]:
         with Client(socket_path) as c:
-            if c.call("status")["state"] == "fault":  # an earlier round's job faulted (its row says so)
+            if c.call("status")["state"] != "idle":  # an earlier round's job faulted (its row says so), or start-up
                 c.call("reset")
             before = c.call("status")["cycles"]
             job = c.call("submit", name="bench.nc", program=program_for(seconds))["job"]["id"]
@@ -139,9 +165,11 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
         return before, after, outcome
 
     cpu_before = {name: cpu_s(pid) for name, pid in pids.items()}
+    switches_before = normal_thread_switches(pids["daemon"])
     wall_before = time.monotonic()
     before, after, outcome = await asyncio.to_thread(run_job)
     wall = time.monotonic() - wall_before
+    switches = switches_between(switches_before, normal_thread_switches(pids["daemon"]))
     cpu = {name: 100 * (cpu_s(pid) - cpu_before[name]) / wall for name, pid in pids.items()}
     stop.set()
     await asyncio.gather(*tasks, return_exceptions=True)
@@ -155,6 +183,8 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
             "median_ms": statistics.median(latencies) * 1e3 if latencies else float("nan"),
             "p99_ms": latencies[int(0.99 * (len(latencies) - 1))] * 1e3 if latencies else float("nan"),
             "gateway_cpu_percent": cpu["gateway"], "daemon_cpu_percent": cpu["daemon"],
+            "late_per_1000": 1000 * (after["late"] - before["late"]) / max(1, after["count"] - before["count"]),
+            "normal_wakeups_per_s": switches / wall,
             "load": Path("/proc/loadavg").read_text().split()[0]}
 
 
@@ -248,13 +278,15 @@ async def main_async(args: argparse.Namespace) -> str:
                 proc.terminate()
                 proc.wait(20)
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
-    table = ["| clients | job outcome | cycles | late (> 10 % T) | missed (> T) | events timed | "
-             "event -> client median ms | p99 ms | gateway CPU % | daemon CPU % | load (1 min) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    table = ["| clients | job outcome | cycles | late (> 10 % T) | late per 1000 cycles | missed (> T) | "
+             "events timed | event -> client median ms | p99 ms | gateway CPU % | daemon CPU % | "
+             "daemon normal-priority wake-ups/s | load (1 min) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['missed']} | "
-                     f"{r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | {r['gateway_cpu_percent']:.1f} | "
-                     f"{r['daemon_cpu_percent']:.0f} | {r['load']} |")
+        table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['late_per_1000']:.0f} | "
+                     f"{r['missed']} | {r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | "
+                     f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
+                     f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
     return (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
             f"clients in the benchmark's process; {args.seconds:g} s jobs with 0 clients, {args.clients} WebSocket "
