@@ -139,6 +139,18 @@ class DirectSubscriber:
         self.sock.close()
 
 
+def ready_cycles(c: Client) -> dict[str, Any]:
+    """The cycle counters once the machine is idle without faults: after an earlier round's
+    fault (its row says so) reset it first (a reset restarts the counters)."""
+    for _ in range(3):
+        status = c.call("status")
+        if status["state"] == "idle" and not status.get("faults"):
+            break
+        c.request("reset")
+        time.sleep(1.0)
+    return dict(c.call("status")["cycles"])
+
+
 async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seconds: float,
                     pids: dict[str, int]) -> dict[str, Any]:
     """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected."""
@@ -151,9 +163,7 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
 
     def run_job() -> tuple[dict[str, Any], dict[str, Any], str]:
         with Client(socket_path) as c:
-            if c.call("status")["state"] != "idle":  # an earlier round's job faulted (its row says so), or start-up
-                c.call("reset")
-            before = c.call("status")["cycles"]
+            before = ready_cycles(c)
             job = c.call("submit", name="bench.nc", program=program_for(seconds))["job"]["id"]
             percent = 100
             while c.call("status").get("job") is not None:

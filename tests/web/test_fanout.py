@@ -61,7 +61,7 @@ class Follower:
         self.messages: list[dict[str, Any]] = []
         self.status: dict[str, Any] | None = None
 
-    async def read_until(self, done: Any, what: str) -> dict[str, Any]:
+    async def read_until(self, done: Any, what: str, timeout_s: float | None = WAIT_S) -> dict[str, Any]:
         """Read messages until ``done(message)``; that message."""
         async def loop() -> dict[str, Any]:
             while True:
@@ -74,7 +74,7 @@ class Follower:
                 if done(message):
                     return message
         try:
-            return await asyncio.wait_for(loop(), WAIT_S)
+            return await asyncio.wait_for(loop(), timeout_s)
         except asyncio.TimeoutError:
             events = sum(m.get("notify") == "event" for m in self.messages)
             resyncs = sum(bool(m.get("resynced")) for m in self.messages)
@@ -131,6 +131,20 @@ def test_ten_clients_share_one_daemon_subscription_and_see_the_same_lines(daemon
             await clients[0].read_until(is_event("job_ended"), "the return to X0")
             for c in clients:
                 await c.ws.close()
+    asyncio.run(body())
+
+
+def test_the_daemon_subscription_is_closed_after_the_last_client_left_and_opened_again(daemon):
+    async def body() -> None:
+        async with gateway(daemon, linger_s=0.3) as (base, fanout), aiohttp.ClientSession() as s:
+            first = await follower(s, base)
+            assert daemon.hub.subscribers == 1
+            await first.ws.close()
+            await asyncio.to_thread(wait_for, lambda: daemon.hub.subscribers == 0, WAIT_S,
+                                    "the daemon subscription closed after the last client")
+            again = await follower(s, base)
+            assert again.status is not None and again.status["state"] == "idle"
+            assert fanout.subscriptions == 2 and daemon.hub.subscribers == 1
     asyncio.run(body())
 
 
@@ -202,7 +216,7 @@ class StalledWebSocket:
 
 
 def test_a_client_that_stops_reading_holds_nobody_and_is_resynced(daemon, caplog):
-    overrides = 600
+    overrides = 300
 
     async def body() -> None:
         async with gateway(daemon, queue_messages=16) as (base, fanout), aiohttp.ClientSession() as s:
@@ -217,6 +231,9 @@ def test_a_client_that_stops_reading_holds_nobody_and_is_resynced(daemon, caplog
             seqs = fast.relayed_seqs()
             assert seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # all of them, in order
             assert not any(m.get("resynced") for m in fast.messages)
+            # the status lines (20 a second) go on filling the stalled client's socket and queue
+            await asyncio.to_thread(wait_for, lambda: any(c.resyncs for c in fanout._clients), WAIT_S,
+                                    "the stalled client resynced")
             [stalled_client] = [c for c in fanout._clients if c.resyncs]
             assert stalled_client.queue.qsize() <= 16  # bounded, however far behind
             frames = stalled.frames()
@@ -253,10 +270,14 @@ def test_the_daemon_going_away_is_told_and_its_return_resubscribes(tmp_path):
             second = Daemon(config)
             restarted.append(second)
             # both clients keep reading while the daemon starts (a client answers the gateway's pings
-            # only while it reads)
-            *_, backs = await asyncio.gather(asyncio.to_thread(second.start), asyncio.gather(
-                *(f.read_until(lambda m: m.get("subscribed"), "a new snapshot from the restarted daemon")
-                  for f in (c, meanwhile))))
+            # only while it reads); the wait for the snapshot starts when the daemon is up
+            reads = asyncio.gather(*(f.read_until(lambda m: m.get("subscribed"), "a new snapshot", timeout_s=None)
+                                     for f in (c, meanwhile)))
+            await asyncio.to_thread(second.start)
+            try:
+                backs = await asyncio.wait_for(reads, WAIT_S)
+            except asyncio.TimeoutError:
+                raise AssertionError(f"no snapshot from the restarted daemon; the last {c.messages[-3:]}") from None
             for back in backs:
                 assert back["status"]["state"] == "idle" and len(back["status"]["axes"]) == 3
             assert sum(m.get("notify") == "daemon_gone" for m in c.messages) == 1  # told once, not every retry

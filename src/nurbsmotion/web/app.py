@@ -37,10 +37,12 @@ WS_COMMANDS = {"status": Role.OBSERVER, "jobs": Role.OBSERVER, "job": Role.OBSER
                "jog": Role.OPERATOR, "jog_renew": Role.OPERATOR, "jog_stop": Role.OPERATOR, "mdi": Role.OPERATOR,
                "override": Role.OPERATOR, "home": Role.OPERATOR, "offsets": Role.OPERATOR}
 WS_AUTH_TIMEOUT_S = 5.0
-# The kernel's send buffer of a WebSocket (autotuned up to 4 MB otherwise): a client that stops
-# reading soon holds up its own sender, so its queue fills and it is resynced with the status
-# of now (web.fanout) instead of reading seconds-old positions out of a deep buffer later.
-WS_SEND_BUFFER_BYTES = 32 * 1024
+# A WebSocket's kernel send buffer (autotuned up to 4 MB otherwise), the event loop's write
+# buffer above it (64 KiB by default) and how much aiohttp writes before it waits for room
+# (256 KiB by default): a client that stops reading soon holds up its own sender, so its queue
+# fills and it is resynced with the status of now (web.fanout) instead of reading seconds-old
+# positions out of a deep buffer later.
+WS_SEND_BUFFER_BYTES = 16 * 1024
 ROLE = web.RequestKey("role", Role)  # the caller's role, set by the auth middleware
 FANOUT = web.AppKey("fanout", StatusFanout)  # the one daemon subscription every WebSocket shares
 
@@ -225,7 +227,7 @@ def websocket_handler(link: DaemonLink, gate: Gate,
     shared by every client: web.fanout); the client may send ``{"id": n, "cmd": NAME,
     ...fields}`` (WS_COMMANDS) and gets ``{"id": n, "response": {...}}``."""
     async def handle(request: web.Request) -> web.StreamResponse:
-        ws = web.WebSocketResponse(heartbeat=10.0)
+        ws = web.WebSocketResponse(heartbeat=10.0, writer_limit=WS_SEND_BUFFER_BYTES)  # waits for room each 16 KiB
         await ws.prepare(request)
         role = await websocket_role(ws, request, gate)
         if role is None:
@@ -247,7 +249,11 @@ def websocket_handler(link: DaemonLink, gate: Gate,
 
 
 def bound_send_buffer(request: web.Request) -> None:
-    sock = request.transport.get_extra_info("socket") if request.transport is not None else None
+    transport = request.transport
+    if transport is None:
+        return
+    transport.set_write_buffer_limits(high=WS_SEND_BUFFER_BYTES)
+    sock = transport.get_extra_info("socket")
     if sock is not None:
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, WS_SEND_BUFFER_BYTES)
 

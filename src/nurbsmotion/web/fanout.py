@@ -111,25 +111,27 @@ class StatusFanout:
             self._idle = asyncio.get_running_loop().call_later(self.linger_s, self._close_if_idle)
 
     async def close(self) -> None:
+        """Close the daemon subscription (the gateway's shutdown)."""
         if self._idle is not None:
             self._idle.cancel()
             self._idle = None
-        await self._cancel()
+        task = self._unsubscribe()
+        if task is not None:
+            with contextlib.suppress(asyncio.CancelledError):
+                await task
 
     def _close_if_idle(self) -> None:
         self._idle = None
-        if not self._clients and self._task is not None:
-            self._task.cancel()
-            self._task = None
-            self._status = self._answer = None
+        if not self._clients:
+            self._unsubscribe()
 
-    async def _cancel(self) -> None:
+    def _unsubscribe(self) -> asyncio.Task[None] | None:
+        """Cancel the subscription's task (its connection closes as it ends); that task."""
         task, self._task = self._task, None
         if task is not None:
             task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await task
         self._status = self._answer = None
+        return task
 
     # ------------------------------------------------------------------ the daemon side
     async def _follow(self) -> None:
