@@ -148,6 +148,21 @@ def test_the_daemon_subscription_is_closed_after_the_last_client_left_and_opened
     asyncio.run(body())
 
 
+def test_the_gateway_shutting_down_closes_open_websockets_and_its_subscription(daemon):
+    async def body() -> None:
+        async with aiohttp.ClientSession() as s:
+            async with gateway(daemon) as (base, fanout):
+                c = await follower(s, base)
+                assert daemon.hub.subscribers == 1
+            # the block's end is the gateway's shutdown (SIGTERM in `nurbsmotion web`)
+            closing = await asyncio.wait_for(c.ws.receive(), WAIT_S)
+            while closing.type == aiohttp.WSMsgType.TEXT:  # a status line sent before the shutdown
+                closing = await asyncio.wait_for(c.ws.receive(), WAIT_S)
+            assert closing.type == aiohttp.WSMsgType.CLOSE and closing.data == aiohttp.WSCloseCode.GOING_AWAY
+            await asyncio.to_thread(wait_for, lambda: daemon.hub.subscribers == 0, WAIT_S, "the subscription closed")
+    asyncio.run(body())
+
+
 def test_a_client_that_joins_later_first_gets_the_complete_status(daemon):
     async def body() -> None:
         async with gateway(daemon) as (base, fanout), aiohttp.ClientSession() as s:

@@ -15,12 +15,13 @@ import ipaddress
 import json
 import logging
 import socket
+import weakref
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, Awaitable, Callable
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from nurbsmotion.log import kv
 from nurbsmotion.web.auth import FailedAttempts, KeyStore, OneShotTokens, Role
@@ -45,6 +46,7 @@ WS_AUTH_TIMEOUT_S = 5.0
 WS_SEND_BUFFER_BYTES = 16 * 1024
 ROLE = web.RequestKey("role", Role)  # the caller's role, set by the auth middleware
 FANOUT = web.AppKey("fanout", StatusFanout)  # the one daemon subscription every WebSocket shares
+SOCKETS = web.AppKey("sockets", weakref.WeakSet[web.WebSocketResponse])  # open WebSockets, closed on shutdown
 
 
 @dataclass(frozen=True)
@@ -138,14 +140,20 @@ def make_app(settings: WebSettings) -> web.Application:
     app.router.add_get(f"{API}/openapi.json", with_role(Role.OBSERVER, openapi_handler))
     fanout = StatusFanout(link)
     app[FANOUT] = fanout
-    app.on_shutdown.append(close_fanout)
+    app[SOCKETS] = weakref.WeakSet()
+    app.on_shutdown.append(close_websockets)
     app.router.add_get(f"{API}/ws", websocket_handler(link, gate, fanout))
     app.router.add_get("/", page_handler)
     app.router.add_static("/static/", static_dir(), show_index=False)
     return app
 
 
-async def close_fanout(app: web.Application) -> None:
+async def close_websockets(app: web.Application) -> None:
+    """SIGTERM: close every WebSocket at once (aiohttp's documented pattern; else the shutdown
+    waits for each client to hang up), then the daemon subscription."""
+    sockets: weakref.WeakSet[web.WebSocketResponse] = app[SOCKETS]
+    for ws in list(sockets):
+        await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway shutting down")
     await app[FANOUT].close()
 
 
@@ -233,6 +241,7 @@ def websocket_handler(link: DaemonLink, gate: Gate,
         if role is None:
             return ws
         bound_send_buffer(request)
+        request.app[SOCKETS].add(ws)
         client = fanout.join()
         relay = asyncio.create_task(relay_to(ws, client))
         try:
