@@ -56,6 +56,7 @@ class Subscription:
     writer: Writer | None = None  # attached: the publisher sends the lines (flush), nobody takes them
     on_drop: Callable[[], None] | None = None  # attached: wakes the connection's thread when dropped
     unsent: bytes = b""
+    mid_line: bool = False  # the socket took part of a line whose rest is at the front of ``unsent``
 
     def put(self, body: bytes) -> None:
         """Queue one line: ``body`` is an encoded JSON object, shared by every subscriber;
@@ -106,8 +107,10 @@ class Subscription:
                 self._drop(f"connection lost: {err}", notice=False)
                 return
             self.unsent = data[sent:]
-            if len(self.unsent) > MAX_UNSENT_BYTES:
-                self.unsent = self.unsent[:self.unsent.find(b"\n") + 1]  # the rest of a line the socket took part of
+            if sent:
+                self.mid_line = data[sent - 1:sent] != b"\n"
+            if len(self.unsent) > MAX_UNSENT_BYTES:  # keep only the rest of a line the socket took part of
+                self.unsent = self.unsent[:self.unsent.find(b"\n") + 1] if self.mid_line else b""
                 self._drop(f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", notice=True)
 
     def take(self, timeout_s: float) -> list[bytes]:
