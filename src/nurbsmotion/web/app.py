@@ -152,8 +152,8 @@ async def close_websockets(app: web.Application) -> None:
     """SIGTERM: close every WebSocket at once (aiohttp's documented pattern; else the shutdown
     waits for each client to hang up), then the daemon subscription."""
     sockets: weakref.WeakSet[web.WebSocketResponse] = app[SOCKETS]
-    for ws in list(sockets):
-        await ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway shutting down")
+    await asyncio.gather(*(ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway shutting down")
+                           for ws in list(sockets)), return_exceptions=True)  # a stalled one delays no other
     await app[FANOUT].close()
 
 
