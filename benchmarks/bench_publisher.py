@@ -2,7 +2,7 @@
 itself: the publisher's CPU time per round (one status line and one event to every
 subscriber, each written to its own Unix socket pair) with 0, 1, 10 and 30 subscribers.
 
-    python benchmarks/bench_publisher.py --rounds 2000
+    python benchmarks/bench_publisher.py --rounds 2000 [--write]
 
 The publisher thread is the daemon's only thread that does work per subscriber; every
 microsecond it runs holds the interpreter lock the cycle thread needs. The status is the
@@ -25,7 +25,9 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from benchmarks._report import write_section  # noqa: E402
 from nurbsmotion.service.subscriptions import StatusHub  # noqa: E402
 
 
@@ -103,18 +105,26 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=2000)
     parser.add_argument("--counts", default="0,1,10,30")
+    parser.add_argument("--write", action="store_true", help="rewrite its section of docs/benchmarks.md")
     args = parser.parse_args()
     counts = [int(c) for c in args.counts.split(",")]
     results = {n: cpu_per_round_us(n, args.rounds) for n in counts}
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
-    print(f"publisher CPU per round (status line + event to every subscriber), {args.rounds} rounds, load {load}")
-    print("| subscribers | CPU per round us | each subscriber more, us |")
-    print("|---|---|---|")
+    rows = ["| subscribers | publisher CPU per round us | each further subscriber us |", "|---|---|---|"]
     previous: tuple[int, float] | None = None
     for n, us in results.items():
         extra = (us - previous[1]) / (n - previous[0]) if previous is not None and n > previous[0] else float("nan")
-        print(f"| {n} | {us:.0f} | {extra:.1f} |")
+        rows.append(f"| {n} | {us:.0f} | {extra:.1f} |")
         previous = (n, us)
+    body = (f"The daemon's status publisher (service.subscriptions) by itself: one status line and one event to "
+            f"every subscriber a round, each written to its own Unix socket pair (read by a drain thread), "
+            f"{args.rounds} rounds, median of five blocks of the publisher thread's CPU time. The status is a "
+            f"three-axis daemon's, moving every round. Load average at the end: {load}.\n\n" + "\n".join(rows) + "\n")
+    if args.write:
+        write_section("publisher", "Status publisher: what one more subscriber costs", body,
+                      f"python benchmarks/bench_publisher.py --rounds {args.rounds} --write")
+    else:
+        print(body)
     return 0
 
 
