@@ -7,7 +7,9 @@ Figures (issue 22's benchmarks):
 - latency from a daemon event (its log record's time, ``logged_t``) to a WebSocket client's
   receipt, median and p99, with 1 and with 10 clients (the feed override is set every 0.25 s
   during a job, so each client gets a stream of ``override_changed`` events);
-- late and missed cycles of a job with 0 and with 10 clients connected, interleaved;
+- late and missed cycles of a job with 0 clients, 10 WebSocket clients (the gateway holds one
+  daemon subscription for all of them: web.fanout) and 10 direct ``subscribe`` connections on
+  the daemon's control socket, interleaved round by round, with the daemon's CPU;
 - the gateway's CPU while idle (one client connected) and while a job streams to 10 clients;
 - the console's time to parse and draw the preview of a 100,000-line program in headless
   Chromium (``window.previewDrawnMs``), when Debian's chromium and playwright are installed.
@@ -25,6 +27,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -56,6 +59,20 @@ web: {{listen: "127.0.0.1:{port}"}}
 """
 
 
+SETTLE_S = 6.0  # between rounds: longer than the gateway's web.fanout.LINGER_S
+
+
+def stop_process(proc: subprocess.Popen[bytes]) -> None:
+    """SIGTERM, then SIGKILL if it has not ended in 20 s: a benchmark leaves no daemon behind."""
+    proc.terminate()
+    try:
+        proc.wait(20)
+    except subprocess.TimeoutExpired:
+        print(f"pid {proc.pid} did not end in 20 s after SIGTERM: killed", file=sys.stderr)
+        proc.kill()
+        proc.wait(20)
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -65,6 +82,28 @@ def free_port() -> int:
 def cpu_s(pid: int) -> float:
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def normal_thread_switches(pid: int) -> dict[int, int]:
+    """Context switches (voluntary + not) of each of the process's SCHED_OTHER threads, by
+    thread id: each is a wake-up of a thread that takes the interpreter lock at normal
+    priority, where the real-time cycle thread may have to wait for it."""
+    counts: dict[int, int] = {}
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            if int((task / "stat").read_text().rsplit(")", 1)[1].split()[38]) != 0:  # policy: SCHED_OTHER is 0
+                continue
+            fields = dict(line.split(":", 1) for line in (task / "status").read_text().splitlines() if ":" in line)
+        except (FileNotFoundError, ProcessLookupError):
+            continue  # a request's thread that just ended
+        counts[int(task.name)] = int(fields["voluntary_ctxt_switches"]) + int(fields["nonvoluntary_ctxt_switches"])
+    return counts
+
+
+def switches_between(before: dict[int, int], after: dict[int, int]) -> int:
+    """Switches of the threads that lived through the interval (a request's short thread is the
+    same in every round and is left out)."""
+    return sum(after[tid] - before[tid] for tid in before.keys() & after.keys())
 
 
 def program_for(seconds: float) -> str:
@@ -86,16 +125,60 @@ async def client(url: str, latencies: list[float], stop: asyncio.Event) -> None:
                 latencies.append(time.time() - line["logged_t"])
 
 
-async def job_round(ws_url: str, socket_path: str, clients: int, seconds: float, gateway_pid: int) -> dict[str, Any]:
+class DirectSubscriber:
+    """One ``subscribe`` connection on the daemon's socket, read by its own thread, timing
+    its events; ``close`` hangs up."""
+
+    def __init__(self, socket_path: str, latencies: list[float]) -> None:
+        self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.sock.connect(socket_path)
+        self.sock.sendall(b'{"cmd": "subscribe"}\n')
+        self.latencies = latencies
+        self.thread = threading.Thread(target=self._read, daemon=True)
+        self.thread.start()
+
+    def _read(self) -> None:
+        with self.sock.makefile("rb") as stream:
+            for raw in stream:
+                line = json.loads(raw)
+                if line.get("notify") == "event" and line.get("logged_t"):
+                    self.latencies.append(time.time() - line["logged_t"])
+
+    def close(self) -> None:
+        self.sock.shutdown(socket.SHUT_RDWR)
+        self.thread.join(5.0)
+        self.sock.close()
+
+
+def ready_cycles(c: Client) -> dict[str, Any]:
+    """The cycle counters once the machine is idle without faults: after an earlier round's
+    fault (its row says so) reset it first (a reset restarts the counters)."""
+    for _ in range(5):
+        status = c.call("status")
+        if status["state"] == "idle" and not status.get("faults"):
+            break
+        c.request("reset")
+        time.sleep(2.0)
+    return dict(c.call("status")["cycles"])
+
+
+async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seconds: float,
+                    pids: dict[str, int]) -> dict[str, Any]:
+    """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected."""
     latencies: list[float] = []
     stop = asyncio.Event()
-    tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients)]
+    await asyncio.sleep(SETTLE_S)  # the gateway closes its daemon subscription 5 s after the last client left
+    tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients if kind == "WebSocket" else 0)]
+    direct = [DirectSubscriber(socket_path, latencies) for _ in range(clients if kind == "direct" else 0)]
     await asyncio.sleep(1.0)
 
     def run_job() -> tuple[dict[str, Any], dict[str, Any], str]:
         with Client(socket_path) as c:
-            before = c.call("status")["cycles"]
-            job = c.call("submit", name="bench.nc", program=program_for(seconds))["job"]["id"]
+            before = ready_cycles(c)
+            answer = c.request("submit", name="bench.nc", program=program_for(seconds))
+            if not answer.get("ok"):  # the drives did not come back: the row says so, the next round tries again
+                return before, before, f"not started ({answer.get('error')})"
+            job = answer["job"]["id"]
             percent = 100
             while c.call("status").get("job") is not None:
                 time.sleep(0.25)
@@ -105,18 +188,28 @@ async def job_round(ws_url: str, socket_path: str, clients: int, seconds: float,
             outcome = c.call("job", id=job)["job"]["outcome"]["outcome"]
         return before, after, outcome
 
-    cpu_before, wall_before = cpu_s(gateway_pid), time.monotonic()
+    cpu_before = {name: cpu_s(pid) for name, pid in pids.items()}
+    switches_before = normal_thread_switches(pids["daemon"])
+    wall_before = time.monotonic()
     before, after, outcome = await asyncio.to_thread(run_job)
-    gateway_cpu = (cpu_s(gateway_pid) - cpu_before) / (time.monotonic() - wall_before)
+    wall = time.monotonic() - wall_before
+    switches = switches_between(switches_before, normal_thread_switches(pids["daemon"]))
+    cpu = {name: 100 * (cpu_s(pid) - cpu_before[name]) / wall for name, pid in pids.items()}
     stop.set()
     await asyncio.gather(*tasks, return_exceptions=True)
+    for subscriber in direct:
+        await asyncio.to_thread(subscriber.close)
     latencies.sort()
-    return {"clients": clients, "outcome": outcome, "cycles": after["count"] - before["count"],
+    return {"clients": f"{clients} {kind}" if clients else "0", "outcome": outcome,
+            "cycles": after["count"] - before["count"],
             "late": after["late"] - before["late"], "missed": after["missed"] - before["missed"],
             "events": len(latencies),
             "median_ms": statistics.median(latencies) * 1e3 if latencies else float("nan"),
             "p99_ms": latencies[int(0.99 * (len(latencies) - 1))] * 1e3 if latencies else float("nan"),
-            "gateway_cpu_percent": 100 * gateway_cpu}
+            "gateway_cpu_percent": cpu["gateway"], "daemon_cpu_percent": cpu["daemon"],
+            "late_per_1000": 1000 * (after["late"] - before["late"]) / max(1, after["count"] - before["count"]),
+            "normal_wakeups_per_s": switches / wall,
+            "load": Path("/proc/loadavg").read_text().split()[0]}
 
 
 async def idle_cpu(ws_url: str, gateway_pid: int, seconds: float) -> float:
@@ -195,29 +288,34 @@ async def main_async(args: argparse.Namespace) -> str:
         ws_url = f"ws://127.0.0.1:{port}/api/v1/ws"
         idle = await idle_cpu(ws_url, gateway.pid, args.idle_seconds)
         rows = []
+        pids = {"gateway": gateway.pid, "daemon": daemon.pid}
         for _ in range(args.rounds):
-            for n in (0, args.clients):
-                rows.append(await job_round(ws_url, str(socket_path), n, args.seconds, gateway.pid))
+            for n, kind in ((0, "WebSocket"), (args.clients, "WebSocket"), (args.clients, "direct")):
+                rows.append(await job_round(ws_url, str(socket_path), n, kind, args.seconds, pids))
                 print(rows[-1], flush=True)
-        for n in (1,):
-            rows.append(await job_round(ws_url, str(socket_path), n, min(args.seconds, 20.0), gateway.pid))
-            print(rows[-1], flush=True)
+        rows.append(await job_round(ws_url, str(socket_path), 1, "WebSocket", min(args.seconds, 20.0), pids))
+        print(rows[-1], flush=True)
         preview = await asyncio.to_thread(preview_ms, base + "/", args.preview_lines)
     finally:
         for proc in (gateway, daemon):
             if proc is not None:
-                proc.terminate()
-                proc.wait(20)
+                stop_process(proc)
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
-    table = ["| WebSocket clients | job outcome | cycles | late (> 10 % T) | missed (> T) | events timed | "
-             "event -> client median ms | p99 ms | gateway CPU % |", "|---|---|---|---|---|---|---|---|---|"]
+    table = ["| clients | job outcome | cycles | late (> 10 % T) | late per 1000 cycles | missed (> T) | "
+             "events timed | event -> client median ms | p99 ms | gateway CPU % | daemon CPU % | "
+             "daemon normal-priority wake-ups/s | load (1 min) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['missed']} | "
-                     f"{r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | {r['gateway_cpu_percent']:.1f} |")
+        table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['late_per_1000']:.0f} | "
+                     f"{r['missed']} | {r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | "
+                     f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
+                     f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
     return (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
-            f"WebSocket clients in the benchmark's process; {args.seconds:g} s jobs with 0 and {args.clients} clients "
-            f"interleaved, then one with 1 client; the override set every 0.25 s gives the clients events to time. "
+            f"clients in the benchmark's process; {args.seconds:g} s jobs with 0 clients, {args.clients} WebSocket "
+            f"clients (one daemon subscription in the gateway) and {args.clients} direct subscribers on the control "
+            f"socket, interleaved round by round, then one with 1 WebSocket client; the override set every 0.25 s "
+            f"gives the clients events to time. "
             f"Load average at the end: {load} (2 cores shared with other work: compare rows of one run).\n\n"
             + "\n".join(table)
             + f"\n\n| figure | value | target |\n|---|---|---|\n"

@@ -4,6 +4,7 @@ its node; a client that hangs up ends only its own connection."""
 
 from __future__ import annotations
 
+import json
 import socket
 import threading
 from typing import Any
@@ -88,3 +89,37 @@ def test_a_fault_is_pushed_with_its_node_and_the_status_says_fault(tmp_path):
             assert fault["fields"]["node"] == "2" and fault["level"] == "WARNING"
             wait_for(lambda: "fault" in listener.states(), 20.0, "state fault pushed")
         listener.hang_up()
+
+
+def test_a_subscriber_that_stops_reading_is_dropped_with_a_notice_and_nobody_else_waits(tmp_path, monkeypatch):
+    """The hub drops an attached subscriber whose socket keeps too much unsent; its connection's
+    thread (asleep until then) is woken by the drop, sends the 'dropped' line after what was
+    queued, and closes; a subscriber that reads gets every event meanwhile."""
+    from nurbsmotion.service import subscriptions
+
+    monkeypatch.setattr(subscriptions, "MAX_UNSENT_BYTES", 4096)  # a socket's buffer and then some
+    with daemon_in_process(tmp_path / "data", "", "subd") as daemon:
+        stalled = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        stalled.connect(str(daemon.config.control.socket))
+        stalled.sendall(b'{"cmd": "subscribe"}\n')
+        reader = Listener(daemon.config.control.socket)
+        wait_for(lambda: daemon.hub.subscribers == 2, 10.0, "both subscribed")
+        overrides = 0
+        with Client(daemon.config.control.socket) as client:
+            while not dropped(daemon) and overrides < 20000:  # events until the stalled one is dropped
+                client.call("override", percent=100 - overrides % 2)
+                overrides += 1
+        assert dropped(daemon), f"not dropped after {overrides} events"
+        with stalled.makefile("rb") as stream:  # read now: the notice waits a second for room in the socket
+            lines = [json.loads(raw) for raw in stream]  # up to the daemon closing it
+        assert lines[0]["subscribed"] and lines[-1]["notify"] == "dropped" and "too slow" in lines[-1]["error"]
+        wait_for(lambda: len(reader.events("override_changed")) == overrides, 20.0, "every event on the reader")
+        seqs = [line["seq"] for line in reader.lines]
+        assert seqs == list(range(1, len(seqs) + 1))
+        wait_for(lambda: daemon.hub.subscribers == 1, 10.0, "the dropped subscriber removed")
+        reader.hang_up()
+        stalled.close()
+
+
+def dropped(daemon: Any) -> bool:
+    return any(sub.dropped is not None for sub in daemon.hub._subscribers)

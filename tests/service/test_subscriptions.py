@@ -228,6 +228,26 @@ def test_an_attached_client_whose_socket_stays_full_is_dropped_with_a_reason():
     assert fast.dropped is None and len(fast_socket.lines()) > MAX_UNSENT_BYTES // 100_000
 
 
+def test_a_client_dropped_after_taking_part_of_a_line_gets_its_rest_before_the_notice():
+    from nurbsmotion.service.subscriptions import MAX_UNSENT_BYTES
+
+    hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
+    sub, _ = hub.subscribe()
+    sock = SocketStandIn(room=50)  # part of the first line, then nothing more
+    sub.attach(sock)
+    big = "x" * 100_000
+    hub.publish_event({"event": "big", "fields": {"text": big}})
+    hub.publish_once()
+    sock.room = 0
+    for _ in range(MAX_UNSENT_BYTES // 100_000 + 2):
+        hub.publish_event({"event": "big", "fields": {"text": big}})
+        hub.publish_once()
+    assert sub.dropped and "too slow" in sub.dropped
+    stream = sock.received + sub.unsent + b"".join(sub.take(0.0))  # what the connection's thread sends last
+    first, notice = [json.loads(line) for line in stream.splitlines()]
+    assert first["fields"]["text"] == big and notice["notify"] == "dropped"
+
+
 def test_a_client_gone_while_the_publisher_writes_is_dropped():
     hub = StatusHub(FakeStatus(), clock=FakeClock(), publisher_thread=False)
     sub, _ = hub.subscribe()

@@ -8,14 +8,14 @@ import asyncio
 import contextlib
 import json
 from pathlib import Path
-from typing import Any, AsyncIterator, Awaitable, Callable
+from typing import Any, Awaitable, Callable
 
 import aiohttp
 import pytest
-from aiohttp import web
 
 from nurbsmotion.web.app import WebSettings, make_app
 from tests.web.ports import free_port
+from tests.web.serving import serving
 from nurbsmotion.web.auth import KeyStore, Role
 from tests.integration.daemon_helpers import daemon_in_process
 from tests.helpers import wait_for
@@ -25,16 +25,8 @@ LONG = "G21 G90\nG01 X60 F600\n"
 
 
 
-@contextlib.asynccontextmanager
-async def gateway(settings: WebSettings) -> AsyncIterator[str]:
-    runner = web.AppRunner(make_app(settings))
-    await runner.setup()
-    site = web.TCPSite(runner, settings.host, settings.port)
-    await site.start()
-    try:
-        yield f"http://{settings.host}:{settings.port}"
-    finally:
-        await runner.cleanup()
+def gateway(settings: WebSettings) -> contextlib.AbstractAsyncContextManager[str]:
+    return serving(make_app(settings), settings.host, settings.port)
 
 
 @pytest.fixture(scope="module")

@@ -138,3 +138,41 @@ def _finite(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [_finite(v) for v in obj]
     return obj
+
+
+# ---------------------------------------------------------------- pushed status changes
+# The ``changes`` of a ``{"notify": "status"}`` line (service.subscriptions): the daemon makes them,
+# a client (the web gateway's fan-out) applies them to the full status it was sent first.
+Status = dict[str, Any]
+
+
+def status_changes(old: Status | None, new: Status) -> Status:
+    """The fields of ``new`` that differ from ``old``: nested dicts by key, anything else whole.
+    A key that disappeared is reported as None."""
+    if old is None:
+        return dict(new)
+    changes: Status = {}
+    for key, value in new.items():
+        before = old.get(key, _MISSING)
+        if isinstance(value, dict) and isinstance(before, dict):
+            inner = status_changes(before, value)
+            if inner:
+                changes[key] = inner
+        elif before is _MISSING or before != value:
+            changes[key] = value
+    for key in old.keys() - new.keys():
+        changes[key] = None
+    return changes
+
+
+def merge_changes(older: Status, newer: Status) -> Status:
+    """Two successive change sets as one (newer wins; nested dicts merged by key); likewise a
+    full status and the changes after it give the full status now. ``older`` is not changed."""
+    merged = dict(older)
+    for key, value in newer.items():
+        before = merged.get(key)
+        merged[key] = merge_changes(before, value) if isinstance(value, dict) and isinstance(before, dict) else value
+    return merged
+
+
+_MISSING = object()

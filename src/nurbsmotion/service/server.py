@@ -31,7 +31,6 @@ log = logging.getLogger(__name__)
 Handler = Callable[[Request], dict[str, Any]]
 SOCKET_MODE = 0o660
 _CHUNK = 1 << 20
-PUSH_POLL_S = 0.5  # a subscriber's thread looks for the daemon's stop or the hub's drop this often
 
 
 class ControlServer:
@@ -223,16 +222,18 @@ class ControlServer:
 
     def _push(self, conn: socket.socket, sub: Subscription) -> None:
         """The hub's publisher sends this client's lines (Subscription.attach, non-blocking);
-        this thread only waits for the client to hang up, the daemon to stop, or the hub to
-        drop the client, waking PUSH_POLL_S apart rather than at every line."""
+        this thread sleeps until the client hangs up, the daemon stops (close shuts every
+        connection down) or the hub drops the client (its on_drop shuts the reading side
+        down): no periodic wake-up, so ten subscribers add no thread that takes the
+        interpreter lock while nothing happens."""
         conn.setblocking(False)
-        sub.attach(conn.send)
+        sub.attach(conn.send, on_drop=lambda: _stop_reading(conn))
         while not self._stopping.is_set() and sub.dropped is None:
             try:
-                readable, _, _ = select.select([conn], [], [], PUSH_POLL_S)
+                readable, _, _ = select.select([conn], [], [])
             except (OSError, ValueError):
                 return
-            if readable and _peer_closed(conn):
+            if sub.dropped is None and readable and _peer_closed(conn):
                 return
         if sub.dropped is not None:
             conn.setblocking(True)
@@ -254,6 +255,15 @@ def _send_lines(conn: socket.socket, lines: list[bytes]) -> bool:
         return True
     except OSError:
         return False
+
+
+def _stop_reading(conn: socket.socket) -> None:
+    """Wake the subscriber's thread from its select (EOF on the reading side); the 'dropped'
+    line can still be sent."""
+    try:
+        conn.shutdown(socket.SHUT_RD)
+    except OSError:
+        pass
 
 
 def _peer_closed(conn: socket.socket) -> bool:

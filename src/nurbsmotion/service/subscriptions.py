@@ -33,45 +33,13 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from nurbsmotion.log import attach_handler, parse_kv
-from nurbsmotion.service.protocol import encode
+from nurbsmotion.service.protocol import Status, encode, merge_changes, status_changes
 
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
 MAX_HZ_RANGE = (0.5, 100.0)
 MAX_PENDING_LINES = 2000  # a client this far behind is dropped (events queue; status lines merge)
 MAX_UNSENT_BYTES = 4 * 1024 * 1024  # an attached client whose socket leaves this much unsent is dropped
-Status = dict[str, Any]
 Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
-
-
-def status_changes(old: Status | None, new: Status) -> Status:
-    """The fields of ``new`` that differ from ``old``: nested dicts by key, anything else whole.
-    A key that disappeared is reported as None."""
-    if old is None:
-        return dict(new)
-    changes: Status = {}
-    for key, value in new.items():
-        before = old.get(key, _MISSING)
-        if isinstance(value, dict) and isinstance(before, dict):
-            inner = status_changes(before, value)
-            if inner:
-                changes[key] = inner
-        elif before is _MISSING or before != value:
-            changes[key] = value
-    for key in old.keys() - new.keys():
-        changes[key] = None
-    return changes
-
-
-def merge_changes(older: Status, newer: Status) -> Status:
-    """Two successive change sets as one (newer wins; nested dicts merged by key)."""
-    merged = dict(older)
-    for key, value in newer.items():
-        before = merged.get(key)
-        merged[key] = merge_changes(before, value) if isinstance(value, dict) and isinstance(before, dict) else value
-    return merged
-
-
-_MISSING = object()
 
 
 @dataclass
@@ -86,7 +54,9 @@ class Subscription:
     seq: int = 0
     wake: threading.Condition = field(default_factory=threading.Condition)
     writer: Writer | None = None  # attached: the publisher sends the lines (flush), nobody takes them
+    on_drop: Callable[[], None] | None = None  # attached: wakes the connection's thread when dropped
     unsent: bytes = b""
+    mid_line: bool = False  # the socket took part of a line whose rest is at the front of ``unsent``
 
     def put(self, body: bytes) -> None:
         """Queue one line: ``body`` is an encoded JSON object, shared by every subscriber;
@@ -98,14 +68,26 @@ class Subscription:
             self.lines.append(b'{"seq":%d,' % self.seq + body[1:])
             if len(self.lines) > MAX_PENDING_LINES:
                 self.lines.clear()
-                self.dropped = f"client too slow: more than {MAX_PENDING_LINES} lines behind"
-                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
-            self.wake.notify()
+                self._drop(f"client too slow: more than {MAX_PENDING_LINES} lines behind", notice=True)
+            elif self.writer is None:
+                self.wake.notify()  # a reader waits in take(); an attached subscriber is flushed instead
 
-    def attach(self, writer: Writer) -> None:
-        """From now on the publisher sends this subscriber's lines with ``writer`` (flush)."""
+    def attach(self, writer: Writer, on_drop: Callable[[], None] | None = None) -> None:
+        """From now on the publisher sends this subscriber's lines with ``writer`` (flush), and
+        calls ``on_drop`` (once, holding no other lock) when it drops the subscriber, so the
+        connection's thread can sleep until then instead of polling."""
         with self.wake:
-            self.writer = writer
+            self.writer, self.on_drop = writer, on_drop
+
+    def _drop(self, reason: str, notice: bool) -> None:
+        """Drop this subscriber (holding ``wake``): ``notice`` queues the 'dropped' line its
+        connection's thread sends before closing."""
+        self.dropped = reason
+        if notice:
+            self.lines.append(encode({"notify": "dropped", "error": reason}))
+        self.wake.notify()
+        if self.on_drop is not None:
+            self.on_drop()
 
     def flush(self) -> None:
         """Send what waits (the publisher's thread; attached subscribers only): what the
@@ -121,14 +103,15 @@ class Subscription:
             except BlockingIOError:
                 sent = 0
             except OSError as err:
-                self.dropped, self.unsent = f"connection lost: {err}", b""
-                self.wake.notify()
+                self.unsent = b""
+                self._drop(f"connection lost: {err}", notice=False)
                 return
             self.unsent = data[sent:]
-            if len(self.unsent) > MAX_UNSENT_BYTES and self.dropped is None:
-                self.dropped, self.unsent = f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", b""
-                self.lines.append(encode({"notify": "dropped", "error": self.dropped}))
-                self.wake.notify()
+            if sent:
+                self.mid_line = data[sent - 1:sent] != b"\n"
+            if len(self.unsent) > MAX_UNSENT_BYTES:  # keep only the rest of a line the socket took part of
+                self.unsent = self.unsent[:self.unsent.find(b"\n") + 1] if self.mid_line else b""
+                self._drop(f"client too slow: more than {MAX_UNSENT_BYTES} bytes unsent", notice=True)
 
     def take(self, timeout_s: float) -> list[bytes]:
         """The lines waiting now (after at most ``timeout_s``); empty when none came."""

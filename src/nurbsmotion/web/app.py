@@ -14,16 +14,19 @@ import asyncio
 import ipaddress
 import json
 import logging
+import socket
+import weakref
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any, Awaitable, Callable
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from nurbsmotion.log import kv
 from nurbsmotion.web.auth import FailedAttempts, KeyStore, OneShotTokens, Role
 from nurbsmotion.web.daemon_link import DaemonLink, DaemonUnreachable
+from nurbsmotion.web.fanout import FanoutClient, StatusFanout
 from nurbsmotion.web.openapi import openapi_document
 from nurbsmotion.web.routes import API, ROUTES, error, job_file_handler, route_handler
 
@@ -35,7 +38,15 @@ WS_COMMANDS = {"status": Role.OBSERVER, "jobs": Role.OBSERVER, "job": Role.OBSER
                "jog": Role.OPERATOR, "jog_renew": Role.OPERATOR, "jog_stop": Role.OPERATOR, "mdi": Role.OPERATOR,
                "override": Role.OPERATOR, "home": Role.OPERATOR, "offsets": Role.OPERATOR}
 WS_AUTH_TIMEOUT_S = 5.0
+# A WebSocket's kernel send buffer (autotuned up to 4 MB otherwise), the event loop's write
+# buffer above it (64 KiB by default) and how much aiohttp writes before it waits for room
+# (256 KiB by default): a client that stops reading soon holds up its own sender, so its queue
+# fills and it is resynced with the status of now (web.fanout) instead of reading seconds-old
+# positions out of a deep buffer later.
+WS_SEND_BUFFER_BYTES = 16 * 1024
 ROLE = web.RequestKey("role", Role)  # the caller's role, set by the auth middleware
+FANOUT = web.AppKey("fanout", StatusFanout)  # the one daemon subscription every WebSocket shares
+SOCKETS = web.AppKey("sockets", weakref.WeakSet[web.WebSocketResponse])  # open WebSockets, closed on shutdown
 
 
 @dataclass(frozen=True)
@@ -127,10 +138,23 @@ def make_app(settings: WebSettings) -> web.Application:
     app.router.add_get(f"{API}/jobs/{{id}}/files/{{name}}", with_role(Role.OBSERVER, job_file_handler(link)))
     app.router.add_post(f"{API}/access/oneshot", with_role(Role.OBSERVER, oneshot_handler(gate)))
     app.router.add_get(f"{API}/openapi.json", with_role(Role.OBSERVER, openapi_handler))
-    app.router.add_get(f"{API}/ws", websocket_handler(link, gate))
+    fanout = StatusFanout(link)
+    app[FANOUT] = fanout
+    app[SOCKETS] = weakref.WeakSet()
+    app.on_shutdown.append(close_websockets)
+    app.router.add_get(f"{API}/ws", websocket_handler(link, gate, fanout))
     app.router.add_get("/", page_handler)
     app.router.add_static("/static/", static_dir(), show_index=False)
     return app
+
+
+async def close_websockets(app: web.Application) -> None:
+    """SIGTERM: close every WebSocket at once (aiohttp's documented pattern; else the shutdown
+    waits for each client to hang up), then the daemon subscription."""
+    sockets: weakref.WeakSet[web.WebSocketResponse] = app[SOCKETS]
+    await asyncio.gather(*(ws.close(code=WSCloseCode.GOING_AWAY, message=b"gateway shutting down")
+                           for ws in list(sockets)), return_exceptions=True)  # a stalled one delays no other
+    await app[FANOUT].close()
 
 
 def static_dir() -> Path:
@@ -205,26 +229,42 @@ def errors_as_json(max_upload_bytes: int) -> Any:
     return middleware
 
 
-def websocket_handler(link: DaemonLink, gate: Gate) -> Callable[[web.Request], Awaitable[web.StreamResponse]]:
-    """``/api/v1/ws``: the daemon's subscription relayed as JSON messages; the client may send
-    ``{"id": n, "cmd": NAME, ...fields}`` (WS_COMMANDS) and gets ``{"id": n, "response": {...}}``."""
+def websocket_handler(link: DaemonLink, gate: Gate,
+                      fanout: StatusFanout) -> Callable[[web.Request], Awaitable[web.StreamResponse]]:
+    """``/api/v1/ws``: the daemon's subscription relayed as JSON messages (one subscription
+    shared by every client: web.fanout); the client may send ``{"id": n, "cmd": NAME,
+    ...fields}`` (WS_COMMANDS) and gets ``{"id": n, "response": {...}}``."""
     async def handle(request: web.Request) -> web.StreamResponse:
-        ws = web.WebSocketResponse(heartbeat=10.0)
+        ws = web.WebSocketResponse(heartbeat=10.0, writer_limit=WS_SEND_BUFFER_BYTES)  # waits for room each 16 KiB
         await ws.prepare(request)
         role = await websocket_role(ws, request, gate)
         if role is None:
             return ws
-        relay = asyncio.create_task(relay_subscription(ws, link))
+        bound_send_buffer(request)
+        request.app[SOCKETS].add(ws)
+        client = fanout.join()
+        relay = asyncio.create_task(relay_to(ws, client))
         try:
             async for message in ws:
                 if message.type != WSMsgType.TEXT:
                     continue
                 await ws.send_json(await websocket_request(message.data, role, link))
         finally:
+            fanout.leave(client)
             relay.cancel()
             await ws.close()
         return ws
     return handle
+
+
+def bound_send_buffer(request: web.Request) -> None:
+    transport = request.transport
+    if transport is None:
+        return
+    transport.set_write_buffer_limits(high=WS_SEND_BUFFER_BYTES)
+    sock = transport.get_extra_info("socket")
+    if sock is not None:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, WS_SEND_BUFFER_BYTES)
 
 
 async def websocket_role(ws: web.WebSocketResponse, request: web.Request, gate: Gate) -> Role | None:
@@ -264,16 +304,11 @@ async def websocket_request(data: str, role: Role, link: DaemonLink) -> dict[str
         return {"id": ident, "error": str(err)}
 
 
-async def relay_subscription(ws: web.WebSocketResponse, link: DaemonLink) -> None:
+async def relay_to(ws: web.WebSocketResponse, client: FanoutClient) -> None:
+    """Send the client's queued messages in order until its connection closes."""
     try:
-        async for line in link.subscribe():
-            if ws.closed:
-                return
-            await ws.send_json(line)
-        await ws.send_json({"notify": "daemon_gone", "error": "the daemon closed the connection"})
-    except DaemonUnreachable as err:
-        if not ws.closed:
-            await ws.send_json({"notify": "daemon_gone", "error": str(err)})
+        while not ws.closed:
+            await ws.send_str(await client.next_text())
     except ConnectionResetError:
         pass
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import asyncio
 import json
 from pathlib import Path
-from typing import Any, AsyncIterator
+from typing import Any, AsyncGenerator
 
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, encode
 
@@ -53,9 +53,10 @@ class DaemonLink:
         answer: dict[str, Any] = json.loads(line)
         return answer
 
-    async def subscribe(self, max_hz: float | None = None) -> AsyncIterator[dict[str, Any]]:
-        """The subscription's answer (full status), then every pushed line until the daemon
-        closes the connection or the caller stops iterating."""
+    async def subscribe_lines(self, max_hz: float | None = None) -> AsyncGenerator[str, None]:
+        """The subscription's answer (full status), then every pushed line, as the daemon's JSON
+        text (relayed as it is: web.fanout), until the daemon closes the connection or the
+        caller stops iterating."""
         reader, writer = await self._open()
         try:
             writer.write(encode({"cmd": "subscribe", **({} if max_hz is None else {"max_hz": max_hz})}))
@@ -64,8 +65,8 @@ class DaemonLink:
                 line = await reader.readline()
                 if not line:
                     return
-                yield json.loads(line)
-        except (OSError, asyncio.IncompleteReadError) as err:
+                yield line.decode().rstrip("\n")
+        except (OSError, asyncio.IncompleteReadError, ValueError) as err:
             raise DaemonUnreachable(f"daemon at {self.socket_path}: subscription ended ({err!r})") from err
         finally:
             writer.close()
