@@ -18,6 +18,7 @@ import ctypes.util
 import gc
 import os
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -194,25 +195,30 @@ class KernelThread:
         return self.policy not in ("SCHED_FIFO", "SCHED_RR") or self.priority <= fifo_priority
 
 
-def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:
-    """The threads that run the kernel's soft timers (ksoftirqd/N, ktimers/N), from ``proc``."""
-    threads = []
+def process_stats(proc: Path = Path("/proc")) -> Iterator[tuple[int, str, list[str]]]:
+    """(pid, name, fields) of every process in ``proc``; ``fields[0]`` is field 3 of
+    /proc/PID/stat (state), after the name in parentheses (proc(5))."""
     for entry in proc.iterdir():
         if not entry.name.isdigit():
             continue
         try:
             stat = (entry / "stat").read_text()
-        except OSError:
+        except OSError:  # ended meanwhile
             continue
-        name = stat[stat.find("(") + 1:stat.rfind(")")]
+        yield int(entry.name), stat[stat.find("(") + 1:stat.rfind(")")], stat[stat.rfind(")") + 2:].split()
+
+
+def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:
+    """The threads that run the kernel's soft timers (ksoftirqd/N, ktimers/N), from ``proc``."""
+    threads = []
+    for pid, name, fields in process_stats(proc):
         if not name.startswith(KERNEL_TIMER_THREAD_PREFIXES):
             continue
-        fields = stat[stat.rfind(")") + 2:].split()  # fields[0] is field 3 (state)
         try:
             priority, policy = int(fields[37]), int(fields[38])
         except (IndexError, ValueError):
             continue
-        threads.append(KernelThread(name, int(entry.name), _POLICY_NAMES.get(policy, str(policy)), priority))
+        threads.append(KernelThread(name, pid, _POLICY_NAMES.get(policy, str(policy)), priority))
     return sorted(threads, key=lambda t: t.pid)
 
 
