@@ -73,6 +73,41 @@ def set_thread_realtime(priority: int | None, thread_id: int = 0) -> str:
     return "SCHED_FIFO"
 
 
+def realtime_for_normal_threads(priority: int, task_dir: Path = Path("/proc/self/task")) -> list[int]:
+    """SCHED_FIFO ``priority`` for every thread of this process still at the normal policy
+    (SCHED_OTHER), where allowed; the native ids of those changed. Threads they start later
+    inherit it (pthread_create's default). The SCHED_FIFO threads wait for the interpreter
+    lock like any other: held by a normal thread that other work has preempted, it keeps them
+    all waiting (docs/reliability.md, "The demo under heavy load")."""
+    changed: list[int] = []
+    if not hasattr(os, "sched_setscheduler") or not task_dir.is_dir():
+        return changed
+    for entry in task_dir.iterdir():
+        tid = int(entry.name)
+        try:
+            if os.sched_getscheduler(tid) != os.SCHED_OTHER:
+                continue
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(max(1, priority)))
+        except OSError:  # not allowed (no root or CAP_SYS_NICE), or the thread ended
+            continue
+        changed.append(tid)
+    return changed
+
+
+def normal_again(thread_ids: list[int], task_dir: Path = Path("/proc/self/task")) -> None:
+    """Those of ``thread_ids`` still threads of this process back to SCHED_OTHER (an id of
+    an ended thread may be another process' thread by now: it is left alone)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return
+    for tid in thread_ids:
+        if not (task_dir / str(tid)).exists():
+            continue
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
+
+
 # ---------------------------------------------------------------- the real-time CPU
 # The daemon's SCHED_FIFO threads (cycle, receive; simulated drives) wake thousands of times a
 # second. Spread over every CPU they preempt the planner worker wherever it runs, and its

@@ -24,6 +24,7 @@ from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.errors import Refused
+from nurbsmotion.runtime import normal_again, realtime_for_normal_threads
 from nurbsmotion.service.client import Client, RequestFailed
 from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.service.daemon import Daemon
@@ -41,6 +42,12 @@ DEMO_HOMING = {
 }
 DEMO_SENSORS = {"X": {"negative_limit_counts": -20_000}, "Y": {"index_pitch_counts": 4000, "index_phase_counts": 1500}}
 DEMO_JOG = {"axis": "X", "distance": 10.0, "speed": 20.0}
+# The simulated drives and the master are SCHED_FIFO threads of this process; every other
+# thread (this one, the control server's, the job watchers) runs SCHED_FIFO at the lowest
+# priority while they run, so that none holds the interpreter lock while the host's other
+# work keeps it off the CPU: all the drives' heartbeats stalled together 330-670 ms on a
+# loaded host, a fault (docs/reliability.md, "The demo under heavy load").
+DEMO_THREADS_PRIORITY = 1
 DEMO_MDI = "G01 X5 Y5 F3000"
 
 
@@ -92,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         config = demo_config(args, folder / "control.sock")
         daemon = Daemon(config, functools.partial(open_link, home_sensors=demo_sensors(config)))
         daemon.start()
+        raised = realtime_for_normal_threads(DEMO_THREADS_PRIORITY)
         try:
             print(f"drives up: {len(config.axes)} simulated axes on {config.bus.interface}:{config.bus.channel}, "
                   f"T = {config.cycle_period_s * 1000:g} ms")
@@ -99,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
             info = _run_program(config, args.no_progress, daemon)
         finally:
             daemon.close()
+            normal_again(raised)  # the report and the plot take CPU seconds: not at a real-time priority
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     return _report(info, config)
