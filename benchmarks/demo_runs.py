@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from nurbsmotion.runtime import process_stats  # noqa: E402
 
@@ -164,6 +165,25 @@ def summary(results: list[RunResult]) -> str:
             f"clean {sum(r.clean for r in results)} of {len(results)}; {load}")
 
 
+def read_results(path: Path) -> list[RunResult]:
+    """The runs of an earlier (or still running) series from its runs.jsonl."""
+    names = set(RunResult.__dataclass_fields__)
+    return [RunResult(**{k: v for k, v in json.loads(line).items() if k in names})
+            for line in path.read_text().splitlines() if line.strip()]
+
+
+def write_doc(results: list[RunResult], command: str) -> None:
+    """docs/benchmarks.md, section demo_runs: the summary and the table of every run."""
+    from benchmarks._report import write_section
+
+    body = (f"{summary(results)}. Every run `nice -n 10 nurbsmotion demo --no-progress --data-dir DIR` (one DIR for "
+            "all, its own TMPDIR each), even runs beside `nice -n 10 python3 -c 'while 1: pass'`; the host's load "
+            "is mostly other helpers' work. A run passes when it exits 0 with `outcome: completed`; it is "
+            "clean when it leaves no job without outcome.json, no process of its session 10 s after it and "
+            "nothing in its TMPDIR.\n\n" + table(results))
+    write_section("demo_runs", "`nurbsmotion demo`, run after run", body, command)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=50)
@@ -171,6 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout-s", type=float, default=600.0, help="a run that takes longer counts as failed")
     parser.add_argument("--nurbsmotion", default=str(Path(sys.executable).with_name("nurbsmotion")))
     parser.add_argument("--stop-on-failure", action="store_true")
+    parser.add_argument("--report-only", action="store_true", help="no run: the table of --out's runs.jsonl")
+    parser.add_argument("--write", action="store_true", help="the table into docs/benchmarks.md (section demo_runs)")
     args = parser.parse_args(argv)
     # Started in the background (nohup, `&`), this process ignores SIGINT and its demos would
     # inherit that (flake 6 in docs/reliability.md): a handled SIGINT is the default in a child.
@@ -178,9 +200,9 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     data_dir = args.out / "data"
     command = ["nice", "-n", "10", args.nurbsmotion, "demo", "--no-progress", "--data-dir", str(data_dir)]
-    results: list[RunResult] = []
+    results: list[RunResult] = read_results(args.out / "runs.jsonl") if args.report_only else []
     try:
-        for index in range(1, args.runs + 1):
+        for index in range(1, 0 if args.report_only else args.runs + 1):
             result = run_once(index, index % 2 == 0, command, data_dir, args.out, args.timeout_s)
             results.append(result)
             with open(args.out / "runs.jsonl", "a") as log:
@@ -194,6 +216,8 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted", flush=True)
     print(table(results))
     print(summary(results))
+    if args.write:
+        write_doc(results, f"python benchmarks/demo_runs.py --runs {len(results)} --out DIR --write")
     return 0 if results and all(r.passed and r.clean for r in results) else 1
 
 
