@@ -3,13 +3,15 @@ and count the outcomes (issue 26: "the demo passes 50 runs in a row, 25 of them 
 CPU-burning process beside it; a failed demo leaves no stray job").
 
     python benchmarks/demo_runs.py --runs 50 --out /tmp/demo-runs      # ~1-2 h on the 2-core host
+    python benchmarks/demo_runs.py --out /tmp/demo-runs --report-only --write   # its table into docs/benchmarks.md
 
 Each run is ``nice -n 10 nurbsmotion demo --no-progress --data-dir DIR`` (one data directory
 for every run, as a user's ``var/demo``) in a session of its own. After it, a run counts as
 passed when the command exited 0 and printed ``outcome: completed``, and as clean when
 
 - every job folder it added to DIR has its ``outcome.json`` (no job left without outcome),
-- no process of its session is still alive (the planner worker, a drive thread's helper),
+- no process of its session is still alive 10 s after it (the planner worker,
+  multiprocessing's resource tracker),
 - it left nothing in its temporary directory (``$TMPDIR``, one per run: the demo's socket
   folder, multiprocessing's files).
 
