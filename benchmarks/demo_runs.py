@@ -54,6 +54,7 @@ class RunResult:
     jobs_without_outcome: list[str] = field(default_factory=list)
     processes_left: list[str] = field(default_factory=list)
     temp_files_left: list[str] = field(default_factory=list)
+    source: str = ""  # --compare-src: the src folder this run's nurbsmotion came from
 
     @property
     def passed(self) -> bool:
@@ -102,7 +103,8 @@ def outcome_line(stdout: str) -> str:
     return "no outcome line"
 
 
-def run_once(index: int, burner: bool, command: list[str], data_dir: Path, out: Path, timeout_s: float) -> RunResult:
+def run_once(index: int, burner: bool, command: list[str], data_dir: Path, out: Path, timeout_s: float,
+             src: str | None = None) -> RunResult:
     before_jobs, temp_dir = job_folders(data_dir), out / f"tmp{index:02d}"
     temp_dir.mkdir()
     hog = subprocess.Popen(["nice", "-n", "10", *BURNER]) if burner else None
@@ -111,7 +113,8 @@ def run_once(index: int, burner: bool, command: list[str], data_dir: Path, out: 
     try:
         with open(stdout_path, "w") as so, open(stderr_path, "w") as se:
             proc = subprocess.Popen(command, stdout=so, stderr=se, start_new_session=True,
-                                    env={**os.environ, "TMPDIR": str(temp_dir)})
+                                    env={**os.environ, "TMPDIR": str(temp_dir),
+                                         **({"PYTHONPATH": src} if src else {})})
             try:
                 code: int | None = proc.wait(timeout=timeout_s)
             except subprocess.TimeoutExpired:
@@ -141,16 +144,16 @@ def run_once(index: int, burner: bool, command: list[str], data_dir: Path, out: 
                      jobs_added=len(added),
                      jobs_without_outcome=sorted(p.name for p in added if not (p / "outcome.json").exists()),
                      processes_left=left,
-                     temp_files_left=sorted(p.name for p in temp_dir.iterdir()))
+                     temp_files_left=sorted(p.name for p in temp_dir.iterdir()), source=src or "")
 
 
 def table(results: list[RunResult]) -> str:
-    rows = ["| run | burner | start (UTC) | s | load 1 min before/after | exit | outcome | jobs | stray |",
-            "|---|---|---|---|---|---|---|---|---|"]
+    rows = ["| run | version | burner | start (UTC) | s | load 1 min before/after | exit | outcome | jobs | stray |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         stray = ", ".join([*(f"job {j} without outcome" for j in r.jobs_without_outcome),
                            *r.processes_left, *r.temp_files_left]) or "none"
-        rows.append(f"| {r.index} | {'yes' if r.burner else 'no'} | {r.started_utc} | {r.seconds:.0f} | "
+        rows.append(f"| {r.index} | {r.source or '-'} | {'yes' if r.burner else 'no'} | {r.started_utc} | {r.seconds:.0f} | "
                     f"{r.load_before:.1f} / {r.load_after:.1f} | {r.exit_code} | {r.outcome[:120]} | "
                     f"{r.jobs_added} | {stray} |")
     return "\n".join(rows)
@@ -161,6 +164,9 @@ def summary(results: list[RunResult]) -> str:
         group = [r for r in results if r.burner == with_burner]
         return f"{sum(r.passed for r in group)} of {len(group)}"
 
+    sources = sorted({r.source for r in results})
+    if len(sources) > 1:
+        return "; ".join(f"{source}: {summary([r for r in results if r.source == source])}" for source in sources)
     loads = [x for r in results for x in (r.load_before, r.load_after)]
     load = f"load {min(loads):.1f}-{max(loads):.1f}" if loads else "no run"
     return (f"passed {sum(r.passed for r in results)} of {len(results)} (quiet {count(False)}, burner {count(True)}); "
@@ -193,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--timeout-s", type=float, default=600.0, help="a run that takes longer counts as failed")
     parser.add_argument("--nurbsmotion", default=str(Path(sys.executable).with_name("nurbsmotion")))
     parser.add_argument("--stop-on-failure", action="store_true")
+    parser.add_argument("--compare-src", metavar="DIR", help="every other pair of runs with DIR/src first on the "
+                                                                 "path (another version, e.g. a git archive): interleaved")
     parser.add_argument("--report-only", action="store_true", help="no run: the table of --out's runs.jsonl")
     parser.add_argument("--write", action="store_true", help="the table into docs/benchmarks.md (section demo_runs)")
     args = parser.parse_args(argv)
@@ -202,10 +210,15 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     data_dir = args.out / "data"
     command = ["nice", "-n", "10", args.nurbsmotion, "demo", "--no-progress", "--data-dir", str(data_dir)]
+    if args.compare_src:  # both versions as `python -m nurbsmotion`, the one on PYTHONPATH first
+        command = ["nice", "-n", "10", sys.executable, "-m", "nurbsmotion", "demo", "--no-progress", "--data-dir",
+                   str(data_dir)]
+    sources = [str(Path(__file__).resolve().parents[1] / "src"), str(Path(args.compare_src or ".") / "src")]
     results: list[RunResult] = read_results(args.out / "runs.jsonl") if args.report_only else []
     try:
         for index in range(1, 0 if args.report_only else args.runs + 1):
-            result = run_once(index, index % 2 == 0, command, data_dir, args.out, args.timeout_s)
+            src = sources[(index - 1) // 2 % 2] if args.compare_src else None
+            result = run_once(index, index % 2 == 0, command, data_dir, args.out, args.timeout_s, src)
             results.append(result)
             with open(args.out / "runs.jsonl", "a") as log:
                 log.write(json.dumps({**asdict(result), "passed": result.passed, "clean": result.clean}) + "\n")

@@ -1,7 +1,8 @@
-"""runtime.realtime_for_normal_threads / normal_again: the demo's threads that are not
-real-time get the lowest SCHED_FIFO priority while its in-process drives run (a normal thread
-holding the interpreter lock while preempted stalls them all), in a child process so that
-this one's threads are left alone."""
+"""runtime.realtime_for_normal_threads / normal_again / unpin_threads, in a child process so
+that this one's threads are left alone: the demo's threads that are not real-time get the
+lowest SCHED_FIFO priority while its in-process drives run (a normal thread holding the
+interpreter lock while preempted stalls them all), and none stays pinned to the one CPU every
+nurbsmotion process pins its real-time threads to."""
 
 from __future__ import annotations
 
@@ -67,3 +68,34 @@ def test_normal_threads_go_real_time_at_the_priority_and_back_and_real_time_ones
     assert seen["rt"] == [fifo, 5]
     assert seen["started_later"] == [fifo, 1]  # a thread started by a raised one inherits it
     assert seen["main_after"] == [other, 0]
+
+
+UNPIN_SCRIPT = r"""
+import json, os, threading
+from nurbsmotion.runtime import unpin_threads
+
+cpus = sorted(os.sched_getaffinity(0))
+seen, ready, go = {}, threading.Event(), threading.Event()
+
+def pinned():
+    os.sched_setaffinity(0, {cpus[-1]})
+    seen["id"] = threading.get_native_id()
+    ready.set()
+    go.wait()
+
+t = threading.Thread(target=pinned)
+t.start(); ready.wait()
+changed = unpin_threads()
+seen["after"] = sorted(os.sched_getaffinity(seen["id"]))
+go.set(); t.join()
+print(json.dumps({"cpus": cpus, "changed": changed, **seen}))
+"""
+
+
+def test_unpin_threads_gives_a_pinned_thread_every_cpu_of_the_process():
+    if not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("needs two CPUs and sched_setaffinity")
+    done = subprocess.run([sys.executable, "-c", UNPIN_SCRIPT], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout)
+    assert seen["changed"] == [seen["id"]] and seen["after"] == seen["cpus"]

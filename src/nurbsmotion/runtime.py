@@ -94,6 +94,27 @@ def realtime_for_normal_threads(priority: int, task_dir: Path = Path("/proc/self
     return changed
 
 
+def unpin_threads(task_dir: Path = Path("/proc/self/task")) -> list[int]:
+    """Every thread of this process allowed on every CPU the calling thread may use (undoes
+    pin_to_realtime_cpu); the native ids changed. Every nurbsmotion process pins its
+    SCHED_FIFO threads to the same last CPU: two on one host (tests, benchmarks) keep each
+    other's simulated drives off it (docs/reliability.md, flake 8)."""
+    changed: list[int] = []
+    if not hasattr(os, "sched_setaffinity") or not task_dir.is_dir():
+        return changed
+    cpus = os.sched_getaffinity(0)
+    for entry in task_dir.iterdir():
+        tid = int(entry.name)
+        try:
+            if os.sched_getaffinity(tid) == cpus:
+                continue
+            os.sched_setaffinity(tid, cpus)
+        except OSError:  # the thread ended
+            continue
+        changed.append(tid)
+    return changed
+
+
 def normal_again(thread_ids: list[int], task_dir: Path = Path("/proc/self/task")) -> None:
     """Those of ``thread_ids`` still threads of this process back to SCHED_OTHER (an id of
     an ended thread may be another process' thread by now: it is left alone)."""

@@ -26,7 +26,7 @@ from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.errors import Refused
-from nurbsmotion.runtime import normal_again, realtime_for_normal_threads
+from nurbsmotion.runtime import normal_again, realtime_for_normal_threads, unpin_threads
 from nurbsmotion.service.client import Client, RequestFailed
 from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.service.daemon import Daemon
@@ -106,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             daemon.start()
             raised = realtime_for_normal_threads(DEMO_THREADS_PRIORITY)
+            unpin_threads()  # the simulated drives may use the other CPU when another process' threads hold the last
             print(f"drives up: {len(config.axes)} simulated axes on {config.bus.interface}:{config.bus.channel}, "
                   f"T = {config.cycle_period_s * 1000:g} ms")
             _home_jog_mdi(config)
