@@ -18,6 +18,7 @@ import ctypes.util
 import gc
 import os
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -70,6 +71,62 @@ def set_thread_realtime(priority: int | None, thread_id: int = 0) -> str:
         return f"normal: {err}"
     pin_to_realtime_cpu(thread_id)
     return "SCHED_FIFO"
+
+
+def realtime_for_normal_threads(priority: int, task_dir: Path = Path("/proc/self/task")) -> list[int]:
+    """SCHED_FIFO ``priority`` for every thread of this process still at the normal policy
+    (SCHED_OTHER), where allowed; the native ids of those changed. Threads they start later
+    inherit it (pthread_create's default). The SCHED_FIFO threads wait for the interpreter
+    lock like any other: held by a normal thread that other work has preempted, it keeps them
+    all waiting (docs/reliability.md, "The demo under heavy load")."""
+    changed: list[int] = []
+    if not hasattr(os, "sched_setscheduler") or not task_dir.is_dir():
+        return changed
+    for entry in task_dir.iterdir():
+        tid = int(entry.name)
+        try:
+            if os.sched_getscheduler(tid) != os.SCHED_OTHER:
+                continue
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(max(1, priority)))
+        except OSError:  # not allowed (no root or CAP_SYS_NICE), or the thread ended
+            continue
+        changed.append(tid)
+    return changed
+
+
+def unpin_threads(task_dir: Path = Path("/proc/self/task")) -> list[int]:
+    """Every thread of this process allowed on every CPU the calling thread may use (undoes
+    pin_to_realtime_cpu); the native ids changed. Every nurbsmotion process pins its
+    SCHED_FIFO threads to the same last CPU: two on one host (tests, benchmarks) keep each
+    other's simulated drives off it (docs/reliability.md, flake 8)."""
+    changed: list[int] = []
+    if not hasattr(os, "sched_setaffinity") or not task_dir.is_dir():
+        return changed
+    cpus = os.sched_getaffinity(0)
+    for entry in task_dir.iterdir():
+        tid = int(entry.name)
+        try:
+            if os.sched_getaffinity(tid) == cpus:
+                continue
+            os.sched_setaffinity(tid, cpus)
+        except OSError:  # the thread ended
+            continue
+        changed.append(tid)
+    return changed
+
+
+def normal_again(thread_ids: list[int], task_dir: Path = Path("/proc/self/task")) -> None:
+    """Those of ``thread_ids`` still threads of this process back to SCHED_OTHER (an id of
+    an ended thread may be another process' thread by now: it is left alone)."""
+    if not hasattr(os, "sched_setscheduler"):
+        return
+    for tid in thread_ids:
+        if not (task_dir / str(tid)).exists():
+            continue
+        try:
+            os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass
 
 
 # ---------------------------------------------------------------- the real-time CPU
@@ -194,25 +251,30 @@ class KernelThread:
         return self.policy not in ("SCHED_FIFO", "SCHED_RR") or self.priority <= fifo_priority
 
 
-def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:
-    """The threads that run the kernel's soft timers (ksoftirqd/N, ktimers/N), from ``proc``."""
-    threads = []
+def process_stats(proc: Path = Path("/proc")) -> Iterator[tuple[int, str, list[str]]]:
+    """(pid, name, fields) of every process in ``proc``; ``fields[0]`` is field 3 of
+    /proc/PID/stat (state), after the name in parentheses (proc(5))."""
     for entry in proc.iterdir():
         if not entry.name.isdigit():
             continue
         try:
             stat = (entry / "stat").read_text()
-        except OSError:
+        except OSError:  # ended meanwhile
             continue
-        name = stat[stat.find("(") + 1:stat.rfind(")")]
+        yield int(entry.name), stat[stat.find("(") + 1:stat.rfind(")")], stat[stat.rfind(")") + 2:].split()
+
+
+def kernel_timer_threads(proc: Path = Path("/proc")) -> list[KernelThread]:
+    """The threads that run the kernel's soft timers (ksoftirqd/N, ktimers/N), from ``proc``."""
+    threads = []
+    for pid, name, fields in process_stats(proc):
         if not name.startswith(KERNEL_TIMER_THREAD_PREFIXES):
             continue
-        fields = stat[stat.rfind(")") + 2:].split()  # fields[0] is field 3 (state)
         try:
             priority, policy = int(fields[37]), int(fields[38])
         except (IndexError, ValueError):
             continue
-        threads.append(KernelThread(name, int(entry.name), _POLICY_NAMES.get(policy, str(policy)), priority))
+        threads.append(KernelThread(name, pid, _POLICY_NAMES.get(policy, str(policy)), priority))
     return sorted(threads, key=lambda t: t.pid)
 
 

@@ -95,6 +95,16 @@ def daemon_with_home_sensors(config_template: str, prefix: str, sensors: dict[in
         daemon.close()
 
 
+def job_reached(status: dict[str, Any], fraction: float) -> bool:
+    """The running job (in a ``status`` answer) has sent ``fraction`` of its planned set-points.
+
+    A streamed job's ``total`` is the rows planned so far until ``planned_all`` (docs/daemon.md,
+    "Status while a job is planned"): right after the start that is cycle 1 of 1, so a fraction
+    of it is not a fraction of the job; the job's length is known once it is all planned."""
+    job = status["job"]
+    return job is not None and job["planned_all"] and job["cycle"] >= fraction * job["total"]
+
+
 def subprocess_environment(notify_socket: Path | None = None) -> dict[str, str]:
     """This test's nurbsmotion first on the path; $NOTIFY_SOCKET only if given."""
     env = dict(os.environ)
@@ -158,8 +168,7 @@ class DaemonProcess:
     def wait_progress(self, fraction: float, timeout_s: float = 20.0) -> dict[str, Any]:
         def reached() -> dict[str, Any] | None:
             status = self.request("status")
-            job = status["job"]
-            return status if job and job["cycle"] >= fraction * job["total"] else None
+            return status if job_reached(status, fraction) else None
         return wait_for(reached, timeout_s, f"{fraction:.0%} of the job", poll_s=0.01)
 
     def close(self, timeout_s: float = 15.0) -> None:

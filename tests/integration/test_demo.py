@@ -28,33 +28,88 @@ def test_the_demo_runs_wang_on_simulated_drives_and_writes_its_plot(tmp_path):
         assert png.read(8) == b"\x89PNG\r\n\x1a\n"
 
 
-@pytest.mark.slow
-def test_a_demo_that_fails_while_its_job_runs_stops_it_and_the_record_says_why(tmp_path, monkeypatch, capsys):
-    """Issue 26.1: a demo crash left a stray 'stopped: the daemon was asked to end' job."""
-    import argparse
+@pytest.fixture
+def demo_on_a_private_bus(monkeypatch):
+    """cli.demo with its configuration on a private virtual channel (tests may run side by side)."""
     import dataclasses
     import uuid
 
     from nurbsmotion.cli import demo
     from nurbsmotion.config import parse_config
-    from nurbsmotion.service.records import JobRecords
 
-    config = parse_config(demo.data.read_text("demo.yaml"), "demo.yaml")  # a private bus: tests may run side by side
+    config = parse_config(demo.data.read_text("demo.yaml"), "demo.yaml")
     private = dataclasses.replace(config, bus=dataclasses.replace(config.bus, channel=f"demo-{uuid.uuid4().hex}"))
     monkeypatch.setattr(demo, "parse_config", lambda text, name: private)
+    return demo
+
+
+def _failing_on_the_program(demo, monkeypatch, failure) -> None:
+    """The demo's follow() calls ``failure()`` when it follows the program's job."""
+    follow = demo.follow
 
     def broken_follow(client, job_id, on_status):
         if client.call("status")["job"]["name"] == demo.PROGRAM_NAME:
-            raise RuntimeError("boom")
+            failure()
         return follow(client, job_id, on_status)
 
-    follow = demo.follow
     monkeypatch.setattr(demo, "follow", broken_follow)
+
+
+def _program_job(data_dir):
+    from nurbsmotion.cli import demo
+    from nurbsmotion.service.records import JobRecords
+
+    records = JobRecords(data_dir).all()
+    assert all(r.outcome() is not None for r in records)  # no job left without its outcome
+    [job] = [r for r in records if (r.plan() or {}).get("program") == demo.PROGRAM_NAME]
+    return job
+
+
+@pytest.mark.slow
+def test_a_demo_that_fails_while_its_job_runs_stops_it_and_the_record_says_why(tmp_path, monkeypatch, capsys,
+                                                                                 demo_on_a_private_bus):
+    """Issue 26.1: a demo crash left a stray 'stopped: the daemon was asked to end' job."""
+    import argparse
+
+    demo = demo_on_a_private_bus
+
+    def boom():
+        raise RuntimeError("boom")
+
+    _failing_on_the_program(demo, monkeypatch, boom)
     args = argparse.Namespace(config=None, data_dir=str(tmp_path / "var"), no_progress=True)
     with pytest.raises(RuntimeError, match="boom"):
         demo.run(args)
-    program_jobs = [r for r in JobRecords(tmp_path / "var").all() if (r.plan() or {}).get("program") == demo.PROGRAM_NAME]
-    assert len(program_jobs) == 1
-    outcome = program_jobs[0].outcome()
+    job = _program_job(tmp_path / "var")
+    outcome = job.outcome()
     assert outcome["outcome"] == "stopped" and outcome["reason"] == "stopped: the demo failed: RuntimeError: boom"
-    assert f"job {program_jobs[0].job_id} stopped; its record: " in capsys.readouterr().err
+    assert f"job {job.job_id} stopped; its record: " in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_sigterm_ends_the_demo_as_ctrl_c_does_and_leaves_nothing_behind(tmp_path, monkeypatch, demo_on_a_private_bus):
+    """Issue 26.1: SIGTERM (``timeout``, ``kill``) ended the demo at once: its job folder had
+    no outcome and its socket's folder stayed in the temporary directory."""
+    import argparse
+    import os
+    import signal
+    import tempfile
+
+    demo = demo_on_a_private_bus
+
+    def reached_the_test(signum, frame):
+        raise AssertionError("SIGTERM reached the test's handler: the demo did not handle it")
+
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    _failing_on_the_program(demo, monkeypatch, lambda: os.kill(os.getpid(), signal.SIGTERM))
+    previous = signal.signal(signal.SIGTERM, reached_the_test)
+    try:
+        args = argparse.Namespace(config=None, data_dir=str(tmp_path / "var"), no_progress=True)
+        with pytest.raises(KeyboardInterrupt, match="SIGTERM"):
+            demo.run(args)
+        assert signal.getsignal(signal.SIGTERM) is reached_the_test  # restored
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    outcome = _program_job(tmp_path / "var").outcome()
+    assert outcome["outcome"] == "stopped" and outcome["reason"] == "stopped: the demo was interrupted (SIGTERM)"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["var"]  # the socket's folder removed

@@ -23,6 +23,7 @@ from nurbsmotion.sim import FaultInjection, read_csv
 from tests.reliability.rig import (A_MAX_MM_S2, COUNTS_PER_MM, HEARTBEAT_CONSUMER_MS, HEARTBEAT_PRODUCER_MS,
                                    V_MAX_MM_S, assert_records_within_limits)
 from tests.helpers import wait_for
+from tests.integration.daemon_helpers import job_reached
 
 LONG = "G21 G90\nG01 X60 Y20 Z5 F4800\n"  # ~1 s
 SHORT = "G21 G90\nG01 X1 Y1 Z1 F3000\n"
@@ -72,8 +73,7 @@ class Running:
     def submit_and_reach(self, program: str, fraction: float) -> str:
         response = self.ask("submit", name="part.nc", program=program)
         assert response["ok"], response
-        wait_for(lambda: (job := self.ask("status")["job"]) is not None and job["cycle"] >= fraction * job["total"],
-                 what=f"{fraction:.0%} of the job")
+        wait_for(lambda: job_reached(self.ask("status"), fraction), what=f"{fraction:.0%} of the job")
         return response["job"]["id"]
 
     def outcome(self, job_id: str) -> dict:

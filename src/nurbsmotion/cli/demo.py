@@ -11,8 +11,10 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -24,6 +26,7 @@ from nurbsmotion.cli._format import figure, number
 from nurbsmotion.cli.run import _display, follow
 from nurbsmotion.config import AxisConfig, MachineConfig, load_config, parse_config
 from nurbsmotion.errors import Refused
+from nurbsmotion.runtime import normal_again, realtime_for_normal_threads, unpin_threads
 from nurbsmotion.service.client import Client, RequestFailed
 from nurbsmotion.config.homing import HomingConfig
 from nurbsmotion.service.daemon import Daemon
@@ -41,6 +44,13 @@ DEMO_HOMING = {
 }
 DEMO_SENSORS = {"X": {"negative_limit_counts": -20_000}, "Y": {"index_pitch_counts": 4000, "index_phase_counts": 1500}}
 DEMO_JOG = {"axis": "X", "distance": 10.0, "speed": 20.0}
+# The simulated drives and the master are SCHED_FIFO threads of this process; every other
+# thread (this one, the control server's, the job watchers) runs SCHED_FIFO at the lowest
+# priority while they run, so that none holds the interpreter lock while the host's other
+# work keeps it off the CPU: all the drives' heartbeats stalled together 330-670 ms on a
+# loaded host, a fault (docs/reliability.md, "The demo under heavy load").
+DEMO_THREADS_PRIORITY = 1
+ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 DEMO_MDI = "G01 X5 Y5 F3000"
 
 
@@ -88,20 +98,43 @@ def _with_findable_eds(axes: tuple[AxisConfig, ...]) -> tuple[AxisConfig, ...]:
 
 def run(args: argparse.Namespace) -> int:
     folder = Path(tempfile.mkdtemp(prefix="nurbsmotion-demo-"))
+    previous = _end_like_ctrl_c(ENDING_SIGNALS)
     try:
         config = demo_config(args, folder / "control.sock")
         daemon = Daemon(config, functools.partial(open_link, home_sensors=demo_sensors(config)))
-        daemon.start()
+        raised: list[int] = []
         try:
+            daemon.start()
+            raised = realtime_for_normal_threads(DEMO_THREADS_PRIORITY)
+            unpin_threads()  # the simulated drives may use the other CPU when another process' threads hold the last
             print(f"drives up: {len(config.axes)} simulated axes on {config.bus.interface}:{config.bus.channel}, "
                   f"T = {config.cycle_period_s * 1000:g} ms")
             _home_jog_mdi(config)
             info = _run_program(config, args.no_progress, daemon)
         finally:
             daemon.close()
+            normal_again(raised)  # the report and the plot take CPU seconds: not at a real-time priority
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return _report(info, config)
+
+
+def _end_like_ctrl_c(signals: tuple[signal.Signals, ...]) -> dict[signal.Signals, Any]:
+    """While the demo's daemon runs, ``signals`` end it as Ctrl-C does (KeyboardInterrupt
+    naming the signal): the job stopped on its path, every record with its outcome, the
+    socket's folder removed. Left at their default, SIGTERM (``timeout``, ``kill``) and SIGHUP
+    (the terminal closed) ended the process at once: a job folder without outcome and the
+    folder left in the temporary directory. The handlers before, to restore; none outside
+    the main thread (only it may set them)."""
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt(signal.Signals(signum).name)
+
+    return {sig: signal.signal(sig, interrupt) for sig in signals}
 
 
 def _home_jog_mdi(config: MachineConfig) -> None:
@@ -177,7 +210,8 @@ def plan_line(plan: dict[str, Any]) -> str:
 def _stop_failed_job(daemon: Daemon, job: dict[str, Any], err: BaseException) -> None:
     """The demo failed (or was interrupted) while its job runs: stop the job along the path
     with a reason that says so, not the daemon's "asked to end", and name its record."""
-    why = "was interrupted (Ctrl-C)" if isinstance(err, KeyboardInterrupt) else f"failed: {type(err).__name__}: {err}"
+    why = f"was interrupted ({err or 'Ctrl-C'})" if isinstance(err, KeyboardInterrupt) else \
+        f"failed: {type(err).__name__}: {err}"
     controller = daemon.controller
     if controller is None:
         return
