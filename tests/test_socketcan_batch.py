@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import time
 
 import can
 
 from nurbsmotion.can.socketcan_batch import BatchNotifier
+from tests.helpers import wait_for
 
 
 def test_the_batch_notifier_leaves_other_buses_to_python_can():
@@ -18,9 +18,7 @@ def test_the_batch_notifier_leaves_other_buses_to_python_can():
         try:
             for i in range(50):
                 a.send(can.Message(arbitration_id=0x100 + i, is_extended_id=False))
-            deadline = time.monotonic() + 5.0
-            while len(got) < 50 and time.monotonic() < deadline:
-                time.sleep(0.01)
+            wait_for(lambda: len(got) >= 50, 5.0, "50 frames received")
         finally:
             notifier.stop()
     assert got == [0x100 + i for i in range(50)]

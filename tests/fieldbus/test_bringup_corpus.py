@@ -5,7 +5,6 @@ same file; otherwise refused before the bus with the one line naming why."""
 from __future__ import annotations
 
 import contextlib
-import time
 import uuid
 from pathlib import Path
 
@@ -17,6 +16,7 @@ from nurbsmotion.config import parse_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.fieldbus import Master
 from nurbsmotion.fieldbus.bringup_plan import plan_drive
+from tests.helpers import wait_for
 
 EDS_DIR = Path(__file__).resolve().parents[1] / "data" / "eds"
 
@@ -121,9 +121,8 @@ def test_runnable_drive_is_brought_up_and_runs_a_short_program(eds, mode):
         result = master.stream(counts).wait(30.0)
         assert result is not None and result.outcome == "done", result
         # the drive applies an RPDO at the SYNC after it (CiA 301): the last rows land a cycle or two later
-        deadline = time.monotonic() + 5.0
-        while not applied_exactly(sim[1].recorder.as_array(), counts[:, 0]) and time.monotonic() < deadline:
-            time.sleep(0.02)
+        wait_for(lambda: applied_exactly(sim[1].recorder.as_array(), counts[:, 0]), 5.0,
+                 "the drive applied every row", 0.02)
         assert applied_exactly(sim[1].recorder.as_array(), counts[:, 0])
     finally:
         master.shutdown()

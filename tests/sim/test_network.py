@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import os
 import threading
-import time
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,6 +15,7 @@ from nurbsmotion.errors import InputError
 from nurbsmotion.sim import FaultInjection, SimNetwork
 from nurbsmotion.sim.timing import MissingSetpoint, SyncSettings
 from nurbsmotion.sim.network import DriveSetupError
+from tests.helpers import wait_for
 
 
 def machine(channel: str, eds: str | None = None) -> SimpleNamespace:
@@ -76,9 +76,7 @@ def _notifier_thread(channel: str) -> threading.Thread:
 def _stop_node_1(net: SimNetwork, master: can.BusABC) -> None:
     """NMT stop node 1 and wait (5 s at most) until the drive's receive thread handled it."""
     master.send(can.Message(arbitration_id=0x000, is_extended_id=False, data=bytes([0x02, 1])))
-    deadline = time.monotonic() + 5.0
-    while net[1].nmt_state != NmtState.STOPPED and time.monotonic() < deadline:
-        time.sleep(0.005)
+    wait_for(lambda: net[1].nmt_state == NmtState.STOPPED, 5.0, "node 1 in NMT STOPPED", 0.005)
     assert net[1].nmt_state == NmtState.STOPPED
 
 
@@ -91,9 +89,7 @@ def test_rt_priority_runs_the_receive_and_ticker_threads_as_it_reports(channel: 
     net.rt_priority = 17
     with net, can.Bus(interface="virtual", channel=channel) as master:
         _stop_node_1(net, master)
-        deadline = time.monotonic() + 5.0
-        while "ticker" not in net.thread_policy and time.monotonic() < deadline:
-            time.sleep(0.005)
+        wait_for(lambda: "ticker" in net.thread_policy, 5.0, "the ticker's thread policy", 0.005)
         assert set(net.thread_policy) == {"receive", "ticker"}
         assert net._ticker is not None
         for name, thread in (("receive", _notifier_thread(channel)), ("ticker", net._ticker)):

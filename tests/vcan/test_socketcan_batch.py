@@ -12,6 +12,7 @@ import can
 import pytest
 
 from nurbsmotion.can.socketcan_batch import BATCH_FRAMES, BatchedSocketcanBus
+from tests.helpers import wait_for
 
 pytestmark = pytest.mark.vcan
 
@@ -149,9 +150,7 @@ def test_the_batch_notifier_hands_out_every_frame_in_order_with_one_wake_up_per_
                 sent.append((can_id, data))
             if k % 250 == 0:
                 time.sleep(0.05)
-        deadline = time.monotonic() + 30.0
-        while len(got) < len(sent) and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_for(lambda: len(got) >= len(sent), 30.0, "every sent frame received", 0.05)
     finally:
         notifier.stop()
         sender.shutdown()
