@@ -162,6 +162,7 @@ class PlanSettings:
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
     max_feed_mm_s: float = 0.0
     tangential_share: float = 1.0  # raw tangential acceleration A x share, filter time tau_f x share
+    feed_step_s: float = 0.0  # a piece's grid spacing at most its feed x this (path.build_grid); 0: spacing_mm
 
     @property
     def min_pass_mm_s(self) -> float:
@@ -175,7 +176,8 @@ def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) ->
     spacing = float(np.clip(steps * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, widest))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
-    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s,
+                        feed_step_s=steps * limits.period_s)
 
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
@@ -303,7 +305,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     A window that does not reach the run's end is sampled and verified up to its stop at the
     window's end, so the committed set-points always have a verified way to stop."""
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
-    grid = build_grid(pieces, settings.spacing_mm)
+    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
     static = static_speed_limit(grid, settings.caps)
@@ -473,7 +475,7 @@ def straight_run_plan(run: Run, cursor: Cursor, settings: PlanSettings) -> Windo
     if not cursor.at_rest or not is_straight(run):
         return None
     piece = run.pieces[0]
-    grid = build_grid(run.pieces, settings.spacing_mm)
+    grid = build_grid(run.pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     if grid.length_mm > settings.window_mm or grid.length_mm <= 0.0:
         return None
     direction = grid.tangent[0]
