@@ -416,7 +416,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             continue
         ratio = getattr(result, name)[rows]
         factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
-        reach = settings.tau_f * v_rows[rows] + 2.0 * settings.spacing_mm
+        reach = settings.tau_f * v_rows[rows] + local_spacing_mm(grid, s[rows], 2.0 * settings.spacing_mm)
         lo = s[np.maximum(rows - 3, 0)] - reach
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
@@ -427,6 +427,16 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             if name in ("accel", "jerk", "axis_accel"):
                 touched[a:b] = True
     accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
+
+
+def local_spacing_mm(grid: PathGrid, s_mm: NDArray[np.float64], widest_mm: float) -> NDArray[np.float64]:
+    """Length of the two grid intervals around each s (at most ``widest_mm``): a repair's reach
+    beyond the filter's, at the grid's own spacing there (path.build_grid grids a slow piece
+    finer; the program's widest spacing spread a 7 % repair at a 2.5 mm/s junction over
+    +-1.6 mm: the V-carve's cuts without J at 0.9 of their feed)."""
+    k = np.searchsorted(grid.s, s_mm)
+    last = len(grid.s) - 1
+    return np.minimum(grid.s[np.minimum(k + 1, last)] - grid.s[np.maximum(k - 1, 0)], widest_mm)
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
