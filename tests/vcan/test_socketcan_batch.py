@@ -161,3 +161,35 @@ def test_the_batch_notifier_hands_out_every_frame_in_order_with_one_wake_up_per_
     read_times = [t for _, _, t in got]
     assert read_times == sorted(read_times) and len(set(read_times)) == bus.lag.wakeups
 
+
+
+def test_with_a_holdoff_the_frames_sent_while_the_thread_sleeps_come_in_one_batch(vcan0):
+    """BatchNotifier's ``holdoff_s`` (the master's receive thread: half a cycle): the first
+    frame of a burst wakes the thread; the others, sent while it sleeps after that batch, are
+    read in one more wake-up, not one each (the master used to wake once per TPDO)."""
+    from nurbsmotion.can.socketcan_batch import BatchNotifier
+
+    holdoff_s = 0.5  # much longer than sending the rest of the burst, even inside User-Mode Linux
+    bus = BatchedSocketcanBus(channel=vcan0)
+    first = threading.Event()
+    batches: list[float] = []  # the read time of the batch of each frame received
+
+    def on_frame(msg: can.Message) -> None:
+        batches.append(bus.read_perf_s)
+        first.set()
+
+    notifier = BatchNotifier(bus, [on_frame], 0.2, holdoff_s=holdoff_s)
+    sender = can.Bus(interface="socketcan", channel=vcan0)
+    burst = [can.Message(arbitration_id=0x181 + i, data=bytes(8), is_extended_id=False) for i in range(6)]
+    try:
+        sender.send(burst[0])
+        assert first.wait(5.0), "the first frame was not received"
+        for msg in burst[1:]:  # while the thread sleeps after its first batch
+            sender.send(msg)
+        wait_for(lambda: len(batches) == len(burst), 5.0, "the whole burst received", 0.05)
+    finally:
+        notifier.stop()
+        sender.shutdown()
+        bus.shutdown()
+    assert notifier.exception is None
+    assert len(set(batches)) == 2, f"{len(set(batches))} wake-ups for a burst of {len(burst)} frames"

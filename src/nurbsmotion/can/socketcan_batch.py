@@ -154,6 +154,14 @@ class ReceiveLag:
         ordered = sorted(self.samples_s)
         return ordered[min(len(ordered) - 1, int(share * len(ordered)))] if ordered else 0.0
 
+    def figures(self) -> dict[str, float]:
+        """Frames, wake-ups and the lag's p50 / p99 / max in ms, for a log line."""
+        return {"frames": self.frames, "wakeups": self.wakeups,
+                "frames_per_wakeup": round(self.frames / max(self.wakeups, 1), 2),
+                "lag_p50_ms": round(self.percentile_s(0.5) * 1000, 2),
+                "lag_p99_ms": round(self.percentile_s(0.99) * 1000, 2),
+                "lag_max_ms": round(max(self.samples_s, default=0.0) * 1000, 2)}
+
 
 def frame_message(frame: bytes, timestamp: float, msg_flags: int, channel: str) -> can.Message:
     """A received classical CAN frame as python-can's ``capture_message`` builds it."""
@@ -335,11 +343,23 @@ class BatchNotifier(can.Notifier):
     """python-can's Notifier whose receive thread takes a batch per wake-up from a
     :class:`BatchedSocketcanBus` (module docstring); other buses as python-can's. Listeners
     see every frame in order, as with python-can's thread. ``on_thread_start()`` runs first
-    in each receive thread (the master and the daemon's simulated drives make it SCHED_FIFO)."""
+    in each receive thread (the master and the daemon's simulated drives make it SCHED_FIFO).
+
+    ``holdoff_s``: after handling a batch the thread sleeps this long before it waits again,
+    so the frames that arrive meanwhile are read as one batch. A SCHED_FIFO receive thread
+    otherwise preempts the sender at every frame: the master's woke once per TPDO (1,300
+    wake-ups for 1,360 frames a second, 3 axes at T = 4 ms inside User-Mode Linux, where a
+    wake-up costs a trapped ``recvmmsg``, a clock read and two context switches; docs/vcan.md,
+    "The master's receive thread"). With half a cycle the drives' answers to one SYNC come in
+    one wake-up; a frame waits at most ``holdoff_s`` longer (its kernel timestamp, which the
+    arrival clock judges on, is unchanged). ``thread_cpu_s``: the thread's CPU time when it
+    ended (batched reads only)."""
 
     def __init__(self, bus: can.BusABC, listeners: Any, timeout: float = 1.0,
-                 on_thread_start: Callable[[], None] | None = None) -> None:
+                 on_thread_start: Callable[[], None] | None = None, holdoff_s: float = 0.0) -> None:
         self.on_thread_start = on_thread_start  # before super() starts the threads
+        self.holdoff_s = holdoff_s
+        self.thread_cpu_s = 0.0
         super().__init__(bus, listeners, timeout)
 
     def _rx_thread(self, bus: can.BusABC) -> None:
@@ -348,13 +368,19 @@ class BatchNotifier(can.Notifier):
         if not isinstance(bus, BatchedSocketcanBus) or not bus.batch or self._loop is not None:
             super()._rx_thread(bus)
             return
-        while not self._stopped:
-            try:
-                if bus.wait_batch(self.timeout):
-                    with self._lock:
-                        while (msg := bus.take()) is not None:
-                            self._on_message_received(msg)
-            except Exception as exc:  # noqa: BLE001 - as python-can's thread: on_error or raise
-                self.exception = exc
-                if not self._on_error(exc):
-                    raise
+        holdoff_s = self.holdoff_s
+        try:
+            while not self._stopped:
+                try:
+                    if bus.wait_batch(self.timeout):
+                        with self._lock:
+                            while (msg := bus.take()) is not None:
+                                self._on_message_received(msg)
+                        if holdoff_s > 0.0:
+                            time.sleep(holdoff_s)
+                except Exception as exc:  # noqa: BLE001 - as python-can's thread: on_error or raise
+                    self.exception = exc
+                    if not self._on_error(exc):
+                        raise
+        finally:
+            self.thread_cpu_s = time.thread_time()

@@ -25,10 +25,15 @@ from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP
 from nurbsmotion.fieldbus.feedback import Callback, Feedback
 from nurbsmotion.fieldbus.traffic import TrafficLog
 from nurbsmotion.fieldbus.writer import RpdoSlot
+from nurbsmotion.log import kv
 from nurbsmotion.runtime import set_thread_realtime
 from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 
 log = logging.getLogger(__name__)
+
+# The receive thread sleeps this share of a cycle after each batch, so the drives' answers to
+# one SYNC are read in one wake-up instead of one each (socketcan_batch.BatchNotifier).
+RECEIVE_HOLDOFF_SHARE = 0.5
 
 
 def uses_kernel_queue(sync_source: str, bus: object) -> bool:
@@ -110,7 +115,8 @@ class BusConnection:
         # canopen's connect() with the bus given only starts python-can's Notifier; ours reads
         # a batch of frames per wake-up on SocketCAN (socketcan_batch: the per-cycle TPDOs)
         network.notifier = BatchNotifier(bus, listeners, network.NOTIFIER_CYCLE,
-                                         on_thread_start=self._raise_receive_thread_priority)
+                                         on_thread_start=self._raise_receive_thread_priority,
+                                         holdoff_s=RECEIVE_HOLDOFF_SHARE * self.config.cycle_period_s)
         self.trails = []
         for i, (axis, plan) in enumerate(zip(self.config.axes, self.plans)):
             assert axis.od is not None  # loaded with the configuration
@@ -181,6 +187,7 @@ class BusConnection:
                     pass
             if network.notifier is not None:
                 network.notifier.stop(2.0)
+                self._log_reception(network.notifier)
             self.network = None
         self.traffic = None
         if self._traffic_log is not None:
@@ -189,6 +196,13 @@ class BusConnection:
         if self.own_bus and self.bus is not None:
             self.bus.shutdown()
             self.bus = None
+
+
+    def _log_reception(self, notifier: object) -> None:
+        """One line on how the receive thread read the bus (batched SocketCAN only)."""
+        bus = self.bus
+        if isinstance(bus, BatchedSocketcanBus) and isinstance(notifier, BatchNotifier) and bus.lag.wakeups:
+            log.info(kv("master.rx", **bus.lag.figures(), thread_cpu_s=round(notifier.thread_cpu_s, 3)))
 
 
 def send_quick_stop(bus: can.BusABC | None, rpdos: list[RpdoSlot], setpoints: list[int]) -> None:

@@ -258,12 +258,7 @@ class SimNetwork:
         """One line: how far behind the wire the drives' process read (SocketCAN only)."""
         bus = self.network.bus if self.network is not None else None
         if isinstance(bus, BatchedSocketcanBus) and bus.lag.wakeups:
-            lag = bus.lag
-            log.info(kv("sim.rx", frames=lag.frames, wakeups=lag.wakeups,
-                        frames_per_wakeup=round(lag.frames / lag.wakeups, 2),
-                        lag_p50_ms=round(lag.percentile_s(0.5) * 1000, 2),
-                        lag_p99_ms=round(lag.percentile_s(0.99) * 1000, 2),
-                        lag_max_ms=round(max(lag.samples_s) * 1000, 2)))
+            log.info(kv("sim.rx", **bus.lag.figures()))
 
     def __enter__(self) -> "SimNetwork":
         return self.start()
