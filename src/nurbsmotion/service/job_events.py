@@ -30,6 +30,11 @@ from nurbsmotion.service.records import now_iso
 log = logging.getLogger(__name__)
 
 POLL_S = 0.01
+# How long the end of a completed job waits for its last events (M5 M9 before M30): the thread
+# may be inside an SDO transfer that waits behind the spindle monitor's reads (each up to its
+# 3 s SDO time-out on a slow bus), so the 2 s it had were too short and M9 went missing.
+DRAIN_WAIT_S = 10.0
+STOP_WAIT_S = 2.0  # a job that did not complete: the thread is only stopped
 EVENTS_FILE = "events.log"
 DEVICE_EVENTS = (EventKind.SPINDLE, EventKind.COOLANT, EventKind.OUTPUT)  # done by the job's events
 
@@ -95,6 +100,8 @@ class JobEvents:
         self._pause_rows: set[int] = set()  # rows of the pauses seen so far
         self._pauses_seen = 0
         self._finished = threading.Event()
+        self._drain = False  # set by finish() before _finished
+        self._given_up = threading.Event()  # finish() stopped waiting for the thread
         self._thread = threading.Thread(target=self._run, name="job-events", daemon=True)
 
     def start(self) -> None:
@@ -104,14 +111,28 @@ class JobEvents:
         """The job ended: stop the thread. ``drain`` (a completed job that leaves the spindle and
         outputs as it set them, service.machine_jobs): first do, in order and without waiting for
         the spindle, the events the thread had not got to (a job of a few rows can end between
-        two polls)."""
+        two polls). The thread does them itself after the transfer it may be in, so the order
+        holds; those it cannot do within ``DRAIN_WAIT_S`` are given up with one line each."""
+        self._drain = drain
         self._finished.set()
-        if self._thread.is_alive() and threading.current_thread() is not self._thread:
-            self._thread.join(2.0)
-        if drain and not self._thread.is_alive():
-            while self._next < len(self.events):
-                self._next += 1
-                self._do(self.events[self._next - 1], wait=False)
+        if threading.current_thread() is self._thread:
+            return
+        if self._thread.is_alive():
+            self._thread.join(DRAIN_WAIT_S if drain else STOP_WAIT_S)
+        if self._thread.is_alive():
+            self._given_up.set()
+            log.warning(kv("job_events_late", events_left=len(self.events) - self._next,
+                           waited_s=DRAIN_WAIT_S if drain else STOP_WAIT_S))
+        elif drain:
+            self._drain_rest()  # the thread ended before the job did (its events were all done)
+
+    def _drain_rest(self) -> None:
+        """The events not done yet, in order, without waiting for the spindle."""
+        while self._next < len(self.events) and not self._given_up.is_set():
+            self._next += 1
+            self._do(self.events[self._next - 1], wait=False)
+        for e in self.events[self._next:]:
+            log.warning(kv("job_event_not_done", code=e.event.code, at=str(e.event.source)))
 
     def _ready(self, e: RowEvent, index: int, held_row: int | None) -> bool:
         """A spindle start at a pause row is done while the master holds there; any other event
@@ -131,6 +152,12 @@ class JobEvents:
         return None
 
     def _run(self) -> None:
+        self._play()
+        if self._drain:
+            self._drain_rest()
+
+    def _play(self) -> None:
+        """Each event at its row while the job runs, until the job ends."""
         while not self._finished.wait(POLL_S):
             complete = self.complete()  # read first: every event it covers is in the list below
             if self._next >= len(self.events) and complete:
