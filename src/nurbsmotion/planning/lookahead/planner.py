@@ -162,6 +162,7 @@ class PlanSettings:
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
     max_feed_mm_s: float = 0.0
     tangential_share: float = 1.0  # raw tangential acceleration A x share, filter time tau_f x share
+    feed_step_s: float = 0.0  # a piece's grid spacing at most its feed x this (path.build_grid); 0: spacing_mm
 
     @property
     def min_pass_mm_s(self) -> float:
@@ -175,7 +176,8 @@ def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) ->
     spacing = float(np.clip(steps * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, widest))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
-    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s,
+                        feed_step_s=steps * limits.period_s)
 
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
@@ -303,7 +305,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     A window that does not reach the run's end is sampled and verified up to its stop at the
     window's end, so the committed set-points always have a verified way to stop."""
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
-    grid = build_grid(pieces, settings.spacing_mm)
+    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
     static = static_speed_limit(grid, settings.caps)
@@ -414,7 +416,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             continue
         ratio = getattr(result, name)[rows]
         factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
-        reach = settings.tau_f * v_rows[rows] + 2.0 * settings.spacing_mm
+        reach = settings.tau_f * v_rows[rows] + local_spacing_mm(grid, s[rows], 2.0 * settings.spacing_mm)
         lo = s[np.maximum(rows - 3, 0)] - reach
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
@@ -425,6 +427,16 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             if name in ("accel", "jerk", "axis_accel"):
                 touched[a:b] = True
     accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
+
+
+def local_spacing_mm(grid: PathGrid, s_mm: NDArray[np.float64], widest_mm: float) -> NDArray[np.float64]:
+    """Length of the two grid intervals around each s (at most ``widest_mm``): a repair's reach
+    beyond the filter's, at the grid's own spacing there (path.build_grid grids a slow piece
+    finer; the program's widest spacing spread a 7 % repair at a 2.5 mm/s junction over
+    +-1.6 mm: the V-carve's cuts without J at 0.9 of their feed)."""
+    k = np.searchsorted(grid.s, s_mm)
+    last = len(grid.s) - 1
+    return np.minimum(grid.s[np.minimum(k + 1, last)] - grid.s[np.maximum(k - 1, 0)], widest_mm)
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
@@ -473,7 +485,7 @@ def straight_run_plan(run: Run, cursor: Cursor, settings: PlanSettings) -> Windo
     if not cursor.at_rest or not is_straight(run):
         return None
     piece = run.pieces[0]
-    grid = build_grid(run.pieces, settings.spacing_mm)
+    grid = build_grid(run.pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     if grid.length_mm > settings.window_mm or grid.length_mm <= 0.0:
         return None
     direction = grid.tangent[0]
