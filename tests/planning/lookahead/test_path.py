@@ -12,7 +12,7 @@ from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.planning.lookahead import plan_lookahead
 from nurbsmotion.planning.lookahead.path import BlockPiece, build_grid
-from nurbsmotion.planning.lookahead.planner import local_spacing_mm
+from nurbsmotion.planning.lookahead.planner import REPAIR_REACH_CYCLES, repair_reach_mm, settings_for
 from nurbsmotion.program import parse_gcode
 
 LIMITS = PlanLimits(period_s=0.001, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0, default_feed_mm_s=200.0,
@@ -69,7 +69,7 @@ G0 Z2.54
 
 def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid():
     """planner.repair lowers the speed caps within the filter's reach plus two grid intervals
-    of the violating set-point: of the cut's own grid (planner.local_spacing_mm), not the
+    of the violating set-point: of the cut's own grid (planner.repair_reach_mm), not the
     rapids' 0.8 mm, which slowed the whole stroke to 0.9 of its feed."""
     program = parse_gcode(VCARVE_STROKE, "vcarve_stroke.nc")
     trajectory = plan_lookahead(program, NO_JERK)
@@ -78,9 +78,15 @@ def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid():
     assert np.median(cut) >= 0.99 * 2.54
 
 
-def test_local_spacing_is_two_intervals_of_the_grid_there():
-    pieces = (piece(0, [0, 0, 0], [10, 0, 0], 200.0), piece(1, [10, 0, 0], [10, 1, 0], 2.5))
-    grid = build_grid(pieces, 0.8, feed_step_s=0.004, min_spacing_mm=0.005)
-    near = local_spacing_mm(grid, np.array([5.0, 10.5, 10.5]), 1.6)
-    assert 1.0 < near[0] <= 1.6  # two 0.8 mm intervals at most
-    assert near[1] <= 0.02 + 1e-12 and near[2] == near[1]
+def test_a_repairs_reach_is_the_grid_there_but_some_cycles_at_the_feed_at_least():
+    """planner.repair_reach_mm: on a fast line two grid intervals (at most two of the widest
+    spacing); where short fast lines meet (intervals of micrometres) REPAIR_REACH_CYCLES cycles
+    at their feed; on a slow piece its own fine grid, not the rapids' spacing."""
+    settings = settings_for(NO_JERK, 200.0, 1000)  # widest spacing 0.8 mm at T = 1 ms
+    pieces = (piece(0, [0, 0, 0], [10, 0, 0], 200.0), piece(1, [10, 0, 0], [10.002, 0, 0], 100.0),
+              piece(2, [10.002, 0, 0], [10.002, 0.002, 0], 100.0), piece(3, [10.002, 0.002, 0], [10.002, 1, 0], 2.5))
+    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, 0.005)
+    reach = repair_reach_mm(grid, np.array([5.0, 10.003, 10.5]), settings)
+    assert 1.0 < reach[0] <= 2.0 * settings.spacing_mm  # two 0.8 mm intervals at most
+    assert reach[1] == pytest.approx(REPAIR_REACH_CYCLES * 100.0 * NO_JERK.period_s)  # 1.6 mm, not 4 um
+    assert reach[2] == pytest.approx(REPAIR_REACH_CYCLES * 2.5 * NO_JERK.period_s)  # 0.04 mm, not 1.6

@@ -37,6 +37,7 @@ MAX_REPAIR_ROUNDS = 16
 MAX_STALLED_REPAIRS = 4  # repair rounds in a row that do not lower the worst violation: the repair diverges
 SHARE_ROUNDS = 2  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
+REPAIR_REACH_CYCLES = 16.0  # a repair reaches at least this many cycles at the feed beyond the filter (repair_reach_mm)
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
 GRID_STEPS = 2.0  # path grid spacing in feed steps (F T), with the jerk filter ...
@@ -416,7 +417,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             continue
         ratio = getattr(result, name)[rows]
         factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
-        reach = settings.tau_f * v_rows[rows] + local_spacing_mm(grid, s[rows], 2.0 * settings.spacing_mm)
+        reach = settings.tau_f * v_rows[rows] + repair_reach_mm(grid, s[rows], settings)
         lo = s[np.maximum(rows - 3, 0)] - reach
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
@@ -429,14 +430,23 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
     accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
 
 
-def local_spacing_mm(grid: PathGrid, s_mm: NDArray[np.float64], widest_mm: float) -> NDArray[np.float64]:
-    """Length of the two grid intervals around each s (at most ``widest_mm``): a repair's reach
-    beyond the filter's, at the grid's own spacing there (path.build_grid grids a slow piece
-    finer; the program's widest spacing spread a 7 % repair at a 2.5 mm/s junction over
-    +-1.6 mm: the V-carve's cuts without J at 0.9 of their feed)."""
+def repair_reach_mm(grid: PathGrid, s_mm: NDArray[np.float64], settings: PlanSettings) -> NDArray[np.float64]:
+    """A repair's reach beyond the filter's around each s: the two grid intervals there, at
+    least REPAIR_REACH_CYCLES cycles at the piece's feed, at most two of the widest spacing.
+
+    Two intervals of the widest spacing (the program's fastest feed's) spread a 7 % repair at
+    a 2.5 mm/s junction over +-1.6 mm: the V-carve's cuts without J at 0.9 of their feed. The
+    grid's own intervals alone are micrometres where short lines meet (every line end is a
+    grid point): at such junctions the repairs of grbl's braid at T = 1 ms with path tolerance
+    0 stalled at 1.00-1.10 x the accel limit in 12-30 windows, each of which (the whole
+    program from rest) fell back to a stop one block further on: minutes of planning instead
+    of seconds. Floors of 8 cycles (two intervals of a grid spaced by the piece's feed, without
+    J) still left 12 fallback stops there, 16 none (2.8 s)."""
     k = np.searchsorted(grid.s, s_mm)
     last = len(grid.s) - 1
-    return np.minimum(grid.s[np.minimum(k + 1, last)] - grid.s[np.maximum(k - 1, 0)], widest_mm)
+    local = grid.s[np.minimum(k + 1, last)] - grid.s[np.maximum(k - 1, 0)]
+    floor = REPAIR_REACH_CYCLES * grid.feed_mm_s[np.minimum(k, last)] * settings.limits.period_s
+    return np.minimum(np.maximum(local, floor), 2.0 * settings.spacing_mm)
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
@@ -683,3 +693,4 @@ def runs_from_rest(run: Run, feed_floor_mm_s: float | None,
     if piece.feed_mm_s / 2.0 < floor:
         raise error
     return [(Run((replace(piece, feed_mm_s=piece.feed_mm_s / 2.0),), ()), floor, FALLBACK_SLOWER)]
+
