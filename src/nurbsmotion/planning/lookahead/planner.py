@@ -683,14 +683,29 @@ def rest_after_stop(run: Run, stop: WindowPlan) -> list[Run]:
 
 def runs_from_rest(run: Run, feed_floor_mm_s: float | None,
                    error: PlanningError) -> list[tuple[Run, float | None, str]]:
-    """What to plan instead of a run that cannot be planned from rest: its first block to a
-    stop, then the rest; a single block at half its feed (raises ``error`` below the floor)."""
+    """What to plan instead of a run that cannot be planned from rest: the run to a stop
+    before the block where it failed (failing_piece), then the rest from there; a single block
+    at half its feed (raises ``error`` below the floor).
+
+    Each part is shorter than the run, so this ends; a part failing in its first block stops
+    after it. (Always stopping after the first block re-planned the whole rest of the run once
+    per block when the failure was far ahead: grbl's braid at T = 1 ms, one window of ~2 m,
+    stopped block by block for more than 10 minutes.)"""
     if len(run.pieces) > 1:
-        return [(Run(run.pieces[:1], ()), None, FALLBACK_SPLIT),
-                (Run(run.pieces[1:], run.junction_speed_mm_s[1:]), None, "")]
+        k = failing_piece(run, error)
+        return [(Run(run.pieces[:k], run.junction_speed_mm_s[:k - 1]), None, FALLBACK_SPLIT),
+                (Run(run.pieces[k:], run.junction_speed_mm_s[k:]), None, "")]
     piece = run.pieces[0]
     floor = feed_floor_mm_s if feed_floor_mm_s is not None else piece.feed_mm_s / 2.0**MAX_FEED_HALVINGS
     if piece.feed_mm_s / 2.0 < floor:
         raise error
     return [(Run((replace(piece, feed_mm_s=piece.feed_mm_s / 2.0),), ()), floor, FALLBACK_SLOWER)]
 
+
+def failing_piece(run: Run, error: PlanningError) -> int:
+    """Index of the run's piece where ``error`` arose (the last piece starting at or before its
+    block: a smoothed piece spans several blocks), at least 1: the cut of runs_from_rest."""
+    if error.block is None:
+        return 1
+    blocks = np.array([p.block for p in run.pieces])
+    return int(np.clip(np.searchsorted(blocks, error.block, side="right") - 1, 1, len(run.pieces) - 1))
