@@ -137,3 +137,19 @@ def test_a_quintic_bezier_evaluates_like_its_control_polygon_says():
     k = np.arange(6)
     bernstein = binom * t[:, None] ** k * (1 - t[:, None]) ** (5 - k)
     np.testing.assert_allclose(curve.points(t), bernstein @ points, atol=1e-12)
+
+
+def test_curvature_peaks_are_the_curves_own_at_the_samples():
+    """curvature_peaks: the largest curvature of the sampled blend equals NurbsCurve.curvature
+    there; the slope |dc/ds| of a blend between two lines scales with 1 / d^2 (its shape only
+    scales with d)."""
+    incoming, outgoing, _ = corner(90.0)
+    d = np.array([1.0, 0.5])
+    two = cb.Pieces(*(np.concatenate([getattr(incoming, f)] * 2) for f in cb.PIECE_FIELDS))
+    two_out = cb.Pieces(*(np.concatenate([getattr(outgoing, f)] * 2) for f in cb.PIECE_FIELDS))
+    points = cb.blend_points(two, two_out, d)
+    kappa, slope = cb.curvature_peaks(points)
+    samples = np.linspace(0.0, 1.0, 65)
+    assert kappa[0] == pytest.approx(cb.bezier_curve(points[0]).curvature(samples).max(), rel=1e-9)
+    assert kappa[1] == pytest.approx(2.0 * kappa[0], rel=1e-9)
+    assert slope[1] == pytest.approx(4.0 * slope[0], rel=1e-9)

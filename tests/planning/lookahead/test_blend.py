@@ -248,3 +248,33 @@ def test_the_plan_command_measures_a_blended_program_on_its_blends(tmp_path, cap
     measured, verified = report["measured"]["max_chord_error_mm"], report["notes"]["verified_max_chord_error_mm"]
     assert report["notes"]["verified_max_path_deviation_mm"] > 0  # the corners were blended
     assert measured <= verified * 1.05 + 1e-9
+
+
+@pytest.mark.parametrize("limits", [LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+def test_a_sharp_corner_at_a_slow_feed_is_blended_and_passed_near_its_feed(limits):
+    """90 deg at 1 mm/s: its blend within 0.01 mm passes at more than SHARP_PASS_SHARE of the
+    feed (with J = 50000 at ~2 mm/s), so it is blended instead of stopped (a V-carve's corners)."""
+    program = polyline(turn(90.0), feed_mm_s=1.0)
+    blends = [p for p in planned_pieces(program, limits) if p.corners is not None]
+    assert len(blends) == 1
+    trajectory = plan_lookahead(program, limits)
+    assert trajectory.notes["stops"] == 0
+    assert not rests_at(trajectory, turn(90.0)[1])
+    assert speed_near(trajectory, turn(90.0)[1]) >= blend.SHARP_PASS_SHARE * 1.0 * 0.99
+    assert_blended_plan_holds(trajectory, program, limits)
+
+
+def test_a_sharp_corner_is_a_stop_where_its_blend_would_crawl():
+    """The same 90 deg corner at 100 mm/s: its blend passes at ~2 mm/s (J = 50000), a crawl
+    that costs as much as the stop: it stays one."""
+    program = polyline(turn(90.0), feed_mm_s=100.0)
+    assert not any(p.corners is not None for p in planned_pieces(program, LIMITS))
+    assert rests_at(plan_lookahead(program, LIMITS), turn(90.0)[1])
+
+
+@pytest.mark.parametrize("feed_mm_s", [0.1, 1.0])
+def test_a_near_reversal_stays_a_stop_at_any_feed(feed_mm_s):
+    theta = blend.SHARP_LIMIT_DEG + 10.0
+    program = polyline(turn(theta), feed_mm_s=feed_mm_s)
+    assert not any(p.corners is not None for p in planned_pieces(program, NO_JERK))
+    assert rests_at(plan_lookahead(program, NO_JERK), turn(theta)[1])

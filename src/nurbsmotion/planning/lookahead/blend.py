@@ -10,12 +10,17 @@ and jerk terms (speed_limits.py).
 
 A corner stays a junction (as before blending) where the program asks for a stop (a block
 that ends at rest: G61, a dwell, M0/M1/M6, a spindle wait), where the tolerance is 0 (G64
-P0, or ``path_tolerance_mm`` 0), at a sharp corner (deflection above MAX_DEFLECTION_DEG:
-within 0.01 mm the blend of a 90 deg corner is passed at ~2 mm/s with J = 50000 and ~8 mm/s
-without, and crawling through it cost more than a stop: grbl's braid 43.7 s with blends up to
-90 deg, 36.9 s up to 30, 45 or 60 deg, HSM_test 22.2 s and 21.6 s; examples/mixed.nc's 40 deg
-corner of a line into an arc made it 4.5 % slower with J, none up to 30), where a piece is not a
-line or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
+P0, or ``path_tolerance_mm`` 0), at a near-reversal (deflection above SHARP_LIMIT_DEG), at a
+sharp corner (above MAX_DEFLECTION_DEG) whose blend would crawl: one whose speed at its
+sharpest (``pass_speed_mm_s``: curvature against A and, with J, the path's jerk at constant
+speed) is below SHARP_PASS_SHARE of the faster of its two feeds. Within 0.01 mm a 90 deg
+blend passes at ~2 mm/s with J = 50000 and ~8 mm/s without; from 100 mm/s such a crawl costs
+as much as a stop and the jerk filter's plateau around it more (grbl's braid 43.7 s with
+every corner up to 90 deg blended, 36.9 s up to 30), while on the V-carve's 2.54 mm/s cuts
+the same blends pass at nearly the feed (37.74 -> 37.41 s with J, 30.35 -> 30.04 s without).
+Rapid-to-feed corners compare the blend with the rapid's feed, so they stay stops, as in
+LinuxCNC (tp.c handleModeChange). A corner also stays a junction where a piece is not a line
+or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
 (corner_blend.trim_distances, monotone). The tolerance of a corner is the outgoing block's
 G64 P, else the machine's ``path_tolerance_mm``.
 """
@@ -32,15 +37,32 @@ from nurbsmotion.geometry import corner_blend as cb
 from nurbsmotion.geometry.nurbs import NurbsCurve
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead.path import BlendCorners, BlockPiece, ProgramNear
-from nurbsmotion.planning.lookahead.runs import ProgramStops
+from nurbsmotion.planning.lookahead.runs import ProgramStops, planned_jerk_mm_s3
+from nurbsmotion.planning.lookahead.speed_limits import JERK_SHARE, MARGIN
 
 SHARE_LIMIT = cb.SHARE_LIMIT
 
-MAX_DEFLECTION_DEG = 30.0  # corners turning more than this stay junctions (module docstring)
+MAX_DEFLECTION_DEG = 30.0  # corners turning up to this are blended whatever their blend's speed
+SHARP_LIMIT_DEG = 150.0  # sharper corners (near-reversals) stay junctions (corner_blend.middle_deviation's range)
+SHARP_PASS_SHARE = 0.8  # a corner above MAX_DEFLECTION_DEG is blended when its blend passes at this x the faster feed
 MIN_DEFLECTION_RAD = 1e-9  # tangent already: nothing to blend
 MAX_JOIN_ROUNDS = 8  # rounds of CornerPlan.join_short_lines before it gives up joining
 JOIN_SMOOTHING = 4  # passes of smoothed() over the joins' curvatures
 JOIN_SAME_WAY = 0.5  # cosine between the two corners' binormals above which a joined line turns one way
+
+
+def pass_speed_mm_s(points: NDArray[np.float64], limits: PlanLimits) -> NDArray[np.float64]:
+    """(n,) speed at which blends (control points (n, 6, 3)) can be passed at their sharpest:
+    the curvature against A (kappa v^2 <= A) and, with a jerk limit, the jerk of the path at
+    constant speed ((kappa^2 + |dc/ds|) v^3 <= JERK_SHARE J), both at MARGIN (speed_limits.py)."""
+    kappa, slope = cb.curvature_peaks(points)
+    accel = MARGIN * limits.max_accel_mm_s2
+    with np.errstate(divide="ignore"):
+        v = np.sqrt(accel / kappa)
+        jerk = planned_jerk_mm_s3(limits)
+        if jerk is not None:
+            v = np.minimum(v, np.cbrt(JERK_SHARE * MARGIN * jerk / (kappa * kappa + slope)))
+    return v
 
 
 def is_line(curve: NurbsCurve) -> bool:
@@ -112,12 +134,19 @@ def blend_pieces(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramSto
     _, t_out, _ = shapes.take(np.arange(1, n)).state_at(np.zeros(n - 1))
     deflection = np.arccos(np.clip(np.einsum("ij,ij->i", t_in, t_out), -1.0, 1.0))
     candidate = (known[:-1] & known[1:] & (tolerance > 0) & (deflection > MIN_DEFLECTION_RAD)
-                 & (deflection <= math.radians(MAX_DEFLECTION_DEG)))
+                 & (deflection <= math.radians(SHARP_LIMIT_DEG)))
     corners = np.flatnonzero(candidate)
     if len(corners) == 0:
         return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
     d = cb.trim_distances(shapes.take(corners), shapes.take(corners + 1), tolerance[corners])
-    good = (d > 0) & cb.monotone(cb.blend_points(shapes.take(corners), shapes.take(corners + 1), d))
+    points = cb.blend_points(shapes.take(corners), shapes.take(corners + 1), d)
+    good = (d > 0) & cb.monotone(points)
+    sharp = deflection[corners] > math.radians(MAX_DEFLECTION_DEG)
+    if sharp.any():
+        feed = np.array([max(pieces[c].feed_mm_s, pieces[c + 1].feed_mm_s) for c in corners[sharp].tolist()])
+        good[sharp] &= pass_speed_mm_s(points[sharp], limits) >= SHARP_PASS_SHARE * feed
+    if not good.any():
+        return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
     plan = CornerPlan(shapes, corners[good], d[good], tolerance[corners[good]], t_in, t_out, deflection)
     plan.join_short_lines()
     blends = BlendCorners(shapes.take(plan.corners), shapes.take(plan.corners + 1), plan.tolerance)

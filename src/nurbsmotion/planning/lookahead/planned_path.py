@@ -44,6 +44,10 @@ def trimmed_curve(piece: BlockPiece) -> tuple[NurbsCurve, UMap]:
     if piece.corners is not None or (piece.u_start == curve.u_min and piece.u_end == curve.u_max):  # blend, whole
         return curve, lambda u: u
     start, end = curve.points(np.array([piece.u_start, piece.u_end]))
+    if piece.u_start == curve.u_min:  # a block's ends are its first and last control points exactly (clamped knots)
+        start = curve.control_points[0].copy()
+    if piece.u_end == curve.u_max:
+        end = curve.end_point
     if curve.degree == 1:
         span = piece.u_end - piece.u_start
         return line_curve(start, end), lambda u: (np.asarray(u) - piece.u_start) / span

@@ -37,6 +37,7 @@ MAX_REPAIR_ROUNDS = 16
 MAX_STALLED_REPAIRS = 4  # repair rounds in a row that do not lower the worst violation: the repair diverges
 SHARE_ROUNDS = 2  # re-evaluations of the tangential jerk share at the planned speeds (first round)
 REPAIR_MARGIN = 0.97
+REPAIR_REACH_CYCLES = 16.0  # a repair reaches at least this many cycles at the feed beyond the filter (repair_reach_mm)
 ACCEL_REPAIR_FACTOR = 0.8  # tangential acceleration scale after an acceleration/jerk violation
 EXPONENTS = {"chord": 2.0, "accel": 2.0, "jerk": 3.0, "axis_velocity": 1.0, "axis_accel": 2.0}
 GRID_STEPS = 2.0  # path grid spacing in feed steps (F T), with the jerk filter ...
@@ -162,6 +163,7 @@ class PlanSettings:
     stop_mm: float  # distance to stop from the highest feed (with the jerk filter's delay)
     max_feed_mm_s: float = 0.0
     tangential_share: float = 1.0  # raw tangential acceleration A x share, filter time tau_f x share
+    feed_step_s: float = 0.0  # a piece's grid spacing at most its feed x this (path.build_grid); 0: spacing_mm
 
     @property
     def min_pass_mm_s(self) -> float:
@@ -175,7 +177,8 @@ def settings_for(limits: PlanLimits, max_feed_mm_s: float, chunk_cycles: int) ->
     spacing = float(np.clip(steps * max_feed_mm_s * limits.period_s, MIN_SPACING_MM, widest))
     stop = max_feed_mm_s**2 / limits.max_accel_mm_s2 + 2.0 * max_feed_mm_s * tau_f
     window = max(chunk_cycles * limits.period_s * max_feed_mm_s, 1.0) + 3.0 * stop
-    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s)
+    return PlanSettings(limits, caps_for(limits), machine_for(limits), tau_f, spacing, window, stop, max_feed_mm_s,
+                        feed_step_s=steps * limits.period_s)
 
 
 def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[BlockPiece, ...], tuple[float, ...], bool]:
@@ -303,7 +306,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     A window that does not reach the run's end is sampled and verified up to its stop at the
     window's end, so the committed set-points always have a verified way to stop."""
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
-    grid = build_grid(pieces, settings.spacing_mm)
+    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
     static = static_speed_limit(grid, settings.caps)
@@ -414,7 +417,7 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             continue
         ratio = getattr(result, name)[rows]
         factor = (REPAIR_MARGIN / ratio) ** (1.0 / EXPONENTS[name])
-        reach = settings.tau_f * v_rows[rows] + 2.0 * settings.spacing_mm
+        reach = settings.tau_f * v_rows[rows] + repair_reach_mm(grid, s[rows], settings)
         lo = s[np.maximum(rows - 3, 0)] - reach
         hi = s[np.minimum(rows + 2, len(s) - 1)] + reach
         k_lo = np.searchsorted(grid.s, lo, side="left")
@@ -425,6 +428,25 @@ def repair(grid: PathGrid, s: NDArray[np.float64], idx: NDArray[np.intp], x: NDA
             if name in ("accel", "jerk", "axis_accel"):
                 touched[a:b] = True
     accel_scale[touched] *= ACCEL_REPAIR_FACTOR  # once per round, however many rows overlap
+
+
+def repair_reach_mm(grid: PathGrid, s_mm: NDArray[np.float64], settings: PlanSettings) -> NDArray[np.float64]:
+    """A repair's reach beyond the filter's around each s: the two grid intervals there, at
+    least REPAIR_REACH_CYCLES cycles at the piece's feed, at most two of the widest spacing.
+
+    Two intervals of the widest spacing (the program's fastest feed's) spread a 7 % repair at
+    a 2.5 mm/s junction over +-1.6 mm: the V-carve's cuts without J at 0.9 of their feed. The
+    grid's own intervals alone are micrometres where short lines meet (every line end is a
+    grid point): at such junctions the repairs of grbl's braid at T = 1 ms with path tolerance
+    0 stalled at 1.00-1.10 x the accel limit in 12-30 windows, each of which (the whole
+    program from rest) fell back to a stop one block further on: minutes of planning instead
+    of seconds. Floors of 8 cycles (two intervals of a grid spaced by the piece's feed, without
+    J) still left 12 fallback stops there, 16 none (2.8 s)."""
+    k = np.searchsorted(grid.s, s_mm)
+    last = len(grid.s) - 1
+    local = grid.s[np.minimum(k + 1, last)] - grid.s[np.maximum(k - 1, 0)]
+    floor = REPAIR_REACH_CYCLES * grid.feed_mm_s[np.minimum(k, last)] * settings.limits.period_s
+    return np.minimum(np.maximum(local, floor), 2.0 * settings.spacing_mm)
 
 
 def next_window_cursor(run: Run, cursor: Cursor, pieces: tuple[BlockPiece, ...], samples: Samples,
@@ -473,7 +495,7 @@ def straight_run_plan(run: Run, cursor: Cursor, settings: PlanSettings) -> Windo
     if not cursor.at_rest or not is_straight(run):
         return None
     piece = run.pieces[0]
-    grid = build_grid(run.pieces, settings.spacing_mm)
+    grid = build_grid(run.pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
     if grid.length_mm > settings.window_mm or grid.length_mm <= 0.0:
         return None
     direction = grid.tangent[0]
@@ -661,13 +683,29 @@ def rest_after_stop(run: Run, stop: WindowPlan) -> list[Run]:
 
 def runs_from_rest(run: Run, feed_floor_mm_s: float | None,
                    error: PlanningError) -> list[tuple[Run, float | None, str]]:
-    """What to plan instead of a run that cannot be planned from rest: its first block to a
-    stop, then the rest; a single block at half its feed (raises ``error`` below the floor)."""
+    """What to plan instead of a run that cannot be planned from rest: the run to a stop
+    before the block where it failed (failing_piece), then the rest from there; a single block
+    at half its feed (raises ``error`` below the floor).
+
+    Each part is shorter than the run, so this ends; a part failing in its first block stops
+    after it. (Always stopping after the first block re-planned the whole rest of the run once
+    per block when the failure was far ahead: grbl's braid at T = 1 ms, one window of ~2 m,
+    stopped block by block for more than 10 minutes.)"""
     if len(run.pieces) > 1:
-        return [(Run(run.pieces[:1], ()), None, FALLBACK_SPLIT),
-                (Run(run.pieces[1:], run.junction_speed_mm_s[1:]), None, "")]
+        k = failing_piece(run, error)
+        return [(Run(run.pieces[:k], run.junction_speed_mm_s[:k - 1]), None, FALLBACK_SPLIT),
+                (Run(run.pieces[k:], run.junction_speed_mm_s[k:]), None, "")]
     piece = run.pieces[0]
     floor = feed_floor_mm_s if feed_floor_mm_s is not None else piece.feed_mm_s / 2.0**MAX_FEED_HALVINGS
     if piece.feed_mm_s / 2.0 < floor:
         raise error
     return [(Run((replace(piece, feed_mm_s=piece.feed_mm_s / 2.0),), ()), floor, FALLBACK_SLOWER)]
+
+
+def failing_piece(run: Run, error: PlanningError) -> int:
+    """Index of the run's piece where ``error`` arose (the last piece starting at or before its
+    block: a smoothed piece spans several blocks), at least 1: the cut of runs_from_rest."""
+    if error.block is None:
+        return 1
+    blocks = np.array([p.block for p in run.pieces])
+    return int(np.clip(np.searchsorted(blocks, error.block, side="right") - 1, 1, len(run.pieces) - 1))

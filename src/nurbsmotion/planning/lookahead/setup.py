@@ -11,8 +11,9 @@ asks for its runs (each once):
    tolerance > 0, one programmed feed and a corner tolerance > 0 between them);
 2. blending: the corner between the smoothed pieces on either side of the cut is not a blend
    candidate (blend.blend_pieces): a tolerance of 0 there, an end that is not a line or planar
-   arc, or a deflection above MAX_DEFLECTION_DEG by a margin (CUT_MARGIN_RAD: the candidate
-   test is evaluated on other arrays here); then no blend, and no joined line, spans it;
+   arc, a deflection above SHARP_LIMIT_DEG, or above MAX_DEFLECTION_DEG with a blend too slow
+   to be worth it, by a margin (CUT_MARGIN_RAD, CUT_MARGIN_SPEED: the candidate test is
+   evaluated on other arrays here); then no blend, and no joined line, spans it;
 3. runs: split_runs ends a run there (a stop, a dwell, or a junction speed of 0).
 
 A run never spans a cut, so the runs of the sections, in order, are the whole program's
@@ -29,6 +30,7 @@ from typing import Iterator
 
 import numpy as np
 
+from nurbsmotion.geometry import corner_blend as cb
 from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead import blend
 from nurbsmotion.planning.lookahead.blend import blend_pieces, corner_tolerances, piece_shapes
@@ -46,6 +48,7 @@ SECTION_PIECES = 64  # sections end at the first cut after this many smoothed pi
 # section cost more than its pieces; 1 each: 15.7 s of set-up for fusion360 btn8copies x2 under
 # cProfile, most of it in 10^4 cut checks on pairs; 64: 9.1 s)
 CUT_MARGIN_RAD = 1e-6  # a cut's deflection exceeds the blend limit by this much at least
+CUT_MARGIN_SPEED = 1e-6  # relative: a cut's sharp blend is this much slower than the blend limit at least
 
 
 def max_program_feed(program: Program, limits: PlanLimits) -> float:
@@ -166,6 +169,22 @@ class PathSections:
         _, t_in, _ = shapes.take(np.array([0])).state_at(shapes.length_mm[:1])
         _, t_out, _ = shapes.take(np.array([1])).state_at(np.zeros(1))
         deflection = float(np.arccos(np.clip(np.dot(t_in[0], t_out[0]), -1.0, 1.0)))
-        return deflection > math.radians(blend.MAX_DEFLECTION_DEG) + CUT_MARGIN_RAD  # read at each use: a test may change it
+        if deflection > math.radians(blend.SHARP_LIMIT_DEG) + CUT_MARGIN_RAD:  # read at each use: a test may change it
+            return True
+        if deflection <= math.radians(blend.MAX_DEFLECTION_DEG) + CUT_MARGIN_RAD:
+            return False
+        return self.too_slow_to_blend(shapes, pieces)
+
+    def too_slow_to_blend(self, shapes: cb.Pieces, pieces: list[BlockPiece]) -> bool:
+        """A sharp corner (above MAX_DEFLECTION_DEG) whose blend fails its checks or passes below
+        SHARP_PASS_SHARE of the feed by CUT_MARGIN_SPEED at least (blend.blend_pieces)."""
+        first, second = shapes.take(np.array([0])), shapes.take(np.array([1]))
+        tolerance = corner_tolerances(pieces, self.limits, self.stops)
+        d = cb.trim_distances(first, second, tolerance)
+        points = cb.blend_points(first, second, d)
+        if not (d[0] > 0 and cb.monotone(points)[0]):
+            return True
+        feed = max(pieces[0].feed_mm_s, pieces[1].feed_mm_s)
+        return float(blend.pass_speed_mm_s(points, self.limits)[0]) < blend.SHARP_PASS_SHARE * feed * (1.0 - CUT_MARGIN_SPEED)
 
 
