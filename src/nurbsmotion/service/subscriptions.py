@@ -260,18 +260,22 @@ class StatusHub:
             self._last = status
         if changes:
             yield_interpreter()
-        now = self._clock()
+        due_s = self._clock() + TICK_SLACK_S
         encoded: dict[int, bytes] = {}  # subscribers at one rate share their pending changes: encode once
         for sub in subscribers:
             if changes:
                 sub.pending = merge_changes(sub.pending, changes) if sub.pending else changes
-            if sub.pending and (now >= sub.next_status_s - TICK_SLACK_S or events):
+            if due_s < sub.next_status_s and not events:
+                continue
+            # due (or woken by an event): its next tick is after this one even when nothing
+            # changed, so the publisher sleeps until then instead of going round again at once
+            sub.next_status_s = next_tick_s(due_s, sub.period_s)
+            if sub.pending:
                 key = id(sub.pending)
                 if key not in encoded:
                     encoded[key] = encode({"notify": "status", "t": stamp, "changes": sub.pending})
                 sub.put(encoded[key])
                 sub.pending = {}
-                sub.next_status_s = next_tick_s(now, sub.period_s)
         if encoded:
             yield_interpreter()
         for sub in subscribers:
