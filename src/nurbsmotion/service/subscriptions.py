@@ -45,11 +45,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-log = logging.getLogger(__name__)
-
 from nurbsmotion.log import attach_handler, kv, parse_kv
 from nurbsmotion.runtime import set_thread_realtime
 from nurbsmotion.service.protocol import Status, encode, merge_changes, status_changes
+
+log = logging.getLogger(__name__)
 
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
 MAX_HZ_RANGE = (0.5, 100.0)
@@ -230,7 +230,7 @@ class StatusHub:
                 self._wake.clear()
                 continue
             now = self._clock()
-            wait_s = min(max(s.next_status_s - now, 0.0) for s in subscribers)  # on a tick: next_tick_s
+            wait_s = min(max(s.next_status_s - now, 0.0) for s in subscribers)
             if wait_s > 0 and not self._events:
                 self._wake.wait(wait_s)
             self._wake.clear()
