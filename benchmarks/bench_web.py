@@ -111,7 +111,18 @@ def program_for(seconds: float) -> str:
     return "G21 G90\nG01 X0 F6000\n" + "".join(f"G01 X{100 if i % 2 == 0 else 0}\n" for i in range(strokes))
 
 
-async def client(url: str, latencies: list[float], stop: asyncio.Event) -> None:
+Latency = tuple[float, float]  # (event logged -> client, event logged -> the daemon's publisher sent it) s
+
+
+def event_latency(line: dict[str, Any]) -> Latency | None:
+    """The line's latency from the daemon's log record, and the daemon's part of it (the
+    publisher stamps ``t`` when it sends); None for a line that is not a timed event."""
+    if line.get("notify") != "event" or not line.get("logged_t"):
+        return None
+    return time.time() - line["logged_t"], line["t"] - line["logged_t"]
+
+
+async def client(url: str, latencies: list[Latency], stop: asyncio.Event) -> None:
     async with aiohttp.ClientSession() as session, session.ws_connect(url) as ws:
         while not stop.is_set():
             try:
@@ -120,16 +131,16 @@ async def client(url: str, latencies: list[float], stop: asyncio.Event) -> None:
                 continue
             if message.type != aiohttp.WSMsgType.TEXT:
                 return
-            line = json.loads(message.data)
-            if line.get("notify") == "event" and line.get("logged_t"):
-                latencies.append(time.time() - line["logged_t"])
+            timed = event_latency(json.loads(message.data))
+            if timed is not None:
+                latencies.append(timed)
 
 
 class DirectSubscriber:
     """One ``subscribe`` connection on the daemon's socket, read by its own thread, timing
     its events; ``close`` hangs up."""
 
-    def __init__(self, socket_path: str, latencies: list[float]) -> None:
+    def __init__(self, socket_path: str, latencies: list[Latency]) -> None:
         self.sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.sock.connect(socket_path)
         self.sock.sendall(b'{"cmd": "subscribe"}\n')
@@ -140,9 +151,9 @@ class DirectSubscriber:
     def _read(self) -> None:
         with self.sock.makefile("rb") as stream:
             for raw in stream:
-                line = json.loads(raw)
-                if line.get("notify") == "event" and line.get("logged_t"):
-                    self.latencies.append(time.time() - line["logged_t"])
+                timed = event_latency(json.loads(raw))
+                if timed is not None:
+                    self.latencies.append(timed)
 
     def close(self) -> None:
         self.sock.shutdown(socket.SHUT_RDWR)
@@ -165,7 +176,7 @@ def ready_cycles(c: Client) -> dict[str, Any]:
 async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seconds: float,
                     pids: dict[str, int]) -> dict[str, Any]:
     """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected."""
-    latencies: list[float] = []
+    latencies: list[Latency] = []
     stop = asyncio.Event()
     await asyncio.sleep(SETTLE_S)  # the gateway closes its daemon subscription 5 s after the last client left
     tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients if kind == "WebSocket" else 0)]
@@ -199,17 +210,25 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
     await asyncio.gather(*tasks, return_exceptions=True)
     for subscriber in direct:
         await asyncio.to_thread(subscriber.close)
-    latencies.sort()
+    total = sorted(t for t, _ in latencies)
+    daemon_part = sorted(d for _, d in latencies)
     return {"clients": f"{clients} {kind}" if clients else "0", "outcome": outcome,
             "cycles": after["count"] - before["count"],
             "late": after["late"] - before["late"], "missed": after["missed"] - before["missed"],
-            "events": len(latencies),
-            "median_ms": statistics.median(latencies) * 1e3 if latencies else float("nan"),
-            "p99_ms": latencies[int(0.99 * (len(latencies) - 1))] * 1e3 if latencies else float("nan"),
+            "events": len(latencies), "median_ms": median_ms(total), "p99_ms": p99_ms(total),
+            "daemon_median_ms": median_ms(daemon_part), "daemon_p99_ms": p99_ms(daemon_part),
             "gateway_cpu_percent": cpu["gateway"], "daemon_cpu_percent": cpu["daemon"],
             "late_per_1000": 1000 * (after["late"] - before["late"]) / max(1, after["count"] - before["count"]),
             "normal_wakeups_per_s": switches / wall,
             "load": Path("/proc/loadavg").read_text().split()[0]}
+
+
+def median_ms(sorted_s: list[float]) -> float:
+    return statistics.median(sorted_s) * 1e3 if sorted_s else float("nan")
+
+
+def p99_ms(sorted_s: list[float]) -> float:
+    return sorted_s[int(0.99 * (len(sorted_s) - 1))] * 1e3 if sorted_s else float("nan")
 
 
 async def idle_cpu(ws_url: str, gateway_pid: int, seconds: float) -> float:
@@ -302,12 +321,13 @@ async def main_async(args: argparse.Namespace) -> str:
                 stop_process(proc)
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
     table = ["| clients | job outcome | cycles | late (> 10 % T) | late per 1000 cycles | missed (> T) | "
-             "events timed | event -> client median ms | p99 ms | gateway CPU % | daemon CPU % | "
-             "daemon normal-priority wake-ups/s | load (1 min) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "events timed | event -> client median ms | p99 ms | of which in the daemon: median ms | p99 ms | "
+             "gateway CPU % | daemon CPU % | daemon normal-priority wake-ups/s | load (1 min) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['late_per_1000']:.0f} | "
                      f"{r['missed']} | {r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | "
+                     f"{r['daemon_median_ms']:.1f} | {r['daemon_p99_ms']:.1f} | "
                      f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
                      f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"

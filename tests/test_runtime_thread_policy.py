@@ -99,3 +99,34 @@ def test_unpin_threads_gives_a_pinned_thread_every_cpu_of_the_process():
     assert done.returncode == 0, done.stderr
     seen = json.loads(done.stdout)
     assert seen["changed"] == [seen["id"]] and seen["after"] == seen["cpus"]
+
+
+UNPINNED_REALTIME_SCRIPT = r"""
+import json, os, threading
+from nurbsmotion.runtime import set_thread_realtime
+
+seen = {"cpus": sorted(os.sched_getaffinity(0))}
+
+def publisher():
+    seen["policy"] = set_thread_realtime(1, pin=False)
+    seen["sched"] = [os.sched_getscheduler(0), os.sched_getparam(0).sched_priority]
+    seen["after"] = sorted(os.sched_getaffinity(0))
+
+t = threading.Thread(target=publisher)
+t.start(); t.join()
+print(json.dumps(seen))
+"""
+
+
+def test_a_thread_made_real_time_without_pinning_keeps_every_cpu():
+    """The daemon's status publisher (service.subscriptions): SCHED_FIFO 1 so that other
+    work does not preempt it while it holds the interpreter lock, on any CPU."""
+    if not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2:
+        pytest.skip("needs two CPUs and sched_setaffinity")
+    done = subprocess.run([sys.executable, "-c", UNPINNED_REALTIME_SCRIPT], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 0, done.stderr
+    seen = json.loads(done.stdout)
+    if seen["policy"] != "SCHED_FIFO":
+        pytest.skip(f"SCHED_FIFO not allowed here ({seen['policy']})")
+    assert seen["sched"] == [os.SCHED_FIFO, 1] and seen["after"] == seen["cpus"]

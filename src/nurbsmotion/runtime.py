@@ -49,6 +49,7 @@ GC_MODES = ("freeze", "disable", "none")
 CYCLE_THREAD_PRIORITY = 20  # SCHED_FIFO priority of the master's cycle thread (its receive thread: one less)
 # simulate: true: the drives' receive and ticker threads in the daemon's process, below the master's
 SIM_DRIVES_PRIORITY = CYCLE_THREAD_PRIORITY - 2
+STATUS_PUBLISHER_PRIORITY = 1  # the daemon's status publisher (service.subscriptions): below all of the above
 
 
 def cap_switch_interval(period_s: float) -> float:
@@ -59,17 +60,18 @@ def cap_switch_interval(period_s: float) -> float:
     return sys.getswitchinterval()
 
 
-def set_thread_realtime(priority: int | None, thread_id: int = 0) -> str:
+def set_thread_realtime(priority: int | None, thread_id: int = 0, pin: bool = True) -> str:
     """SCHED_FIFO ``priority`` for the calling thread (or the thread ``thread_id``, its native
     id) when allowed (root / CAP_SYS_NICE), on the real-time CPU (realtime_cpu) when there is
-    one; returns the policy in force ('SCHED_FIFO', or 'normal: <reason>')."""
+    one and ``pin``; returns the policy in force ('SCHED_FIFO', or 'normal: <reason>')."""
     if priority is None or not hasattr(os, "sched_setscheduler"):
         return "normal: not requested"
     try:
         os.sched_setscheduler(thread_id, os.SCHED_FIFO, os.sched_param(max(1, priority)))
     except (PermissionError, OSError) as err:
         return f"normal: {err}"
-    pin_to_realtime_cpu(thread_id)
+    if pin:
+        pin_to_realtime_cpu(thread_id)
     return "SCHED_FIFO"
 
 

@@ -123,3 +123,29 @@ def test_a_subscriber_that_stops_reading_is_dropped_with_a_notice_and_nobody_els
 
 def dropped(daemon: Any) -> bool:
     return any(sub.dropped is not None for sub in daemon.hub._subscribers)
+
+
+def test_a_subscriber_following_the_changes_has_every_field_of_a_status_request(tmp_path):
+    """Fast reads between events, whole reads after them (service.subscriptions): once the
+    machine rests after a job and an offsets change, the subscriber's status is a ``status``
+    answer, field for field (the cycle counters, which move every cycle, left out)."""
+    from nurbsmotion.service.protocol import merge_changes
+
+    with daemon_in_process(tmp_path / "data", "", "subeq") as daemon:
+        listener = Listener(daemon.config.control.socket)
+        with Client(daemon.config.control.socket) as client:
+            client.call("submit", name="sq.nc", program=PROGRAM)
+            wait_for(lambda: listener.events("job_ended"), 30.0, "job_ended pushed")
+            client.call("override", percent=70)
+
+            def same_as_a_status_request() -> bool:
+                merged = listener.first["status"]
+                for line in list(listener.lines):
+                    if line.get("notify") == "status":
+                        merged = merge_changes(merged, line["changes"])
+                answer = client.call("status")
+                return {k: v for k, v in merged.items() if k != "cycles"} == \
+                    {k: v for k, v in answer.items() if k != "cycles"} and set(merged) == set(answer)
+
+            wait_for(same_as_a_status_request, 10.0, "the subscriber's status to be the status answer")
+        listener.hang_up()

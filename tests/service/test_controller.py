@@ -7,11 +7,12 @@ import json
 import logging
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
-from nurbsmotion.service.controller import Controller
+from nurbsmotion.service.controller import FAST_FIELDS, Controller
 from nurbsmotion.service.planner import plan_job
 from nurbsmotion.service.records import JobRecords
 from tests.service.fakes import FakeLink, fake_planner
@@ -284,3 +285,20 @@ def test_a_start_that_fails_unexpectedly_leaves_no_record(parts, monkeypatch):
     with pytest.raises(RuntimeError):
         controller.submit("line.nc", "X5")
     assert controller.records.all() == [] and controller.status()["job"] is None
+
+
+def test_the_fast_fields_are_those_of_the_whole_status_with_positions_as_the_axis_map_converts(parts):
+    controller, link = parts
+    link.held = [1234, -567, 89]
+    link.axis_map.offset_counts[0] = 100  # as homing sets it
+    link.axis_map.sign[1] = -1.0  # an inverted axis
+    steps = []
+    status = controller.status()
+    fast = controller.status(fast_only=True, step=lambda: steps.append(1))
+    assert tuple(fast) == FAST_FIELDS and fast == {k: status[k] for k in FAST_FIELDS}
+    assert set(status) - set(FAST_FIELDS) >= {"override", "coordinates", "homing", "last_job"}
+    assert len(steps) == 3
+    expected_mm = link.axis_map.to_mm(np.array([link.held]))[0]
+    for axis, mm in zip(status["axes"], expected_mm):
+        assert axis["commanded_mm"] == axis["actual_mm"] == round(float(mm), 6)
+    assert [axis["actual_mm"] for axis in status["axes"]] == [1.134, 0.567, 0.089]

@@ -42,3 +42,9 @@ def test_responses_are_one_line_of_json_without_nan():
     line = encode({"ok": True, "value": float("nan"), "text": "a\nb"})
     assert line.endswith(b"\n") and line.count(b"\n") == 1
     assert json.loads(line)["value"] is None
+
+
+def test_non_finite_numbers_anywhere_become_null_and_finite_ones_stay_as_they_were():
+    assert encode({"a": [1.5, float("inf")], "b": {"c": (float("-inf"), 2)}, "d": "x"}) == \
+        b'{"a":[1.5,null],"b":{"c":[null,2]},"d":"x"}\n'
+    assert encode({"a": [1.5, 0.1], "b": {"c": (3, None)}}) == b'{"a":[1.5,0.1],"b":{"c":[3,null]}}\n'

@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError, Refused
 from nurbsmotion.fieldbus.reports import MasterStatus
@@ -46,6 +47,7 @@ from nurbsmotion.service.records import JobRecords
 
 log = logging.getLogger(__name__)
 
+FAST_FIELDS = ("ok", "state", "phase", "job", "axes", "cycles", "faults")  # Controller.status(fast_only=True)
 Planner = Callable[[str, str, np.ndarray, ReadOptions], JobPlan]  # (name, text, start mm, reader options) -> plan
 
 
@@ -333,33 +335,31 @@ class Controller:
             return status.phase
         return "running"
 
-    def status(self) -> dict[str, Any]:
+    def status(self, fast_only: bool = False, step: Callable[[], None] = lambda: None) -> dict[str, Any]:
+        """The ``status`` answer. ``fast_only``: only FAST_FIELDS, those that change every
+        cycle while the machine moves (axis positions, cycle counters, the job's progress)
+        or with its state; the status publisher reads these at the subscribers' rate and the
+        rest after events (service.subscriptions), and passes ``step``, called between the
+        parts (it lets go of the interpreter lock there)."""
         status = self.link.status()
+        step()
         self.homing.forget_faulted(status.faults)
-        axis_map = self.link.axis_map
-        setpoints = np.array([[a.setpoint_counts for a in status.axes]])
-        actual = np.array([[a.position_counts if a.position_counts is not None else a.setpoint_counts
-                            for a in status.axes]])
-        commanded_mm, actual_mm = axis_map.to_mm(setpoints)[0], axis_map.to_mm(actual)[0]
-        axes = [{"name": a.name, "node": a.node_id, "drive_state": a.state, "statusword": a.statusword,
-                 "commanded_mm": round(float(commanded_mm[i]), 6), "actual_mm": round(float(actual_mm[i]), 6),
-                 "following_error_mm": None if a.following_error_counts is None else
-                 round(a.following_error_counts * float(axis_map.sign[i]) / float(axis_map.counts_per_mm[i]), 6),
-                 "emcy_count": a.emcy_count, "soft_limits_mm": _limits(self.config.axes[i].soft_limits_mm)}
-                for i, a in enumerate(status.axes)]
-        t = status.timing
         job = self._job
-        return {"ok": True, "state": self.state(status), "phase": status.phase,
-                "job": job_progress(job, status, self.feed_override.effective(job)), "override": self.feed_override.status(job), "axes": axes,
-                "cycles": {"count": t.cycles, "late": t.late_cycles, "missed": t.missed_cycles,
-                           "send_errors": t.send_errors, "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3),
-                           "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)},
+        progress = job_progress(job, status, self.feed_override.effective(job))
+        step()
+        axes = axes_status(status, self.link.axis_map, self.config)
+        step()
+        fast = {"ok": True, "state": self.state(status), "phase": status.phase, "job": progress, "axes": axes,
+                "cycles": cycles_status(status),
                 "faults": [self.outcomes.fault_record(f, status, job.start_cycle if job is not None else
-                                              self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
-                           for f in status.faults[self._faults_acknowledged:]],
-                "last_job": self._last, "simulate": self.simulation is not None,
-                "coordinates": self.state_store.state.status(), "homing": self.homing.status(),
-                **self.machine.status()}
+                                                      self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
+                           for f in status.faults[self._faults_acknowledged:]]}
+        if fast_only:
+            return fast
+        step()
+        return {**fast, "override": self.feed_override.status(job), "last_job": self._last,
+                "simulate": self.simulation is not None, "coordinates": self.state_store.state.status(),
+                "homing": self.homing.status(), **self.machine.status()}
 
     # ------------------------------------------------------------------ job life
     def _check_can_start(self, jog: AxisMotion | None = None) -> None:
@@ -442,6 +442,29 @@ def check_program_name(name: str) -> None:
     """A program name is a file name: it appears in every error line and names the record file."""
     if not name or len(name) > 255 or any(ord(ch) < 32 or ch == "\x7f" for ch in name):
         raise InputError("field 'name'", "must be a file name of 1-255 printable characters")
+
+
+def axes_status(status: MasterStatus, axis_map: AxisMap, config: MachineConfig) -> list[dict[str, Any]]:
+    """Each axis' drive state and positions in mm: AxisMap.to_mm's arithmetic on Python
+    numbers (numpy's per-call overhead was a fifth of a status read for three axes)."""
+    scale = zip(axis_map.offset_counts.tolist(), axis_map.sign.tolist(), axis_map.counts_per_mm.tolist())
+    axes = []
+    for i, (a, (offset, sign, per_mm)) in enumerate(zip(status.axes, scale)):
+        actual = a.position_counts if a.position_counts is not None else a.setpoint_counts
+        axes.append({"name": a.name, "node": a.node_id, "drive_state": a.state, "statusword": a.statusword,
+                     "commanded_mm": round((a.setpoint_counts - offset) * sign / per_mm, 6),
+                     "actual_mm": round((actual - offset) * sign / per_mm, 6),
+                     "following_error_mm": None if a.following_error_counts is None else
+                     round(a.following_error_counts * sign / per_mm, 6),
+                     "emcy_count": a.emcy_count, "soft_limits_mm": _limits(config.axes[i].soft_limits_mm)})
+    return axes
+
+
+def cycles_status(status: MasterStatus) -> dict[str, Any]:
+    """The status' ``cycles``: counted, late, missed, send errors, lateness p99 and max."""
+    t = status.timing
+    return {"count": t.cycles, "late": t.late_cycles, "missed": t.missed_cycles, "send_errors": t.send_errors,
+            "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3), "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)}
 
 
 def _limits(pair: tuple[float, float] | None) -> list[float] | None:

@@ -24,7 +24,7 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError, Refused
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
-from nurbsmotion.runtime import cap_switch_interval
+from nurbsmotion.runtime import STATUS_PUBLISHER_PRIORITY, cap_switch_interval
 from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.devices import open_devices
@@ -41,7 +41,7 @@ from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
 from nurbsmotion.service.start_line import start_line_field
-from nurbsmotion.service.subscriptions import StatusHub, attach_event_log
+from nurbsmotion.service.subscriptions import StatusHub, attach_event_log, yield_interpreter
 from nurbsmotion.service.webhooks import start_webhooks
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ class Daemon:
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
         self.programs = Programs(self.config, self.controller, self.store, queue)
-        self.hub = StatusHub(self._status)
+        self.hub = StatusHub(self._status, read_fast=self._fast_status, realtime_priority=STATUS_PUBLISHER_PRIORITY)
         self._detach_event_log = attach_event_log(self.hub)
         self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group, hub=self.hub)
@@ -163,8 +163,15 @@ class Daemon:
         return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store, checker)
 
     def _status(self) -> dict[str, Any]:
+        """The whole status for the status publisher, as a ``status`` request answers it,
+        read in steps that each let go of the interpreter lock (yield_interpreter)."""
         assert self.controller is not None
-        return with_queue(self.controller.status(), self.programs)
+        return with_queue(self.controller.status(step=yield_interpreter), self.programs)
+
+    def _fast_status(self) -> dict[str, Any]:
+        """The status fields that move with the machine (controller.FAST_FIELDS), likewise."""
+        assert self.controller is not None
+        return self.controller.status(fast_only=True, step=yield_interpreter)
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller

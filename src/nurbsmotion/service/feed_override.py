@@ -20,11 +20,11 @@ class FeedOverride:
         self.requested = 1.0  # requested, as a fraction
 
     def status(self, job: ActiveJob | None) -> dict[str, Any]:
-        out: dict[str, Any] = {"requested_percent": round(self.requested * 100.0, 3),
-                               "effective_percent": round(self.effective(job) * 100.0, 3)}
-        if job is not None:
-            out["max_percent"] = round(max(1.0, job.plan.max_rate) * 100.0, 3)
-        return out
+        """The status' ``override``; ``max_percent`` None without a job (always there: a
+        subscriber applying changes cannot tell a field that went away from one set to None)."""
+        return {"requested_percent": round(self.requested * 100.0, 3),
+                "effective_percent": round(self.effective(job) * 100.0, 3),
+                "max_percent": round(max(1.0, job.plan.max_rate) * 100.0, 3) if job is not None else None}
 
     def effective(self, job: ActiveJob | None) -> float:
         return effective_rate(self.requested, job.plan.max_rate) if job is not None else self.requested

@@ -20,6 +20,7 @@ The daemon's process only receives, copies and indexes rows: the planner never h
 
 from __future__ import annotations
 
+import bisect
 import collections
 import dataclasses
 import logging
@@ -209,7 +210,7 @@ class StreamedJob:
         """The program block of planned row ``index`` (None before the first)."""
         if index < 0 or not self._block_rows:
             return None
-        i = int(np.searchsorted(np.asarray(self._block_rows), index, side="right")) - 1
+        i = bisect.bisect_right(self._block_rows, index) - 1  # numpy's searchsorted: ~25 µs a call (a status read)
         return self._block_ids[max(i, 0)]
 
     def feed_at(self, index: int) -> float:

@@ -12,32 +12,51 @@ After ``{"cmd": "subscribe"}`` a control connection receives, one JSON line each
 - ``{"notify": "dropped", "error": "..."}`` before the daemon closes a client that fell
   too far behind (it never blocks the daemon: each client has its own bounded queue).
 
-One publisher thread (normal priority) reads the controller's status for all subscribers at
-the fastest rate any of them asked for, and only while someone is subscribed; a logged event
-wakes it at once, so a state change reaches clients with the event, not a period later. It
-also writes every subscriber's lines to its connection (``Subscription.attach``: a
-non-blocking send; what the socket cannot take now waits for the next round), so a round
-wakes one thread for all clients instead of one per client: every thread that wakes takes
-the interpreter lock the cycle thread needs (issue 22). The cycle thread pays one
-``deque.append`` and ``Event.set`` per log line it writes (faults), and the status read
-takes the controller's lock as a ``status`` request does.
+One publisher thread reads the status for all subscribers on a shared grid of ticks at the
+fastest rate any of them asked for (subscribers at one rate fall due together: one read for
+all), and only while someone is subscribed; a logged event wakes it at once, so a state change
+reaches clients with the event, not a period later. It also writes every subscriber's lines to
+its connection (``Subscription.attach``: a non-blocking send; what the socket cannot take now
+waits for the next round), so a round wakes one thread for all clients instead of one per
+client.
+
+The cycle thread must not pay for it (issue 22): every microsecond the publisher runs Python
+holds the interpreter lock the cycle thread may wake up needing, and a cycle thread that waits
+for it longer than the spin before its deadline starts the cycle late. So the publisher
+- reads between events only the fields that move with the machine (``read_fast``: positions,
+  cycle counters, job progress, state); the rest (override, offsets, homing, spindle, I/O,
+  queue, last job) whole in the round of an event and the next, and every FULL_READ_PERIOD_S;
+- lets go of the lock between its steps (yield_interpreter: the master's status, the job's
+  progress, the axes, the diff, the encoding, each send), so a waking cycle thread waits for
+  one step, not for the switch interval;
+- runs at SCHED_FIFO 1 where allowed, below every thread of the cycle: at normal priority the
+  scheduler preempted it for milliseconds while it held the lock under load, and the cycle
+  thread waited that long (docs/web.md, "What the subscription costs the cycle").
+The cycle thread pays one ``deque.append`` and ``Event.set`` per log line it writes (faults).
 """
 
 from __future__ import annotations
 
 import collections
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from nurbsmotion.log import attach_handler, parse_kv
+from nurbsmotion.log import attach_handler, kv, parse_kv
+from nurbsmotion.runtime import set_thread_realtime
 from nurbsmotion.service.protocol import Status, encode, merge_changes, status_changes
+
+log = logging.getLogger(__name__)
 
 DEFAULT_MAX_HZ = 20.0  # status lines per second per client (positions), Moonraker's default rate
 MAX_HZ_RANGE = (0.5, 100.0)
 MAX_PENDING_LINES = 2000  # a client this far behind is dropped (events queue; status lines merge)
+FULL_READ_PERIOD_S = 0.5  # between events, the fields that do not move with the machine are read this often
+TICK_SLACK_S = 1e-3  # a subscriber due this soon is served in this round
+FULL_READS_AFTER_EVENT = 2  # rounds that read the whole status after an event (this one and the next)
 MAX_UNSENT_BYTES = 4 * 1024 * 1024  # an attached client whose socket leaves this much unsent is dropped
 Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
 
@@ -127,10 +146,18 @@ class StatusHub:
     """Samples ``read_status`` for the subscribers and fans out status changes and events."""
 
     def __init__(self, read_status: Callable[[], Status], clock: Callable[[], float] = time.monotonic,
-                 wall_clock: Callable[[], float] = time.time, publisher_thread: bool = True) -> None:
-        """``publisher_thread`` False: nothing publishes but ``publish_once`` calls (tests
+                 wall_clock: Callable[[], float] = time.time, publisher_thread: bool = True,
+                 read_fast: Callable[[], Status] | None = None, realtime_priority: int | None = None) -> None:
+        """``read_fast``: the fields of the status that move with the machine (the rest is
+        read whole only after events and every FULL_READ_PERIOD_S; None: always whole).
+        ``realtime_priority``: the publisher thread's SCHED_FIFO priority where allowed.
+        ``publisher_thread`` False: nothing publishes but ``publish_once`` calls (tests
         drive the hub step by step with an injected clock)."""
         self._read_status = read_status
+        self._read_fast = read_fast
+        self._realtime_priority = realtime_priority
+        self._next_full_s = 0.0
+        self._full_reads_due = 0  # an event was published: read the whole status this many rounds
         self._publisher_thread = publisher_thread
         self._clock = clock
         self._wall = wall_clock
@@ -152,7 +179,7 @@ class StatusHub:
             if self._last is None:
                 self._last = status
             sub.pending = status_changes(self._last, status)  # what moved since the shared sample
-            sub.next_status_s = self._clock() + sub.period_s
+            sub.next_status_s = next_tick_s(self._clock(), sub.period_s)
             self._ensure_thread()
         self._wake.set()
         return sub, status
@@ -190,6 +217,11 @@ class StatusHub:
             self._thread.start()
 
     def _run(self) -> None:
+        if self._realtime_priority is not None:
+            # never preempted by other work while it holds the interpreter lock the cycle
+            # thread waits for (it only runs a few hundred µs per round: docs/web.md)
+            policy = set_thread_realtime(self._realtime_priority, pin=False)
+            log.debug(kv("status_publisher_policy", policy=policy, priority=self._realtime_priority))
         while not self._stopping:
             with self._lock:
                 subscribers = list(self._subscribers)
@@ -206,7 +238,9 @@ class StatusHub:
 
     def publish_once(self) -> None:
         """Send queued events, then the status changes of every subscriber that is due (or
-        that an event just woke). The publisher thread's step; tests call it directly."""
+        that an event just woke). The publisher thread's step; tests call it directly.
+        Between its steps it lets go of the interpreter lock (yield_interpreter), so a cycle
+        thread that woke meanwhile waits for one step, not for the switch interval."""
         with self._lock:
             subscribers = list(self._subscribers)
         if not subscribers:
@@ -219,24 +253,63 @@ class StatusHub:
             body = encode({"notify": "event", "t": stamp, **event})
             for sub in subscribers:
                 sub.put(body)
-        status = self._read_status()
+        status = self._sample(bool(events))
+        yield_interpreter()
         with self._lock:
             changes = status_changes(self._last, status)
             self._last = status
-        now = self._clock()
+        if changes:
+            yield_interpreter()
+        due_s = self._clock() + TICK_SLACK_S
         encoded: dict[int, bytes] = {}  # subscribers at one rate share their pending changes: encode once
         for sub in subscribers:
             if changes:
                 sub.pending = merge_changes(sub.pending, changes) if sub.pending else changes
-            if sub.pending and (now >= sub.next_status_s or events):
+            if due_s < sub.next_status_s and not events:
+                continue
+            # due (or woken by an event): its next tick is after this one even when nothing
+            # changed, so the publisher sleeps until then instead of going round again at once
+            sub.next_status_s = next_tick_s(due_s, sub.period_s)
+            if sub.pending:
                 key = id(sub.pending)
                 if key not in encoded:
                     encoded[key] = encode({"notify": "status", "t": stamp, "changes": sub.pending})
                 sub.put(encoded[key])
                 sub.pending = {}
-                sub.next_status_s = now + sub.period_s
+        if encoded:
+            yield_interpreter()
         for sub in subscribers:
             sub.flush()
+
+    def _sample(self, after_event: bool) -> Status:
+        """The status now. Whole when there is no fast read, after an event (in this round
+        and the next: a change is logged just before or after it is made) and every
+        FULL_READ_PERIOD_S; otherwise the last sample with the fields that move with the
+        machine read again (``read_fast``): the same values a ``status`` request gives, the
+        rest at most FULL_READ_PERIOD_S old."""
+        now = self._clock()
+        if after_event:
+            self._full_reads_due = FULL_READS_AFTER_EVENT
+        last = self._last
+        if self._read_fast is None or last is None or self._full_reads_due > 0 or now >= self._next_full_s:
+            self._full_reads_due = max(0, self._full_reads_due - 1)
+            self._next_full_s = now + FULL_READ_PERIOD_S
+            return self._read_status()
+        return {**last, **self._read_fast()}
+
+
+def next_tick_s(now_s: float, period_s: float) -> float:
+    """The next multiple of ``period_s`` after ``now_s`` (clock seconds): subscribers at one
+    rate fall due together, so one status read serves them all (not one read per client
+    at its own phase)."""
+    return (math.floor(now_s / period_s + 1e-9) + 1) * period_s
+
+
+def yield_interpreter() -> None:
+    """Let go of the interpreter lock for a moment (time.sleep(0) releases it): a thread
+    waiting for it, the cycle thread above all, takes it now instead of at the switch
+    interval."""
+    time.sleep(0)
 
 
 class EventLogHandler(logging.Handler):
