@@ -42,3 +42,21 @@ def test_kernel_sync_grid_counts_half_a_period_late_as_missed():
     lateness, missed = grid.advance(10.0025)
     assert missed
     assert grid.next_s == pytest.approx(10.004)  # still the same grid: less than a period late
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_percentile_is_the_upper_edge_of_the_bin_holding_that_sample(seed):
+    """Oracle: the sorted samples' ceil(q n)-th sample, rounded up to its bin's upper edge."""
+    import math
+    import random
+
+    rng = random.Random(seed)
+    samples = [rng.choice([abs(rng.gauss(4e-4, 3e-4)), rng.uniform(1e-3, 0.08), 0.0]) for _ in range(rng.randint(1, 4000))]
+    stats = LatenessStats(late_threshold_s=5e-4)
+    for s in samples:
+        stats.add(s, missed=False)
+    ordered = sorted(samples)
+    for q in (0.01, 0.5, 0.9, 0.99, 1.0):
+        sample = ordered[max(0, math.ceil(q * len(ordered)) - 1)]
+        edge = (int(sample / 1e-6) + 1) * 1e-6 if sample < 1e-3 else 1e-3 + (int((sample - 1e-3) / 1e-4) + 1) * 1e-4
+        assert stats.percentile_s(q) == pytest.approx(edge, abs=1e-12), q

@@ -9,6 +9,8 @@ a jump) and the set-point sequence simply continues: nothing is dropped or repea
 
 from __future__ import annotations
 
+import bisect
+import itertools
 import time
 
 # lateness histogram: 1 µs bins up to 1 ms, then 100 µs bins up to 100 ms (last bin: later)
@@ -56,18 +58,17 @@ class LatenessStats:
             self.max_s = lateness_s
 
     def percentile_s(self, q: float) -> float:
-        """Upper edge of the bin holding the q-quantile (0 < q <= 1)."""
+        """Upper edge of the bin holding the q-quantile (0 < q <= 1): the first bin whose running
+        count reaches q * count (running sums and the search in C: a status read asks for two)."""
         if self.count == 0:
             return 0.0
-        target = q * self.count
-        running = 0
-        for b, n in enumerate(self.hist):
-            running += n
-            if running >= target:
-                if b < _N_FINE:
-                    return (b + 1) * _FINE_S
-                return _N_FINE * _FINE_S + (b - _N_FINE + 1) * _COARSE_S
-        return self.max_s
+        running = list(itertools.accumulate(self.hist))  # the cycle thread may add meanwhile
+        b = bisect.bisect_left(running, q * self.count)
+        if b >= len(running):
+            return self.max_s
+        if b < _N_FINE:
+            return (b + 1) * _FINE_S
+        return _N_FINE * _FINE_S + (b - _N_FINE + 1) * _COARSE_S
 
 
 class DeadlineGrid:
