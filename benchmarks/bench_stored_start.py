@@ -6,8 +6,9 @@ their heartbeats (bench_library_start.py's end-to-end rows need them).
 One fresh process per size holds the daemon's side: a PlannerWorker (its own process, as in the
 daemon), the checked-program store and, for a large program, the checker process
 (service.program_check), with bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord
-error, spindle, tools 1-99). For the program (a real CAM program repeated, read from a file as
-the library keeps it):
+error, spindle, tools 1-99). For the program (a real CAM program repeated, in a file as the
+library keeps it, passed as ``start NAME`` passes it: linked into the spool with its SHA-256,
+never read in this process, service.program_file):
 
 1. ``check``: prepare_streamed_job of the program not in the store (read and checked by the
    worker, or, from 4,000,000 characters, by the checker process first), seconds to the first
@@ -52,6 +53,7 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
     from nurbsmotion.service.checked_store import CheckedStore
     from nurbsmotion.service.planner_worker import PlannerWorker
     from nurbsmotion.service.program_check import ProgramChecker
+    from nurbsmotion.service.program_file import file_stamp, snapshot
     from nurbsmotion.service.streamed_job import prepare_streamed_job
 
     work = Path(tempfile.mkdtemp(prefix="stored-"))
@@ -65,16 +67,19 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
     worker.start()
     worker.wait_ready()
 
+    recorded: list[Any] = []  # the library's record of the file: its stamp and SHA-256, once known
+
     def started() -> dict[str, Any]:
         reset_peak(os.getpid(), worker.pid)
         t0, cpu0 = time.perf_counter(), time.thread_time()
-        text = path.read_text(encoding="utf-8")  # as the library's text is read for `start NAME`
+        text = snapshot(path, config.data_dir, *recorded)  # as the library's program is passed for `start NAME`
+        recorded[:] = [file_stamp(path), text.sha256]
         job = prepare_streamed_job(name, text, config, worker, np.zeros(3), None, store=store, checker=checker)
+        text.discard()
         seconds, cpu = time.perf_counter() - t0, time.thread_time() - cpu0
         peaks = (peak_mb("self"), peak_mb(worker.pid))
         from_store = job.summary["checked_from_store"]
         blocks = len(job.program.blocks)
-        del text
         job.cancel()
         job.wait_closed()
         return {"s": seconds, "cpu_s": cpu, "from_store": from_store, "blocks": blocks, "daemon_mb": peaks[0],

@@ -87,6 +87,7 @@ class PlanRequest:
     first_chunk_cycles: int
     checked_path: Path | None = None  # the checked-program entry to load, or write once checked (service.checked_store)
     checked_key: str = ""
+    text_file: Path | None = None  # with text None: the file holding it, read here if need be (service.program_file)
 
 
 @dataclass(frozen=True)
@@ -388,12 +389,14 @@ class BlockLengths:
         self.lengths_mm = np.zeros(len(program.blocks))
         self.done = 0
         self.sent = False
-        if isinstance(program.blocks, BlockRecords) and not program.blocks.curves:  # lines and arcs only: closed form, at once
-            self.lengths_mm = program.blocks.lengths_mm()
-            self.done = len(program.blocks)
 
     def compute(self, budget_s: float | None) -> bool:
-        """Go on for about ``budget_s`` (None: to the end); True once every length is known."""
+        """Go on for about ``budget_s`` (None: to the end); True once every length is known.
+        Lines and arcs only: all in closed form at the first call, after the first chunk (10^6
+        blocks: ~0.1 s that first motion does not wait for)."""
+        if self.done == 0 and isinstance(self.blocks, BlockRecords) and not self.blocks.curves:
+            self.lengths_mm = self.blocks.lengths_mm()
+            self.done = len(self.blocks)
         deadline = None if budget_s is None else time.monotonic() + budget_s
         while self.done < len(self.blocks) and (deadline is None or time.monotonic() < deadline):
             self.lengths_mm[self.done] = self.blocks[self.done].length_mm
@@ -429,10 +432,21 @@ def read_or_load(request: PlanRequest, text_of: Callable[[], str] | None = None)
             touch(request.checked_path)
             return program, True
     if request.text is None:
+        if request.text_file is not None:
+            text_of = lambda: read_text_file(request)  # noqa: E731 - the file the daemon named
         if text_of is None:
             raise InputError(request.name, "the program's text was not sent and its checked entry cannot be read")
         request = dataclasses.replace(request, text=text_of())
     return read_and_check(request), False
+
+
+def read_text_file(request: PlanRequest) -> str:
+    """The text of the request's ``text_file`` (the daemon's spool: UTF-8 already checked)."""
+    assert request.text_file is not None
+    try:
+        return request.text_file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(request.name, f"cannot read the program's file {request.text_file}: {err}") from None
 
 
 def touch(path: Path) -> None:

@@ -40,10 +40,11 @@ from nurbsmotion.program.records import KINDS, BlockRecords
 from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
-from nurbsmotion.service.checked_store import CheckedStore
+from nurbsmotion.service.checked_store import CheckedStore, text_digest
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, NeedText, PathLengths,
                                                 PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, ProgramText, TracePath,
                                                 as_error, receive_program)
+from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.rate import max_rate
 
 if TYPE_CHECKING:
@@ -346,18 +347,20 @@ class StreamedJob:
             log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
 
 
-def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
+def prepare_streamed_job(name: str, text: str | ProgramFile, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
                          chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
                          store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> StreamedJob:
-    """Have the worker parse and check ``text`` completely (or load it checked from ``store``,
+    """Have the worker parse and check ``text`` (or the file holding it: the daemon never reads
+    it, service.program_file) completely (or load it checked from ``store``,
     service.checked_store; a large program not there is read and checked by ``checker`` first,
     checked_apart) and start planning it; return once the first chunk is planned (InputError
     naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
     checked_now = checked_apart(request, checker)
     connection = worker.connect(withheld(request))
-    program, from_store = checked_program(name, worker, connection, key=request.checked_key, text=text)
+    program, from_store = checked_program(name, worker, connection, key=request.checked_key,
+                                          text=text if isinstance(text, str) else "")
     from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
@@ -383,7 +386,7 @@ def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
     it from the store as any stored program: reading a 10^6-line program peaks at ~350 MB
     (issue 25: the worker < 300 MB, `check` < 500 MB), and the checker's time-out is the
     check's (minutes), not the first chunk's. True when it checked it (InputError: refused)."""
-    if checker is None or request.checked_path is None or len(request.text or "") < LARGE_PROGRAM_CHARS \
+    if checker is None or request.checked_path is None or program_chars(request) < LARGE_PROGRAM_CHARS \
             or request.checked_path.exists():
         return False
     report = checker.check(request, tuple(a.name for a in request.config.axes))
@@ -392,19 +395,29 @@ def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
     return not report.from_store
 
 
-def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+def program_chars(request: PlanRequest) -> int:
+    """The program's size: its text's characters, or its file's bytes (about as many)."""
+    if request.text is None and request.text_file is not None:
+        return request.text_file.stat().st_size
+    return len(request.text or "")
+
+
+def plan_request(name: str, text: str | ProgramFile, config: MachineConfig, start_mm: np.ndarray | None = None,
                  options: ReadOptions | None = None, store: CheckedStore | None = None,
                  chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> PlanRequest:
-    """The worker's request for ``text`` started at ``start_mm`` (machine axes; None: 0) with
-    ``options``, with its entry in the checked-program ``store`` (service.checked_store)."""
+    """The worker's request for ``text`` (or the file holding it: sent as its path) started at
+    ``start_mm`` (machine axes; None: 0) with ``options``, with its entry in the
+    checked-program ``store`` (service.checked_store)."""
     columns = axis_columns(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
         start_xyz[columns] = start_mm
     options = options or ReadOptions(tool_table=config.tool_table)
-    key = store.key(name, text, start_xyz, options) if store is not None else ""
-    return PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
-                       min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key)
+    held = text if isinstance(text, ProgramFile) else None
+    key = "" if store is None else store.key(name, held.sha256 if held else text_digest(str(text)), start_xyz, options)
+    return PlanRequest(config, name, None if held else str(text), start_xyz, options, columns, chunk_cycles,
+                       min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key,
+                       held.path if held else None)
 
 
 def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any],
