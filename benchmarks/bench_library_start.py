@@ -21,8 +21,8 @@ client process of its own, the program as ``run`` and ``programs add`` send it: 
 passed along (protocol ``program_fd``; ``--text``: its text, as a remote client sends it), so
 that the daemon's process holds only what the daemon holds.
 
-Peak memory of each step: the daemon's process (with its simulated drives) and the planner
-worker's VmHWM (/proc/PID/status), both reset before the step (``5`` into
+Peak memory of each step: the daemon's process (with its simulated drives, its allocator set as
+``nurbsmotion daemon`` sets it: runtime.keep_freed_memory) and the planner worker's VmHWM (/proc/PID/status), both reset before the step (``5`` into
 /proc/PID/clear_refs) and read at the first set-point (the add's: at its answer, with the
 checker process' peak as well).
 
@@ -119,6 +119,7 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
         job = master_job(master)
     moved = time.perf_counter()
     daemon_mb, worker_mb = peak_mb("self"), peak_mb(worker_pid)
+    rss_mb = [status_kb(f, "self") / 1024.0 for f in ("RssAnon", "RssFile")]  # what the daemon's RSS is now
     started, answer = answer_of(sender)
     if not answer.get("ok"):
         raise RuntimeError(f"{cmd}: {answer.get('error')}")
@@ -133,7 +134,8 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
     idle(client)
     return {"s": moved - started, "first_chunk_s": answer["job"]["summary"].get("first_chunk_s", float("nan")),
             "from_store": answer["job"]["summary"]["checked_from_store"],
-            "blocks": answer["job"]["summary"]["blocks"], "daemon_mb": daemon_mb, "worker_mb": worker_mb}
+            "blocks": answer["job"]["summary"]["blocks"], "daemon_mb": daemon_mb, "worker_mb": worker_mb,
+            "daemon_anon_file_mb": rss_mb}
 
 
 def recover(client: Any) -> None:
@@ -163,12 +165,13 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
     """The three starts of ``program`` x ``copies`` in one daemon (module docstring)."""
     from nurbsmotion.config import parse_config
     from nurbsmotion.fieldbus import Master
-    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
+    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY, keep_freed_memory
     from nurbsmotion.service.client import Client
     from nurbsmotion.service.daemon import Daemon
     from nurbsmotion.service.link import SimulatedDrives
     from nurbsmotion.sim import SimNetwork
 
+    keep_freed_memory()  # as `nurbsmotion daemon` sets its process (runtime.py): freed heap kept
     work = Path(tempfile.mkdtemp(prefix="lib-"))
     (work / "tools.yaml").write_text(TOOLS_YAML)
     config = parse_config(CONFIG.format(channel=f"lib-{uuid.uuid4().hex}", socket=work / "ctl.sock",
@@ -219,6 +222,8 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
             "add_s": add_s, "start_s": start["s"], "start_from_store": start["from_store"],
             "first_chunk_s": {"run_first": first["first_chunk_s"], "run_second": second["first_chunk_s"],
                               "start": start["first_chunk_s"]},
+            "daemon_anon_file_mb": {"run_first": first["daemon_anon_file_mb"], "run_second": second["daemon_anon_file_mb"],
+                                    "start": start["daemon_anon_file_mb"]},
             "store_hits": counters["hits"], "store_misses": counters["misses"],
             "peak_mb": {"run_first": [first["daemon_mb"], first["worker_mb"]],
                         "run_second": [second["daemon_mb"], second["worker_mb"]],

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from nurbsmotion.planning import PlanLimits
@@ -33,3 +34,23 @@ def test_the_highest_feed_is_the_same_a_slice_at_a_time(monkeypatch):
     whole = highest_feed_mm_s(program, LIMITS)
     monkeypatch.setattr(streamed_job, "FEED_ROWS", 7)
     assert highest_feed_mm_s(program, LIMITS) == whole
+
+
+def test_block_starts_give_the_block_of_any_row_across_chunks_and_growth():
+    """StreamedJob's index of block starts (the status' line, the end's reason) against a
+    list of (row, block) pairs: chunks continuing their last block, growth past its size."""
+    from nurbsmotion.service.planner_worker import block_starts
+    from nurbsmotion.service.streamed_job import BlockStarts
+
+    rng = np.random.default_rng(3)
+    blocks = np.repeat(np.arange(3000), rng.integers(1, 5, 3000)).astype(np.int32)  # each block 1-4 rows
+    starts, first = BlockStarts(), 0
+    for size in rng.integers(1, 50, 400):
+        chunk = blocks[first:first + size]
+        if len(chunk):
+            starts.add(*block_starts(chunk, first))
+        first += size
+    assert first >= len(blocks) and starts.count == 3000 and len(starts.rows) >= 3000
+    assert [starts.block_at(row) for row in range(len(blocks))] == blocks.tolist()
+    assert starts.block_at(-1) is None and BlockStarts().block_at(5) is None
+    assert starts.block_at(10 ** 9) == 2999

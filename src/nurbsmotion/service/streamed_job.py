@@ -96,6 +96,37 @@ def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfi
                     [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
 
 
+class BlockStarts:
+    """The first row of each block reached, in order, and that block: numpy arrays grown by
+    doubling (a 10^6-block job: 12-24 MB; lists of Python ints held 72 MB and every status
+    read converted one to an array, ~50 ms of the daemon's interpreter lock late in the job)."""
+
+    def __init__(self) -> None:
+        self.rows = np.zeros(1024, np.int64)
+        self.blocks = np.zeros(1024, np.int32)
+        self.count = 0
+
+    def add(self, rows: np.ndarray, blocks: np.ndarray) -> None:
+        """A chunk's block starts (planner_worker.block_starts), its first one dropped when it
+        continues the last block here."""
+        if len(blocks) and self.count and int(blocks[0]) == int(self.blocks[self.count - 1]):
+            rows, blocks = rows[1:], blocks[1:]
+        end = self.count + len(rows)
+        if end > len(self.rows):
+            size = max(end, 2 * len(self.rows))
+            self.rows = np.concatenate([self.rows[:self.count], np.zeros(size - self.count, np.int64)])
+            self.blocks = np.concatenate([self.blocks[:self.count], np.zeros(size - self.count, np.int32)])
+        self.rows[self.count:end], self.blocks[self.count:end] = rows, blocks
+        self.count = end
+
+    def block_at(self, row: int) -> int | None:
+        """The block of ``row`` (None before the first block start)."""
+        if row < 0 or not self.count:
+            return None
+        i = int(np.searchsorted(self.rows[:self.count], row, side="right")) - 1
+        return int(self.blocks[max(i, 0)])
+
+
 class StreamedJob:
     """One streamed job: its checks passed, the worker planning ahead (see module docstring).
 
@@ -128,8 +159,7 @@ class StreamedJob:
         self.submitted_s = time.monotonic()
         self.first_chunk_s = float("nan")
         self.end: PlanEnd | None = None  # the worker's last word on this job
-        self._block_rows: list[int] = []  # first row of each block reached, in order
-        self._block_ids: list[int] = []
+        self._starts = BlockStarts()  # first row of each block reached, in order
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
         self._length_before: np.ndarray | None = None  # path length before each block, once the worker sent them
         self._commands, self._results = connection  # the worker got this job's PlanRequest
@@ -208,10 +238,7 @@ class StreamedJob:
 
     def block_at(self, index: int) -> int | None:
         """The program block of planned row ``index`` (None before the first)."""
-        if index < 0 or not self._block_rows:
-            return None
-        i = int(np.searchsorted(np.asarray(self._block_rows), index, side="right")) - 1
-        return self._block_ids[max(i, 0)]
+        return self._starts.block_at(index)
 
     def feed_at(self, index: int) -> float:
         """Planned feed (mm/s) at row ``index`` when it is recent, else 0."""
@@ -306,10 +333,7 @@ class StreamedJob:
             return
         self.pauses.extend(JobPause(row, reason, tool, wait) for row, reason, tool, wait in chunk.pauses)
         self._take_events(chunk.block_rows, chunk.block_ids)
-        for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
-            if not self._block_ids or self._block_ids[-1] != block:
-                self._block_rows.append(row)
-                self._block_ids.append(block)
+        self._starts.add(chunk.block_rows, chunk.block_ids)
         self._feeds.append((chunk.first_row, chunk.feed_mm_s))
         rows = RowChunk(chunk.counts.astype(np.int64), chunk.stop_tail.astype(np.int64),
                         tuple(row for row, _, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
@@ -333,7 +357,9 @@ class StreamedJob:
 
     def _take_lengths(self, message: PathLengths) -> None:
         """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
-        self._length_before = np.concatenate([[0.0], np.cumsum(message.lengths_mm)])
+        before = np.zeros(len(message.lengths_mm) + 1)
+        np.cumsum(message.lengths_mm, out=before[1:])  # no temporary of the program's size (8 MB at 10^6 blocks)
+        self._length_before = before
         self.summary["length_mm"] = round(float(self._length_before[-1]), 6)
 
     def _finish(self, end: PlanEnd) -> None:
