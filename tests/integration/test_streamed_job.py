@@ -124,7 +124,8 @@ def test_progress_before_the_lengths_is_by_block_then_by_length():
     plan = streamed_job.StreamedJob.__new__(streamed_job.StreamedJob)
     plan.finished, plan.planned, plan._length_before, plan.summary = False, 0, None, {"length_mm": None}
     plan.program = type("P", (), {"blocks": (0, 1, 2, 3)})()
-    plan._block_rows, plan._block_ids = [0, 10, 20], [0, 1, 2]
+    plan._starts = streamed_job.BlockStarts()
+    plan._starts.add(np.array([0, 10, 20]), np.array([0, 1, 2]))
     assert plan.percent_at(15) == 25.0  # block 1 of 4
     plan._take_lengths(PathLengths(np.array([1.0, 3.0, 4.0, 2.0])))
     assert plan.percent_at(15) == 10.0 and plan.percent_at(25) == 40.0  # 1 of 10 mm, 4 of 10 mm

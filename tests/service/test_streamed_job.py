@@ -1,4 +1,4 @@
-"""streamed_job: the highest feed of a program from its block columns is the one of its Blocks."""
+"""streamed_job: the highest feed of a program from its block columns (computed by the planner worker) is the one of its Blocks; the index of block starts."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pytest
 from nurbsmotion.planning import PlanLimits
 from nurbsmotion.program import Program, read_program
 from nurbsmotion.program.records import BlockRecords
-from nurbsmotion.service import streamed_job
-from nurbsmotion.service.streamed_job import highest_feed_mm_s
+from nurbsmotion.service import planner_worker
+from nurbsmotion.service.planner_worker import highest_feed_mm_s
 
 GCODE = Path(__file__).resolve().parents[1] / "data" / "gcode"
 LIMITS = PlanLimits(period_s=0.001, chord_error_mm=0.001, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0,
@@ -32,7 +32,7 @@ def test_the_highest_feed_from_the_columns_is_the_blocks(name, rapid_feed_mm_s):
 def test_the_highest_feed_is_the_same_a_slice_at_a_time(monkeypatch):
     program = read_program(GCODE / "fusion360_led_floor_1121_btn8copies_20bit.nc")
     whole = highest_feed_mm_s(program, LIMITS)
-    monkeypatch.setattr(streamed_job, "FEED_ROWS", 7)
+    monkeypatch.setattr(planner_worker, "FEED_ROWS", 7)
     assert highest_feed_mm_s(program, LIMITS) == whole
 
 

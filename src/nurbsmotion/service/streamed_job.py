@@ -35,15 +35,14 @@ from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
 from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
-from nurbsmotion.program import AXES, BlockKind, Program, ReadOptions
-from nurbsmotion.program.records import KINDS, BlockRecords
+from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
 from nurbsmotion.service.checked_store import CheckedStore, text_digest
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, NeedText, PathLengths,
                                                 PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, ProgramText, TracePath,
-                                                as_error, receive_program)
+                                                as_error, highest_feed_mm_s, receive_program)
 from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.rate import max_rate
 
@@ -58,31 +57,16 @@ MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s a
 FIRST_CHUNK_TIMEOUT_S = 60.0
 END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
 FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
-FEED_ROWS = 65536  # highest_feed_mm_s's slice
 LARGE_PROGRAM_CHARS = 4_000_000  # ~130,000 CAM lines: read and checked apart (checked_apart), not in the worker
 
 
-def highest_feed_mm_s(program: Program, limits: PlanLimits) -> float:
-    """The highest Block.feed_or_default_mm_s of the program's blocks; from the block columns
-    (a slice at a time) when it has them (a Block per block took 1.6 s of the daemon's CPU at 10^5 blocks, before
-    first motion and holding the cycle thread's interpreter lock)."""
-    blocks = program.blocks
-    if not isinstance(blocks, BlockRecords):
-        return max(b.feed_or_default_mm_s(limits.default_feed_mm_s, limits.rapid_feed_mm_s) for b in blocks)
-    highest = -np.inf
-    for first in range(0, len(blocks), FEED_ROWS):  # a slice at a time: no column-sized temporaries (10^6 blocks: 25 MB)
-        kinds, feeds = blocks.kinds[first:first + FEED_ROWS], blocks.feeds_mm_s[first:first + FEED_ROWS]
-        machine = np.where(kinds == KINDS.index(BlockKind.RAPID), limits.rapid_feed_mm_s, limits.default_feed_mm_s)
-        highest = max(highest, float(np.where(np.isnan(feeds), machine, feeds).max()))
-    return highest
-
-
-def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int]) -> float:
+def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int],
+                      highest_feed: float | None = None) -> float:
     """The highest feed override rate for a plan not yet made, from bounds that hold for any
     plan of it: an axis moves no faster than the path (<= the highest feed of its blocks, the
     planner's fluctuation guarantee included) and accelerates no more than the path's
     resultant limit; the axis limits cap both (the planner keeps them)."""
-    feed = highest_feed_mm_s(program, limits)
+    feed = highest_feed_mm_s(program, limits) if highest_feed is None else highest_feed
     if limits.feed_mm_s is not None:
         feed = limits.feed_mm_s
     v_bound, a_bound = [], []
@@ -136,7 +120,8 @@ class StreamedJob:
 
     def __init__(self, name: str, program: Program, config: MachineConfig, columns: list[int],
                  worker: PlannerWorker, connection: tuple[Any, Any], chunk_cycles: int = CHUNK_CYCLES,
-                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
+                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
+                 highest_feed: float | None = None) -> None:
         self.name = name
         self.program = program
         self.config = config
@@ -145,7 +130,7 @@ class StreamedJob:
         self.chunk_cycles = chunk_cycles
         self.first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
         self.limits = limits_from_config(config)
-        self.max_rate = streamed_max_rate(program, self.limits, config, columns)
+        self.max_rate = streamed_max_rate(program, self.limits, config, columns, highest_feed)
         self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
         self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
         # spindle / coolant / output events with their rows (service.job_events), as the chunks
@@ -385,13 +370,13 @@ def prepare_streamed_job(name: str, text: str | ProgramFile, config: MachineConf
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
     checked_now = checked_apart(request, checker)
     connection = worker.connect(withheld(request))
-    program, from_store = checked_program(name, worker, connection, key=request.checked_key,
-                                          text=text if isinstance(text, str) else "")
+    program, from_store, highest_feed = checked_program(name, worker, connection, key=request.checked_key,
+                                                        text=text if isinstance(text, str) else "")
     from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
     job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
-                      first_chunk_cycles=request.first_chunk_cycles)
+                      first_chunk_cycles=request.first_chunk_cycles, highest_feed=highest_feed)
     job.summary["checked_from_store"] = from_store
     job.begin()
     return job
@@ -447,9 +432,11 @@ def plan_request(name: str, text: str | ProgramFile, config: MachineConfig, star
 
 
 def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any],
-                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = "") -> tuple[Program, bool]:
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = ""
+                    ) -> tuple[Program, bool, float | None]:
     """The worker's first answer: (the program parsed and checked, mapped from its store entry
-    ``key`` or received in slices, whether it came from the checked-program store), or the
+    ``key`` or received in slices, whether it came from the checked-program store, its highest
+    feed), or the
     errors refusing it. A worker that asks for the program's ``text`` (NeedText) gets it."""
     commands, results = connection
     try:
@@ -466,7 +453,7 @@ def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
         try:
-            return receive_program(results, answer, timeout_s, key), answer.from_store
+            return receive_program(results, answer, timeout_s, key), answer.from_store, answer.highest_feed_mm_s
         except EntryGone as err:
             worker.abandon()
             raise InputError(name, str(err)) from None
