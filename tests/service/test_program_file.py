@@ -8,7 +8,7 @@ import pytest
 
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.checked_store import text_digest
-from nurbsmotion.service.program_file import ProgramFile, file_stamp, requested_program, snapshot, spool
+from nurbsmotion.service.program_file import ProgramFile, clear_spool, file_stamp, requested_program, snapshot, spool
 from nurbsmotion.text_files import open_text_file, read_text_file
 
 TEXT = "G21 G90 (é)\nG01 X4 Y3 F3000\n" * 3000  # ~90 kB
@@ -33,6 +33,10 @@ def test_a_spooled_file_holds_the_text_run_would_send_and_its_digest(tmp_path, p
     assert program.sha256 == text_digest(TEXT) and program.size_bytes == len(TEXT.encode())
     program.discard()
     assert list((tmp_path / "data" / "spool").iterdir()) == []
+    left = spooled(tmp_path, TEXT.encode())  # a daemon that died mid-start
+    clear_spool(tmp_path / "data")
+    assert not left.path.exists()
+    clear_spool(tmp_path / "nothing")  # no spool yet: nothing to do
 
 
 def test_a_file_not_utf8_too_large_or_not_regular_is_refused_and_leaves_nothing(tmp_path):
@@ -84,17 +88,17 @@ def test_a_snapshot_takes_the_recorded_digest_only_for_the_very_file_recorded(tm
 
 
 def test_a_request_names_its_program_by_text_or_by_a_descriptor_sent_along(tmp_path):
-    with requested_program({"program": TEXT}, (), tmp_path, 1 << 20) as text:
+    with requested_program({"program": TEXT}, (), tmp_path, 1 << 20, "limit") as text:
         assert text == TEXT
     (tmp_path / "part.nc").write_text(TEXT)
     fd = os.open(tmp_path / "part.nc", os.O_RDONLY)
     try:
-        with requested_program({"name": "part.nc", "program_fd": 0}, (fd,), tmp_path, 1 << 20) as program:
+        with requested_program({"name": "part.nc", "program_fd": 0}, (fd,), tmp_path, 1 << 20, "limit") as program:
             assert isinstance(program, ProgramFile) and program.read_text() == TEXT
         assert not program.path.exists()  # discarded once served
         for index in (1, 0.5, -1):
             with pytest.raises(InputError) as info:
-                with requested_program({"program_fd": index}, (fd,), tmp_path, 1 << 20):
+                with requested_program({"program_fd": index}, (fd,), tmp_path, 1 << 20, "limit"):
                     pass
             assert str(info.value) == f"field 'program_fd': no file descriptor {index!r} came with the request (1 did)"
     finally:

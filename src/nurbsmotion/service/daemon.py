@@ -36,7 +36,7 @@ from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
 from nurbsmotion.service.planner import needs_planner_worker, prepare_job
 from nurbsmotion.service.planner_worker import PlannerWorker
-from nurbsmotion.service.program_file import ProgramFile, requested_program
+from nurbsmotion.service.program_file import ProgramFile, clear_spool, requested_program
 from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, Request
 from nurbsmotion.service.records import JobRecords
@@ -83,7 +83,8 @@ def submit(controller: Controller, request: Request) -> dict[str, Any]:
     """``submit``: the program's text, or the file sent along (service.program_file: spooled
     while the job starts, never read into the daemon)."""
     f = request.fields
-    with requested_program(f, request.files, controller.config.data_dir, MAX_REQUEST_BYTES) as program:
+    with requested_program(f, request.files, controller.config.data_dir, MAX_REQUEST_BYTES,
+                           "a request's, the text's limit as well") as program:
         return controller.submit(f["name"], program, bool(f.get("keep_override", False)),
                                  bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
                                  start_line=start_line_field(f.get("start_line")))
@@ -121,6 +122,7 @@ class Daemon:
         cap_switch_interval(self.config.cycle_period_s)  # process-wide: the cycle thread gets the GIL in time
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
+        clear_spool(self.config.data_dir)  # a daemon that died mid-start left its spooled programs
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         queue = JobQueue(self.config.data_dir)  # a corrupt queue.json too
         self._start_planner_worker()

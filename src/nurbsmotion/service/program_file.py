@@ -69,14 +69,22 @@ def spool_folder(data_dir: str | Path) -> Path:
     return folder
 
 
+def clear_spool(data_dir: str | Path) -> None:
+    """Remove what a daemon that ended mid-start left in the spool (no start is under way)."""
+    folder = Path(data_dir) / SPOOL
+    for left in folder.glob("*.program") if folder.is_dir() else ():
+        left.unlink(missing_ok=True)
+
+
 def spool_path(data_dir: str | Path) -> Path:
     return spool_folder(data_dir) / f"{uuid.uuid4().hex}.program"
 
 
-def spool(fd: int, data_dir: str | Path, where: str, max_bytes: int) -> ProgramFile:
+def spool(fd: int, data_dir: str | Path, where: str, max_bytes: int, limit: str = "web.max_upload_mb") -> ProgramFile:
     """Copy the regular file open as ``fd`` (read from its start) into the spool: a
     ProgramFile; InputError naming ``where`` for a descriptor that is not a regular file, a
-    file larger than ``max_bytes`` or one that is not UTF-8 (nothing is left behind)."""
+    file larger than ``max_bytes`` (the ``limit``'s) or one that is not UTF-8 (nothing is
+    left behind)."""
     if not stat.S_ISREG(os.fstat(fd).st_mode):
         raise InputError(where, "the descriptor sent is not a regular file")
     path = spool_path(data_dir)
@@ -93,7 +101,7 @@ def spool(fd: int, data_dir: str | Path, where: str, max_bytes: int) -> ProgramF
                 first = False
                 size += len(chunk)
                 if size > max_bytes:
-                    raise InputError(where, f"larger than the {max_bytes / (1024 * 1024):g} MB limit (web.max_upload_mb)")
+                    raise InputError(where, f"larger than the {max_bytes / (1024 * 1024):g} MB limit ({limit})")
                 try:
                     decoder.decode(chunk, final=not chunk)
                 except UnicodeDecodeError as err:
@@ -142,7 +150,7 @@ def file_stamp(path: Path) -> list[int]:
 
 @contextlib.contextmanager
 def requested_program(fields: dict[str, Any], files: tuple[int, ...], data_dir: str | Path,
-                      max_bytes: int) -> Iterator[str | ProgramFile]:
+                      max_bytes: int, limit: str) -> Iterator[str | ProgramFile]:
     """The program of a ``submit`` or ``programs.add`` request (protocol: ``program``, its
     text, or ``program_fd``, the index of a descriptor in ``files``), spooled while the
     request is served and discarded after (a program the library kept was moved out)."""
@@ -153,7 +161,7 @@ def requested_program(fields: dict[str, Any], files: tuple[int, ...], data_dir: 
     if float(index) != int(index) or not 0 <= int(index) < len(files):
         raise InputError("field 'program_fd'", f"no file descriptor {index!r} came with the request "
                                                f"({len(files)} did)")
-    program = spool(files[int(index)], data_dir, f"program {fields.get('name', '')!r}", max_bytes)
+    program = spool(files[int(index)], data_dir, f"program {fields.get('name', '')!r}", max_bytes, limit)
     try:
         yield program
     finally:

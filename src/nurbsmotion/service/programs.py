@@ -117,7 +117,8 @@ class Programs:
 
     def add_requested(self, request: Request) -> dict[str, Any]:
         """``programs.add`` with the program's text or the file sent along (service.program_file)."""
-        with requested_program(request.fields, request.files, self.config.data_dir, self.library.max_bytes) as program:
+        with requested_program(request.fields, request.files, self.config.data_dir, self.library.max_bytes,
+                               "web.max_upload_mb") as program:
             return self.add(request.fields["name"], program)
 
     def handlers(self, request: Request) -> dict[str, Callable[[], dict[str, Any]]]:
