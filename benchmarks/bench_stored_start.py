@@ -146,7 +146,7 @@ def main() -> None:
         print(json.dumps(results[-1]), flush=True)
     body = ("The daemon's side of a streamed start without drives (module docstring of the script): a planner worker "
             "process, the checked-program store and the checker process, bench_first_motion's machine. Seconds from "
-            "the request (the program's text read from its file, as the library's) to the first chunk planned; first "
+            "the request (the program's file linked into the spool, as `start NAME` passes it: its text never read here) to the first chunk planned; first "
             "motion adds the job record and the master's start (and a spindle's spin-up). Peak memory: VmHWM of "
             "this process (the daemon's side, without the master and simulated drives) and of the planner worker, "
             "reset before each start. Host: 2 cores shared with other sessions (load average before → after).\n\n"
