@@ -127,7 +127,7 @@ def test_progress_before_the_lengths_is_by_block_then_by_length():
     plan._starts = streamed_job.BlockStarts()
     plan._starts.add(np.array([0, 10, 20]), np.array([0, 1, 2]))
     assert plan.percent_at(15) == 25.0  # block 1 of 4
-    plan._take_lengths(PathLengths(np.array([1.0, 3.0, 4.0, 2.0])))
+    plan._take_lengths(PathLengths.of(np.array([1.0, 3.0, 4.0, 2.0])))
     assert plan.percent_at(15) == 10.0 and plan.percent_at(25) == 40.0  # 1 of 10 mm, 4 of 10 mm
     assert plan.summary["length_mm"] == 10.0
 

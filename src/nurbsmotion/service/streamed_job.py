@@ -342,9 +342,7 @@ class StreamedJob:
 
     def _take_lengths(self, message: PathLengths) -> None:
         """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
-        before = np.zeros(len(message.lengths_mm) + 1)
-        np.cumsum(message.lengths_mm, out=before[1:])  # no temporary of the program's size (8 MB at 10^6 blocks)
-        self._length_before = before
+        self._length_before = message.before_mm
         self.summary["length_mm"] = round(float(self._length_before[-1]), 6)
 
     def _finish(self, end: PlanEnd) -> None:
