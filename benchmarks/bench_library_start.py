@@ -82,6 +82,20 @@ print(json.dumps({"started": started, "answer": answer}))
 SEND_TEXT = False  # --text: each program sent as its text (a remote client's way), not as the open file
 
 
+def write_copies(program: Path, copies: int, path: Path) -> int:
+    """``program`` x ``copies`` into ``path`` (its lines), built in a process of its own: the
+    text's temporaries (a few times 17.5 MB at 10^6 lines) would otherwise stay in this
+    process' heap and count as the daemon's memory."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    code = ("import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]); "
+            "from benchmarks.bench_first_motion import program_copies; "
+            "text = program_copies(Path(sys.argv[2]), int(sys.argv[3])); Path(sys.argv[4]).write_text(text); "
+            "print(text.count(chr(10)))")
+    out = subprocess.run([sys.executable, "-c", code, str(ROOT), str(program), str(copies), str(path)],
+                         capture_output=True, text=True, env=env, check=True)
+    return int(out.stdout.strip())
+
+
 def reset_peak(*pids: int | None) -> None:
     """VmHWM back to the current RSS (Linux: '5' into /proc/PID/clear_refs)."""
     for pid in pids:
@@ -188,12 +202,9 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
         masters.append(master)
         return master, drives
 
-    text = program_copies(program, copies)
     name = f"{program.stem}_x{copies}{program.suffix}"
     program_file = work / name
-    program_file.write_text(text)
-    lines = text.count("\n")
-    del text  # the daemon's process holds only what the daemon holds
+    lines = write_copies(program, copies, program_file)  # the daemon's process holds only what the daemon holds
     daemon = Daemon(config, open_motion)
     daemon.start()
     assert daemon.planner_worker is not None

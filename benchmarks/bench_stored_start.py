@@ -39,8 +39,9 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT))
 
 from benchmarks._report import write_section  # noqa: E402
-from benchmarks.bench_first_motion import CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line, program_copies  # noqa: E402
-from benchmarks.bench_library_start import PROGRAM, TARGET_DAEMON_MB, TARGET_WORKER_MB, peak_mb, reset_peak  # noqa: E402
+from benchmarks.bench_first_motion import CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line  # noqa: E402
+from benchmarks.bench_library_start import (PROGRAM, TARGET_DAEMON_MB, TARGET_WORKER_MB, peak_mb,  # noqa: E402
+                                            reset_peak, write_copies)
 
 STARTS = 3
 
@@ -62,7 +63,7 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
                                         extra=PROGRAM_MACHINE), str(work / "machine.yaml"), base_dir=work)
     name = f"{program.stem}_x{copies}{program.suffix}"
     path = work / name
-    path.write_text(program_copies(program, copies))
+    write_copies(program, copies, path)  # not in this process (bench_library_start.write_copies)
     store, checker, worker = CheckedStore.for_config(config), ProgramChecker(), PlannerWorker()
     worker.start()
     worker.wait_ready()
