@@ -411,6 +411,7 @@ class Controller:
                     k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")},
                     "line_reached": reached["where"] if reached else None}
                 self._job = None
+            job.plan.release()  # what grows with the program, now (StreamedJob.release)
 
     # ------------------------------------------------------------------ shutdown
     def shutdown(self, timeout_s: float = 10.0) -> None:

@@ -146,7 +146,7 @@ class StreamedJob:
         self.end: PlanEnd | None = None  # the worker's last word on this job
         self._starts = BlockStarts()  # first row of each block reached, in order
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
-        self._length_before: np.ndarray | None = None  # path length before each block, once the worker sent them
+        self._lengths: PathLengths | None = None  # the path's length before the blocks, once the worker sent it
         self._commands, self._results = connection  # the worker got this job's PlanRequest
         self._cancel_sent = False
         self._send_lock = threading.Lock()
@@ -243,11 +243,11 @@ class StreamedJob:
         block = self.block_at(index)
         if block is None:
             return 0.0
-        before = self._length_before
-        if before is None:
+        lengths = self._lengths
+        if lengths is None:
             return 100.0 * block / len(self.program.blocks)
-        total = float(before[-1])
-        return 100.0 * float(before[block]) / total if total > 0 else 0.0
+        total = lengths.total_mm
+        return 100.0 * lengths.before(block) / total if total > 0 else 0.0
 
     def axis_step(self, axis: int, index: int, rows: int) -> int:
         """Counts axis ``axis`` moves from ``rows`` rows before row ``index`` to ``rows`` after,
@@ -286,6 +286,16 @@ class StreamedJob:
         if self.error is not None:
             self.summary["error"] = str(self.error)
         record.write_plan_summary(self.summary)
+
+    def release(self) -> None:
+        """The job is over and the controller let go of it: drop what grows with the program
+        (the path's running length, the block starts, the recent feeds) now. The job object
+        itself is in reference cycles that only a full collection frees, and the daemon
+        collects rarely (its master freezes the collector's objects during a job): 10^6-line
+        jobs left ~8.5 MB each in the daemon until then (9 starts in a row: 67 -> 175 MB)."""
+        self._lengths = None
+        self._starts = BlockStarts()
+        self._feeds.clear()
 
     # ------------------------------------------------------------------ the receiver thread
     def _receive(self) -> None:
@@ -342,8 +352,8 @@ class StreamedJob:
 
     def _take_lengths(self, message: PathLengths) -> None:
         """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
-        self._length_before = message.before_mm
-        self.summary["length_mm"] = round(float(self._length_before[-1]), 6)
+        self._lengths = message
+        self.summary["length_mm"] = round(message.total_mm, 6)
 
     def _finish(self, end: PlanEnd) -> None:
         self.end = end
