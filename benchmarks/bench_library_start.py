@@ -14,12 +14,15 @@ bench_first_motion does (its machine: T = 1 ms, lookahead J = 50000, a spindle a
 Each job is stopped (controlled stop) at its first motion, the axes sent back to 0 by MDI
 ``G53 G0 X0 Y0 Z0``; each row says whether the store served it (the job's
 ``checked_from_store``). First set-point: from the request to the first cycle whose
-set-point leaves the held position (the master's job index >= 1). Each request is sent by a
-client process of its own (the program read from a file and sent as ``run`` sends it), so
+set-point leaves the held position (the master's job index >= 1); it includes the program's
+spindle spin-up (S5000 M3 at 8000 rpm/s: 0.625 s), and the job's ``first_chunk_s`` (request
+to the first planned chunk in the daemon) is shown beside it. Each request is sent by a
+client process of its own, the program as ``run`` and ``programs add`` send it: the open file
+passed along (protocol ``program_fd``; ``--text``: its text, as a remote client sends it), so
 that the daemon's process holds only what the daemon holds.
 
-Peak memory of each step: the daemon's process (with its simulated drives) and the planner
-worker's VmHWM (/proc/PID/status), both reset before the step (``5`` into
+Peak memory of each step: the daemon's process (with its simulated drives, its allocator set as
+``nurbsmotion daemon`` sets it: runtime.keep_freed_memory) and the planner worker's VmHWM (/proc/PID/status), both reset before the step (``5`` into
 /proc/PID/clear_refs) and read at the first set-point (the add's: at its answer, with the
 checker process' peak as well).
 
@@ -28,7 +31,7 @@ process (time.process_time: far less sensitive to a loaded host than wall time):
 checking (what the store saves), loading the store's entry, pickling the checked program for
 the daemon (the worker's share of the transfer), and the planner's first chunk.
 
-Run: python benchmarks/bench_library_start.py [--copies 2 19] [--program FILE] [--cpu]
+Run: python benchmarks/bench_library_start.py [--copies 2 19] [--program FILE] [--text] [--cpu]
 """
 
 from __future__ import annotations
@@ -61,17 +64,36 @@ TARGET_WORKER_MB = 300.0
 CLIENT = """
 import json, sys, time
 from nurbsmotion.service.client import Client, RequestFailed
-socket, cmd, fields, program_file = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), sys.argv[4]
-if program_file:
+socket, cmd, fields, program_file, as_text = sys.argv[1], sys.argv[2], json.loads(sys.argv[3]), sys.argv[4], sys.argv[5]
+files = []
+if program_file and as_text:
     fields["program"] = open(program_file, encoding="utf-8").read()
+elif program_file:  # as run and programs add send it: the open file (protocol program_fd)
+    src = open(program_file, "rb")
+    files, fields["program_fd"] = [src.fileno()], 0
 with Client(socket, timeout_s=900.0) as client:
     started = time.perf_counter()  # CLOCK_MONOTONIC: the daemon's process reads the same clock
     try:
-        answer = client.call(cmd, **fields)
+        answer = client.call(cmd, files=files, **fields)
     except RequestFailed as err:
         answer = {"ok": False, "error": str(err)}
 print(json.dumps({"started": started, "answer": answer}))
 """
+SEND_TEXT = False  # --text: each program sent as its text (a remote client's way), not as the open file
+
+
+def write_copies(program: Path, copies: int, path: Path) -> int:
+    """``program`` x ``copies`` into ``path`` (its lines), built in a process of its own: the
+    text's temporaries (a few times 17.5 MB at 10^6 lines) would otherwise stay in this
+    process' heap and count as the daemon's memory."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    code = ("import sys; from pathlib import Path; sys.path.insert(0, sys.argv[1]); "
+            "from benchmarks.bench_first_motion import program_copies; "
+            "text = program_copies(Path(sys.argv[2]), int(sys.argv[3])); Path(sys.argv[4]).write_text(text); "
+            "print(text.count(chr(10)))")
+    out = subprocess.run([sys.executable, "-c", code, str(ROOT), str(program), str(copies), str(path)],
+                         capture_output=True, text=True, env=env, check=True)
+    return int(out.stdout.strip())
 
 
 def reset_peak(*pids: int | None) -> None:
@@ -87,8 +109,8 @@ def peak_mb(pid: int | str | None) -> float:
 
 def request(socket: Path, cmd: str, fields: dict[str, Any], program_file: Path | None) -> subprocess.Popen[str]:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
-    return subprocess.Popen([sys.executable, "-c", CLIENT, str(socket), cmd, json.dumps(fields), str(program_file or "")],
-                            stdout=subprocess.PIPE, text=True, env=env)
+    return subprocess.Popen([sys.executable, "-c", CLIENT, str(socket), cmd, json.dumps(fields), str(program_file or ""),
+                             "1" if SEND_TEXT else ""], stdout=subprocess.PIPE, text=True, env=env)
 
 
 def answer_of(client: subprocess.Popen[str]) -> tuple[float, dict[str, Any]]:
@@ -111,6 +133,7 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
         job = master_job(master)
     moved = time.perf_counter()
     daemon_mb, worker_mb = peak_mb("self"), peak_mb(worker_pid)
+    rss_mb = [status_kb(f, "self") / 1024.0 for f in ("RssAnon", "RssFile")]  # what the daemon's RSS is now
     started, answer = answer_of(sender)
     if not answer.get("ok"):
         raise RuntimeError(f"{cmd}: {answer.get('error')}")
@@ -123,8 +146,10 @@ def first_setpoint(client: Any, socket: Path, master: Any, worker_pid: int | Non
     recover(client)
     client.call("mdi", text="G53 G0 X0 Y0 Z0")
     idle(client)
-    return {"s": moved - started, "from_store": answer["job"]["summary"]["checked_from_store"],
-            "blocks": answer["job"]["summary"]["blocks"], "daemon_mb": daemon_mb, "worker_mb": worker_mb}
+    return {"s": moved - started, "first_chunk_s": answer["job"]["summary"].get("first_chunk_s", float("nan")),
+            "from_store": answer["job"]["summary"]["checked_from_store"],
+            "blocks": answer["job"]["summary"]["blocks"], "daemon_mb": daemon_mb, "worker_mb": worker_mb,
+            "daemon_anon_file_mb": rss_mb}
 
 
 def recover(client: Any) -> None:
@@ -154,12 +179,13 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
     """The three starts of ``program`` x ``copies`` in one daemon (module docstring)."""
     from nurbsmotion.config import parse_config
     from nurbsmotion.fieldbus import Master
-    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY
+    from nurbsmotion.runtime import CYCLE_THREAD_PRIORITY, SIM_DRIVES_PRIORITY, keep_freed_memory
     from nurbsmotion.service.client import Client
     from nurbsmotion.service.daemon import Daemon
     from nurbsmotion.service.link import SimulatedDrives
     from nurbsmotion.sim import SimNetwork
 
+    keep_freed_memory()  # as `nurbsmotion daemon` sets its process (runtime.py): freed heap kept
     work = Path(tempfile.mkdtemp(prefix="lib-"))
     (work / "tools.yaml").write_text(TOOLS_YAML)
     config = parse_config(CONFIG.format(channel=f"lib-{uuid.uuid4().hex}", socket=work / "ctl.sock",
@@ -176,12 +202,9 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
         masters.append(master)
         return master, drives
 
-    text = program_copies(program, copies)
     name = f"{program.stem}_x{copies}{program.suffix}"
     program_file = work / name
-    program_file.write_text(text)
-    lines = text.count("\n")
-    del text  # the daemon's process holds only what the daemon holds
+    lines = write_copies(program, copies, program_file)  # the daemon's process holds only what the daemon holds
     daemon = Daemon(config, open_motion)
     daemon.start()
     assert daemon.planner_worker is not None
@@ -208,6 +231,10 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
             "run_first_s": first["s"], "run_first_from_store": first["from_store"],
             "run_second_s": second["s"], "run_second_from_store": second["from_store"],
             "add_s": add_s, "start_s": start["s"], "start_from_store": start["from_store"],
+            "first_chunk_s": {"run_first": first["first_chunk_s"], "run_second": second["first_chunk_s"],
+                              "start": start["first_chunk_s"]},
+            "daemon_anon_file_mb": {"run_first": first["daemon_anon_file_mb"], "run_second": second["daemon_anon_file_mb"],
+                                    "start": start["daemon_anon_file_mb"]},
             "store_hits": counters["hits"], "store_misses": counters["misses"],
             "peak_mb": {"run_first": [first["daemon_mb"], first["worker_mb"]],
                         "run_second": [second["daemon_mb"], second["worker_mb"]],
@@ -276,12 +303,13 @@ def cpu_table(results: list[dict[str, Any]]) -> str:
     return "\n".join(rows)
 
 
-def run_child(program: Path, copies: int, cpu: bool = False) -> dict[str, Any]:
+def run_child(program: Path, copies: int, cpu: bool = False, as_text: bool = False) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     before = load_line()
     out = subprocess.run([sys.executable, __file__, "--child", str(copies), "--program", str(program)]
-                         + ["--cpu"] * cpu, capture_output=True, text=True, env=env, timeout=3600)
+                         + ["--cpu"] * cpu + ["--text"] * as_text, capture_output=True, text=True, env=env,
+                         timeout=3600)
     run = {"started": started, "load_before": before, "load_after": load_line()}
     if out.returncode != 0:
         tail = out.stderr.strip().splitlines()[-1] if out.stderr.strip() else "failed"
@@ -289,8 +317,9 @@ def run_child(program: Path, copies: int, cpu: bool = False) -> dict[str, Any]:
     return {**json.loads(out.stdout.strip().splitlines()[-1]), **run}
 
 
-def served(seconds: float, from_store: bool) -> str:
-    return f"{seconds:.2f} ({'store' if from_store else 'read + checked'})"
+def served(seconds: float, from_store: bool, first_chunk_s: float | None = None) -> str:
+    chunk = f"; first chunk {first_chunk_s:.2f}" if first_chunk_s is not None else ""
+    return f"{seconds:.2f} ({'store' if from_store else 'read + checked'}{chunk})"
 
 
 def peaks(r: dict[str, Any], step: str) -> str:
@@ -314,7 +343,7 @@ def table(results: list[dict[str, Any]]) -> str:
         met = [r["start_s"] <= TARGET_START_S, daemon_peak < TARGET_DAEMON_MB, worker_peak < TARGET_WORKER_MB]
         rows.append(f"{head}| {r['lines']:,} ({r['blocks']:,}) | {served(r['run_first_s'], r['run_first_from_store'])} "
                     f"| {served(r['run_second_s'], r['run_second_from_store'])} | {r['add_s']:.2f} "
-                    f"| {served(r['start_s'], r['start_from_store'])} "
+                    f"| {served(r['start_s'], r['start_from_store'], r['first_chunk_s']['start'])} "
                     f"| {peaks(r, 'run_first')}, {peaks(r, 'run_second')}, {peaks(r, 'start')} ({peaks(r, 'add')}) "
                     f"| {r['store_hits']} / {r['store_misses']} "
                     f"| {', '.join('met' if m else 'NOT met' for m in met)} "
@@ -327,14 +356,17 @@ def main() -> None:
     parser.add_argument("--copies", type=int, nargs="*", default=[2, 19])
     parser.add_argument("--program", type=Path, default=PROGRAM)
     parser.add_argument("--cpu", action="store_true", help="CPU seconds of each step instead (module docstring)")
+    parser.add_argument("--text", action="store_true", help="send each program as its text, not the open file")
     parser.add_argument("--child", type=int, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child is not None:
+        global SEND_TEXT
+        SEND_TEXT = args.text
         print(json.dumps(cpu_steps(args.program, args.child) if args.cpu else one_size(args.program, args.child)))
         return
     results = []
     for copies in args.copies:
-        results.append(run_child(args.program, copies, args.cpu))
+        results.append(run_child(args.program, copies, args.cpu, args.text))
         print(json.dumps(results[-1]), flush=True)
     if args.cpu:
         body = ("CPU seconds (time.process_time) of each step before a streamed job's first set-point, one process, "
@@ -350,11 +382,13 @@ def main() -> None:
     body = ("The daemon and three simulated drives in one process (bench_first_motion's machine: T = 1 ms, "
             "lookahead J = 50000 mm/s^3, 1 um chord error, spindle, tools 1-99); each request through the control "
             "socket from the held position 0, 0, 0; each job stopped at its first motion and the axes sent back "
-            "by MDI. Seconds from the request to the first set-point that moves; in brackets whether the "
+            "by MDI. Seconds from the request to the first set-point that moves (the program's spindle spin-up, "
+            "0.625 s, included; `start NAME`: the job's first chunk planned after, in the daemon); in brackets whether the "
             "planner worker read and checked the program or loaded it checked from DATA_DIR/checked "
             "(service.checked_store). `programs add`: the request's answer, the check done in the checker "
             "process. Host: 2 cores shared with other sessions (load average before → after).\n\n" + table(results))
-    command = "python benchmarks/bench_library_start.py --copies " + " ".join(str(c) for c in args.copies)
+    command = "python benchmarks/bench_library_start.py --copies " + " ".join(str(c) for c in args.copies) \
+        + " --text" * args.text
     write_section("library_start", "Library starts: `start NAME` and `run FILE` to the first set-point", body,
                   command)
 

@@ -6,8 +6,9 @@ their heartbeats (bench_library_start.py's end-to-end rows need them).
 One fresh process per size holds the daemon's side: a PlannerWorker (its own process, as in the
 daemon), the checked-program store and, for a large program, the checker process
 (service.program_check), with bench_first_motion's machine (T = 1 ms, J = 50000, 1 um chord
-error, spindle, tools 1-99). For the program (a real CAM program repeated, read from a file as
-the library keeps it):
+error, spindle, tools 1-99). For the program (a real CAM program repeated, in a file as the
+library keeps it, passed as ``start NAME`` passes it: linked into the spool with its SHA-256,
+never read in this process, service.program_file):
 
 1. ``check``: prepare_streamed_job of the program not in the store (read and checked by the
    worker, or, from 4,000,000 characters, by the checker process first), seconds to the first
@@ -38,8 +39,9 @@ sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT))
 
 from benchmarks._report import write_section  # noqa: E402
-from benchmarks.bench_first_motion import CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line, program_copies  # noqa: E402
-from benchmarks.bench_library_start import PROGRAM, TARGET_DAEMON_MB, TARGET_WORKER_MB, peak_mb, reset_peak  # noqa: E402
+from benchmarks.bench_first_motion import CONFIG, PROGRAM_MACHINE, TOOLS_YAML, load_line  # noqa: E402
+from benchmarks.bench_library_start import (PROGRAM, TARGET_DAEMON_MB, TARGET_WORKER_MB, peak_mb,  # noqa: E402
+                                            reset_peak, write_copies)
 
 STARTS = 3
 
@@ -52,6 +54,7 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
     from nurbsmotion.service.checked_store import CheckedStore
     from nurbsmotion.service.planner_worker import PlannerWorker
     from nurbsmotion.service.program_check import ProgramChecker
+    from nurbsmotion.service.program_file import file_stamp, snapshot
     from nurbsmotion.service.streamed_job import prepare_streamed_job
 
     work = Path(tempfile.mkdtemp(prefix="stored-"))
@@ -60,21 +63,24 @@ def one_size(program: Path, copies: int) -> dict[str, Any]:
                                         extra=PROGRAM_MACHINE), str(work / "machine.yaml"), base_dir=work)
     name = f"{program.stem}_x{copies}{program.suffix}"
     path = work / name
-    path.write_text(program_copies(program, copies))
+    write_copies(program, copies, path)  # not in this process (bench_library_start.write_copies)
     store, checker, worker = CheckedStore.for_config(config), ProgramChecker(), PlannerWorker()
     worker.start()
     worker.wait_ready()
 
+    recorded: list[Any] = []  # the library's record of the file: its stamp and SHA-256, once known
+
     def started() -> dict[str, Any]:
         reset_peak(os.getpid(), worker.pid)
         t0, cpu0 = time.perf_counter(), time.thread_time()
-        text = path.read_text(encoding="utf-8")  # as the library's text is read for `start NAME`
+        text = snapshot(path, config.data_dir, *recorded)  # as the library's program is passed for `start NAME`
+        recorded[:] = [file_stamp(path), text.sha256]
         job = prepare_streamed_job(name, text, config, worker, np.zeros(3), None, store=store, checker=checker)
+        text.discard()
         seconds, cpu = time.perf_counter() - t0, time.thread_time() - cpu0
         peaks = (peak_mb("self"), peak_mb(worker.pid))
         from_store = job.summary["checked_from_store"]
         blocks = len(job.program.blocks)
-        del text
         job.cancel()
         job.wait_closed()
         return {"s": seconds, "cpu_s": cpu, "from_store": from_store, "blocks": blocks, "daemon_mb": peaks[0],
@@ -141,7 +147,7 @@ def main() -> None:
         print(json.dumps(results[-1]), flush=True)
     body = ("The daemon's side of a streamed start without drives (module docstring of the script): a planner worker "
             "process, the checked-program store and the checker process, bench_first_motion's machine. Seconds from "
-            "the request (the program's text read from its file, as the library's) to the first chunk planned; first "
+            "the request (the program's file linked into the spool, as `start NAME` passes it: its text never read here) to the first chunk planned; first "
             "motion adds the job record and the master's start (and a spindle's spin-up). Peak memory: VmHWM of "
             "this process (the daemon's side, without the master and simulated drives) and of the planner worker, "
             "reset before each start. Host: 2 cores shared with other sessions (load average before → after).\n\n"

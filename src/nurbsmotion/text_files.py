@@ -4,9 +4,13 @@ the file. Light on purpose: ``run`` reads its program before importing any reade
 
 from __future__ import annotations
 
+import codecs
 from pathlib import Path
+from typing import BinaryIO
 
 from nurbsmotion.errors import InputError
+
+CHUNK_BYTES = 1 << 20
 
 
 def read_text_file(path: str | Path) -> str:
@@ -17,3 +21,27 @@ def read_text_file(path: str | Path) -> str:
         raise InputError(str(path), f"not a UTF-8 text file ({err.reason} at byte {err.start})") from None
     except OSError as err:
         raise InputError(str(path), f"cannot read: {err.strerror or err}") from None
+
+
+def open_text_file(path: str | Path) -> BinaryIO:
+    """The file open for reading, checked as read_text_file reads it (the same errors) a
+    megabyte at a time without keeping its text: ``run`` and ``programs add`` send the open
+    file to the daemon (service.program_file)."""
+    try:
+        src = open(path, "rb")
+    except OSError as err:
+        raise InputError(str(path), f"cannot read: {err.strerror or err}") from None
+    try:
+        decoder, offset = codecs.getincrementaldecoder("utf-8")(), 0
+        for chunk in iter(lambda: src.read(CHUNK_BYTES), b""):
+            decoder.decode(chunk)
+            offset += len(chunk)
+        decoder.decode(b"", final=True)
+    except UnicodeDecodeError as err:
+        src.close()
+        raise InputError(str(path), f"not a UTF-8 text file ({err.reason} at byte {offset + err.start})") from None
+    except OSError as err:
+        src.close()
+        raise InputError(str(path), f"cannot read: {err.strerror or err}") from None
+    src.seek(0)
+    return src

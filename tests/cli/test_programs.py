@@ -80,3 +80,25 @@ def test_no_daemon_is_exit_3(tmp_path: Path, capsys):
     assert main(["programs", "list", "--socket", str(tmp_path / "none.sock")]) == 3
     assert main(["start", "x.nc", "--socket", str(tmp_path / "none.sock")]) == 3
     assert "no-daemon" not in capsys.readouterr().out
+
+
+def test_a_daemon_that_takes_no_files_gets_the_text(tmp_path: Path):
+    """cli.run.program_request: the open file first (protocol program_fd); a daemon that does
+    not know the field (an older one) answers so, and gets the text instead."""
+    from nurbsmotion.cli.run import program_request
+
+    part = tmp_path / "part.nc"
+    part.write_bytes(b"\xef\xbb\xbfG21 G90\nG01 X1 F600\n")
+    sent: list[dict] = []
+
+    class OlderDaemon:
+        def request(self, cmd: str, files=(), **fields):
+            sent.append({"cmd": cmd, "files": len(files), **fields})
+            if "program_fd" in fields:
+                return {"ok": False, "error": "field 'program_fd': unknown for command 'submit'; expected name, program"}
+            return {"ok": True}
+
+    with open(part, "rb") as program:
+        assert program_request(OlderDaemon(), "submit", {"name": "part.nc"}, program) == {"ok": True}  # type: ignore[arg-type]
+    assert sent == [{"cmd": "submit", "files": 1, "program_fd": 0, "name": "part.nc"},
+                    {"cmd": "submit", "files": 0, "program": "G21 G90\nG01 X1 F600\n", "name": "part.nc"}]

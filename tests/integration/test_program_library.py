@@ -181,3 +181,55 @@ def test_a_large_program_run_the_first_time_is_checked_in_the_checker_process_th
         assert daemon.programs.checker._pool is not None  # the checker read it
         assert run_twice(daemon, "big.nc", SQUARE) == (False, True)
         assert daemon.store.counters()["misses"] == 1 and daemon.store.counters()["hits"] == 1
+
+
+def sent_with_file(daemon: Any, path: Path, cmd: str, **fields: Any) -> dict[str, Any]:
+    """``cmd`` with the open file passed along (protocol program_fd), as ``run`` and
+    ``programs add`` send it."""
+    with Client(daemon.config.control.socket) as client, open(path, "rb") as src:
+        return client.request(cmd, files=[src.fileno()], program_fd=0, **fields)
+
+
+def test_starts_and_files_sent_along_reach_the_worker_as_a_path_never_as_text(data_dir, tmp_path, monkeypatch):
+    """Issue 25 item 7 (the daemon < 150 MB at 10^6 lines): ``start NAME`` and a program file
+    passed with the request never put the text in the daemon: the planner worker's and the
+    checker's requests carry the spool file's path; a text request still carries its text."""
+    from nurbsmotion.service.program_check import ProgramChecker
+    from nurbsmotion.service.program_library import ProgramLibrary
+
+    requests: list[Any] = []
+    check = ProgramChecker.check
+    monkeypatch.setattr(ProgramChecker, "check", lambda self, request, axes: (requests.append(request),
+                                                                              check(self, request, axes))[1])
+    monkeypatch.setattr(ProgramLibrary, "get", lambda self, name: pytest.fail("the daemon read the library's text"))
+    part = tmp_path / "part.nc"
+    part.write_bytes(b"\xef\xbb\xbf" + SQUARE.encode())  # a byte-order mark, as CAM posts write
+    with daemon_in_process(data_dir, "", "lib") as daemon:
+        connect = daemon.planner_worker.connect
+        monkeypatch.setattr(daemon.planner_worker, "connect", lambda request: (requests.append(request),
+                                                                               connect(request))[1])
+        added = sent_with_file(daemon, part, "programs.add", name="square.nc")
+        assert added["ok"] and added["program"]["check"]["blocks"] == 2, added
+        assert (data_dir / "programs" / "square.nc").read_text() == SQUARE  # moved from the spool, no mark
+        for _ in range(2):
+            started = call(daemon, "start", name="square.nc")
+            assert started["ok"] and started["job"]["summary"]["checked_from_store"] is True, started
+            assert Path(started["job"]["folder"], "program.nc").read_text() == SQUARE  # the record links it
+            job_end(daemon, started["job"]["id"])
+        (data_dir / "programs" / "square.nc").write_text(SQUARE.replace("X4 Y3", "X5 Y3"))  # edited by hand
+        edited = call(daemon, "start", name="square.nc")
+        assert edited["ok"] and edited["job"]["summary"]["checked_from_store"] is False  # the worker read the file
+        job_end(daemon, edited["job"]["id"])
+        assert call(daemon, "mdi", text="G53 G0 X0 Y0 Z0")["ok"]
+        wait_for(lambda: daemon.controller.idle(), 20.0, "the MDI to end")
+        ran = sent_with_file(daemon, part, "submit", name="part.nc")
+        assert ran["ok"] and ran["job"]["summary"]["checked_from_store"] is False, ran
+        job_end(daemon, ran["job"]["id"])
+        text = call(daemon, "submit", name="text.nc", program=SQUARE)  # a remote client: the text itself
+        assert text["ok"], text
+        job_end(daemon, text["job"]["id"])
+        assert list((data_dir / "spool").iterdir()) == []  # every spooled file discarded or moved
+    by_path = [r for r in requests if r.name != "<mdi>"]
+    assert [(r.name, r.text is None, r.text_file is not None) for r in by_path] == \
+        [("square.nc", True, True)] * 4 + [("part.nc", True, True), ("text.nc", False, False)]
+    assert by_path[-1].text == SQUARE

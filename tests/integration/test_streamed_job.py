@@ -112,7 +112,7 @@ def test_the_path_length_reaches_plan_json_and_the_progress_after_the_first_chun
     running_at(machine, 3 * CHUNK)  # the lengths come with the second chunk at the latest
     job = machine._job
     first_line = np.hypot(40.0, 20.0)
-    assert job is not None and job.plan._length_before == pytest.approx([0.0, first_line, 2 * first_line], abs=1e-9)
+    assert job is not None and job.plan._lengths.before_mm == pytest.approx([0.0, first_line, 2 * first_line], abs=1e-9)
     info = ended(machine, job_id)
     assert info["plan"]["length_mm"] == round(2 * first_line, 6)  # as a whole plan's plan.json
 
@@ -122,11 +122,12 @@ def test_progress_before_the_lengths_is_by_block_then_by_length():
     from nurbsmotion.service.planner_worker import PathLengths
 
     plan = streamed_job.StreamedJob.__new__(streamed_job.StreamedJob)
-    plan.finished, plan.planned, plan._length_before, plan.summary = False, 0, None, {"length_mm": None}
+    plan.finished, plan.planned, plan._lengths, plan.summary = False, 0, None, {"length_mm": None}
     plan.program = type("P", (), {"blocks": (0, 1, 2, 3)})()
-    plan._block_rows, plan._block_ids = [0, 10, 20], [0, 1, 2]
+    plan._starts = streamed_job.BlockStarts()
+    plan._starts.add(np.array([0, 10, 20]), np.array([0, 1, 2]))
     assert plan.percent_at(15) == 25.0  # block 1 of 4
-    plan._take_lengths(PathLengths(np.array([1.0, 3.0, 4.0, 2.0])))
+    plan._take_lengths(PathLengths.of(np.array([1.0, 3.0, 4.0, 2.0])))
     assert plan.percent_at(15) == 10.0 and plan.percent_at(25) == 40.0  # 1 of 10 mm, 4 of 10 mm
     assert plan.summary["length_mm"] == 10.0
 

@@ -51,19 +51,68 @@ def test_lengths_in_closed_form_equal_the_curves_lengths(programs):
             assert block.length_mm == pytest.approx(length, rel=1e-12, abs=1e-12)
 
 
-def test_boxes_hold_every_sampled_point_and_hulls_are_the_control_points(programs):
-    """extent_mm: line ends and arc extremes exact, NURBS sampled as curve_samples samples them."""
+def test_boxes_hold_every_sampled_point_within_the_control_points_box(programs):
+    """boxes_mm (per block) and extent_mm (the path's): line ends and arc extremes exact,
+    NURBS blocks their control points' box, the path's NURBS sampled as curve_samples samples them."""
     for program in programs:
-        lows, highs = program.blocks.hulls_mm()
+        lows, highs = program.blocks.boxes_mm()
         for i, block in enumerate(program.blocks):
             points = block.curve.control_points
-            np.testing.assert_array_equal(lows[i], points.min(axis=0))
-            np.testing.assert_array_equal(highs[i], points.max(axis=0))
+            assert np.all(lows[i] >= points.min(axis=0) - 1e-9) and np.all(highs[i] <= points.max(axis=0) + 1e-9)
+            if block.kind is BlockKind.NURBS:
+                np.testing.assert_array_equal(lows[i], points.min(axis=0))
+                np.testing.assert_array_equal(highs[i], points.max(axis=0))
+            else:
+                samples = curve_samples(block.curve, 256)
+                assert np.all(samples >= lows[i] - 1e-9) and np.all(samples <= highs[i] + 1e-9)
+                scale = 1e-9 + (np.abs(samples).max() * 1e-5 if block.kind is BlockKind.ARC else 0.0)  # r (1 - cos(pi / 1024))
+                assert np.all(samples.min(axis=0) - lows[i] <= scale) and np.all(highs[i] - samples.max(axis=0) <= scale)
         low, high = program.blocks.extent_mm(curve_samples)
         per_span = {BlockKind.NURBS: 64, BlockKind.ARC: 2048}  # lines: their ends
         samples = np.vstack([curve_samples(b.curve, per_span.get(b.kind, 1)) for b in program.blocks])
         assert np.all(samples >= low - 1e-9) and np.all(samples <= high + 1e-9)
         assert np.all(samples.min(axis=0) - low <= 2e-6) and np.all(high - samples.max(axis=0) <= 2e-6)  # r (1 - cos(pi / 8192))
+
+
+ARC_CASES = [  # (normal, start angle deg, sweep deg, rise mm, end moved by mm)
+    *((normal, start, sweep, 0.0, 0.0) for normal in ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0), (1.0, 0.0, 0.0))
+      for start, sweep in ((0, 360), (0, -360), (37, 360), (-10, 20), (80, 20), (170, 20), (260, 20), (350, 20),
+                           (10, -20), (100, -20), (190, -20), (280, -20), (45, 90), (45, 270), (-135, -300), (0, 90),
+                           (90, 90), (0, 0.5), (120, 179))),
+    ((0.0, 0.0, 1.0), 30, 720, 5.0, 0.0), ((0.0, 0.0, 1.0), 30, -450, -3.0, 0.0), ((0.0, 1.0, 0.0), 200, 200, 2.0, 0.0),
+    ((1.0, 0.0, 0.0), -60, -150, 7.0, 0.0), ((0.0, 0.0, 1.0), 60, 60, 0.0, 0.002), ((0.0, 1.0, 0.0), -95, 100, 1.0, 0.002),
+]
+
+
+@pytest.mark.parametrize("normal, start_deg, sweep_deg, rise_mm, moved_mm", ARC_CASES)
+def test_arc_boxes_in_closed_form_against_dense_sampling(normal, start_deg, sweep_deg, rise_mm, moved_mm):
+    """An arc's or helix' box (G17, G18, G19; full turns, sweeps crossing 0/90/180/270 deg
+    either way, an end off the circle by the reader's tolerance) against 20,000 points of
+    the curve arc_curve builds, the one the planner follows."""
+    n = int(np.flatnonzero(normal)[0])
+    a, b = (n + 1) % 3, (n + 2) % 3
+    centre, radius = np.array([3.0, -2.0, 1.5]), 7.0
+
+    def at(angle_deg: float, lift: float) -> np.ndarray:
+        point = centre.copy()
+        point[a] += radius * math.cos(math.radians(angle_deg))
+        point[b] += radius * math.sin(math.radians(angle_deg))
+        point[n] += lift
+        return point
+
+    start = at(start_deg, 0.0)
+    end = at(start_deg + sweep_deg, rise_mm) + moved_mm * np.array([0.6, -0.48, 0.64])
+    shape = ArcShape(start, end, centre, math.radians(sweep_deg), normal, rise_mm)
+    records = BlockRecords.of_blocks((Block(BlockKind.ARC, shape, 1.0, SourceRef("t", 1)),))
+    lows, highs = records.boxes_mm()
+    curve = shape.curve()
+    points = curve.points(np.linspace(curve.knots[0], curve.knots[-1], 20001))
+    assert np.all(points >= lows[0] - 1e-9) and np.all(points <= highs[0] + 1e-9)
+    slack = radius * (1 - math.cos(math.radians(abs(sweep_deg)) / 20000)) + 1e-9 + abs(moved_mm)
+    assert np.all(points.min(axis=0) - lows[0] <= slack) and np.all(highs[0] - points.max(axis=0) <= slack)
+    low, high = records.extent_mm(curve_samples)
+    np.testing.assert_array_equal(low, lows[0])
+    np.testing.assert_array_equal(high, highs[0])
 
 
 def test_summary_of_records_equals_the_summary_of_the_same_blocks_as_a_tuple(programs):

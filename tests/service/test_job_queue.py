@@ -105,8 +105,8 @@ def test_a_refused_start_keeps_the_entry_first_and_a_fault_pauses_the_queue(tmp_
 
 def test_the_library_commands_are_the_protocol_commands_programs_serves():
     from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
-    from nurbsmotion.service.protocol import COMMANDS
+    from nurbsmotion.service.protocol import COMMANDS, Request
 
     assert LIBRARY_COMMANDS <= set(COMMANDS)
-    served = Programs.handlers(SimpleNamespace(queue=None, listing=None), {})  # type: ignore[arg-type]
+    served = Programs.handlers(SimpleNamespace(queue=None, listing=None), Request("programs.list"))  # type: ignore[arg-type]
     assert set(served) == LIBRARY_COMMANDS

@@ -10,6 +10,7 @@ from nurbsmotion.config import load_config
 from nurbsmotion.errors import InputError
 from nurbsmotion.geometry.primitives import arc_curve
 from nurbsmotion.program import parse_gcode, read_program
+from nurbsmotion.program.summary import curve_samples
 from nurbsmotion.service import path_bounds
 from nurbsmotion.service.path_bounds import BRACKET_MM, curve_extreme
 from nurbsmotion.service.streamed_job import prepare_streamed_job
@@ -70,8 +71,8 @@ def test_an_arc_just_inside_the_limit_is_accepted(config, planner_worker):
 
 
 def _per_block_reference(program, config, columns):
-    """The checks as one loop per block (how path_bounds computed them before block_hulls):
-    (first unconfigured column moved, first soft-limit error text, hull box)."""
+    """The checks as one loop per block (how path_bounds computed them before block_boxes):
+    (first unconfigured column moved, first soft-limit error text, the control points' box)."""
     moved = next((j for b in program.blocks for j in range(3)
                   if j not in columns and np.ptp(b.curve.control_points[:, j]) > 1e-9), None)
     error = None
@@ -90,7 +91,8 @@ def _per_block_reference(program, config, columns):
 
 @pytest.mark.parametrize("seed", range(8))
 def test_whole_program_checks_agree_with_a_loop_over_the_blocks(config, seed):
-    """block_hulls reduces all blocks at once: same first axis, same first error line, same box."""
+    """block_boxes gives all blocks' boxes at once: same first axis, same first error line; the
+    path's box holds every sampled point of the path and lies within the control points' box."""
     rng = np.random.default_rng(seed)
     lines = ["G21 G90 G17 F3000"]
     for _ in range(60):
@@ -105,6 +107,9 @@ def test_whole_program_checks_agree_with_a_loop_over_the_blocks(config, seed):
         assert path_bounds.moving_unconfigured_axis(program, columns) == moved
         found = path_bounds.soft_limit_violation(program, config, columns)
         assert (str(found) if found else None) == error
-        box = path_bounds.hull_box(program, columns)
-        np.testing.assert_array_equal(box[0], lows)
-        np.testing.assert_array_equal(box[1], highs)
+        low, high = path_bounds.path_box(program, columns)
+        assert np.all(low >= lows - 1e-9) and np.all(high <= highs + 1e-9)
+        samples = np.vstack([curve_samples(b.curve, 1024)[:, columns] for b in program.blocks])
+        assert np.all(samples >= low - 1e-9) and np.all(samples <= high + 1e-9)
+        np.testing.assert_allclose(low, samples.min(axis=0), atol=1e-4)  # r (1 - cos(pi / 4096)), r <= 300
+        np.testing.assert_allclose(high, samples.max(axis=0), atol=1e-4)

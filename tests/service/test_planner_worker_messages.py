@@ -99,3 +99,22 @@ def test_a_withheld_text_is_asked_for_only_when_the_entry_cannot_be_loaded(tmp_p
     assert not from_store and asked == ["text"] and again.blocks == program.blocks
     with pytest.raises(InputError, match="^z.nc: the program's text was not sent and its checked entry cannot be read$"):
         read_or_load(request)
+
+
+@pytest.mark.parametrize("blocks", [0, 1, 3, 65535, 65536, 200_001])
+def test_path_lengths_keep_at_most_length_points_and_interpolate_between_them(blocks):
+    """PathLengths: the running length exact at every stride-th block and at the end, within
+    one stride's blocks between (the daemon's progress; 10^6 blocks: 0.5 MB, not 8 MB)."""
+    from nurbsmotion.service.planner_worker import LENGTH_POINTS, PathLengths
+
+    lengths = np.random.default_rng(blocks).uniform(0.0, 2.0, blocks)
+    exact = np.concatenate([[0.0], np.cumsum(lengths)])
+    path = PathLengths.of(lengths)
+    assert len(path.before_mm) <= LENGTH_POINTS + 1 and path.total_mm == pytest.approx(exact[-1], rel=1e-12)
+    assert (path.stride == 1) == (blocks + 1 <= LENGTH_POINTS)
+    for block in sorted({0, 1, blocks // 3, blocks - 1, blocks} & set(range(blocks + 1))):
+        k = block // path.stride
+        window = exact[min(k * path.stride, blocks):min((k + 1) * path.stride, blocks) + 1]
+        assert window[0] - 1e-9 <= path.before(block) <= window[-1] + 1e-9
+        if block % path.stride == 0 or block == blocks:
+            assert path.before(block) == pytest.approx(exact[block], rel=1e-12, abs=1e-12)

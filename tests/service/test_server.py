@@ -158,3 +158,31 @@ def _ask_as_nobody(path: Path, send_after_close: bool) -> bytes:
         line = answer.read()
     os.waitpid(pid, 0)
     return line
+
+
+def test_descriptors_sent_with_a_request_reach_its_handler_and_are_closed_after(tmp_path):
+    """protocol ``program_fd``: the file a client sends with its request line (SCM_RIGHTS) is
+    the handler's to read for that request only; the server closes it after answering."""
+    seen: list[tuple[str, tuple[int, ...], bytes]] = []
+
+    def handler(request):
+        seen.append((request.cmd, request.files, b"".join(os.pread(fd, 100, 0) for fd in request.files)))
+        return {"ok": True}
+
+    program = tmp_path / "part.nc"
+    program.write_bytes(b"G21 G90\nG01 X1 F600\n")
+    srv = ControlServer(tmp_path / "ctl.sock", handler, idle_timeout_s=10.0)
+    srv.start()
+    try:
+        with Client(srv.path) as client, open(program, "rb") as src:
+            assert client.request("submit", files=[src.fileno()], name="part.nc", program_fd=0)["ok"]
+            assert client.request("status")["ok"]  # the next request carries none
+            too_many = [src.fileno()] * 3  # more than protocol.MAX_FDS: none is kept
+            assert client.request("submit", files=too_many, name="part.nc", program_fd=0)["ok"]
+    finally:
+        srv.close()
+    assert [(cmd, len(files), data) for cmd, files, data in seen] == \
+        [("submit", 1, b"G21 G90\nG01 X1 F600\n"), ("status", 0, b""), ("submit", 0, b"")]
+    for fd in seen[0][1]:
+        with pytest.raises(OSError):
+            os.fstat(fd)  # closed by the server (not reused meanwhile: no other descriptor opened since)

@@ -16,7 +16,7 @@ from typing import Any
 
 from nurbsmotion.cli._control import add_socket_arguments, with_client
 from nurbsmotion.cli._format import figure, reading_text
-from nurbsmotion.service.client import Client
+from nurbsmotion.service.client import Client, RequestFailed
 
 HELP = "the daemon's program library: add FILE (checked once), list, show NAME, remove NAME"
 
@@ -63,14 +63,18 @@ def list_lines(response: dict[str, Any]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     if args.action == "add":
-        from nurbsmotion.text_files import read_text_file
+        from nurbsmotion.cli.run import program_request
+        from nurbsmotion.text_files import open_text_file
 
-        text = read_text_file(args.file)  # the same errors as check's and run's
+        added = open_text_file(args.file)  # the same errors as check's and run's
         name = args.name or Path(args.file).name
 
     def body(client: Client) -> int:
         if args.action == "add":
-            print(f"added {program_line(client.call('programs.add', name=name, program=text)['program'])}")
+            response = program_request(client, "programs.add", {"name": name}, added)
+            if not response.get("ok"):
+                raise RequestFailed(response)
+            print(f"added {program_line(response['program'])}")
         elif args.action == "list":
             response = client.call("programs.list")
             print(json.dumps(response, indent=2) if args.json else "\n".join(list_lines(response)))
@@ -82,4 +86,8 @@ def run(args: argparse.Namespace) -> int:
             print(f"removed {args.name}")
         return 0
 
-    return with_client(args, body)
+    try:
+        return with_client(args, body)
+    finally:
+        if args.action == "add":
+            added.close()

@@ -13,13 +13,13 @@ import json
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, BinaryIO, Callable
 
 from nurbsmotion.cli._control import EXIT_REFUSED, add_socket_arguments, error_line, with_client
 from nurbsmotion.cli._format import figure, number, reading_text
 from nurbsmotion.service.client import Client, DaemonUnavailable, RequestFailed
 from nurbsmotion.service.records import OUTCOME_FILE, PLAN_FILE
-from nurbsmotion.text_files import read_text_file
+from nurbsmotion.text_files import open_text_file, read_text_file
 
 HELP = "submit a program (G-code or YAML) to the daemon, follow it and print the outcome"
 POLL_S = 0.2
@@ -27,7 +27,8 @@ PLAIN_EVERY_S = 1.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("program", help="program file (.nc G-code or .yaml curves); read here, sent as text")
+    parser.add_argument("program", help="program file (.nc G-code or .yaml curves); checked here, the open file "
+                                         "sent to the daemon (its text to a daemon that cannot take files)")
     add_job_options(parser)
     add_socket_arguments(parser)
 
@@ -172,10 +173,12 @@ def follow_to_the_end(client: Client, job: dict[str, Any], display: Any) -> dict
         return None
 
 
-def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: str, fields: dict[str, Any]) -> int:
-    """Send ``cmd`` (submit, start, mdi), follow the job it started with a progress display, print
-    its outcome; the exit code (0 completed, 1 not, 2 rejected)."""
-    response = client.request(cmd, **fields)
+def start_and_follow(client: Client, args: argparse.Namespace, title: str, cmd: str, fields: dict[str, Any],
+                     program: BinaryIO | None = None) -> int:
+    """Send ``cmd`` (submit, start, mdi; with the ``program`` file: program_request), follow
+    the job it started with a progress display, print its outcome; the exit code (0
+    completed, 1 not, 2 rejected)."""
+    response = client.request(cmd, **fields) if program is None else program_request(client, cmd, fields, program)
     if not response.get("ok"):
         for line in response.get("errors") or [response.get("error", "rejected")]:
             error_line(args, line)
@@ -205,14 +208,25 @@ def follow_and_report(client: Client, args: argparse.Namespace, job: dict[str, A
     return info
 
 
+def program_request(client: Client, cmd: str, fields: dict[str, Any], program: BinaryIO) -> dict[str, Any]:
+    """``cmd`` with the open ``program`` file passed along (protocol ``program_fd``: the daemon
+    reads it from the descriptor, whoever may read its path); a daemon that takes no files
+    (an older one) gets its text."""
+    response = client.request(cmd, files=[program.fileno()], program_fd=0, **fields)
+    if not response.get("ok") and str(response.get("error", "")).startswith("field 'program_fd'"):
+        response = client.request(cmd, program=read_text_file(program.name), **fields)
+    return response
+
+
 def run(args: argparse.Namespace) -> int:
-    text = read_text_file(args.program)  # the same errors as check's
+    program = open_text_file(args.program)  # the same errors as check's
 
     def body(client: Client) -> int:
         name = Path(args.program).name
-        return start_and_follow(client, args, name, "submit", {"name": name, "program": text, **job_fields(args)})
+        return start_and_follow(client, args, name, "submit", {"name": name, **job_fields(args)}, program)
 
-    return with_client(args, body)
+    with program:
+        return with_client(args, body)
 
 
 def job_fields(args: argparse.Namespace) -> dict[str, Any]:

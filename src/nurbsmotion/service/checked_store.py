@@ -215,8 +215,10 @@ class CheckedStore:
     def for_config(cls, config: MachineConfig) -> "CheckedStore":
         return cls(Path(config.data_dir) / "checked", config_fingerprint(config))
 
-    def key(self, name: str, text: str, start_xyz: np.ndarray, options: ReadOptions) -> str:
-        return check_key(name, text_digest(text), self.config_sha256, start_xyz, options)
+    def key(self, name: str, text_sha256: str, start_xyz: np.ndarray, options: ReadOptions) -> str:
+        """The key of a program whose text's SHA-256 (text_digest, or its file's:
+        service.program_file) is ``text_sha256``."""
+        return check_key(name, text_sha256, self.config_sha256, start_xyz, options)
 
     def path(self, key: str) -> Path:
         return self.folder / f"{key}{SUFFIX}"

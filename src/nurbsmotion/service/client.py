@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import socket
 from pathlib import Path
-from typing import Any, Iterator, NoReturn
+from typing import Any, Iterator, NoReturn, Sequence
 
 from nurbsmotion.errors import NurbsmotionError
 from nurbsmotion.service.protocol import encode
@@ -55,13 +55,17 @@ class Client:
         self._file = sock.makefile("rb")
         return self
 
-    def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
+    def request(self, cmd: str, *, files: Sequence[int] = (), **fields: Any) -> dict[str, Any]:
+        """Send one request (``files``: descriptors to pass along, protocol ``program_fd``) and
+        return its answer."""
         if self._sock is None:
             self.connect()
         assert self._sock is not None
         send_error: OSError | None = None
         try:
-            self._sock.sendall(encode({"cmd": cmd, **fields}))
+            data = encode({"cmd": cmd, **fields})
+            sent = socket.send_fds(self._sock, [data], list(files)) if files else 0
+            self._sock.sendall(data[sent:])
         except (BrokenPipeError, ConnectionResetError) as err:
             # The daemon may have answered and closed before reading (a refusal by peer
             # credentials is sent at once): its line is still in our receive queue.
@@ -82,9 +86,9 @@ class Client:
         detail = f"connection lost: {err.strerror or err}" if err is not None else "closed without an answer"
         raise DaemonUnavailable(self.path, detail, lost=True) from err
 
-    def call(self, cmd: str, **fields: Any) -> dict[str, Any]:
+    def call(self, cmd: str, *, files: Sequence[int] = (), **fields: Any) -> dict[str, Any]:
         """``request`` that raises RequestFailed for ``ok: false``."""
-        response = self.request(cmd, **fields)
+        response = self.request(cmd, files=files, **fields)
         if not response.get("ok"):
             raise RequestFailed(response)
         return response
@@ -93,7 +97,7 @@ class Client:
         """Subscribe this connection (protocol ``subscribe``): yields the answer with the full
         status first, then every pushed line, until the daemon closes the connection.
         RequestFailed when the daemon refuses the subscription."""
-        first = self.call("subscribe", **({} if max_hz is None else {"max_hz": max_hz}))
+        first = self.call("subscribe", files=(), **({} if max_hz is None else {"max_hz": max_hz}))
         assert self._sock is not None
         self._sock.settimeout(None)  # a quiet machine pushes nothing for a while: not a lost daemon
         yield first

@@ -40,6 +40,7 @@ from nurbsmotion.service.machine_jobs import MachineJobs
 from nurbsmotion.service.machine_state import MachineState, cleared, selected, with_offset
 from nurbsmotion.service.machine_state_store import MachineStateStore
 from nurbsmotion.service.motion import MotionLink, Simulation
+from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.job_common import MDI_NAME
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.start_line import resume_of, start_line_options
@@ -48,7 +49,7 @@ from nurbsmotion.service.records import JobRecords
 log = logging.getLogger(__name__)
 
 FAST_FIELDS = ("ok", "state", "phase", "job", "axes", "cycles", "faults")  # Controller.status(fast_only=True)
-Planner = Callable[[str, str, np.ndarray, ReadOptions], JobPlan]  # (name, text, start mm, reader options) -> plan
+Planner = Callable[[str, "str | ProgramFile", np.ndarray, ReadOptions], JobPlan]  # (name, text or its file, start mm, reader options) -> plan
 
 
 class Controller:
@@ -76,7 +77,7 @@ class Controller:
         self.jogging = Jogging(self)  # `jog`, its lease (service.jog)
 
     # ------------------------------------------------------------------ requests
-    def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
+    def submit(self, name: str, text: str | ProgramFile, keep_override: bool = False, block_delete: bool = True,
                optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None,
                start_line: int | None = None) -> dict[str, Any]:
         """Parse, plan and check the program, record it, start streaming; reject with errors.
@@ -410,6 +411,7 @@ class Controller:
                     k: outcome[k] for k in ("outcome", "reason", "sent", "planned", "motion_time_s")},
                     "line_reached": reached["where"] if reached else None}
                 self._job = None
+            job.plan.release()  # what grows with the program, now (StreamedJob.release)
 
     # ------------------------------------------------------------------ shutdown
     def shutdown(self, timeout_s: float = 10.0) -> None:

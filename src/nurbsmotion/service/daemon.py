@@ -36,8 +36,9 @@ from nurbsmotion.service.notify import sd_notify
 from nurbsmotion.service.ownership import BusOwnership
 from nurbsmotion.service.planner import needs_planner_worker, prepare_job
 from nurbsmotion.service.planner_worker import PlannerWorker
+from nurbsmotion.service.program_file import ProgramFile, clear_spool, requested_program
 from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
-from nurbsmotion.service.protocol import Request
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
 from nurbsmotion.service.start_line import start_line_field
@@ -53,11 +54,9 @@ def dispatch(controller: Controller, request: Request, programs: Programs | None
     """Route one checked request to the controller (the library and queue: to ``programs``)."""
     f = request.fields
     if programs is not None and request.cmd in LIBRARY_COMMANDS:
-        return programs.handlers(f)[request.cmd]()
+        return programs.handlers(request)[request.cmd]()
     handlers: dict[str, Callable[[], dict[str, Any]]] = {
-        "submit": lambda: controller.submit(f["name"], f["program"], bool(f.get("keep_override", False)),
-                                            bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
-                                            start_line=start_line_field(f.get("start_line"))),
+        "submit": lambda: submit(controller, request),
         "mdi": lambda: controller.mdi(f["text"]),
         "offsets": lambda: controller.offsets(f),
         "status": lambda: with_queue(controller.status(), programs),
@@ -78,6 +77,17 @@ def dispatch(controller: Controller, request: Request, programs: Programs | None
     if request.cmd not in handlers:
         raise Refused(request.cmd, "this daemon has no program library")
     return handlers[request.cmd]()
+
+
+def submit(controller: Controller, request: Request) -> dict[str, Any]:
+    """``submit``: the program's text, or the file sent along (service.program_file: spooled
+    while the job starts, never read into the daemon)."""
+    f = request.fields
+    with requested_program(f, request.files, controller.config.data_dir, MAX_REQUEST_BYTES,
+                           "a request's, the text's limit as well") as program:
+        return controller.submit(f["name"], program, bool(f.get("keep_override", False)),
+                                 bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
+                                 start_line=start_line_field(f.get("start_line")))
 
 
 def with_queue(status: dict[str, Any], programs: Programs | None) -> dict[str, Any]:
@@ -112,6 +122,7 @@ class Daemon:
         cap_switch_interval(self.config.cycle_period_s)  # process-wide: the cycle thread gets the GIL in time
         for record in self.records.mark_interrupted():
             log.warning(kv("job_interrupted", job=record.job_id, folder=record.folder))
+        clear_spool(self.config.data_dir)  # a daemon that died mid-start left its spooled programs
         machine_state = load_state(self.config.data_dir)  # a corrupt offsets.json: one error, nothing started
         queue = JobQueue(self.config.data_dir)  # a corrupt queue.json too
         self._start_planner_worker()
@@ -158,7 +169,7 @@ class Daemon:
         except InputError as err:
             log.warning(kv("planner_worker_not_ready", error=err))
 
-    def _prepare_job(self, name: str, text: str, start: np.ndarray, options: ReadOptions) -> Any:
+    def _prepare_job(self, name: str, text: str | ProgramFile, start: np.ndarray, options: ReadOptions) -> Any:
         checker = self.programs.checker if self.programs is not None else None  # large programs' check
         return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store, checker)
 

@@ -94,6 +94,10 @@ class PlannedJob:
     def finish_records(self, record: Any) -> None:
         """Everything was written before the motion."""
 
+    def release(self) -> None:
+        """The job is over and nobody asks it anything more: its trajectory is kept (a whole
+        plan's is the job's own)."""
+
 
 MDI_NAME = "<mdi>"  # the program name of MDI lines (G-code, errors read '<mdi>:1: ...')
 JOG_NAME = "<jog>"  # a jog's one G53 line (service.jog)

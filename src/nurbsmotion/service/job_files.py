@@ -13,6 +13,7 @@ from nurbsmotion.log import kv
 from nurbsmotion.service.active_job import ActiveJob, JobPlan
 from nurbsmotion.service.feedback import FeedbackLog
 from nurbsmotion.service.motion import MotionLink
+from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.record_config import config_dict
 from nurbsmotion.service.records import TRAFFIC_FILE, JobRecord, JobRecords
 
@@ -27,7 +28,7 @@ class JobFiles:
         self.link = link
         self.records = records
 
-    def record(self, name: str, text: str, plan: JobPlan) -> JobRecord:
+    def record(self, name: str, text: str | ProgramFile, plan: JobPlan) -> JobRecord:
         """The job folder with program, configuration and plan before any motion (a streamed
         job's trace follows as it is planned)."""
         record = None
@@ -42,7 +43,7 @@ class JobFiles:
             raise InputError("data_dir", f"cannot write the job record in {self.records.root}: "
                              f"{err.strerror or err}") from None
 
-    def record_rejection(self, name: str, text: str, err: InputError) -> None:
+    def record_rejection(self, name: str, text: str | ProgramFile, err: InputError) -> None:
         """A rejected program leaves a record (program + error lines) and one log line."""
         errors = str(err).splitlines()
         job_id = "-"

@@ -2,9 +2,10 @@
 
 Every set-point of a job lies on the program's path (the planner samples the blocks' curves,
 a stop or a feed override time-scales along them), so the path's extrema bound every
-set-point. Each block is a NURBS curve with positive weights (lines, arcs and helix
-segments included), so it lies in the convex hull of its control points: when the hull is
-inside an axis' soft limits the block is, and nothing more is computed. Otherwise the
+set-point. Each block lies in a box known in closed form (program.records.BlockRecords.boxes_mm:
+a line's ends, an arc's or helix' exact extents; a NURBS curve with positive weights lies in
+the convex hull of its control points, and so in their box): when the box is inside an axis'
+soft limits the block is, and nothing more is computed. Otherwise the
 extreme of coordinate x_j is bracketed between a point of the curve (a lower bound, the
 value reported) and a verified upper bound: between two curve points a, b with arc length L
 between them the curve stays in the ellipsoid with foci a and b and major axis L, whose
@@ -89,13 +90,13 @@ def curve_extreme(curve: NurbsCurve, j: int, sign: float) -> Extreme:
     return Extreme(best, max(best, float(bounds.max(initial=best))))
 
 
-def block_hulls(program: Program) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(lows, highs): per block, the min and max of its control points per coordinate, arrays
-    (blocks, dim). One reduction over all the program's control points (np.*.reduceat), not
-    a few per block: a CAM program has ~10^5 blocks. A reader's program (program.records)
-    gives them from its columns: its lines' ends without building their curves."""
+def block_boxes(program: Program) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(lows, highs), arrays (blocks, dim): per block a box holding its curve. A reader's
+    program (program.records) gives them from its columns in closed form, without building a
+    curve; other blocks give their control points' min and max (one reduction over all of
+    them, np.*.reduceat, not a few per block: a CAM program has ~10^5 blocks)."""
     if isinstance(program.blocks, BlockRecords):
-        return program.blocks.hulls_mm()
+        return program.blocks.boxes_mm()
     points = [block.curve.control_points for block in program.blocks]
     starts = np.cumsum([0] + [len(p) for p in points[:-1]])
     stacked = np.concatenate(points)
@@ -103,15 +104,15 @@ def block_hulls(program: Program) -> tuple[NDArray[np.float64], NDArray[np.float
 
 
 def soft_limit_violation(program: Program, config: MachineConfig, columns: list[int],
-                         hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> InputError | None:
+                         boxes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> InputError | None:
     """The first block (in program order) whose path leaves an axis' soft limits, as the error
     of its program line: ``part.nc:42: X650: axis X would reach 650 mm, beyond the soft limit
-    600 mm`` (the word only when it is that position, not an arc's bulge). A block whose hull
-    (``hulls``: block_hulls) is inside every limit is inside: only the others are examined."""
+    600 mm`` (the word only when it is that position, not an arc's bulge). A block whose box
+    (``boxes``: block_boxes) is inside every limit is inside: only the others are examined."""
     limited = [(j, axis, col) for j, (axis, col) in enumerate(zip(config.axes, columns)) if axis.soft_limits_mm is not None]
     if not limited or not program.blocks:
         return None
-    lows, highs = hulls if hulls is not None else block_hulls(program)
+    lows, highs = boxes if boxes is not None else block_boxes(program)
     outside = np.zeros(len(program.blocks), dtype=bool)
     for _, axis, col in limited:
         low, high = axis.soft_limits_mm  # type: ignore[misc]
@@ -139,22 +140,22 @@ def _violation(source: SourceRef, name: str, reached: float, limit: float) -> In
 
 
 def moving_unconfigured_axis(program: Program, columns: list[int],
-                             hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> int | None:
+                             boxes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> int | None:
     """Column of a program axis without a machine axis that some block moves (None: none does);
     the first such block's first such column."""
     if not program.blocks:
         return None
-    lows, highs = hulls if hulls is not None else block_hulls(program)
+    lows, highs = boxes if boxes is not None else block_boxes(program)
     moved = (highs - lows) > 1e-9
     moved[:, [j for j in columns if j < moved.shape[1]]] = False
     blocks = np.flatnonzero(moved.any(axis=1))
     return int(np.flatnonzero(moved[blocks[0]])[0]) if len(blocks) else None
 
 
-def hull_box(program: Program, columns: list[int],
-             hulls: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(min, max) per configured axis over every block's control points: a box holding the path."""
-    lows, highs = hulls if hulls is not None else block_hulls(program)
+def path_box(program: Program, columns: list[int],
+             boxes: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(min, max) per configured axis over every block's box (block_boxes): a box holding the path."""
+    lows, highs = boxes if boxes is not None else block_boxes(program)
     return lows[:, columns].min(axis=0), highs[:, columns].max(axis=0)
 
 
@@ -166,14 +167,14 @@ def check_before_motion(name: str, program: Program, config: MachineConfig, colu
     check_machine_can_run(program, config)
     if not program.blocks:
         raise InputError(name, "the program has no motion")
-    hulls = block_hulls(program)
-    moved = moving_unconfigured_axis(program, columns, hulls)
+    boxes = block_boxes(program)
+    moved = moving_unconfigured_axis(program, columns, boxes)
     if moved is not None:
         raise InputError(name, f"the program moves {AXES[moved]}, which this machine has no axis for")
-    beyond = soft_limit_violation(program, config, columns, hulls)
+    beyond = soft_limit_violation(program, config, columns, boxes)
     if beyond is not None:
         raise beyond
-    low, high = hull_box(program, columns, hulls)
+    low, high = path_box(program, columns, boxes)
     try:
         axis_map.to_counts(np.array([low, high]), check_limits=False)
     except InputError as err:

@@ -25,6 +25,7 @@ from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JOG_NAME, MDI_NAME, JobPause, PlannedJob, axis_columns, parse
 from nurbsmotion.service.planner_worker import PlannerWorker
+from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.program_gate import check_machine_can_run
 from nurbsmotion.service.rate import max_rate
 from nurbsmotion.service.checked_store import CheckedStore
@@ -93,7 +94,7 @@ def soft_limit_error(positions: np.ndarray, trajectory: Trajectory, program: Pro
     return InputError(where, f"axis {name} would reach {reached:.6g} mm, beyond the soft limit {limit:g} mm")
 
 
-def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+def prepare_job(name: str, text: str | ProgramFile, config: MachineConfig, start_mm: np.ndarray | None = None,
                 options: ReadOptions | None = None, worker: PlannerWorker | None = None,
                 store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> PlannedJob | StreamedJob:
     """The daemon's planner: the lookahead planner streams the job while it runs in the
@@ -105,7 +106,7 @@ def prepare_job(name: str, text: str, config: MachineConfig, start_mm: np.ndarra
         return prepare_streamed_job(name, text, config, worker, start_mm, options,
                                     store=store if name != JOG_NAME else None,  # a jog: a new line each time
                                     checker=checker)
-    return plan_job(name, text, config, start_mm, options)
+    return plan_job(name, text if isinstance(text, str) else text.read_text(), config, start_mm, options)
 
 
 def needs_planner_worker(config: MachineConfig) -> bool:

@@ -49,15 +49,15 @@ from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError, InputErrors
 from nurbsmotion.fieldbus.row_source import chunk_figures
 from nurbsmotion.log import kv
-from nurbsmotion.planning.limits import limits_from_config
+from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 from nurbsmotion.planning.measure import MeasureStream, RowFigures
 from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.runtime import GcQuiet, keep_off_realtime_cpu
 from nurbsmotion.planning.trajectory import Trajectory
-from nurbsmotion.program import Program, ReadOptions
-from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.program import BlockKind, Program, ReadOptions
+from nurbsmotion.program.records import KINDS, BlockRecords
 from nurbsmotion.service.block_lines import BlockLinesFile
 from nurbsmotion.service.job_common import machine_has_devices, parse, spindle_wait_reason
 from nurbsmotion.service.path_bounds import check_before_motion
@@ -68,6 +68,8 @@ READY_TIMEOUT_S = 60.0  # a worker that has not started by then (imports under h
 QUIT_TIMEOUT_S = 5.0
 IDLE_TIMEOUT_S = 15.0  # a new job waits this long for the last one's PlanEnd (a cancel ends it within a chunk)
 BLOCKS_PER_MESSAGE = 1000  # blocks a ProgramBlocks slice carries (~15 ms of the daemon's lock to load)
+FEED_ROWS = 65536  # highest_feed_mm_s's slice
+LENGTH_POINTS = 65536  # PathLengths' values at most
 LENGTHS_BUDGET_S = 0.02  # arc-length work between two chunks (a chunk is 2 s of motion): planning stays ahead
 
 
@@ -87,6 +89,7 @@ class PlanRequest:
     first_chunk_cycles: int
     checked_path: Path | None = None  # the checked-program entry to load, or write once checked (service.checked_store)
     checked_key: str = ""
+    text_file: Path | None = None  # with text None: the file holding it, read here if need be (service.program_file)
 
 
 @dataclass(frozen=True)
@@ -125,6 +128,7 @@ class CheckedProgram:
     block_count: int
     from_store: bool = False  # loaded from the checked-program store: not read and checked again
     entry: Path | None = None  # the store entry that holds the blocks (written now if not from_store)
+    highest_feed_mm_s: float | None = None  # highest_feed_mm_s, so the daemon reads no column of the blocks
 
 
 @dataclass(frozen=True, eq=False)
@@ -136,9 +140,39 @@ class ProgramBlocks:
 
 @dataclass(frozen=True, eq=False)
 class PathLengths:
-    """Every block's arc length in mm (the program's blocks, in order)."""
+    """The path's length before every ``stride``-th block and at its end, in mm (the running
+    sum of the blocks' arc lengths); between those blocks it is interpolated by block. At most
+    LENGTH_POINTS values cross the pipe and stay in the daemon: every block's, 8 MB at 10^6
+    blocks and twice that while it was received, stayed in the daemon's heap after each job
+    (its allocator keeps freed memory, an arena per receiving thread: 67 -> 141 MB in 9 starts)."""
 
-    lengths_mm: np.ndarray  # (blocks,) float64
+    before_mm: np.ndarray  # float64: before_mm[k] = length before block k * stride; the last: the whole path's
+    stride: int
+    blocks: int
+
+    @classmethod
+    def of(cls, lengths_mm: np.ndarray) -> PathLengths:
+        n = len(lengths_mm)
+        stride = max(1, -(-(n + 1) // LENGTH_POINTS))
+        before = np.zeros(n + 1)
+        np.cumsum(lengths_mm, out=before[1:])
+        points = before[::stride]
+        if n % stride:
+            points = np.append(points, before[n])
+        return cls(np.ascontiguousarray(points), stride, n)
+
+    @property
+    def total_mm(self) -> float:
+        return float(self.before_mm[-1])
+
+    def before(self, block: int) -> float:
+        """The path's length before ``block`` (0 <= block <= blocks)."""
+        k, r = divmod(block, self.stride)
+        low = float(self.before_mm[k])
+        if r == 0:
+            return low
+        span = min((k + 1) * self.stride, self.blocks) - k * self.stride
+        return low + (float(self.before_mm[k + 1]) - low) * r / span
 
 
 @dataclass(frozen=True, eq=False)
@@ -224,7 +258,8 @@ class WorkerJob:
         try:
             program, from_store, entry = checked_and_stored(self.request, self._ask_for_text)
             self.request = dataclasses.replace(self.request, text="")  # read: its text is not kept for the job
-            send_program(self.results, program, from_store, entry)
+            send_program(self.results, program, from_store, entry,
+                         highest_feed_mm_s(program, limits_from_config(self.config)))
             self.block_lines = BlockLinesFile(program)
             self.lengths = BlockLengths(program)
             self.events = pause_events(program, machine_has_devices(self.config))
@@ -298,7 +333,7 @@ class WorkerJob:
         if lengths is None or lengths.sent:
             return
         if lengths.compute(budget_s):
-            self.results.send(PathLengths(lengths.lengths_mm))
+            self.results.send(PathLengths.of(lengths.lengths_mm))
             lengths.sent = True
 
     def _counts(self, rows: Trajectory) -> np.ndarray:
@@ -388,12 +423,14 @@ class BlockLengths:
         self.lengths_mm = np.zeros(len(program.blocks))
         self.done = 0
         self.sent = False
-        if isinstance(program.blocks, BlockRecords) and not program.blocks.curves:  # lines and arcs only: closed form, at once
-            self.lengths_mm = program.blocks.lengths_mm()
-            self.done = len(program.blocks)
 
     def compute(self, budget_s: float | None) -> bool:
-        """Go on for about ``budget_s`` (None: to the end); True once every length is known."""
+        """Go on for about ``budget_s`` (None: to the end); True once every length is known.
+        Lines and arcs only: all in closed form at the first call, after the first chunk (10^6
+        blocks: ~0.1 s that first motion does not wait for)."""
+        if self.done == 0 and isinstance(self.blocks, BlockRecords) and not self.blocks.curves:
+            self.lengths_mm = self.blocks.lengths_mm()
+            self.done = len(self.blocks)
         deadline = None if budget_s is None else time.monotonic() + budget_s
         while self.done < len(self.blocks) and (deadline is None or time.monotonic() < deadline):
             self.lengths_mm[self.done] = self.blocks[self.done].length_mm
@@ -429,10 +466,21 @@ def read_or_load(request: PlanRequest, text_of: Callable[[], str] | None = None)
             touch(request.checked_path)
             return program, True
     if request.text is None:
+        if request.text_file is not None:
+            text_of = lambda: read_text_file(request)  # noqa: E731 - the file the daemon named
         if text_of is None:
             raise InputError(request.name, "the program's text was not sent and its checked entry cannot be read")
         request = dataclasses.replace(request, text=text_of())
     return read_and_check(request), False
+
+
+def read_text_file(request: PlanRequest) -> str:
+    """The text of the request's ``text_file`` (the daemon's spool: UTF-8 already checked)."""
+    assert request.text_file is not None
+    try:
+        return request.text_file.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise InputError(request.name, f"cannot read the program's file {request.text_file}: {err}") from None
 
 
 def touch(path: Path) -> None:
@@ -470,11 +518,28 @@ def checked_and_stored(request: PlanRequest, text_of: Callable[[], str] | None =
     return (program, False, None) if stored is None else (stored, False, request.checked_path)
 
 
-def send_program(results: Any, program: Program, from_store: bool = False, entry: Path | None = None) -> None:
-    """The checked program to the daemon: its outline and the store ``entry`` holding its
-    blocks, or (no entry) its outline, then its blocks in slices (CheckedProgram)."""
+def highest_feed_mm_s(program: Program, limits: PlanLimits) -> float:
+    """The highest Block.feed_or_default_mm_s of the program's blocks; from the block columns
+    (a slice at a time) when it has them (a Block per block took 1.6 s of the daemon's CPU at 10^5 blocks, before
+    first motion and holding the cycle thread's interpreter lock)."""
     blocks = program.blocks
-    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks), from_store, entry))
+    if not isinstance(blocks, BlockRecords):
+        return max(b.feed_or_default_mm_s(limits.default_feed_mm_s, limits.rapid_feed_mm_s) for b in blocks)
+    highest = -np.inf
+    for first in range(0, len(blocks), FEED_ROWS):  # a slice at a time: no column-sized temporaries (10^6 blocks: 25 MB)
+        kinds, feeds = blocks.kinds[first:first + FEED_ROWS], blocks.feeds_mm_s[first:first + FEED_ROWS]
+        machine = np.where(kinds == KINDS.index(BlockKind.RAPID), limits.rapid_feed_mm_s, limits.default_feed_mm_s)
+        highest = max(highest, float(np.where(np.isnan(feeds), machine, feeds).max()))
+    return highest
+
+
+def send_program(results: Any, program: Program, from_store: bool = False, entry: Path | None = None,
+                 highest_feed: float | None = None) -> None:
+    """The checked program to the daemon: its outline and the store ``entry`` holding its
+    blocks, or (no entry) its outline, then its blocks in slices (CheckedProgram), with its
+    ``highest_feed`` (highest_feed_mm_s)."""
+    blocks = program.blocks
+    results.send(CheckedProgram(dataclasses.replace(program, blocks=()), len(blocks), from_store, entry, highest_feed))
     if entry is not None:
         return
     for first in range(0, len(blocks), BLOCKS_PER_MESSAGE):

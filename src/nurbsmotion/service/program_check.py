@@ -49,7 +49,7 @@ def check_in_process(request: PlanRequest, axis_names: tuple[str, ...]) -> Check
     """The checker process' work: load or read and check, store, summarise."""
     from nurbsmotion.errors import InputErrors
     from nurbsmotion.program.summary import reading_dict
-    from nurbsmotion.service.path_bounds import hull_box
+    from nurbsmotion.service.path_bounds import path_box
     from nurbsmotion.service.planner_worker import read_or_load, store_checked
 
     try:
@@ -59,7 +59,7 @@ def check_in_process(request: PlanRequest, axis_names: tuple[str, ...]) -> Check
         return CheckReport(errors=tuple((e.where, e.message) for e in found))
     if not from_store:
         store_checked(request, program)
-    low, high = hull_box(program, request.columns)
+    low, high = path_box(program, request.columns)
     extent = {"axes": list(axis_names), "min_mm": [round(float(v), 6) for v in low],
               "max_mm": [round(float(v), 6) for v in high]}
     return CheckReport(len(program.blocks), reading_dict(program), extent, from_store=from_store)

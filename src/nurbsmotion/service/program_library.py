@@ -7,18 +7,23 @@ the gateway keeps no state. Names are file names of 1-128 letters, digits, ``.``
 the size is limited by ``web.max_upload_mb`` (default 64 MB). A program is added only after
 its check passed (service.program_check); both files are written atomically. A file changed
 on disk after it was added is still started from what it holds now: its check's key is
-its content (service.checked_store), so it is read and checked again.
+its content (service.checked_store), so it is read and checked again. A start never reads the
+text in the daemon: the file is linked into the spool (service.program_file.snapshot) and its
+SHA-256 taken from NAME.json while the file is the one recorded there (device, inode, size,
+modification time: ``stamp``), hashed again otherwise.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import re
 import threading
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from nurbsmotion.errors import InputError
+from nurbsmotion.service.program_file import ProgramFile, file_stamp, snapshot
 from nurbsmotion.service.protocol import PROGRAM_NAME
 from nurbsmotion.service.records import now_iso, write_atomic
 
@@ -58,15 +63,36 @@ class ProgramLibrary:
 
     def add(self, name: str, text: str, sha256: str, check: dict[str, Any]) -> dict[str, Any]:
         """Keep ``text`` as ``name`` (replacing a program of that name) with its check's report."""
-        meta = {"name": name, "size_bytes": self.check_size(name, text), "sha256": sha256, "added_at": now_iso(),
-                "check": check}
+        size = self.check_size(name, text)
+        return self._keep(name, lambda path: write_atomically(path, text.encode("utf-8")), size, sha256, check)
+
+    def add_file(self, name: str, program: ProgramFile, check: dict[str, Any]) -> dict[str, Any]:
+        """Keep the spooled ``program`` as ``name`` (moved into the library, not copied)."""
+        return self._keep(name, lambda path: os.replace(program.path, path), program.size_bytes, program.sha256, check)
+
+    def _keep(self, name: str, write: Callable[[Path], None], size: int, sha256: str,
+              check: dict[str, Any]) -> dict[str, Any]:
+        meta = {"name": name, "size_bytes": size, "sha256": sha256, "added_at": now_iso(), "check": check}
         with self._lock:
             try:
-                write_atomically(self.folder / name, text.encode("utf-8"))
+                self.folder.mkdir(parents=True, exist_ok=True)
+                write(self.folder / name)
+                meta["stamp"] = file_stamp(self.folder / name)
                 write_atomically(self._meta_path(name), json.dumps(meta, indent=1).encode())
             except OSError as err:
                 raise InputError("data_dir", f"cannot write {name} into {self.folder}: {err.strerror or err}") from None
         return meta
+
+    def program_file(self, name: str, data_dir: str | Path) -> ProgramFile:
+        """The program ``name`` as a file of the spool in ``data_dir`` (module docstring);
+        InputError when the library has no such program."""
+        meta = self._meta(check_library_name(name))
+        try:
+            if meta is None:
+                raise FileNotFoundError(name)
+            return snapshot(self.folder / name, data_dir, meta.get("stamp"), str(meta.get("sha256", "")))
+        except OSError:
+            raise InputError(f"program {name!r}", "not in the library (nurbsmotion programs list)") from None
 
     def listing(self) -> list[dict[str, Any]]:
         """Every program's record (no text), by name."""
@@ -89,9 +115,6 @@ class ProgramLibrary:
         if meta is None:
             raise InputError(f"program {name!r}", "not in the library (nurbsmotion programs list)")
         return {**meta, "text": text}
-
-    def text(self, name: str) -> str:
-        return str(self.get(name)["text"])
 
     def remove(self, name: str) -> None:
         check_library_name(name)

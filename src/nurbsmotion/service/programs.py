@@ -23,7 +23,9 @@ from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.job_queue import JobQueue, QueueEntry, QueueHooks, QueueRunner
 from nurbsmotion.service.planner_worker import as_error
 from nurbsmotion.service.program_check import ProgramChecker
+from nurbsmotion.service.program_file import ProgramFile, requested_program
 from nurbsmotion.service.program_library import ProgramLibrary, check_library_name
+from nurbsmotion.service.protocol import Request
 from nurbsmotion.service.start_line import start_line_field
 
 log = logging.getLogger(__name__)
@@ -55,11 +57,13 @@ class Programs:
         self.checker.close()
 
     # ------------------------------------------------------------------ the library
-    def add(self, name: str, text: str) -> dict[str, Any]:
+    def add(self, name: str, text: str | ProgramFile) -> dict[str, Any]:
+        """Check ``text`` (or the spooled file holding it) and keep it in the library."""
         from nurbsmotion.service.streamed_job import plan_request
 
         check_library_name(name)
-        self.library.check_size(name, text)
+        if isinstance(text, str):
+            self.library.check_size(name, text)
         start_mm, options = self.controller.reading_start()
         request = plan_request(name, text, self.config, start_mm, options, self.store)
         report = self.checker.check(request, tuple(a.name for a in self.config.axes))
@@ -68,7 +72,8 @@ class Programs:
             log.info(kv("program_refused", name=name, errors=len(report.errors),
                         first=report.as_dict()["errors"][0]))
             raise as_error(report.errors)
-        meta = self.library.add(name, text, text_digest(text), report.as_dict())
+        meta = self.library.add(name, text, text_digest(text), report.as_dict()) if isinstance(text, str) \
+            else self.library.add_file(name, text, report.as_dict())
         log.info(kv("program_added", name=name, blocks=report.blocks, size_bytes=meta["size_bytes"],
                     checked_from_store=report.from_store))
         return {"ok": True, "program": meta}
@@ -85,11 +90,16 @@ class Programs:
         return {"ok": True, "removed": name}
 
     def start_program(self, name: str, fields: dict[str, Any]) -> dict[str, Any]:
-        """``start NAME``: the library's program submitted with ``fields`` (submit's options)."""
-        text = self.library.text(name)
-        return self.controller.submit(name, text, bool(fields.get("keep_override", False)),
-                                      bool(fields.get("block_delete", True)), bool(fields.get("optional_stop", True)),
-                                      start_line=start_line_field(fields.get("start_line")))
+        """``start NAME``: the library's program submitted with ``fields`` (submit's options),
+        as its file (service.program_file.snapshot: the daemon never reads its text)."""
+        program = self.library.program_file(name, self.config.data_dir)
+        try:
+            return self.controller.submit(name, program, bool(fields.get("keep_override", False)),
+                                          bool(fields.get("block_delete", True)),
+                                          bool(fields.get("optional_stop", True)),
+                                          start_line=start_line_field(fields.get("start_line")))
+        finally:
+            program.discard()
 
     # ------------------------------------------------------------------ the queue
     def queue_add(self, name: str, start_line: Any) -> dict[str, Any]:
@@ -105,11 +115,18 @@ class Programs:
         """The queue runner's start of ``entry``: the job's id (InputError when refused)."""
         return str(self.start_program(entry.program, {"start_line": entry.start_line})["job"]["id"])
 
-    def handlers(self, f: dict[str, Any]) -> dict[str, Callable[[], dict[str, Any]]]:
-        """The daemon's request table entries (service.daemon.dispatch) for fields ``f``."""
+    def add_requested(self, request: Request) -> dict[str, Any]:
+        """``programs.add`` with the program's text or the file sent along (service.program_file)."""
+        with requested_program(request.fields, request.files, self.config.data_dir, self.library.max_bytes,
+                               "web.max_upload_mb") as program:
+            return self.add(request.fields["name"], program)
+
+    def handlers(self, request: Request) -> dict[str, Callable[[], dict[str, Any]]]:
+        """The daemon's request table entries (service.daemon.dispatch) for ``request``."""
+        f = request.fields
         q = self.queue
         return {
-            "programs.add": lambda: self.add(f["name"], f["program"]),
+            "programs.add": lambda: self.add_requested(request),
             "programs.list": self.listing,
             "programs.get": lambda: self.get(f["name"]),
             "programs.remove": lambda: self.remove(f["name"]),

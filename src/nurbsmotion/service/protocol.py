@@ -4,7 +4,10 @@ Request: ``{"cmd": NAME, ...fields}``; response: ``{"ok": true, ...}`` or
 ``{"ok": false, "error": "one line naming the field"}`` (program rejections add
 ``"errors": [one line per problem]``). After ``subscribe`` the connection only pushes
 ``{"notify": ...}`` lines (service.subscriptions) until the client closes it. Requests longer than :data:`MAX_REQUEST_BYTES` are
-refused. This module is pure: it turns bytes into checked :class:`Request` records and
+refused. ``submit`` and ``programs.add`` carry the program as ``program`` (its text) or, from a
+client on this host, as ``program_fd``: the index of a file descriptor sent with the request
+line (SCM_RIGHTS, at most :data:`MAX_FDS`; service.program_file), so that the daemon never
+holds the text. This module is pure: it turns bytes into checked :class:`Request` records and
 records into bytes; the server and the client both use it.
 """
 
@@ -16,16 +19,18 @@ from dataclasses import dataclass, field
 from typing import Any
 
 MAX_REQUEST_BYTES = 80 * 1024 * 1024  # a library program (web.max_upload_mb, default 64 MB) as JSON text
+MAX_FDS = 2  # file descriptors a request line may carry (more are closed unread)
 PROGRAM_NAME = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$"  # a library program's name: a file name, no path
 DEFAULT_SOCKET = "/tmp/nurbsmotion.sock"  # where the daemon listens unless control.socket says otherwise
 
 # command -> {field: (type name, required)}
 COMMANDS: dict[str, dict[str, tuple[str, bool]]] = {
-    "submit": {"name": ("string", True), "program": ("string", True), "keep_override": ("boolean", False),
+    "submit": {"name": ("string", True), "program": ("string", False), "program_fd": ("number", False),
+               "keep_override": ("boolean", False),
                "block_delete": ("boolean", False), "optional_stop": ("boolean", False),
                "start_line": ("number", False)},  # start from this line of the program (program.gcode_start)
     # the program library (service.programs): checked once when added, started by name
-    "programs.add": {"name": ("string", True), "program": ("string", True)},
+    "programs.add": {"name": ("string", True), "program": ("string", False), "program_fd": ("number", False)},
     "programs.list": {},
     "programs.get": {"name": ("string", True)},
     "programs.remove": {"name": ("string", True)},
@@ -70,6 +75,7 @@ class ProtocolError(Exception):
 class Request:
     cmd: str
     fields: dict[str, Any] = field(default_factory=dict)
+    files: tuple[int, ...] = ()  # descriptors sent with the line (``program_fd``); the server closes them after
 
 
 def _type_ok(value: Any, type_name: str) -> bool:
@@ -114,6 +120,9 @@ def parse_request(line: bytes) -> Request:
     for key, (_, required) in spec.items():
         if required and key not in fields:
             raise ProtocolError(f"field {key!r}: required for command {cmd!r}")
+    if "program_fd" in spec and ("program" in fields) == ("program_fd" in fields):
+        raise ProtocolError(f"field 'program': required for command {cmd!r} (its text, or 'program_fd' with the file sent "
+                            "along), not both")
     return Request(cmd, fields)
 
 

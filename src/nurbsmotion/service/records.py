@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable
 
 from nurbsmotion.errors import InputError
+from nurbsmotion.service.program_file import ProgramFile
 
 PROGRAM_FILE = "program"  # suffix added from the submitted name (.nc, .yaml ...)
 PLAN_FILE = "plan.json"
@@ -80,9 +81,13 @@ class JobRecord:
     job_id: str
     folder: Path
 
-    def write_program(self, name: str, text: str) -> Path:
+    def write_program(self, name: str, text: str | ProgramFile) -> Path:
+        """The program as submitted: its text written, or its file linked (service.program_file)."""
         path = self.folder / f"{PROGRAM_FILE}{_safe_suffix(name)}"
-        write_atomic(path, text.encode("utf-8"))
+        if isinstance(text, ProgramFile):
+            text.link_to(path)
+        else:
+            write_atomic(path, text.encode("utf-8"))
         return path
 
     def write_plan(self, summary: dict[str, Any], write_trace: Callable[[Path], None]) -> None:
@@ -222,7 +227,7 @@ class JobRecords:
         self._last_stamp_ms = stamp_ms
         return datetime.fromtimestamp(stamp_ms // 1000).replace(microsecond=stamp_ms % 1000 * 1000)
 
-    def create(self, name: str, text: str) -> JobRecord:
+    def create(self, name: str, text: str | ProgramFile) -> JobRecord:
         """A new job folder holding the program as submitted."""
         self.root.mkdir(parents=True, exist_ok=True)
         job_id = new_job_id()
@@ -233,7 +238,7 @@ class JobRecords:
         record.write_program(name, text)
         return record
 
-    def create_rejected(self, name: str, text: str, errors: list[str]) -> JobRecord:
+    def create_rejected(self, name: str, text: str | ProgramFile, errors: list[str]) -> JobRecord:
         """The record of a submission whose program was rejected: the program and why."""
         record = self.create(name, text)
         record.write_outcome({"outcome": "rejected", "job": record.job_id, "name": name, "reason": errors[0],

@@ -11,6 +11,7 @@ hang up.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import select
@@ -23,7 +24,7 @@ from typing import Any, Callable, Iterator
 from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.service import access
-from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, Request, encode, error_response, parse_request
+from nurbsmotion.service.protocol import MAX_FDS, MAX_REQUEST_BYTES, ProtocolError, Request, encode, error_response, parse_request
 from nurbsmotion.service.subscriptions import DEFAULT_MAX_HZ, MAX_HZ_RANGE, StatusHub, Subscription
 
 log = logging.getLogger(__name__)
@@ -149,12 +150,16 @@ class ControlServer:
                 self._send(conn, error_response(access.refusal(peer, self.control_group)))
                 return
             conn.settimeout(self.idle_timeout_s)
-            for line in _request_lines(conn):
-                request = self._parse(line)
-                if isinstance(request, Request) and request.cmd == "subscribe":
-                    self._serve_subscription(conn, request)
-                    return
-                response = self.handle(request) if isinstance(request, Request) else request
+            for line, files in _request_lines(conn):
+                try:
+                    request = self._parse(line)
+                    if isinstance(request, Request) and request.cmd == "subscribe":
+                        self._serve_subscription(conn, request)
+                        return
+                    response = self.handle(dataclasses.replace(request, files=tuple(files))) \
+                        if isinstance(request, Request) else request
+                finally:
+                    _close_all(files)
                 if not self._send(conn, response):
                     return
         except OSError:
@@ -277,29 +282,48 @@ def _peer_closed(conn: socket.socket) -> bool:
     return not data
 
 
-def _request_lines(conn: socket.socket) -> Iterator[bytes | None]:
-    """Yield each complete line (without the newline); None as soon as a line passes the
-    size limit: the rest of that line is read and dropped, so the connection stays usable."""
+def _close_all(files: list[int]) -> None:
+    for fd in files:
+        try:
+            os.close(fd)
+        except OSError:
+            pass
+    files.clear()
+
+
+def _request_lines(conn: socket.socket) -> Iterator[tuple[bytes | None, list[int]]]:
+    """Yield each complete line (without the newline) with the descriptors received while it
+    arrived (protocol ``program_fd``: a client sends its request and waits for the answer, so
+    they are that line's; the caller closes them); None as soon as a line passes the size
+    limit: the rest of that line is read and dropped, so the connection stays usable."""
     buf = bytearray()
+    files: list[int] = []
     scanned = 0
     dropping = False
-    while True:
-        newline = buf.find(b"\n", scanned)
-        if newline >= 0:
-            line = bytes(buf[:newline])
-            del buf[:newline + 1]
-            scanned = 0
-            if not dropping and line.strip():
-                yield line
-            dropping = False
-            continue
-        if len(buf) > MAX_REQUEST_BYTES:
-            if not dropping:
-                yield None
-            dropping = True
-            buf.clear()
-        scanned = len(buf)
-        chunk = conn.recv(_CHUNK)
-        if not chunk:
-            return
-        buf += chunk
+    try:
+        while True:
+            newline = buf.find(b"\n", scanned)
+            if newline >= 0:
+                line = bytes(buf[:newline])
+                del buf[:newline + 1]
+                scanned = 0
+                if not dropping and line.strip():
+                    taken, files = files, []
+                    yield line, taken
+                dropping = False
+                continue
+            if len(buf) > MAX_REQUEST_BYTES:
+                if not dropping:
+                    yield None, []
+                dropping = True
+                buf.clear()
+            scanned = len(buf)
+            chunk, received, flags, _ = socket.recv_fds(conn, _CHUNK, MAX_FDS, socket.MSG_CMSG_CLOEXEC)
+            files.extend(received)
+            if len(files) > MAX_FDS or flags & socket.MSG_CTRUNC:
+                _close_all(files)  # more than a request may carry (the kernel dropped the rest): none is used
+            if not chunk:
+                return
+            buf += chunk
+    finally:
+        _close_all(files)

@@ -20,7 +20,6 @@ The daemon's process only receives, copies and indexes rows: the planner never h
 
 from __future__ import annotations
 
-import bisect
 import collections
 import dataclasses
 import logging
@@ -36,15 +35,15 @@ from nurbsmotion.fieldbus.row_source import RowChunk, RowFeed
 from nurbsmotion.log import kv
 from nurbsmotion.planning.limits import PlanLimits, limits_from_config
 from nurbsmotion.planning.lookahead.verify import FLUCTUATION_LIMIT, TOLERANCE
-from nurbsmotion.program import AXES, BlockKind, Program, ReadOptions
-from nurbsmotion.program.records import KINDS, BlockRecords
+from nurbsmotion.program import AXES, Program, ReadOptions
 from nurbsmotion.program.summary import reading_dict
 from nurbsmotion.service.job_common import JobPause, axis_columns
 from nurbsmotion.service.job_events import DEVICE_EVENTS, RowEvent
-from nurbsmotion.service.checked_store import CheckedStore
+from nurbsmotion.service.checked_store import CheckedStore, text_digest
 from nurbsmotion.service.planner_worker import (CancelPlan, CheckedProgram, EntryGone, NeedText, PathLengths,
                                                 PlanEnd, PlannedChunk, PlannerWorker, PlanRequest, ProgramText, TracePath,
-                                                as_error, receive_program)
+                                                as_error, highest_feed_mm_s, receive_program)
+from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.rate import max_rate
 
 if TYPE_CHECKING:
@@ -58,31 +57,16 @@ MAX_CHUNKS_AHEAD = 4  # chunks planned ahead of the axes (bounded memory; ~8 s a
 FIRST_CHUNK_TIMEOUT_S = 60.0
 END_TIMEOUT_S = 10.0  # the worker's last word after a cancel (it finishes the chunk it plans)
 FEEDS_KEPT = 8  # chunks whose feed column is kept for the status' feed
-FEED_ROWS = 65536  # highest_feed_mm_s's slice
 LARGE_PROGRAM_CHARS = 4_000_000  # ~130,000 CAM lines: read and checked apart (checked_apart), not in the worker
 
 
-def highest_feed_mm_s(program: Program, limits: PlanLimits) -> float:
-    """The highest Block.feed_or_default_mm_s of the program's blocks; from the block columns
-    (a slice at a time) when it has them (a Block per block took 1.6 s of the daemon's CPU at 10^5 blocks, before
-    first motion and holding the cycle thread's interpreter lock)."""
-    blocks = program.blocks
-    if not isinstance(blocks, BlockRecords):
-        return max(b.feed_or_default_mm_s(limits.default_feed_mm_s, limits.rapid_feed_mm_s) for b in blocks)
-    highest = -np.inf
-    for first in range(0, len(blocks), FEED_ROWS):  # a slice at a time: no column-sized temporaries (10^6 blocks: 25 MB)
-        kinds, feeds = blocks.kinds[first:first + FEED_ROWS], blocks.feeds_mm_s[first:first + FEED_ROWS]
-        machine = np.where(kinds == KINDS.index(BlockKind.RAPID), limits.rapid_feed_mm_s, limits.default_feed_mm_s)
-        highest = max(highest, float(np.where(np.isnan(feeds), machine, feeds).max()))
-    return highest
-
-
-def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int]) -> float:
+def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfig, columns: list[int],
+                      highest_feed: float | None = None) -> float:
     """The highest feed override rate for a plan not yet made, from bounds that hold for any
     plan of it: an axis moves no faster than the path (<= the highest feed of its blocks, the
     planner's fluctuation guarantee included) and accelerates no more than the path's
     resultant limit; the axis limits cap both (the planner keeps them)."""
-    feed = highest_feed_mm_s(program, limits)
+    feed = highest_feed_mm_s(program, limits) if highest_feed is None else highest_feed
     if limits.feed_mm_s is not None:
         feed = limits.feed_mm_s
     v_bound, a_bound = [], []
@@ -96,6 +80,37 @@ def streamed_max_rate(program: Program, limits: PlanLimits, config: MachineConfi
                     [a.max_accel_mm_s2 or config.interpolation.max_accel_mm_s2 for a in config.axes])
 
 
+class BlockStarts:
+    """The first row of each block reached, in order, and that block: numpy arrays grown by
+    doubling (a 10^6-block job: 12-24 MB; lists of Python ints held 72 MB and every status
+    read converted one to an array, ~50 ms of the daemon's interpreter lock late in the job)."""
+
+    def __init__(self) -> None:
+        self.rows = np.zeros(1024, np.int64)
+        self.blocks = np.zeros(1024, np.int32)
+        self.count = 0
+
+    def add(self, rows: np.ndarray, blocks: np.ndarray) -> None:
+        """A chunk's block starts (planner_worker.block_starts), its first one dropped when it
+        continues the last block here."""
+        if len(blocks) and self.count and int(blocks[0]) == int(self.blocks[self.count - 1]):
+            rows, blocks = rows[1:], blocks[1:]
+        end = self.count + len(rows)
+        if end > len(self.rows):
+            size = max(end, 2 * len(self.rows))
+            self.rows = np.concatenate([self.rows[:self.count], np.zeros(size - self.count, np.int64)])
+            self.blocks = np.concatenate([self.blocks[:self.count], np.zeros(size - self.count, np.int32)])
+        self.rows[self.count:end], self.blocks[self.count:end] = rows, blocks
+        self.count = end
+
+    def block_at(self, row: int) -> int | None:
+        """The block of ``row`` (None before the first block start)."""
+        if row < 0 or not self.count:
+            return None
+        i = int(np.searchsorted(self.rows[:self.count], row, side="right")) - 1
+        return int(self.blocks[max(i, 0)])
+
+
 class StreamedJob:
     """One streamed job: its checks passed, the worker planning ahead (see module docstring).
 
@@ -105,7 +120,8 @@ class StreamedJob:
 
     def __init__(self, name: str, program: Program, config: MachineConfig, columns: list[int],
                  worker: PlannerWorker, connection: tuple[Any, Any], chunk_cycles: int = CHUNK_CYCLES,
-                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> None:
+                 max_chunks: int = MAX_CHUNKS_AHEAD, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
+                 highest_feed: float | None = None) -> None:
         self.name = name
         self.program = program
         self.config = config
@@ -114,7 +130,7 @@ class StreamedJob:
         self.chunk_cycles = chunk_cycles
         self.first_chunk_cycles = min(first_chunk_cycles, chunk_cycles)
         self.limits = limits_from_config(config)
-        self.max_rate = streamed_max_rate(program, self.limits, config, columns)
+        self.max_rate = streamed_max_rate(program, self.limits, config, columns, highest_feed)
         self.feed = RowFeed(len(config.axes), max_chunks, ahead_rows=2 * chunk_cycles)
         self.pauses: list[Any] = []  # JobPause, in row order, as the chunks are planned
         # spindle / coolant / output events with their rows (service.job_events), as the chunks
@@ -128,10 +144,9 @@ class StreamedJob:
         self.submitted_s = time.monotonic()
         self.first_chunk_s = float("nan")
         self.end: PlanEnd | None = None  # the worker's last word on this job
-        self._block_rows: list[int] = []  # first row of each block reached, in order
-        self._block_ids: list[int] = []
+        self._starts = BlockStarts()  # first row of each block reached, in order
         self._feeds: collections.deque[tuple[int, np.ndarray]] = collections.deque(maxlen=FEEDS_KEPT)
-        self._length_before: np.ndarray | None = None  # path length before each block, once the worker sent them
+        self._lengths: PathLengths | None = None  # the path's length before the blocks, once the worker sent it
         self._commands, self._results = connection  # the worker got this job's PlanRequest
         self._cancel_sent = False
         self._send_lock = threading.Lock()
@@ -208,10 +223,7 @@ class StreamedJob:
 
     def block_at(self, index: int) -> int | None:
         """The program block of planned row ``index`` (None before the first)."""
-        if index < 0 or not self._block_rows:
-            return None
-        i = bisect.bisect_right(self._block_rows, index) - 1  # numpy's searchsorted: ~25 µs a call (a status read)
-        return self._block_ids[max(i, 0)]
+        return self._starts.block_at(index)
 
     def feed_at(self, index: int) -> float:
         """Planned feed (mm/s) at row ``index`` when it is recent, else 0."""
@@ -231,11 +243,11 @@ class StreamedJob:
         block = self.block_at(index)
         if block is None:
             return 0.0
-        before = self._length_before
-        if before is None:
+        lengths = self._lengths
+        if lengths is None:
             return 100.0 * block / len(self.program.blocks)
-        total = float(before[-1])
-        return 100.0 * float(before[block]) / total if total > 0 else 0.0
+        total = lengths.total_mm
+        return 100.0 * lengths.before(block) / total if total > 0 else 0.0
 
     def axis_step(self, axis: int, index: int, rows: int) -> int:
         """Counts axis ``axis`` moves from ``rows`` rows before row ``index`` to ``rows`` after,
@@ -275,6 +287,16 @@ class StreamedJob:
             self.summary["error"] = str(self.error)
         record.write_plan_summary(self.summary)
 
+    def release(self) -> None:
+        """The job is over and the controller let go of it: drop what grows with the program
+        (the path's running length, the block starts, the recent feeds) now. The job object
+        itself is in reference cycles that only a full collection frees, and the daemon
+        collects rarely (its master freezes the collector's objects during a job): 10^6-line
+        jobs left ~8.5 MB each in the daemon until then (9 starts in a row: 67 -> 175 MB)."""
+        self._lengths = None
+        self._starts = BlockStarts()
+        self._feeds.clear()
+
     # ------------------------------------------------------------------ the receiver thread
     def _receive(self) -> None:
         """Chunks from the worker into the feed until its PlanEnd (or its death)."""
@@ -306,10 +328,7 @@ class StreamedJob:
             return
         self.pauses.extend(JobPause(row, reason, tool, wait) for row, reason, tool, wait in chunk.pauses)
         self._take_events(chunk.block_rows, chunk.block_ids)
-        for row, block in zip(chunk.block_rows.tolist(), chunk.block_ids.tolist()):
-            if not self._block_ids or self._block_ids[-1] != block:
-                self._block_rows.append(row)
-                self._block_ids.append(block)
+        self._starts.add(chunk.block_rows, chunk.block_ids)
         self._feeds.append((chunk.first_row, chunk.feed_mm_s))
         rows = RowChunk(chunk.counts.astype(np.int64), chunk.stop_tail.astype(np.int64),
                         tuple(row for row, _, _, _ in chunk.pauses), chunk.max_step, chunk.max_accel)
@@ -333,8 +352,8 @@ class StreamedJob:
 
     def _take_lengths(self, message: PathLengths) -> None:
         """The blocks' arc lengths: progress by path length, plan.json's length_mm."""
-        self._length_before = np.concatenate([[0.0], np.cumsum(message.lengths_mm)])
-        self.summary["length_mm"] = round(float(self._length_before[-1]), 6)
+        self._lengths = message
+        self.summary["length_mm"] = round(message.total_mm, 6)
 
     def _finish(self, end: PlanEnd) -> None:
         self.end = end
@@ -347,23 +366,25 @@ class StreamedJob:
             log.warning(kv("planning_failed", program=self.name, row=self.planned, error=self.error))
 
 
-def prepare_streamed_job(name: str, text: str, config: MachineConfig, worker: PlannerWorker,
+def prepare_streamed_job(name: str, text: str | ProgramFile, config: MachineConfig, worker: PlannerWorker,
                          start_mm: np.ndarray | None = None, options: ReadOptions | None = None,
                          chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES,
                          store: CheckedStore | None = None, checker: ProgramChecker | None = None) -> StreamedJob:
-    """Have the worker parse and check ``text`` completely (or load it checked from ``store``,
+    """Have the worker parse and check ``text`` (or the file holding it: the daemon never reads
+    it, service.program_file) completely (or load it checked from ``store``,
     service.checked_store; a large program not there is read and checked by ``checker`` first,
     checked_apart) and start planning it; return once the first chunk is planned (InputError
     naming file:line for anything refused; nothing moves)."""
     request = plan_request(name, text, config, start_mm, options, store, chunk_cycles, first_chunk_cycles)
     checked_now = checked_apart(request, checker)
     connection = worker.connect(withheld(request))
-    program, from_store = checked_program(name, worker, connection, key=request.checked_key, text=text)
+    program, from_store, highest_feed = checked_program(name, worker, connection, key=request.checked_key,
+                                                        text=text if isinstance(text, str) else "")
     from_store = from_store and not checked_now
     if store is not None:
         store.note(from_store, name)
     job = StreamedJob(name, program, config, request.columns, worker, connection, chunk_cycles,
-                      first_chunk_cycles=request.first_chunk_cycles)
+                      first_chunk_cycles=request.first_chunk_cycles, highest_feed=highest_feed)
     job.summary["checked_from_store"] = from_store
     job.begin()
     return job
@@ -384,7 +405,7 @@ def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
     it from the store as any stored program: reading a 10^6-line program peaks at ~350 MB
     (issue 25: the worker < 300 MB, `check` < 500 MB), and the checker's time-out is the
     check's (minutes), not the first chunk's. True when it checked it (InputError: refused)."""
-    if checker is None or request.checked_path is None or len(request.text or "") < LARGE_PROGRAM_CHARS \
+    if checker is None or request.checked_path is None or program_chars(request) < LARGE_PROGRAM_CHARS \
             or request.checked_path.exists():
         return False
     report = checker.check(request, tuple(a.name for a in request.config.axes))
@@ -393,25 +414,37 @@ def checked_apart(request: PlanRequest, checker: ProgramChecker | None) -> bool:
     return not report.from_store
 
 
-def plan_request(name: str, text: str, config: MachineConfig, start_mm: np.ndarray | None = None,
+def program_chars(request: PlanRequest) -> int:
+    """The program's size: its text's characters, or its file's bytes (about as many)."""
+    if request.text is None and request.text_file is not None:
+        return request.text_file.stat().st_size
+    return len(request.text or "")
+
+
+def plan_request(name: str, text: str | ProgramFile, config: MachineConfig, start_mm: np.ndarray | None = None,
                  options: ReadOptions | None = None, store: CheckedStore | None = None,
                  chunk_cycles: int = CHUNK_CYCLES, first_chunk_cycles: int = FIRST_CHUNK_CYCLES) -> PlanRequest:
-    """The worker's request for ``text`` started at ``start_mm`` (machine axes; None: 0) with
-    ``options``, with its entry in the checked-program ``store`` (service.checked_store)."""
+    """The worker's request for ``text`` (or the file holding it: sent as its path) started at
+    ``start_mm`` (machine axes; None: 0) with ``options``, with its entry in the
+    checked-program ``store`` (service.checked_store)."""
     columns = axis_columns(config)
     start_xyz = np.zeros(len(AXES))
     if start_mm is not None:
         start_xyz[columns] = start_mm
     options = options or ReadOptions(tool_table=config.tool_table)
-    key = store.key(name, text, start_xyz, options) if store is not None else ""
-    return PlanRequest(config, name, text, start_xyz, options, columns, chunk_cycles,
-                       min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key)
+    held = text if isinstance(text, ProgramFile) else None
+    key = "" if store is None else store.key(name, held.sha256 if held else text_digest(str(text)), start_xyz, options)
+    return PlanRequest(config, name, None if held else str(text), start_xyz, options, columns, chunk_cycles,
+                       min(first_chunk_cycles, chunk_cycles), store.path(key) if store is not None else None, key,
+                       held.path if held else None)
 
 
 def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any],
-                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = "") -> tuple[Program, bool]:
+                    timeout_s: float = FIRST_CHUNK_TIMEOUT_S, key: str = "", text: str = ""
+                    ) -> tuple[Program, bool, float | None]:
     """The worker's first answer: (the program parsed and checked, mapped from its store entry
-    ``key`` or received in slices, whether it came from the checked-program store), or the
+    ``key`` or received in slices, whether it came from the checked-program store, its highest
+    feed), or the
     errors refusing it. A worker that asks for the program's ``text`` (NeedText) gets it."""
     commands, results = connection
     try:
@@ -428,7 +461,7 @@ def checked_program(name: str, worker: PlannerWorker, connection: tuple[Any, Any
         raise InputError(name, f"the planner worker ended unexpectedly ({worker.exit_description()})") from None
     if isinstance(answer, CheckedProgram):
         try:
-            return receive_program(results, answer, timeout_s, key), answer.from_store
+            return receive_program(results, answer, timeout_s, key), answer.from_store, answer.highest_feed_mm_s
         except EntryGone as err:
             worker.abandon()
             raise InputError(name, str(err)) from None
