@@ -133,13 +133,45 @@ def plot_corner(path: Path) -> None:
     print(f"wrote {path}")
 
 
+SWEEP_JERKS = (1e4, 5e4, 1e5, 1e6, 1e8, 1e12, None)  # issue 24: the time falls monotonically towards no limit
+
+
+def sweep(write: bool) -> None:
+    """Each program's smoothed plan at every jerk limit of SWEEP_JERKS, and whether its motion
+    time falls monotonically as J grows (to the plan without a limit)."""
+    header = ("| program | J (mm/s^3) | corners | motion | vs LinuxCNC 2.9 | planning (wall) | set-points/s | stops "
+              "| max deviation | max accel | max jerk |\n|---|---|---|---|---|---|---|---|---|---|---|")
+    print(header)
+    rows, verdicts = [], []
+    for name, program in programs().items():
+        times = []
+        for jerk in SWEEP_JERKS:
+            rows.append(row(name, program, jerk, "smoothed"))
+            times.append(float(rows[-1].split("|")[4].split()[0]))
+        falls = all(b <= a + 0.005 for a, b in zip(times, times[1:]))
+        verdicts.append(f"{name}: {' > '.join(f'{t:.2f}' for t in times)} s, "
+                        f"{'monotone' if falls else 'NOT monotone'}")
+        print(verdicts[-1], flush=True)
+    if write:
+        body = ("Smoothed and blended within 0.01 mm (the default), T = 1 ms, A = 2500 mm/s^2, feeds capped at "
+                "200 mm/s; J from 1e4 to none (the plan's time must fall monotonically towards the unlimited "
+                "plan, issue 24; equal within 5 ms counts).\n\n" + header + "\n" + "\n".join(rows)
+                + "\n\n" + "\n".join(f"- {v}" for v in verdicts))
+        write_section("jerk_sweep", "Jerk limit sweep (short-segment CAM programs)", body,
+                      "python benchmarks/bench_blend.py --sweep --write")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
     parser.add_argument("--plot", action="store_true", help=f"write {IMG.relative_to(ROOT)}")
     parser.add_argument("--no-baseline", action="store_true", help="only the smoothed plans (the default settings)")
     parser.add_argument("--only-plot", action="store_true", help="only the picture")
+    parser.add_argument("--sweep", action="store_true", help="the smoothed plans at SWEEP_JERKS (section jerk_sweep)")
     args = parser.parse_args()
+    if args.sweep:
+        sweep(args.write)
+        return
     if args.plot or args.only_plot:
         plot_corner(IMG)
     if args.only_plot:

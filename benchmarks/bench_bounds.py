@@ -25,7 +25,11 @@ T = 1 ms, A = 2500 mm/s^2, J = 50000 mm/s^3, feeds capped at 200 mm/s, tolerance
   at its 1-D jerk-limited time (S-curve at F, A, J: exact on a line, from rest: its ends
   passed at the blend's few mm/s would save a few ms each): a lower bound with J to that.
 
-Run: python benchmarks/bench_bounds.py [--write]
+With --breakdown: where each plan's time goes against the forced bound, by class of step
+(cruise, dip, stop, rapid), beside a tighter lower bound with J at each slow stretch's lowest
+point and a feasible profile of the tangential jerk model (BREAKDOWN says what each is).
+
+Run: python benchmarks/bench_bounds.py [--breakdown] [--write]
 """
 
 from __future__ import annotations
@@ -52,10 +56,12 @@ from nurbsmotion.planning.lookahead.path import BlockPiece  # noqa: E402
 from nurbsmotion.planning.lookahead.planner import settings_for  # noqa: E402
 from nurbsmotion.planning.lookahead.runs import ProgramStops, end_tangents, split_runs  # noqa: E402
 from nurbsmotion.planning.lookahead.setup import max_program_feed  # noqa: E402
+from nurbsmotion.planning.lookahead.speed_limits import floor_log2, min_table  # noqa: E402
 from nurbsmotion.program import BlockKind  # noqa: E402
 from nurbsmotion.program import Program  # noqa: E402
 
 JERK = 50000.0
+FEED_LIMIT_MM_S = 200.0
 ACCEL = 2500.0
 STEP_MM = 0.01
 
@@ -135,23 +141,35 @@ def stop_reason(a: BlockPiece, b: BlockPiece, program: Program, lim, stops: Prog
     return ("crawl" if speed > 0 else "other"), speed
 
 
-def forced_bound(s: np.ndarray, cap: np.ndarray, reasons: list[tuple[float, str, float]],
-                 straight: list[tuple[float, float, float]]) -> float:
+def forced_speeds(s: np.ndarray, cap: np.ndarray, reasons: list[tuple[float, str, float]]) -> np.ndarray:
     """caps + A resting only where the program or a reversal forces it, every other stop at its
-    blend's speed, and the straight rest-to-rest runs at their jerk-limited time."""
+    blend's speed."""
     capped = cap.copy()
     for s_stop, reason, speed in reasons:
         i = min(int(np.searchsorted(s, s_stop)), len(s) - 1)
         capped[i] = 0.0 if reason in ("program", "reversal") else min(capped[i], speed)
     capped[0], capped[-1] = 0.0, 0.0
-    v = with_accel(s, capped)
+    return with_accel(s, capped)
+
+
+def forced_steps(s: np.ndarray, v: np.ndarray, straight: list[tuple[float, float, float]]) -> np.ndarray:
+    """Time of each step of s at the forced speeds v, each straight rest-to-rest run's steps
+    stretched to its jerk-limited time."""
     mean = np.maximum(0.5 * (v[1:] + v[:-1]), 1e-9)
     dt = np.diff(s) / mean
-    total = float(np.sum(dt))
     for s_from, s_to, jerk_s in straight:
         inside = (s[:-1] >= s_from - 1e-9) & (s[1:] <= s_to + 1e-9)
-        total += max(jerk_s - float(np.sum(dt[inside])), 0.0)
-    return total
+        accel_s = float(np.sum(dt[inside]))
+        if accel_s > 0.0 and jerk_s > accel_s:
+            dt[inside] *= jerk_s / accel_s
+    return dt
+
+
+def forced_bound(s: np.ndarray, cap: np.ndarray, reasons: list[tuple[float, str, float]],
+                 straight: list[tuple[float, float, float]]) -> float:
+    """caps + A resting only where the program or a reversal forces it, every other stop at its
+    blend's speed, and the straight rest-to-rest runs at their jerk-limited time."""
+    return float(np.sum(forced_steps(s, forced_speeds(s, cap, reasons), straight)))
 
 
 def reason_counts(reasons: list[tuple[float, str, float]]) -> str:
@@ -166,7 +184,13 @@ def reason_counts(reasons: list[tuple[float, str, float]]) -> str:
 
 def caps(program: Program) -> tuple[np.ndarray, np.ndarray, float]:
     """(s, speed cap at s, feeds-alone time) along the planned path."""
-    s_all, cap_all, feeds_s, s0 = [], [], 0.0, 0.0
+    s, cap, feeds_s, _ = caps_and_blocks(program)
+    return s, cap, feeds_s
+
+
+def caps_and_blocks(program: Program) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """caps with the block of every sample (a blend's: its outgoing block's)."""
+    s_all, cap_all, block_all, feeds_s, s0 = [], [], [], 0.0, 0.0
     for piece in planned_pieces(program, limits(JERK, 0.01)):
         curve = piece.curve
         length = float(curve.arc_length(piece.u_end) - curve.arc_length(piece.u_start))
@@ -182,9 +206,10 @@ def caps(program: Program) -> tuple[np.ndarray, np.ndarray, float]:
                                                      np.cbrt(JERK / np.maximum(rate + kappa**2, 1e-12))))
         s_all.append(s0 + s)
         cap_all.append(cap)
+        block_all.append(np.full(len(s), piece.block))
         feeds_s += length / piece.feed_mm_s
         s0 += float(s[-1])
-    return np.concatenate(s_all), np.concatenate(cap_all), feeds_s
+    return np.concatenate(s_all), np.concatenate(cap_all), feeds_s, np.concatenate(block_all)
 
 
 def time_s(s: np.ndarray, v: np.ndarray) -> float:
@@ -231,10 +256,200 @@ def row(name: str, program: Program) -> str:
     return line
 
 
+JERK_CHOICES = np.array([1.0, 0.5, 0.0, -0.5, -1.0])  # x J: the greedy profile's candidate jerks, best first
+CRAWL_MM_S = 0.5  # a forced rest passed at this speed by the greedy profile (it cannot stop and start on a point)
+
+
+class CapRange:
+    """Least cap over the samples of s between two arc lengths (a sparse table of minima)."""
+
+    def __init__(self, s: np.ndarray, cap: np.ndarray) -> None:
+        self.s = s
+        self.table = min_table(cap, int(np.log2(len(cap))) + 2)
+
+    def between(self, a_mm: np.ndarray, b_mm: np.ndarray) -> np.ndarray:
+        lo = np.clip(np.searchsorted(self.s, np.minimum(a_mm, b_mm), side="right") - 1, 0, len(self.s) - 1)
+        hi = np.clip(np.searchsorted(self.s, np.maximum(a_mm, b_mm), side="left"), lo, len(self.s) - 1)
+        level = floor_log2(hi - lo + 1)
+        return np.minimum(self.table[level, lo], self.table[level, hi - (1 << level) + 1])
+
+
+def step(s: np.ndarray, v: np.ndarray, a: np.ndarray, jerk: np.ndarray, dt: float) -> tuple[np.ndarray, ...]:
+    """One cycle of constant jerk (a_t clipped to +-A, v not below 0): (s, v, a) after it."""
+    a1 = np.clip(a + jerk * dt, -ACCEL, ACCEL)
+    v1 = np.maximum(v + 0.5 * (a + a1) * dt, 0.0)
+    return s + 0.5 * (v + v1) * dt, v1, a1
+
+
+def brakes_within(caps: CapRange, s: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
+    """Whether the hardest jerk-limited braking to rest from each state (jerk -J to -A, then +J
+    so that a_t reaches 0 as v does) stays under the caps: the exact test that some admissible
+    continuation exists (it is the lowest v(s) any continuation can have)."""
+    ok = np.ones(len(s), dtype=bool)
+    for _ in range(int(2.0 * (FEED_LIMIT_MM_S / ACCEL + ACCEL / JERK) / dt) + 2):
+        moving = v > 0.0
+        if not moving.any():
+            break
+        release = (a < 0.0) & (a * a / (2.0 * JERK) >= v)
+        s1, v1, a1 = step(s, v, a, np.where(release, JERK, -JERK), dt)
+        ok &= ~moving | (np.maximum(v, v1) <= caps.between(s, s1) + 1e-9)
+        s, v, a = s1, np.where(moving, v1, 0.0), np.where(moving & (v1 > 0.0), a1, 0.0)
+    return ok
+
+
+def greedy_jerk_profile(s: np.ndarray, cap: np.ndarray, dt: float = 1e-3) -> np.ndarray:
+    """Arc length every cycle of a feasible jerk-limited profile under the caps (|a_t| <= A,
+    |j_t| <= J, v <= cap: the tangential model of the bounds, the path's own jerk at constant
+    speed in the caps): each cycle the largest jerk of JERK_CHOICES whose state can still brake
+    within the caps (brakes_within). An upper bound on the least time of that model, so the
+    least time lies between the forced bound and this."""
+    caps = CapRange(s, np.maximum(cap, CRAWL_MM_S))
+    jerks = JERK_CHOICES * JERK
+    pos, v, a, out = 0.0, 0.0, 0.0, [0.0]
+    while pos < s[-1] - 1e-6:
+        s1, v1, a1 = step(np.full(len(jerks), pos), np.full(len(jerks), v), np.full(len(jerks), a), jerks, dt)
+        ok = (np.maximum(v, v1) <= caps.between(np.full(len(jerks), pos), s1) + 1e-9) & brakes_within(caps, s1, v1, a1, dt)
+        k = int(np.argmax(ok)) if ok.any() else len(jerks) - 1
+        pos, v, a = float(s1[k]), float(v1[k]), float(a1[k])
+        out.append(min(pos, float(s[-1])))
+    return np.array(out)
+
+
+CLASSES = ("cruise", "dip", "stop", "rapid")
+
+
+def ramp_up(v0_mm_s: float, feed_mm_s: float, step_s: float = 1e-4) -> tuple[np.ndarray, np.ndarray]:
+    """(t, s) of the fastest jerk-limited ramp from v0 at a_t = 0 to F (a_t back at 0 there):
+    jerk J up to A (or to sqrt(dv J) when dv < A^2 / J), A held, jerk -J down."""
+    dv = max(feed_mm_s - v0_mm_s, 0.0)
+    rise = min(ACCEL / JERK, np.sqrt(dv / JERK))
+    hold = max(dv / ACCEL - ACCEL / JERK, 0.0)
+    t = np.arange(0.0, 2.0 * rise + hold + step_s, step_s)
+    accel = JERK * np.minimum(np.minimum(t, rise), np.maximum(2.0 * rise + hold - t, 0.0))
+    v = v0_mm_s + np.concatenate([[0.0], np.cumsum(0.5 * (accel[1:] + accel[:-1]) * step_s)])
+    return t, np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * step_s)])
+
+
+def side_time_s(v0_mm_s: float, feed_mm_s: float, distance_mm: float) -> float:
+    """Least time over ``distance_mm`` from v0 at a_t = 0 under F, A and J (ramp_up, then F)."""
+    t, s = ramp_up(v0_mm_s, feed_mm_s)
+    if distance_mm <= s[-1]:
+        return float(np.interp(distance_mm, s, t))
+    return float(t[-1] + (distance_mm - s[-1]) / feed_mm_s)
+
+
+def stretch_jerk_s(s: np.ndarray, v: np.ndarray, steps: np.ndarray, feed_mm_s: float) -> float:
+    """A lower bound on the time over one slow stretch (its steps) with the tangential jerk
+    limited: the speed at the stretch's lowest point p is at most v_p (the forced speeds bound
+    every admissible profile), and the fastest profile under that one constraint has its minimum
+    at p, so a_t = 0 there (a_t is continuous with a jerk limit); from there each side is at
+    best ramp_up over its distance, whatever the stretch's ends do."""
+    lo, hi = int(steps[0]), int(steps[-1]) + 1
+    p = lo + int(np.argmin(v[lo:hi + 1]))
+    return (side_time_s(float(v[p]), feed_mm_s, float(s[p] - s[lo]))
+            + side_time_s(float(v[p]), feed_mm_s, float(s[hi] - s[p])))
+
+
+def step_classes(program: Program, s: np.ndarray, v: np.ndarray, blocks: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(class of every step of s, the stretch of slow steps it belongs to: -1 when cruising):
+    rapid (a rapid block's step), else cruise where the forced speeds reach the block's feed,
+    else a stretch below it that is a stop (it falls below 5 mm/s: a rest, a crawl corner, a
+    rapid/feed junction) or a dip."""
+    lim = limits(JERK, 0.01)
+    step_block = blocks[:-1]
+    rapid = np.array([b.kind == BlockKind.RAPID for b in program.blocks])[step_block]
+    feed = np.array([lim.feed_for(b.feed_mm_s) for b in program.blocks])[step_block]
+    low = np.minimum(v[1:], v[:-1])
+    slow = (low < 0.99 * feed) & ~rapid
+    first = slow & ~np.concatenate([[False], slow[:-1]])
+    stretch = np.where(slow, np.cumsum(first) - 1, -1)
+    lowest = np.full(int(np.count_nonzero(first)), np.inf)
+    np.minimum.at(lowest, stretch[slow], low[slow])
+    cls = np.where(rapid, 3, np.where(slow, np.where(lowest[np.maximum(stretch, 0)] < 5.0, 2, 1), 0))
+    return cls, stretch
+
+
+def plan_steps(trajectory, s: np.ndarray) -> np.ndarray:
+    """The plan's time over each step of s (its set-points' travel scaled to the path's length)."""
+    step = np.linalg.norm(np.diff(trajectory.position_mm, axis=0), axis=1)
+    travelled = np.concatenate([[0.0], np.cumsum(step)]) * s[-1] / max(float(np.sum(step)), 1e-300)
+    return time_steps(travelled, trajectory.period_s, s)
+
+
+def time_steps(travelled_mm: np.ndarray, period_s: float, s: np.ndarray) -> np.ndarray:
+    """Time over each step of s of a motion at ``travelled_mm`` every ``period_s``."""
+    t = np.arange(len(travelled_mm)) * period_s
+    moving = np.concatenate([[True], np.diff(travelled_mm) > 0.0])
+    return np.diff(np.interp(s, travelled_mm[moving], t[moving]))
+
+
+def breakdown(name: str, program: Program) -> list[str]:
+    """Where the plan's time goes against the forced bound, step class by step class."""
+    lim = limits(JERK, 0.01)
+    trajectory = plan_lookahead(program, lim)
+    s, cap, _, blocks = caps_and_blocks(program)
+    reasons, straight = stop_reasons(program)
+    v = forced_speeds(s, cap, reasons)
+    bound_dt = forced_steps(s, v, straight)
+    plan_dt = plan_steps(trajectory, s)
+    greedy_dt = time_steps(greedy_jerk_profile(s, v), 1e-3, s)
+    cls, stretch = step_classes(program, s, v, blocks)
+    feed = np.array([lim.feed_for(b.feed_mm_s) for b in program.blocks])[blocks[:-1]]
+    jerk_dt = bound_dt.copy()  # bound_dt with every slow stretch stretched to its stretch_jerk_s
+    for i in range(int(stretch.max(initial=-1)) + 1):
+        steps = np.flatnonzero(stretch == i)
+        accel_s = float(np.sum(bound_dt[steps]))
+        jerk_s = stretch_jerk_s(s, v, steps, float(feed[steps].max()))
+        if jerk_s > accel_s > 0.0:
+            jerk_dt[steps] *= jerk_s / accel_s
+    masks = [cls == k for k in range(len(CLASSES))] + [np.ones(len(cls), dtype=bool)]
+    rows = []
+    for label, mask in zip(CLASSES + ("all",), masks):
+        count = len(np.unique(stretch[mask])) if label in ("dip", "stop") else ""
+        bound, jerk, greedy, plan = (float(np.sum(dt[mask])) for dt in (bound_dt, jerk_dt, greedy_dt, plan_dt))
+        rows.append(f"| {name} | {label} | {count} | {float(np.sum(np.diff(s)[mask])):.1f} mm | {bound:.2f} s | "
+                    f"{jerk:.2f} s | {greedy:.2f} s | {plan:.2f} s | {plan - bound:+.2f} s | {plan - greedy:+.2f} s |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+BREAKDOWN = """Where each plan's time goes (J = 50000), step by step of s along the planned path, each step
+classed by the forced bound's speeds there: `rapid` (a rapid block), `cruise` (the forced
+speeds at the block's feed), else a stretch below the feed that is a `stop` (it falls below
+5 mm/s: a rest, a crawl corner, a rapid/feed junction) or a `dip` (a loop or tight curve). The
+plan's time over a step: its set-points' travel mapped onto s. Columns:
+- forced: the lower bound of the table above (A only on the tangent; J only in the caps, the
+  path's jerk at constant speed, and on straight rest-to-rest runs);
+- + J at the lowest points: each slow stretch at least its stretch_jerk_s (the speed at its
+  lowest point is at most the forced speed there, and a profile bounded only there has a_t = 0
+  at that point, so each side is at best a jerk-limited ramp to the feed): still a lower bound;
+- tangential J profile: greedy_jerk_profile, a feasible profile with |a_t| <= A, |j_t| <= J
+  under the same caps (every 1 ms the largest jerk of +-J, +-J/2, 0 that can still brake to rest
+  within the caps): an upper bound on the least time of that tangential model. It leaves out
+  the path's normal jerk 3 |c| v a_t + c'_n v^3, which the plan must keep within J: measured
+  on the braid's s = 755-800 mm through the path it is above J on 45 % of its cycles (7 of
+  809 above 1.5 J, up to 7 J where its discrete jerks nearly stop it in a loop), so it is not
+  a plan the machine may run, only how low the tangential model alone goes. Its 1 ms steps of
+  five jerks also lose time near rest (it is slower than our plan on the rests and rapids of
+  the braid and the V-carve): only its `dip` rows say much.
+
+| program | class | stretches | length | forced | + J at the lowest points | tangential J profile | our plan | plan - forced | plan - tangential J |
+|---|---|---|---|---|---|---|---|---|---|"""
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
+    parser.add_argument("--breakdown", action="store_true",
+                        help="where each plan's time goes by class of step (section bounds_breakdown; minutes)")
     args = parser.parse_args()
+    if args.breakdown:
+        print(BREAKDOWN)
+        lines = [line for name, program in programs().items() for line in breakdown(name, program)]
+        if args.write:
+            write_section("bounds_breakdown", "Jerk-limited bounds: where the plan's time goes",
+                          BREAKDOWN + "\n" + "\n".join(lines), "python benchmarks/bench_bounds.py --breakdown --write")
+        return
     header = ("| program | LinuxCNC 2.9 (no J) | feeds alone | caps | caps + A, the plan's stops | stops: why | "
               "forced (lower bound with J) | our plan, J = 50000 | speed dips | dips x A/J |\n"
               "|---|---|---|---|---|---|---|---|---|---|")

@@ -109,8 +109,9 @@ def test_wangs_curve_at_1_ms_with_a_jerk_limit_needs_no_repair_round(wang_progra
 
 def test_widened_dips_spread_each_limit_over_its_bands_half_width():
     """widen_dips against the definition: every inner limit v_j spreads over
-    +-DIP_WIDTH_FACTOR L_j tau, L_j the level of its band (the first level >= v_j)."""
-    from nurbsmotion.planning.lookahead.speed_limits import DIP_WIDTH_FACTOR, dip_levels, widen_dips
+    +-DIP_HALF_TIME L_j tau, L_j the level of its band (the first level >= v_j), out to the
+    grid points at or beyond those ends."""
+    from nurbsmotion.planning.lookahead.speed_limits import DIP_HALF_TIME, dip_levels, widen_dips
 
     rng = np.random.default_rng(5)
     for _ in range(60):
@@ -125,11 +126,31 @@ def test_widened_dips_spread_each_limit_over_its_bands_half_width():
         if np.isfinite(inner).any():
             levels = dip_levels(inner)
             for j in np.flatnonzero(np.isfinite(inner)):
-                level = levels[min(np.searchsorted(levels, inner[j]), len(levels) - 1)]
-                near = np.abs(s - s[j]) <= DIP_WIDTH_FACTOR * level * tau
+                half = DIP_HALF_TIME * levels[min(np.searchsorted(levels, inner[j]), len(levels) - 1)] * tau
+                before, after = s <= s[j] - half, s >= s[j] + half
+                lo = np.flatnonzero(before)[-1] if before.any() else 0
+                hi = np.flatnonzero(after)[0] if after.any() else n - 1
+                near = (np.arange(n) >= lo) & (np.arange(n) <= hi)
                 near[0] = near[-1] = False
                 expected[near] = np.minimum(expected[near], inner[j])
         np.testing.assert_array_equal(widen_dips(s, v, tau), expected)
+
+
+def test_a_short_slower_block_between_fast_ones_is_never_passed_above_its_feed():
+    """With the jerk filter the set-points' speed is the raw speed averaged over tau: a dip of
+    the feed widened too little (main had +-0.75 v tau inside the grid points; the V-carve
+    passed 8 of its feed moves up to 14 % above their feed) lets the average exceed it."""
+    from nurbsmotion.planning import PlanLimits
+    from nurbsmotion.program import parse_gcode
+
+    program = parse_gcode("G21 G90 G64 P0.01\nG1 X30 F6000\nG1 X30.4 F150\nG1 X60 F6000\n", "slow.nc")
+    limits = PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0,
+                        default_feed_mm_s=100.0, rapid_feed_mm_s=200.0, path_tolerance_mm=0.01)
+    trajectory = plan_lookahead(program, limits)
+    speed = np.linalg.norm(np.diff(trajectory.position_mm, axis=0), axis=1) / trajectory.period_s
+    slow = trajectory.block[1:] == 1
+    assert slow.any()
+    assert speed[slow].max() <= 2.5 * (1.0 + 1e-6)
 
 
 def test_last_below_and_flat_top_starts_match_a_walk():

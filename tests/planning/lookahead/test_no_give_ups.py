@@ -56,11 +56,13 @@ def test_repairs_that_always_fail_fall_back_to_slower_verified_plans(monkeypatch
     """No repair round at all: every window that violates falls back (stops, exact stops
     after a block, lower feeds) and the plan still holds every limit on every cycle. (Cases
     whose first round violates somewhere: mixed.nc at T = 1 ms with J no longer does, its first
-    round holds every limit; the near-cusp zigzag at T = 4 ms with J takes its place.)"""
+    round holds every limit; the near-cusp zigzag at T = 4 ms with J takes its place. Wang's
+    curve at T = 1 ms with J no longer does either since dips are widened by +-v tau / 2, not
+    0.75 v tau: at T = 2 ms it still does.)"""
     monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)
     cases = [("sharp_corners.yaml", WANG_LIMITS),
              ("mixed.nc", replace(WANG_LIMITS, max_jerk_mm_s3=None, period_s=0.001)),
-             ("wang_table1.nc", replace(WANG_LIMITS, period_s=0.001))]
+             ("wang_table1.nc", replace(WANG_LIMITS, period_s=0.002))]
     for name, limits in cases:
         program = read_program(EXAMPLES / name)
         trajectory = plan_lookahead(program, limits)
@@ -82,13 +84,14 @@ def test_the_resume_after_a_fallback_stop_continues_the_plan(monkeypatch):
 
 
 def test_a_plan_that_cannot_exist_names_the_program_line(monkeypatch):
-    """No repairs and no lower feed allowed: Wang's curve with a jerk limit violates in its
-    first round (the path's own jerk terms), and the error names the G-code line."""
+    """No repairs and no lower feed allowed: Wang's curve with a jerk limit at T = 2 ms violates
+    in its first round (the path's own jerk terms; at 4 ms no longer since dips are widened by
+    +-v tau / 2), and the error names the G-code line."""
     monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)
     monkeypatch.setattr(lookahead_planner, "MAX_FEED_HALVINGS", 0)
     program = read_program(WANG_NC)
     with pytest.raises(PlanningError) as err:
-        plan_lookahead(program, WANG_LIMITS)
+        plan_lookahead(program, replace(WANG_LIMITS, period_s=0.002))
     line = program.blocks[err.value.block].source.line
     assert err.value.where == f"{WANG_NC}:{line}" and "lookahead cannot hold" in err.value.message
 
@@ -99,7 +102,7 @@ def test_plan_json_writes_an_error_object_when_planning_fails(monkeypatch, tmp_p
     path = tmp_path / "wang.nc"
     path.write_text(Path(WANG_NC).read_text())
     trace = tmp_path / "out.csv"
-    assert main(["plan", str(path), "--period-ms", "4", "--max-jerk-mm-s3", "50000",
+    assert main(["plan", str(path), "--period-ms", "2", "--max-jerk-mm-s3", "50000",
                  "--trace", str(trace), "--json"]) == 2
     out = capsys.readouterr()
     error = json.loads(out.out)["error"]
@@ -186,7 +189,8 @@ def test_a_repair_that_does_not_lower_the_worst_violation_gives_up_early(monkeyp
     monkeypatch.setattr(lookahead_planner, "check", counting_check)
     monkeypatch.setattr(lookahead_planner, "plan_window", counting_window)
     program = read_program(WANG_NC)
-    trajectory = plan_lookahead(program, WANG_LIMITS)
+    limits = replace(WANG_LIMITS, period_s=0.002)  # violates in its first round
+    trajectory = plan_lookahead(program, limits)
     assert trajectory.notes["fallback_stops"] + trajectory.notes["fallback_slower_blocks"] >= 1
     assert len(checks) <= len(windows) * (lookahead_planner.MAX_STALLED_REPAIRS + 1)
-    assert_within_limits(measure_planned(trajectory, program, WANG_LIMITS), WANG_LIMITS)
+    assert_within_limits(measure_planned(trajectory, program, limits), limits)

@@ -345,8 +345,6 @@ def static_speed_limit(grid: PathGrid, caps: Caps) -> NDArray[np.float64]:
     return np.minimum(v, curvature_jump_speed_limit(grid, caps))
 
 
-DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
-DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
 
 
 def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
@@ -373,7 +371,8 @@ def range_min_update(n: int, lo: NDArray[np.intp], hi: NDArray[np.intp],
 
 NORMAL_SHARE = 0.99  # of A the normal acceleration may take at a speed cap (max_speed_squared)
 DIP_LEVEL_RATIO = 1.5  # speed levels of widen_dips
-DIP_WIDTH_FACTOR = 0.75  # half-width of a widened dip: this x (speed x averaging time)
+DIP_HALF_TIME = 0.5  # a widened dip spans +-this x (its level x averaging time), out to grid points
+DIP_WIDTH_FACTOR = 0.75  # a junction passed moving must keep a plateau of +-this x v tau >= a grid interval (runs.py)
 
 
 def dip_levels(inner: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -390,13 +389,19 @@ def dip_levels(inner: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
-    """Spread every low speed limit v_j over +-DIP_WIDTH_FACTOR v_j tau around its point, so a
-    moving average over tau seconds only ever sees the dip's own speed while it passes the dip.
+    """Spread every low speed limit v_j over +-DIP_HALF_TIME v_j tau around its point, out to the
+    grid points at or beyond those ends (the raw profile only holds a plateau on grid points), so
+    a moving average over tau seconds only ever sees the dip's own speed while it passes the
+    dip: when the average s_f(t) = p, the raw positions of its window [t - tau, t] lie within
+    +-v_j tau / 2 of p if the raw speed is at most v_j there (a window reaching further on one
+    side, at a higher speed, would put its mean on that side), so the set-point's speed
+    (s(t) - s(t - tau)) / tau <= v_j. Was +-0.75 v_j tau inside the grid points: the braid's
+    loops held ~1.5x as long (issue 24).
 
     Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels, dip_levels): the limits in
-    a band spread over a fixed +-L tau, at most DIP_LEVEL_RATIO x their own width (on the safe
-    side); all bands at once by range_min_update. The two ends (the run's start and end states)
-    are not dips and do not spread."""
+    a band spread over a fixed +-L tau / 2, at most DIP_LEVEL_RATIO x their own width (on the
+    safe side); all bands at once by range_min_update. The two ends (the run's start and end
+    states) are not dips and do not spread."""
     inner = v.copy()
     inner[0] = inner[-1] = np.inf
     members = np.flatnonzero(np.isfinite(inner))
@@ -404,9 +409,9 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
         return v
     levels = dip_levels(inner)
     band_level = levels[np.minimum(np.searchsorted(levels, inner[members], side="left"), len(levels) - 1)]
-    half_width = DIP_WIDTH_FACTOR * band_level * averaging_s
-    lo = np.searchsorted(s, s[members] - half_width, side="left")
-    hi = np.searchsorted(s, s[members] + half_width, side="right") - 1
+    half_width = DIP_HALF_TIME * band_level * averaging_s
+    lo = np.maximum(np.searchsorted(s, s[members] - half_width, side="right") - 1, 0)
+    hi = np.minimum(np.searchsorted(s, s[members] + half_width, side="left"), len(s) - 1)
     out = np.minimum(v, range_min_update(len(s), lo, hi, inner[members]))
     out[0], out[-1] = v[0], v[-1]
     return out
