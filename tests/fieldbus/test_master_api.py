@@ -82,3 +82,18 @@ def test_no_warning_when_the_timer_threads_are_above(monkeypatch, caplog):
     with caplog.at_level("WARNING", logger="nurbsmotion.fieldbus.master"):
         Master(_config(), rt_priority=20)._warn_timer_threads_below()
     assert not caplog.records
+
+
+def test_a_status_without_percentiles_has_fresh_counters_and_the_quantiles_of_the_last_whole_read():
+    master = Master(_config())
+    stats = master._loop.stats()
+    for _ in range(100):
+        stats.add(20e-6, False)
+    whole = master.status().timing
+    for _ in range(300):
+        stats.add(900e-6, True)
+    fast = master.status(percentiles=False).timing
+    again = master.status().timing
+    assert (fast.cycles, fast.missed_cycles) == (again.cycles, again.missed_cycles) == (400, 300)
+    assert (fast.lateness_p50_s, fast.lateness_p99_s) == (whole.lateness_p50_s, whole.lateness_p99_s)
+    assert again.lateness_p50_s > whole.lateness_p99_s  # the whole read computed them anew

@@ -125,6 +125,7 @@ class Master:
         self._gc = GcQuiet(gc_mode)
         # the csv spindle's 0x60FF, sent with every SYNC after the axes' RPDOs (fieldbus.cyclic_velocity)
         self.cyclic_velocity = spindle_cyclic_velocity(config)
+        self._lateness_quantiles_s = (0.0, 0.0)  # p50, p99 of the last status read that computed them
         self._loop = CycleLoop(self._ctl, self._fb, self._history, self._supervisor, self._gc, enable_timeout_s,
                                self._late_threshold_s, self.cyclic_velocity,
                                lambda: send_quick_stop(self._conn.bus, self._frames.rpdos, self._ctl.sp))
@@ -321,8 +322,11 @@ class Master:
         self._loop.request(Request(Req.JOB, job))
         return job
 
-    def status(self) -> MasterStatus:
-        """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
+    def status(self, percentiles: bool = True) -> MasterStatus:
+        """A consistent-enough snapshot (lists copied) for the daemon; any thread.
+        ``percentiles`` False: the lateness p50 and p99 are those of the last read that
+        computed them (the two are most of a read's CPU: the status publisher's reads between
+        events take them from its whole reads, docs/web.md)."""
         writer = self._writer
         stats = self._loop.stats()
         fb, history = self._fb, self._history
@@ -336,8 +340,11 @@ class Master:
                 fe = history.sp[(fb.cycle[i] - 1) % history.size][i] - fb.pos[i]
             axes.append(AxisStatus(self._names[i], self._node_ids[i], state_name(sw), sw, fb.pos[i],
                                    sent[i], fe, fb.bad_tpdo[i], fb.emcy_count[i], fb.last_emcy[i]))
-        timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
-                            stats.percentile_s(0.99), stats.max_s, writer.send_errors if writer is not None else 0)
+        if percentiles:
+            self._lateness_quantiles_s = (stats.percentile_s(0.5), stats.percentile_s(0.99))
+        p50_s, p99_s = self._lateness_quantiles_s
+        timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, p50_s, p99_s, stats.max_s,
+                            writer.send_errors if writer is not None else 0)
         job = self._loop.job
         ctl_job = self._ctl.job
         pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
