@@ -300,9 +300,12 @@ class Running:
         self.daemon = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "daemon", "--config", str(self.config)],
                                        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         for _ in range(200):
-            if self.socket_path.exists():
+            if self.socket_path.exists() or self.daemon.poll() is not None:
                 break
             await asyncio.sleep(0.1)
+        if not self.socket_path.exists():  # e.g. a previous checkout's src without its eds/ beside it
+            raise RuntimeError(f"the daemon from {self.src} did not start (exit code {self.daemon.poll()}): "
+                               f"try it with PYTHONPATH={self.src} python -m nurbsmotion daemon --config {self.config}")
         self.gateway = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "web", "--config", str(self.config)],
                                         env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         async with aiohttp.ClientSession() as session:
@@ -404,7 +407,8 @@ def main() -> int:
     parser.add_argument("--preview-lines", type=int, default=100_000)
     parser.add_argument("--no-write", action="store_true")
     parser.add_argument("--previous-src", type=Path,
-                        help="src/ of a previous checkout: its daemon against this one's, round by round (printed only)")
+                        help="src/ of a previous checkout (with its eds/ beside it): its daemon against this one's, "
+                             "round by round (printed only)")
     args = parser.parse_args()
     body = asyncio.run(main_async(args))
     command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}"
