@@ -2,6 +2,7 @@
 processes (simulated drives in the daemon, T = 1 ms), WebSocket clients in this process.
 
     python benchmarks/bench_web.py --seconds 60 --rounds 2
+    python benchmarks/bench_web.py --seconds 20 --rounds 3 --previous-src /tmp/main/src  # before/after
 
 Figures (issue 22's benchmarks):
 - latency from a daemon event (its log record's time, ``logged_t``) to a WebSocket client's
@@ -59,6 +60,7 @@ web: {{listen: "127.0.0.1:{port}"}}
 """
 
 
+SRC = Path(__file__).resolve().parents[1] / "src"
 SETTLE_S = 6.0  # between rounds: longer than the gateway's web.fanout.LINGER_S
 
 
@@ -276,49 +278,97 @@ def preview_ms(page_url: str, lines: int) -> float | None:
     return ms
 
 
-async def main_async(args: argparse.Namespace) -> str:
-    folder = Path(tempfile.mkdtemp(prefix="nm-bench-web-"))
-    port = free_port()
-    config = folder / "machine.yaml"
-    socket_path = folder / "ctl.sock"
-    config.write_text(MACHINE.format(channel=f"bench-web-{uuid.uuid4().hex}", socket=socket_path,
-                                     data_dir=folder / "data", port=port))
-    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
-    daemon = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "daemon", "--config", str(config)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    gateway = None
-    try:
+class Running:
+    """The daemon and the gateway started from ``src`` (a fresh folder, machine file and
+    port), until ``stop``."""
+
+    def __init__(self, src: Path) -> None:
+        self.src = src
+        self.folder = Path(tempfile.mkdtemp(prefix="nm-bench-web-"))
+        self.port = free_port()
+        self.config = self.folder / "machine.yaml"
+        self.socket_path = self.folder / "ctl.sock"
+        self.config.write_text(MACHINE.format(channel=f"bench-web-{uuid.uuid4().hex}", socket=self.socket_path,
+                                              data_dir=self.folder / "data", port=self.port))
+        self.base = f"http://127.0.0.1:{self.port}"
+        self.ws_url = f"ws://127.0.0.1:{self.port}/api/v1/ws"
+        self.daemon: subprocess.Popen[bytes] | None = None
+        self.gateway: subprocess.Popen[bytes] | None = None
+
+    async def start(self) -> None:
+        env = dict(os.environ, PYTHONPATH=str(self.src))
+        self.daemon = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "daemon", "--config", str(self.config)],
+                                       env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         for _ in range(200):
-            if socket_path.exists():
+            if self.socket_path.exists() or self.daemon.poll() is not None:
                 break
             await asyncio.sleep(0.1)
-        gateway = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "web", "--config", str(config)], env=env,
-                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        base = f"http://127.0.0.1:{port}"
+        if not self.socket_path.exists():  # e.g. a previous checkout's src without its eds/ beside it
+            raise RuntimeError(f"the daemon from {self.src} did not start (exit code {self.daemon.poll()}): "
+                               f"try it with PYTHONPATH={self.src} python -m nurbsmotion daemon --config {self.config}")
+        self.gateway = subprocess.Popen([sys.executable, "-m", "nurbsmotion", "web", "--config", str(self.config)],
+                                        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         async with aiohttp.ClientSession() as session:
             for _ in range(200):
                 try:
-                    async with session.get(f"{base}/api/v1/status") as r:
+                    async with session.get(f"{self.base}/api/v1/status") as r:
                         if r.status == 200:
                             break
                 except aiohttp.ClientError:
                     pass
                 await asyncio.sleep(0.1)
-        ws_url = f"ws://127.0.0.1:{port}/api/v1/ws"
-        idle = await idle_cpu(ws_url, gateway.pid, args.idle_seconds)
-        rows = []
-        pids = {"gateway": gateway.pid, "daemon": daemon.pid}
-        for _ in range(args.rounds):
-            for n, kind in ((0, "WebSocket"), (args.clients, "WebSocket"), (args.clients, "direct")):
-                rows.append(await job_round(ws_url, str(socket_path), n, kind, args.seconds, pids))
-                print(rows[-1], flush=True)
-        rows.append(await job_round(ws_url, str(socket_path), 1, "WebSocket", min(args.seconds, 20.0), pids))
-        print(rows[-1], flush=True)
-        preview = await asyncio.to_thread(preview_ms, base + "/", args.preview_lines)
-    finally:
-        for proc in (gateway, daemon):
+
+    @property
+    def pids(self) -> dict[str, int]:
+        assert self.gateway is not None and self.daemon is not None
+        return {"gateway": self.gateway.pid, "daemon": self.daemon.pid}
+
+    def stop(self) -> None:
+        for proc in (self.gateway, self.daemon):
             if proc is not None:
                 stop_process(proc)
+
+
+async def ab_rounds(args: argparse.Namespace) -> list[dict[str, Any]]:
+    """Rounds of 0 and ``args.clients`` WebSocket clients, each on this checkout's daemon and
+    on the previous one's (``--previous-src``), alternating: both under the same load."""
+    rows = []
+    for _ in range(args.rounds):
+        for label, src in (("before", args.previous_src), ("after", SRC)):
+            running = Running(src)
+            try:
+                await running.start()
+                for n in (0, args.clients):
+                    row = await job_round(running.ws_url, str(running.socket_path), n, "WebSocket", args.seconds,
+                                          running.pids)
+                    rows.append({**row, "clients": f"{label}: {row['clients']}"})
+                    print(rows[-1], flush=True)
+            finally:
+                running.stop()
+    return rows
+
+
+async def main_async(args: argparse.Namespace) -> str:
+    if args.previous_src is not None:
+        rows = await ab_rounds(args)
+        idle, preview = None, None
+    else:
+        running = Running(SRC)
+        try:
+            await running.start()
+            idle = await idle_cpu(running.ws_url, running.pids["gateway"], args.idle_seconds)
+            rows = []
+            for _ in range(args.rounds):
+                for n, kind in ((0, "WebSocket"), (args.clients, "WebSocket"), (args.clients, "direct")):
+                    rows.append(await job_round(running.ws_url, str(running.socket_path), n, kind, args.seconds,
+                                                running.pids))
+                    print(rows[-1], flush=True)
+            rows.append(await job_round(running.ws_url, str(running.socket_path), 1, "WebSocket",
+                                        min(args.seconds, 20.0), running.pids))
+            print(rows[-1], flush=True)
+            preview = await asyncio.to_thread(preview_ms, running.base + "/", args.preview_lines)
+        finally:
+            running.stop()
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
     table = ["| clients | job outcome | cycles | late (> 10 % T) | late per 1000 cycles | missed (> T) | "
              "events timed | event -> client median ms | p99 ms | of which in the daemon: median ms | p99 ms | "
@@ -330,6 +380,10 @@ async def main_async(args: argparse.Namespace) -> str:
                      f"{r['daemon_median_ms']:.1f} | {r['daemon_p99_ms']:.1f} | "
                      f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
                      f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
+    if idle is None:
+        return (f"This checkout's daemon and gateway against the previous one's (`--previous-src`), restarted "
+                f"for each: {args.seconds:g} s jobs with 0 and {args.clients} WebSocket clients, before and after "
+                f"alternating round by round. Load average at the end: {load}.\n\n" + "\n".join(table) + "\n")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
     return (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
             f"clients in the benchmark's process; {args.seconds:g} s jobs with 0 clients, {args.clients} WebSocket "
@@ -352,10 +406,13 @@ def main() -> int:
     parser.add_argument("--idle-seconds", type=float, default=30.0)
     parser.add_argument("--preview-lines", type=int, default=100_000)
     parser.add_argument("--no-write", action="store_true")
+    parser.add_argument("--previous-src", type=Path,
+                        help="src/ of a previous checkout (with its eds/ beside it): its daemon against this one's, "
+                             "round by round (printed only)")
     args = parser.parse_args()
     body = asyncio.run(main_async(args))
     command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}"
-    if args.no_write:
+    if args.no_write or args.previous_src is not None:
         print(body)
     else:
         write_section("web", "Web gateway: event latency, cycles with clients, CPU, preview", body, command)

@@ -6,6 +6,7 @@ import pytest
 from nurbsmotion.config import parse_config
 from nurbsmotion.errors import FieldbusError, InputError
 from nurbsmotion.fieldbus import Master
+from nurbsmotion.fieldbus.master import LATENESS_QUANTILES_EVERY_CYCLES
 
 
 def _config(period_ms: float = 4, n_axes: int = 2):
@@ -82,3 +83,23 @@ def test_no_warning_when_the_timer_threads_are_above(monkeypatch, caplog):
     with caplog.at_level("WARNING", logger="nurbsmotion.fieldbus.master"):
         Master(_config(), rt_priority=20)._warn_timer_threads_below()
     assert not caplog.records
+
+
+def test_the_lateness_quantiles_are_computed_anew_by_whole_reads_only_and_at_most_every_so_many_cycles():
+    master = Master(_config())
+    stats = master._loop.stats()
+    for _ in range(100):
+        stats.add(20e-6, False)
+    whole = master.status().timing
+    for _ in range(LATENESS_QUANTILES_EVERY_CYCLES + 100):
+        stats.add(900e-6, True)
+    fast = master.status(percentiles=False).timing
+    again = master.status().timing
+    assert (fast.cycles, fast.missed_cycles) == (again.cycles, again.missed_cycles) == (700, 600)
+    assert (fast.lateness_p50_s, fast.lateness_p99_s) == (whole.lateness_p50_s, whole.lateness_p99_s)
+    assert again.lateness_p50_s > whole.lateness_p99_s  # enough cycles counted: computed anew
+    for _ in range(LATENESS_QUANTILES_EVERY_CYCLES - 100):
+        stats.add(5e-3, True)  # a third of the cycles: they would move the p99
+    soon = master.status().timing
+    assert soon.cycles == 1100 and (soon.lateness_p50_s, soon.lateness_p99_s) == (again.lateness_p50_s,
+                                                                                     again.lateness_p99_s)

@@ -104,7 +104,7 @@ class FakeLink:
                                0, 0)
         job.done.set()
 
-    def status(self) -> MasterStatus:
+    def status(self, percentiles: bool = True) -> MasterStatus:
         job = self.job
         axes = tuple(AxisStatus(n, i + 1, "OPERATION ENABLED", 0x1237, self.held[i], self.held[i], 0, 0, 0, None)
                      for i, n in enumerate(self.names))

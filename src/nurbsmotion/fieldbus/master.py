@@ -61,6 +61,10 @@ from nurbsmotion.runtime import GC_MODES, GcQuiet, timer_threads_below
 log = logging.getLogger(__name__)
 
 FeedbackSink = Callable[[int, int, int, int, float], None]  # see Master.record_feedback
+# a status read computes the lateness p50 and p99 anew at most once in this many cycles (0.5 s
+# at T = 1 ms: the status publisher's whole reads follow every event; the two percentiles were
+# most of a read's CPU, and a histogram of the whole run hardly moves in 500 cycles)
+LATENESS_QUANTILES_EVERY_CYCLES = 500
 
 
 class Master:
@@ -125,6 +129,8 @@ class Master:
         self._gc = GcQuiet(gc_mode)
         # the csv spindle's 0x60FF, sent with every SYNC after the axes' RPDOs (fieldbus.cyclic_velocity)
         self.cyclic_velocity = spindle_cyclic_velocity(config)
+        self._lateness_quantiles_s = (0.0, 0.0)  # p50, p99 of the last status read that computed them
+        self._lateness_quantiles_count = -LATENESS_QUANTILES_EVERY_CYCLES  # the cycles counted then
         self._loop = CycleLoop(self._ctl, self._fb, self._history, self._supervisor, self._gc, enable_timeout_s,
                                self._late_threshold_s, self.cyclic_velocity,
                                lambda: send_quick_stop(self._conn.bus, self._frames.rpdos, self._ctl.sp))
@@ -321,8 +327,12 @@ class Master:
         self._loop.request(Request(Req.JOB, job))
         return job
 
-    def status(self) -> MasterStatus:
-        """A consistent-enough snapshot (lists copied) for the daemon; any thread."""
+    def status(self, percentiles: bool = True) -> MasterStatus:
+        """A consistent-enough snapshot (lists copied) for the daemon; any thread.
+        The lateness p50 and p99 are computed anew when LATENESS_QUANTILES_EVERY_CYCLES cycles
+        were counted since the last read that computed them (else they are that read's);
+        ``percentiles`` False: never (the two are most of a read's CPU: the status publisher's
+        reads between events take them from its whole reads, docs/web.md)."""
         writer = self._writer
         stats = self._loop.stats()
         fb, history = self._fb, self._history
@@ -336,8 +346,12 @@ class Master:
                 fe = history.sp[(fb.cycle[i] - 1) % history.size][i] - fb.pos[i]
             axes.append(AxisStatus(self._names[i], self._node_ids[i], state_name(sw), sw, fb.pos[i],
                                    sent[i], fe, fb.bad_tpdo[i], fb.emcy_count[i], fb.last_emcy[i]))
-        timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, stats.percentile_s(0.5),
-                            stats.percentile_s(0.99), stats.max_s, writer.send_errors if writer is not None else 0)
+        if percentiles and not 0 <= stats.count - self._lateness_quantiles_count < LATENESS_QUANTILES_EVERY_CYCLES:
+            self._lateness_quantiles_s = (stats.percentile_s(0.5), stats.percentile_s(0.99))
+            self._lateness_quantiles_count = stats.count  # a new writer's stats count from 0 again
+        p50_s, p99_s = self._lateness_quantiles_s
+        timing = CycleStats(stats.count, stats.late, stats.missed, stats.late_threshold_s, p50_s, p99_s, stats.max_s,
+                            writer.send_errors if writer is not None else 0)
         job = self._loop.job
         ctl_job = self._ctl.job
         pause = ctl_job.playback.pause_i if ctl_job is not None and self._ctl.phase is Phase.HELD \
