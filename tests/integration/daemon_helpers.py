@@ -166,8 +166,17 @@ class DaemonProcess:
         return wait_for(ended, timeout_s, f"the end of job {job_id}", poll_s=0.05)
 
     def wait_progress(self, fraction: float, timeout_s: float = 20.0) -> dict[str, Any]:
+        """The status once the running job has sent ``fraction`` of its set-points; a job seen
+        running that ends before it fails at once, naming the machine's faults (not a time-out)."""
+        seen_job = False
+
         def reached() -> dict[str, Any] | None:
+            nonlocal seen_job
             status = self.request("status")
+            if status["job"] is None and seen_job:
+                raise AssertionError(f"the job ended before {fraction:.0%}: state {status['state']}, "
+                                     f"faults {status.get('faults')}")
+            seen_job = seen_job or status["job"] is not None
             return status if job_reached(status, fraction) else None
         return wait_for(reached, timeout_s, f"{fraction:.0%} of the job", poll_s=0.01)
 
