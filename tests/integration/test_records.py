@@ -42,7 +42,8 @@ def _events(log: str) -> list[str]:
 
 def test_the_daemon_logs_ready_jobs_rejections_and_overrides_at_its_default_level(quiet_daemon):
     daemon = quiet_daemon
-    assert any(e.startswith("daemon_ready ") for e in _events(daemon.log()))
+    # the socket answers a moment before the line is written (the start-up's last step)
+    wait_for(lambda: any(e.startswith("daemon_ready ") for e in _events(daemon.log())), 5.0, "daemon_ready")
     rejected = daemon.request("submit", name="bad.nc", program="G01 Q7\n")
     assert not rejected["ok"]
     daemon.request("override", percent=80)

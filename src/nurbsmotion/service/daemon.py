@@ -144,13 +144,15 @@ class Daemon:
         self.hub = StatusHub(self._status, read_fast=self._fast_status, realtime_priority=STATUS_PUBLISHER_PRIORITY)
         self._detach_event_log = attach_event_log(self.hub)
         self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
+        # the library pruned and the queue runner going before the socket answers: a request never
+        # meets a half-started daemon, and the first answer comes with daemon_ready logged
+        self.programs.start()
         self.server = ControlServer(self.config.control.socket, self._handle, self.config.control.group, hub=self.hub)
         try:
             self.server.start()
         except BaseException:
             self._stop_motion()
             raise
-        self.programs.start()
         sd_notify("READY=1")
         log.info(kv("daemon_ready", socket=self.config.control.socket, simulate=self.config.simulate))
 
