@@ -13,6 +13,23 @@ from nurbsmotion.errors import InputError
 CHUNK_BYTES = 1 << 20
 
 
+class Utf8Check:
+    """UTF-8 check of a file read in chunks, without keeping its text; the error names the
+    byte (counted over the chunks fed) as read_text_file's does."""
+
+    def __init__(self) -> None:
+        self._decoder = codecs.getincrementaldecoder("utf-8")()
+        self._offset = 0
+
+    def feed(self, chunk: bytes, where: str, final: bool = False) -> None:
+        """InputError ``where: not a UTF-8 text file (...)`` when ``chunk`` breaks the encoding."""
+        try:
+            self._decoder.decode(chunk, final=final)
+        except UnicodeDecodeError as err:
+            raise InputError(where, f"not a UTF-8 text file ({err.reason} at byte {self._offset + err.start})") from None
+        self._offset += len(chunk)
+
+
 def read_text_file(path: str | Path) -> str:
     """The file's text; InputError ``path: not a UTF-8 text file (...)`` or ``cannot read: ...``."""
     try:
@@ -31,15 +48,14 @@ def open_text_file(path: str | Path) -> BinaryIO:
         src = open(path, "rb")
     except OSError as err:
         raise InputError(str(path), f"cannot read: {err.strerror or err}") from None
+    check = Utf8Check()
     try:
-        decoder, offset = codecs.getincrementaldecoder("utf-8")(), 0
         for chunk in iter(lambda: src.read(CHUNK_BYTES), b""):
-            decoder.decode(chunk)
-            offset += len(chunk)
-        decoder.decode(b"", final=True)
-    except UnicodeDecodeError as err:
+            check.feed(chunk, str(path))
+        check.feed(b"", str(path), final=True)
+    except InputError:
         src.close()
-        raise InputError(str(path), f"not a UTF-8 text file ({err.reason} at byte {offset + err.start})") from None
+        raise
     except OSError as err:
         src.close()
         raise InputError(str(path), f"cannot read: {err.strerror or err}") from None

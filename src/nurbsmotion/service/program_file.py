@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 from nurbsmotion.errors import InputError
+from nurbsmotion.text_files import Utf8Check
 
 CHUNK_BYTES = 1 << 20
 BOM = codecs.BOM_UTF8
@@ -89,7 +90,7 @@ def spool(fd: int, data_dir: str | Path, where: str, max_bytes: int, limit: str 
         raise InputError(where, "the descriptor sent is not a regular file")
     path = spool_path(data_dir)
     digest, size, offset = hashlib.sha256(), 0, 0
-    decoder = codecs.getincrementaldecoder("utf-8")()
+    check = Utf8Check()
     try:
         with open(path, "xb") as out:
             first = True
@@ -102,11 +103,7 @@ def spool(fd: int, data_dir: str | Path, where: str, max_bytes: int, limit: str 
                 size += len(chunk)
                 if size > max_bytes:
                     raise InputError(where, f"larger than the {max_bytes / (1024 * 1024):g} MB limit ({limit})")
-                try:
-                    decoder.decode(chunk, final=not chunk)
-                except UnicodeDecodeError as err:
-                    raise InputError(where, f"not a UTF-8 text file ({err.reason} at byte "
-                                            f"{size - len(chunk) + err.start})") from None
+                check.feed(chunk, where, final=not chunk)
                 if not chunk:
                     break
                 digest.update(chunk)
