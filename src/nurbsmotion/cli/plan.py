@@ -14,6 +14,7 @@ import sys
 from dataclasses import dataclass
 from typing import Callable
 
+from nurbsmotion.cli._forked import cores_available, drained, forked_iteration
 from nurbsmotion.cli._planning_options import add_planning_arguments, limits_summary, planner, planning_setup
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import ALGORITHM_MODULES, PlanLimits, Trajectory
@@ -125,12 +126,20 @@ class PlanSummary:
 def streamed_plan(name: str, program: Program, limits: PlanLimits,
                   chunks_out: Callable[[Trajectory], None]) -> PlanSummary:
     """Plan and hand every chunk to ``chunks_out``: the lookahead planner in bounded memory
-    (PlanStream), the papers' methods as one whole trajectory."""
+    (PlanStream; on a machine with two cores or more in a forked process, so that planning
+    the next chunk overlaps measuring and writing this one: cli._forked), the papers'
+    methods as one whole trajectory."""
     if name == ALGORITHM:
         stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES)
+
+        def summary() -> PlanSummary:
+            return PlanSummary(name, stream.planning_time_s, stream.notes)
+
+        if cores_available() > 1:  # plan in a second process while this one measures
+            return drained(forked_iteration(lambda: stream, summary), chunks_out)
         for chunk in stream:
             chunks_out(chunk)
-        return PlanSummary(name, stream.planning_time_s, stream.notes)
+        return summary()
     trajectory = planner(name)(program, limits)
     chunks_out(trajectory)
     return PlanSummary(trajectory.algorithm, trajectory.planning_time_s, trajectory.notes)

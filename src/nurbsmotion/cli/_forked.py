@@ -1,0 +1,147 @@
+"""Iterate in a forked child process, consume here: the two cores of a small controller used
+for one command (``plan``: the planner computes chunk k + 1 while this process measures chunk k).
+
+The child pickles every item through a pipe as soon as it has it (protocol 5: numpy arrays
+as raw buffers, about 1 ms per MB), then the ``result`` it computes after the last one. The
+pipe holds little (64 KB), so the child is at most about one item ahead: memory stays
+bounded by an item, as in one process. An exception in the child is raised here (an
+InputError with its place and message; anything else with its type and text); the child
+ends with ``os._exit`` (no atexit handlers, no second flush of output buffered before the
+fork). If this side stops early (an error while consuming, Ctrl-C), the child is ended and
+reaped: nothing is left running, and its CPU time counts in this process's children.
+
+Without ``os.fork`` (not POSIX) the items are iterated in this process.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import signal
+import sys
+from typing import BinaryIO, Callable, Generator, Iterable, TypeVar
+
+from nurbsmotion.errors import InputError, InputErrors
+
+Item = TypeVar("Item")
+Result = TypeVar("Result")
+
+ITEM, DONE, FAILED = 0, 1, 2
+PROTOCOL = 5
+
+log = logging.getLogger(__name__)
+
+
+def forked_iteration(items: Callable[[], Iterable[Item]],
+                     result: Callable[[], Result]) -> Generator[Item, None, Result]:
+    """Yield the items ``items()`` gives in a forked child, in order, as they arrive; return
+    the child's ``result()`` (computed after the last item). ``items`` is called in the child."""
+    if not hasattr(os, "fork"):
+        yield from items()
+        return result()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    read_fd, write_fd = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child: measured by its effect in the parent
+        os.close(read_fd)
+        os._exit(_child(os.fdopen(write_fd, "wb"), items, result))
+    os.close(write_fd)
+    finished = False
+    try:
+        with os.fdopen(read_fd, "rb") as incoming:
+            while True:
+                kind, value = pickle.load(incoming)
+                if kind == ITEM:
+                    yield value
+                elif kind == DONE:
+                    finished = True
+                    return value
+                else:
+                    finished = True
+                    raise _rebuilt(value)
+    except EOFError:
+        raise RuntimeError("the planning process ended without a result") from None
+    finally:
+        _end_child(pid, finished)
+
+
+def _child(out: BinaryIO, items: Callable[[], Iterable[Item]], result: Callable[[], Result]) -> int:
+    """Send every item, then the result or the error; the exit code."""
+    try:
+        with out:
+            try:
+                for item in items():
+                    pickle.dump((ITEM, item), out, PROTOCOL)
+                    out.flush()
+                pickle.dump((DONE, result()), out, PROTOCOL)
+            except BrokenPipeError:
+                return 1  # the parent stopped reading
+            except BaseException as err:  # noqa: BLE001 - every error is the parent's to report
+                log.debug("in the forked process", exc_info=err)
+                pickle.dump((FAILED, _portable(err)), out, PROTOCOL)
+        return 0
+    except BaseException:  # noqa: BLE001 - the parent sees the pipe end and reports it
+        return 1
+
+
+def _portable(err: BaseException) -> tuple[str, object]:
+    """What the parent needs to raise ``err`` again: InputErrors and InputError by their places and
+    messages (their constructors take two arguments: pickle cannot rebuild them), the
+    exception itself if it pickles, else its type and text."""
+    if isinstance(err, InputErrors):
+        return "input_errors", [(e.where, e.message) for e in err.errors]
+    if isinstance(err, InputError):
+        return "input_error", (err.where, err.message)
+    try:
+        pickle.loads(pickle.dumps(err, PROTOCOL))
+        return "exception", err
+    except Exception:  # noqa: BLE001 - any failure to pickle: send the text
+        return "text", f"{type(err).__name__}: {err}"
+
+
+def _rebuilt(sent: tuple[str, object]) -> BaseException:
+    kind, value = sent
+    if kind == "input_errors":
+        assert isinstance(value, list)
+        return InputErrors([InputError(where, message) for where, message in value])
+    if kind == "input_error":
+        assert isinstance(value, tuple)
+        return InputError(*value)
+    if kind == "exception":
+        assert isinstance(value, BaseException)
+        return value
+    return RuntimeError(str(value))
+
+
+def _end_child(pid: int, finished: bool) -> None:
+    """Reap the child; one still running (this side stopped early) is killed first. The pid
+    is ours until reaped, so the signal cannot reach another process."""
+    if not finished:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    os.waitpid(pid, 0)
+
+
+def drained(items: Generator[Item, None, Result], each: Callable[[Item], None]) -> Result:
+    """Hand every item of ``items`` to ``each`` in order; the generator's return value. The
+    generator is closed on any error (a forked child is then ended)."""
+    try:
+        while True:
+            try:
+                item = next(items)
+            except StopIteration as end:
+                return end.value
+            each(item)
+    finally:
+        items.close()
+
+
+def cores_available() -> int:
+    """CPUs this process may run on (its affinity mask where the OS has one)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
