@@ -132,6 +132,25 @@ def test_plan_streams_the_same_trace_and_figures_as_a_whole_plan(capsys, tmp_pat
     assert not (tmp_path / "streamed.csv.part").exists()
 
 
+def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_does(capsys, tmp_path, monkeypatch):
+    """On two cores the planner runs in a forked process (cli._forked) while this one
+    measures: every figure and every byte of the trace as when one process does both."""
+    import nurbsmotion.cli.plan as plan_command
+
+    def plan(cores: int) -> tuple[dict, bytes]:
+        monkeypatch.setattr(plan_command, "cores_available", lambda: cores)
+        trace = tmp_path / f"cores{cores}.csv"
+        assert main(["plan", WANG_NC, "--period-ms", "1", "--trace", str(trace), "--json"]) == 0
+        data = json.loads(capsys.readouterr().out)
+        data.pop("planning_time_s")
+        data.pop("trace")
+        return data, trace.read_bytes()
+
+    (forked, forked_trace), (one, one_trace) = plan(2), plan(1)
+    assert forked == one
+    assert forked_trace == one_trace and len(one_trace) > 100_000
+
+
 def test_plan_without_config_plans_with_the_daemons_defaults(capsys):
     """No --config: the interpolation defaults a configuration without that section gets
     (the daemon's), the jerk limit included; --no-jerk-limit removes it."""

@@ -1,0 +1,89 @@
+"""cli._forked: items computed in a forked child reach the parent in order with the child's
+result; the child's errors are raised in the parent; a parent that stops early leaves no
+child behind."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+import pytest
+
+from nurbsmotion.cli._forked import drained, forked_iteration
+from nurbsmotion.errors import InputError, InputErrors
+
+
+def arrays(n: int) -> Iterator[np.ndarray]:
+    for k in range(n):
+        yield np.arange(k * 1000, (k + 1) * 1000, dtype=np.float64) / 3.0
+
+
+def test_items_arrive_in_order_to_the_bit_and_then_the_childs_result():
+    done: list[int] = []  # appended in the child only: the parent's list stays empty
+
+    def result() -> tuple[int, int]:
+        return os.getpid(), len(done)
+
+    def items() -> Iterator[np.ndarray]:
+        for a in arrays(40):  # 40 x 8 kB: more than the pipe holds, so the child waits for the parent
+            done.append(1)
+            yield a
+
+    got: list[np.ndarray] = []
+    child_pid, child_count = drained(forked_iteration(items, result), got.append)
+    assert child_pid != os.getpid() and child_count == 40 and done == []
+    assert len(got) == 40
+    for a, b in zip(got, arrays(40)):
+        assert np.array_equal(a, b)
+
+
+def failing(err: BaseException) -> Iterator[int]:
+    yield 1
+    raise err
+
+
+@pytest.mark.parametrize("err", [InputError("p.nc:7", "bad word"),
+                                 InputErrors([InputError("p.nc:1", "one"), InputError("p.nc:2", "two")])])
+def test_an_input_error_in_the_child_is_raised_with_its_places_and_messages(err):
+    got: list[int] = []
+    with pytest.raises(InputError) as raised:
+        drained(forked_iteration(lambda: failing(err), lambda: None), got.append)
+    assert got == [1]
+    assert type(raised.value) is type(err) and str(raised.value) == str(err)
+    assert (raised.value.where, raised.value.message) == (err.where, err.message)
+
+
+class Unpicklable(Exception):
+    def __init__(self, a: int, b: int) -> None:
+        super().__init__(f"{a} and {b}")
+
+
+def test_other_errors_keep_their_type_or_their_type_name_and_text():
+    with pytest.raises(ValueError, match="plain"):
+        drained(forked_iteration(lambda: failing(ValueError("plain")), lambda: None), lambda item: None)
+    with pytest.raises(RuntimeError, match="Unpicklable: 1 and 2"):
+        drained(forked_iteration(lambda: failing(Unpicklable(1, 2)), lambda: None), lambda item: None)
+
+
+def test_a_consumer_that_stops_ends_and_reaps_the_child(tmp_path: Path):
+    pid_file = tmp_path / "pid"
+
+    def endless() -> Iterator[int]:
+        pid_file.write_text(str(os.getpid()))
+        k = 0
+        while True:
+            k += 1
+            yield k
+
+    def consume(k: int) -> None:
+        if k == 3:
+            raise KeyError("stop here")
+
+    with pytest.raises(KeyError):
+        drained(forked_iteration(endless, lambda: None), consume)
+    child = int(pid_file.read_text())
+    assert child != os.getpid()
+    with pytest.raises(ProcessLookupError):  # killed and reaped: no such process, not even a zombie
+        os.kill(child, 0)
