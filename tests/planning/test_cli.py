@@ -138,7 +138,7 @@ def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_do
     import nurbsmotion.cli.plan as plan_command
 
     def plan(cores: int) -> tuple[dict, bytes]:
-        monkeypatch.setattr(plan_command, "cores_available", lambda: cores)
+        monkeypatch.setattr(plan_command, "second_process_helps", lambda watch: cores > 1)
         trace = tmp_path / f"cores{cores}.csv"
         assert main(["plan", WANG_NC, "--period-ms", "1", "--trace", str(trace), "--json"]) == 0
         data = json.loads(capsys.readouterr().out)

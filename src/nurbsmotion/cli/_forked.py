@@ -20,6 +20,7 @@ import os
 import pickle
 import signal
 import sys
+import time
 from typing import BinaryIO, Callable, Generator, Iterable, TypeVar
 
 from nurbsmotion.errors import InputError, InputErrors
@@ -145,3 +146,35 @@ def cores_available() -> int:
     if hasattr(os, "sched_getaffinity"):
         return len(os.sched_getaffinity(0))
     return os.cpu_count() or 1
+
+
+MIN_IDLE_WINDOW_S = 0.05  # shorter: a few clock ticks (10 ms each), too coarse to tell
+
+
+class IdleWatch:
+    """How many CPUs of the machine stood idle, on average, since this was made: the idle
+    and iowait clock ticks of all CPUs (/proc/stat's first line) over the wall time. A second
+    process only helps when a core is free: under other work at normal priority a forked
+    planner shares our one core with us and the command gets slower (bench_plan_command)."""
+
+    def __init__(self) -> None:
+        self.started_s = time.monotonic()
+        self.idle_ticks = idle_ticks()
+
+    def idle_cores(self) -> float | None:
+        """Idle CPUs on average since this was made; None where /proc/stat is missing or the
+        window is shorter than MIN_IDLE_WINDOW_S."""
+        now, elapsed_s = idle_ticks(), time.monotonic() - self.started_s
+        if now is None or self.idle_ticks is None or elapsed_s < MIN_IDLE_WINDOW_S:
+            return None
+        return (now - self.idle_ticks) / os.sysconf("SC_CLK_TCK") / elapsed_s
+
+
+def idle_ticks() -> int | None:
+    """Idle + iowait clock ticks of all CPUs since boot (Linux /proc/stat), None elsewhere."""
+    try:
+        with open("/proc/stat", "rb") as stat:
+            fields = stat.readline().split()
+        return int(fields[4]) + int(fields[5])
+    except (OSError, IndexError, ValueError):
+        return None

@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from dataclasses import dataclass
 from typing import Callable
 
-from nurbsmotion.cli._forked import cores_available, drained, forked_iteration
+from nurbsmotion.cli._forked import IdleWatch, cores_available, drained, forked_iteration
 from nurbsmotion.cli._planning_options import add_planning_arguments, limits_summary, planner, planning_setup
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import ALGORITHM_MODULES, PlanLimits, Trajectory
@@ -23,6 +24,8 @@ from nurbsmotion.planning.lookahead.api import ALGORITHM
 from nurbsmotion.planning.measure import Measurements, MeasureStream
 from nurbsmotion.planning.trace import TraceWriter
 from nurbsmotion.program import Program
+
+log = logging.getLogger(__name__)
 
 HELP = "interpolate a program cycle by cycle and report the measured chord error, acceleration, jerk"
 
@@ -123,19 +126,31 @@ class PlanSummary:
     notes: dict[str, float | str]
 
 
+IDLE_CORES_TO_FORK = 0.5  # idle CPUs while the program was read (beside this process) that make a second process worth it
+
+
+def second_process_helps(watch: IdleWatch) -> bool:
+    """Whether to plan in a second process: two cores or more, and on average at least
+    IDLE_CORES_TO_FORK of them idle since ``watch`` started (unknown counts as idle)."""
+    if cores_available() < 2:
+        return False
+    idle = watch.idle_cores()
+    log.debug("idle CPUs while reading: %s", "unknown" if idle is None else f"{idle:.2f}")
+    return idle is None or idle >= IDLE_CORES_TO_FORK
+
+
 def streamed_plan(name: str, program: Program, limits: PlanLimits,
-                  chunks_out: Callable[[Trajectory], None]) -> PlanSummary:
+                  chunks_out: Callable[[Trajectory], None], forked: bool = False) -> PlanSummary:
     """Plan and hand every chunk to ``chunks_out``: the lookahead planner in bounded memory
-    (PlanStream; on a machine with two cores or more in a forked process, so that planning
-    the next chunk overlaps measuring and writing this one: cli._forked), the papers'
-    methods as one whole trajectory."""
+    (PlanStream; ``forked``: in a second process, so that planning the next chunk overlaps
+    measuring and writing this one: cli._forked), the papers' methods as one whole trajectory."""
     if name == ALGORITHM:
         stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES)
 
         def summary() -> PlanSummary:
             return PlanSummary(name, stream.planning_time_s, stream.notes)
 
-        if cores_available() > 1:  # plan in a second process while this one measures
+        if forked:
             return drained(forked_iteration(lambda: stream, summary), chunks_out)
         for chunk in stream:
             chunks_out(chunk)
@@ -145,9 +160,10 @@ def streamed_plan(name: str, program: Program, limits: PlanLimits,
     return PlanSummary(trajectory.algorithm, trajectory.planning_time_s, trajectory.notes)
 
 
-def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits,
-                  name: str) -> tuple[PlanSummary, Measurements, Trajectory | None]:
-    """Plan, measure and write the trace chunk by chunk; the whole trajectory is kept only for --plot."""
+def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits, name: str,
+                  forked: bool = False) -> tuple[PlanSummary, Measurements, Trajectory | None]:
+    """Plan (``forked``: in a second process), measure and write the trace chunk by chunk;
+    the whole trajectory is kept only for --plot."""
     from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 
     path = PlannedPath.for_algorithm(program, limits, name)  # set-points measured on the path planned (blends)
@@ -163,7 +179,7 @@ def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits
             kept.append(chunk)
 
     try:
-        summary = streamed_plan(name, program, limits, consume)
+        summary = streamed_plan(name, program, limits, consume, forked)
         last = stream.finish()
         if last is not None and trace is not None:
             trace.write(path.on_program(last))
@@ -192,6 +208,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def plan_and_report(args: argparse.Namespace) -> int:
+    watch = IdleWatch()  # the machine's idle CPUs while the program is read
     program, limits, default = planning_setup(args)
     name = args.algorithm or default
     planner(name)  # an unknown algorithm is an error before anything is planned
@@ -199,7 +216,7 @@ def plan_and_report(args: argparse.Namespace) -> int:
         from nurbsmotion.planning.plot import require_matplotlib
 
         require_matplotlib()
-    plan, m, whole = measured_plan(args, program, limits, name)
+    plan, m, whole = measured_plan(args, program, limits, name, second_process_helps(watch))
     if args.plot:
         from nurbsmotion.planning.plot import plot_run
 
