@@ -1,17 +1,18 @@
 """cli._forked: items computed in a forked child reach the parent in order with the child's
 result; the child's errors are raised in the parent; a parent that stops early leaves no
-child behind."""
+child behind; the idle CPUs that decide whether ``plan`` forks at all."""
 
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 import pytest
 
-from nurbsmotion.cli._forked import drained, forked_iteration
+from nurbsmotion.cli._forked import MIN_IDLE_WINDOW_S, IdleWatch, drained, forked_iteration, idle_ticks
 from nurbsmotion.errors import InputError, InputErrors
 
 
@@ -87,3 +88,33 @@ def test_a_consumer_that_stops_ends_and_reaps_the_child(tmp_path: Path):
     assert child != os.getpid()
     with pytest.raises(ProcessLookupError):  # killed and reaped: no such process, not even a zombie
         os.kill(child, 0)
+
+
+@pytest.mark.skipif(idle_ticks() is None, reason="no /proc/stat")
+def test_idle_cores_are_measured_over_a_window_long_enough_to_tell():
+    watch = IdleWatch()
+    assert watch.idle_cores() is None  # no window yet: a few clock ticks tell nothing
+    time.sleep(MIN_IDLE_WINDOW_S * 1.5)
+    idle = watch.idle_cores()
+    assert idle is not None and 0.0 <= idle <= (os.cpu_count() or 1) + 0.5  # 0.5: clock ticks of 10 ms over 75 ms
+    earlier = IdleWatch()
+    assert earlier.idle_ticks is not None
+    earlier.started_s -= 1.0  # as if made a second ago, one CPU idle all that second
+    earlier.idle_ticks -= os.sysconf("SC_CLK_TCK")
+    assert earlier.idle_cores() == pytest.approx(1.0, abs=0.2)
+
+
+class Watch:
+    def __init__(self, idle: float | None) -> None:
+        self.idle = idle
+
+    def idle_cores(self) -> float | None:
+        return self.idle
+
+
+@pytest.mark.parametrize("cores, idle, forked", [(2, 0.9, True), (2, None, True), (2, 0.2, False), (1, 0.9, False)])
+def test_the_planner_gets_a_second_process_only_with_a_core_to_run_on(monkeypatch, cores, idle, forked):
+    import nurbsmotion.cli.plan as plan_command
+
+    monkeypatch.setattr(plan_command, "cores_available", lambda: cores)
+    assert plan_command.second_process_helps(Watch(idle)) is forked
