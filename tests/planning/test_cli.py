@@ -133,20 +133,28 @@ def test_plan_streams_the_same_trace_and_figures_as_a_whole_plan(capsys, tmp_pat
 
 
 def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_does(capsys, tmp_path, monkeypatch):
-    """On two cores the planner runs in a forked process (cli._forked) while this one
+    """With a core to spare the planner runs in a forked process (cli._forked) while this one
     measures: every figure and every byte of the trace as when one process does both."""
     import nurbsmotion.cli.plan as plan_command
 
-    def plan(cores: int) -> tuple[dict, bytes]:
-        monkeypatch.setattr(plan_command, "second_process_helps", lambda watch: cores > 1)
-        trace = tmp_path / f"cores{cores}.csv"
-        assert main(["plan", WANG_NC, "--period-ms", "1", "--trace", str(trace), "--json"]) == 0
+    def plan(processes: str) -> tuple[dict, bytes]:
+        trace = tmp_path / f"processes{processes}.csv"
+        assert main(["plan", WANG_NC, "--period-ms", "1", "--trace", str(trace), "--json", "--processes", processes]) == 0
         data = json.loads(capsys.readouterr().out)
         data.pop("planning_time_s")
         data.pop("trace")
         return data, trace.read_bytes()
 
-    (forked, forked_trace), (one, one_trace) = plan(2), plan(1)
+    forked_at: list[bool] = []
+    streamed_plan = plan_command.streamed_plan
+
+    def recorded(*args):  # streamed_plan(name, program, limits, chunks_out, forked)
+        forked_at.append(args[-1])
+        return streamed_plan(*args)
+
+    monkeypatch.setattr(plan_command, "streamed_plan", recorded)
+    (forked, forked_trace), (one, one_trace) = plan("2"), plan("1")
+    assert forked_at == [True, False]
     assert forked == one
     assert forked_trace == one_trace and len(one_trace) > 100_000
 
