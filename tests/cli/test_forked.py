@@ -5,6 +5,7 @@ child behind; the idle CPUs that decide whether ``plan`` forks at all."""
 from __future__ import annotations
 
 import os
+import threading
 import time
 from pathlib import Path
 from typing import Iterator
@@ -45,27 +46,39 @@ def failing(err: BaseException) -> Iterator[int]:
     raise err
 
 
-@pytest.mark.parametrize("err", [InputError("p.nc:7", "bad word"),
-                                 InputErrors([InputError("p.nc:1", "one"), InputError("p.nc:2", "two")])])
-def test_an_input_error_in_the_child_is_raised_with_its_places_and_messages(err):
+class BlockError(InputError):
+    def __init__(self, where: str, message: str, block: int | None = None) -> None:
+        super().__init__(where, message)
+        self.block = block
+
+
+@pytest.mark.parametrize("err", [InputError("p.nc:7", "bad word"), BlockError("p.nc:9", "cannot hold", block=4),
+                                 InputErrors([InputError("p.nc:1", "one"), BlockError("p.nc:2", "two", 1)])])
+def test_an_input_error_in_the_child_is_raised_of_its_class_with_its_places_and_messages(err):
     got: list[int] = []
     with pytest.raises(InputError) as raised:
         drained(forked_iteration(lambda: failing(err), lambda: None), got.append)
     assert got == [1]
     assert type(raised.value) is type(err) and str(raised.value) == str(err)
-    assert (raised.value.where, raised.value.message) == (err.where, err.message)
+    assert vars(raised.value).keys() == vars(err).keys()
+    assert (raised.value.where, raised.value.message, getattr(raised.value, "block", None)) == \
+        (err.where, err.message, getattr(err, "block", None))
+    if isinstance(err, InputErrors):
+        assert [(type(e), str(e)) for e in raised.value.errors] == [(type(e), str(e)) for e in err.errors]
+        assert raised.value.errors[1].block == 1
 
 
 class Unpicklable(Exception):
-    def __init__(self, a: int, b: int) -> None:
-        super().__init__(f"{a} and {b}")
+    def __init__(self, a: int) -> None:
+        super().__init__(f"{a} and a lock")
+        self.lock = threading.Lock()
 
 
 def test_other_errors_keep_their_type_or_their_type_name_and_text():
     with pytest.raises(ValueError, match="plain"):
         drained(forked_iteration(lambda: failing(ValueError("plain")), lambda: None), lambda item: None)
-    with pytest.raises(RuntimeError, match="Unpicklable: 1 and 2"):
-        drained(forked_iteration(lambda: failing(Unpicklable(1, 2)), lambda: None), lambda item: None)
+    with pytest.raises(RuntimeError, match="Unpicklable: 1 and a lock"):
+        drained(forked_iteration(lambda: failing(Unpicklable(1)), lambda: None), lambda item: None)
 
 
 def test_a_consumer_that_stops_ends_and_reaps_the_child(tmp_path: Path):

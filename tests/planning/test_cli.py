@@ -159,6 +159,26 @@ def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_do
     assert forked_trace == one_trace and len(one_trace) > 100_000
 
 
+def test_a_planning_error_in_the_second_process_is_reported_as_in_one(monkeypatch, tmp_path, capsys):
+    """The forked planner's PlanningError reaches the command with its class and place: one
+    line on stderr, the JSON error object, exit 2, no trace left behind."""
+    from nurbsmotion.planning.lookahead import planner as lookahead_planner
+
+    monkeypatch.setattr(lookahead_planner, "MAX_REPAIR_ROUNDS", 0)  # the child is forked with these
+    monkeypatch.setattr(lookahead_planner, "MAX_FEED_HALVINGS", 0)
+    reports = []
+    for processes in ("2", "1"):
+        trace = tmp_path / f"out{processes}.csv"
+        assert main(["plan", WANG_NC, "--period-ms", "2", "--max-jerk-mm-s3", "50000", "--trace", str(trace),
+                     "--json", "--processes", processes]) == 2
+        out = capsys.readouterr()
+        assert out.err.count("\n") == 1 and "lookahead cannot hold" in out.err
+        assert not trace.exists() and not trace.with_name(trace.name + ".part").exists()
+        reports.append((json.loads(out.out), out.err))
+    assert reports[0] == reports[1]
+    assert reports[0][0]["error"]["where"].startswith(f"{WANG_NC}:")
+
+
 def test_plan_without_config_plans_with_the_daemons_defaults(capsys):
     """No --config: the interpolation defaults a configuration without that section gets
     (the daemon's), the jerk limit included; --no-jerk-limit removes it."""

@@ -4,8 +4,9 @@ for one command (``plan``: the planner computes chunk k + 1 while this process m
 The child pickles every item through a pipe as soon as it has it (protocol 5: numpy arrays
 as raw buffers, about 1 ms per MB), then the ``result`` it computes after the last one. The
 pipe holds little (64 KB), so the child is at most about one item ahead: memory stays
-bounded by an item, as in one process. An exception in the child is raised here (an
-InputError with its place and message; anything else with its type and text); the child
+bounded by an item, as in one process. An exception in the child is raised here, of its
+class and with its attributes (an InputError with its place and message; one that cannot
+be pickled as a RuntimeError with its type and text); the child
 ends with ``os._exit`` (no atexit handlers, no second flush of output buffered before the
 fork). If this side stops early (an error while consuming, Ctrl-C), the child is ended and
 reaped: nothing is left running, and its CPU time counts in this process's children.
@@ -15,15 +16,14 @@ Without ``os.fork`` (not POSIX) the items are iterated in this process.
 
 from __future__ import annotations
 
+import io
 import logging
 import os
 import pickle
 import signal
 import sys
 import time
-from typing import BinaryIO, Callable, Generator, Iterable, TypeVar
-
-from nurbsmotion.errors import InputError, InputErrors
+from typing import Any, BinaryIO, Callable, Generator, Iterable, TypeVar
 
 Item = TypeVar("Item")
 Result = TypeVar("Result")
@@ -61,9 +61,9 @@ def forked_iteration(items: Callable[[], Iterable[Item]],
                     return value
                 else:
                     finished = True
-                    raise _rebuilt(value)
+                    raise pickle.loads(value)
     except EOFError:
-        raise RuntimeError("the planning process ended without a result") from None
+        raise RuntimeError("the forked process ended without a result") from None
     finally:
         _end_child(pid, finished)
 
@@ -87,33 +87,34 @@ def _child(out: BinaryIO, items: Callable[[], Iterable[Item]], result: Callable[
         return 1
 
 
-def _portable(err: BaseException) -> tuple[str, object]:
-    """What the parent needs to raise ``err`` again: InputErrors and InputError by their places and
-    messages (their constructors take two arguments: pickle cannot rebuild them), the
-    exception itself if it pickles, else its type and text."""
-    if isinstance(err, InputErrors):
-        return "input_errors", [(e.where, e.message) for e in err.errors]
-    if isinstance(err, InputError):
-        return "input_error", (err.where, err.message)
+class _ExceptionPickler(pickle.Pickler):
+    """Pickles exceptions by class, args and attributes (``__dict__``), not through their
+    constructors: InputError(where, message) and its kind (PlanningError's ``block``,
+    InputErrors' list) take other arguments than ``args`` holds, which plain pickle passes."""
+
+    def reducer_override(self, obj: object) -> Any:  # a reduce tuple, or NotImplemented: pickle as usual
+        if isinstance(obj, BaseException):
+            return _exception, (type(obj), obj.args, dict(vars(obj)))
+        return NotImplemented
+
+
+def _exception(cls: type[BaseException], args: tuple[object, ...], state: dict[str, object]) -> BaseException:
+    err = cls.__new__(cls)
+    err.args = args
+    err.__dict__.update(state)
+    return err
+
+
+def _portable(err: BaseException) -> bytes:
+    """``err`` pickled with its class and attributes; if it cannot be, a RuntimeError with its
+    type and text."""
+    out = io.BytesIO()
     try:
-        pickle.loads(pickle.dumps(err, PROTOCOL))
-        return "exception", err
-    except Exception:  # noqa: BLE001 - any failure to pickle: send the text
-        return "text", f"{type(err).__name__}: {err}"
-
-
-def _rebuilt(sent: tuple[str, object]) -> BaseException:
-    kind, value = sent
-    if kind == "input_errors":
-        assert isinstance(value, list)
-        return InputErrors([InputError(where, message) for where, message in value])
-    if kind == "input_error":
-        assert isinstance(value, tuple)
-        return InputError(*value)
-    if kind == "exception":
-        assert isinstance(value, BaseException)
-        return value
-    return RuntimeError(str(value))
+        _ExceptionPickler(out, PROTOCOL).dump(err)
+        pickle.loads(out.getvalue())
+        return out.getvalue()
+    except Exception:  # noqa: BLE001 - any failure to pickle or rebuild: send the text
+        return pickle.dumps(RuntimeError(f"{type(err).__name__}: {err}"), PROTOCOL)
 
 
 def _end_child(pid: int, finished: bool) -> None:
