@@ -11,8 +11,10 @@ Targets (issue 17):
 - whole-process throughput (issue 25, part 6): the whole `nurbsmotion plan` of Wang x 100
   at T = 1 ms, start-up and parsing included, >= 1,000,000 set-points/s, with J = 50000 (the
   daemon's default, now plan's too) and without (--no-jerk-limit), against the previous
-  version (--previous-src); and where the time goes (imports, reading, planning, measuring:
-  CPU seconds of each in one process).
+  version (--previous-src); this version as it chooses (--processes auto: the planner in a
+  second process when a CPU stood idle while the program was read) and with one and two
+  processes forced; and where the time goes (imports, reading, planning, measuring: CPU
+  seconds of each in one process).
 
 Each run is the real command in a fresh process (`python -m nurbsmotion plan ... --json`);
 peak memory is that child's maximum resident set size, CPU its user + system time (os.wait4).
@@ -90,7 +92,9 @@ def long_programs(copies: list[int], work: Path) -> str:
         program = work / f"wang_x{n}.nc"
         program.write_text(wang_copies(n))
         trace = work / "trace.csv"
-        r = run_plan(program, "--period-ms", "1", "--max-jerk-mm-s3", JERK, "--trace", str(trace))
+        # one process: the peak RSS of a process tree (os.wait4) is its largest member's, not the
+        # sum a forked planner would add (docs/planning.md gives that sum)
+        r = run_plan(program, "--period-ms", "1", "--max-jerk-mm-s3", JERK, "--trace", str(trace), "--processes", "1")
         if r["exit"] != 0:
             rows.append(f"| Wang x {n} | failed: {r.get('error')} | | | | | | |")
             continue
@@ -222,7 +226,9 @@ def whole_process(work: Path, previous_src: str | None, runs: int) -> str:
              "|---|---|---|---|---|---|"]
     no_jerk_before = ["--no-jerk-limit"] if previous_src and has_no_jerk_option(previous_src) else []
     for jerk in (JERK, None):
-        versions = [("this", ["--period-ms", "1", *(["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"])], None)]
+        options = ["--period-ms", "1", *(["--max-jerk-mm-s3", JERK] if jerk else ["--no-jerk-limit"])]
+        versions = [("this", options, None)] + [(f"this, --processes {n}", [*options, "--processes", n], None)
+                                                for n in ("2", "1")]
         if previous_src:  # a plan older than --no-jerk-limit had no jerk limit by default
             versions.append(("before", ["--period-ms", "1", *(["--max-jerk-mm-s3", JERK] if jerk else no_jerk_before)],
                              previous_src))
@@ -268,8 +274,8 @@ def main() -> None:
                      + braid(work, args.previous_src) + "\n")
         if args.copies:
             body += ("\n### Peak memory of `nurbsmotion plan` on long programs\n\nWang's Table 1 curve repeated, "
-                     f"T = 1 ms, J = {JERK} mm/s^3, `--trace` written (streamed chunk by chunk) and `--json`; the "
-                     "command's own process, its peak RSS from os.wait4.\n\n" + long_programs(args.copies, work) + "\n")
+                     f"T = 1 ms, J = {JERK} mm/s^3, `--trace` written (streamed chunk by chunk) and `--json`, "
+                     "`--processes 1`; the command's own process, its peak RSS from os.wait4.\n\n" + long_programs(args.copies, work) + "\n")
         if not args.skip_throughput:
             throughput = whole_process(work, args.previous_src, args.runs)
     load = os.getloadavg()
@@ -288,8 +294,10 @@ def main() -> None:
                       "`nurbsmotion plan` of Wang's Table 1 curve x 100 (bench_plan_command.wang_copies) at T = 1 ms "
                       "with `--json`, the whole command in a fresh process: start-up, reading, planning, measuring, "
                       f"the report. The run of median wall time of {args.runs} (after a warm-up run; the versions' runs "
-                      "alternate), CPU the median and the least of the child's user + system time; figures: every "
-                      "run's measured JSON figures equal this version's. \"before\": the previous version (--previous-src).\n\n" + throughput
+                      "alternate), CPU the median and the least of the child's user + system time (its forked planner's "
+                      "included); figures: every run's measured JSON figures equal this version's. \"this\": as the "
+                      "command chooses (a second process when a CPU stood idle while the program was read); "
+                      "\"--processes 2 / 1\": forced; \"before\": the previous version (--previous-src).\n\n" + throughput
                       + f"\n\nThe machine was shared with other agents' work ({load_text}): wall times are longer "
                       "than on a quiet machine, CPU times less so.\n",
                       "python benchmarks/bench_plan_command.py --skip-braid --copies --previous-src /tmp/base/src")
