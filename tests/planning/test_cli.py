@@ -132,14 +132,26 @@ def test_plan_streams_the_same_trace_and_figures_as_a_whole_plan(capsys, tmp_pat
     assert not (tmp_path / "streamed.csv.part").exists()
 
 
-def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_does(capsys, tmp_path, monkeypatch):
+ZIGZAG = "G21 G90 G64 P0.01\nG01 X0 Y0 F6000\n" + "".join(f"G01 X{2 * (i + 1)} Y{(i % 2) * 0.5:.1f}\n" for i in range(40))
+
+
+@pytest.mark.parametrize("program", ["wang", "zigzag"])
+def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_does(capsys, tmp_path, monkeypatch,
+                                                                                    program):
     """With a core to spare the planner runs in a forked process (cli._forked) while this one
-    measures: every figure and every byte of the trace as when one process does both."""
+    measures: every figure and every byte of the trace as when one process does both. On a
+    blended program (the zigzag) one process measures on the pieces its planner set up
+    (PlannedPath.streamed), the forked one sets them up again: the same figures too."""
     import nurbsmotion.cli.plan as plan_command
+
+    path = WANG_NC
+    if program == "zigzag":
+        path = str(tmp_path / "zigzag.nc")
+        Path(path).write_text(ZIGZAG)
 
     def plan(processes: str) -> tuple[dict, bytes]:
         trace = tmp_path / f"processes{processes}.csv"
-        assert main(["plan", WANG_NC, "--period-ms", "1", "--trace", str(trace), "--json", "--processes", processes]) == 0
+        assert main(["plan", path, "--period-ms", "1", "--trace", str(trace), "--json", "--processes", processes]) == 0
         data = json.loads(capsys.readouterr().out)
         data.pop("planning_time_s")
         data.pop("trace")
@@ -148,15 +160,17 @@ def test_plan_in_a_second_process_reports_and_traces_exactly_what_one_process_do
     forked_at: list[bool] = []
     streamed_plan = plan_command.streamed_plan
 
-    def recorded(*args):  # streamed_plan(name, program, limits, chunks_out, forked)
-        forked_at.append(args[-1])
-        return streamed_plan(*args)
+    def recorded(*args, **kwargs):  # streamed_plan(name, program, limits, chunks_out, forked, stream=)
+        forked_at.append(args[4])
+        return streamed_plan(*args, **kwargs)
 
     monkeypatch.setattr(plan_command, "streamed_plan", recorded)
     (forked, forked_trace), (one, one_trace) = plan("2"), plan("1")
     assert forked_at == [True, False]
     assert forked == one
     assert forked_trace == one_trace and len(one_trace) > 100_000
+    if program == "zigzag":
+        assert one["notes"]["verified_max_path_deviation_mm"] > 0  # blended
 
 
 def test_a_planning_error_in_the_second_process_is_reported_as_in_one(monkeypatch, tmp_path, capsys):

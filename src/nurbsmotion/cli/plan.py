@@ -23,7 +23,7 @@ from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.planning.lookahead.api import ALGORITHM
 from nurbsmotion.planning.measure import Measurements, MeasureStream
 from nurbsmotion.planning.trace import TraceWriter
-from nurbsmotion.program import Program
+from nurbsmotion.program import BlockKind, Program
 
 if TYPE_CHECKING:
     from nurbsmotion.planning.lookahead.planned_path import PlannedPath
@@ -145,13 +145,14 @@ def second_process_helps(watch: IdleWatch) -> bool:
     return idle is None or idle >= IDLE_CORES_TO_FORK
 
 
-def streamed_plan(name: str, program: Program, limits: PlanLimits,
-                  chunks_out: Callable[[Trajectory], None], forked: bool = False) -> PlanSummary:
+def streamed_plan(name: str, program: Program, limits: PlanLimits, chunks_out: Callable[[Trajectory], None],
+                  forked: bool = False, stream: PlanStream | None = None) -> PlanSummary:
     """Plan and hand every chunk to ``chunks_out``: the lookahead planner in bounded memory
-    (PlanStream; ``forked``: in a second process, so that planning the next chunk overlaps
-    measuring and writing this one: cli._forked), the papers' methods as one whole trajectory."""
+    (``stream``, or a PlanStream made here; ``forked``: in a second process, so that planning
+    the next chunk overlaps measuring and writing this one: cli._forked), the papers' methods
+    as one whole trajectory."""
     if name == ALGORITHM:
-        stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES)
+        stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES) if stream is None else stream
 
         def summary() -> PlanSummary:
             return PlanSummary(name, stream.planning_time_s, stream.notes)
@@ -168,19 +169,31 @@ def streamed_plan(name: str, program: Program, limits: PlanLimits,
 
 class PathRuler:
     """The MeasureStream on the path planned (PlannedPath: blends as blocks of their own),
-    made at the first chunk: with the planner in a forked process, setting the path up
-    (0.1-0.24 s of CPU on the CAM programs of tests/data/gcode) runs after the fork, beside
-    the planner, not before it."""
+    made at the first chunk.
 
-    def __init__(self, program: Program, limits: PlanLimits, name: str, keep_rows: bool) -> None:
+    In one process (``stream``: the PlanStream planning here) the path is the pieces the
+    stream sets up (PlannedPath.streamed, as the daemon's planner worker measures), not a
+    second set-up of the whole program: 0.1-0.24 s of CPU on HSM_test, braid, V-carve.
+    A program of NURBS blocks only has no blends (they join lines and arcs), so its path is
+    the program itself, without the block-to-piece lookup of every set-point (0.07 s for
+    Wang x 100). With the planner in a forked process the path is set up here, after the
+    fork, beside the planner."""
+
+    def __init__(self, program: Program, limits: PlanLimits, name: str, keep_rows: bool,
+                 stream: PlanStream | None = None) -> None:
         self.program, self.limits, self.name, self.keep_rows = program, limits, name, keep_rows
+        self.stream = stream
         self.made: tuple[PlannedPath, MeasureStream] | None = None
 
     def ready(self) -> tuple[PlannedPath, MeasureStream]:
         if self.made is None:
             from nurbsmotion.planning.lookahead.planned_path import PlannedPath
 
-            path = PlannedPath.for_algorithm(self.program, self.limits, self.name)
+            stream = self.stream
+            if stream is not None and any(b.kind is not BlockKind.NURBS for b in self.program.blocks):
+                path = PlannedPath.streamed(self.program, lambda: stream.pieces_set_up)
+            else:
+                path = PlannedPath.for_algorithm(self.program, self.limits, self.name)
             self.made = path, MeasureStream(path.program, keep_rows=self.keep_rows)
         return self.made
 
@@ -189,22 +202,23 @@ def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits
                   forked: bool = False) -> tuple[PlanSummary, Measurements, Trajectory | None]:
     """Plan (``forked``: in a second process), measure and write the trace chunk by chunk;
     the whole trajectory is kept only for --plot."""
-    ruler = PathRuler(program, limits, name, keep_rows=bool(args.plot))
+    stream = PlanStream(program, limits, STREAM_CHUNK_CYCLES) if name == ALGORITHM else None
+    ruler = PathRuler(program, limits, name, bool(args.plot), None if forked else stream)
     trace = TraceWriter(args.trace) if args.trace else None
     kept: list[Trajectory] = []
 
     def consume(chunk: Trajectory) -> None:
-        path, stream = ruler.ready()
-        figures = stream.add(path.rows(chunk))
+        path, measuring = ruler.ready()
+        figures = measuring.add(path.rows(chunk))
         if figures is not None and trace is not None:
             trace.write(path.on_program(figures))
         if args.plot:
             kept.append(chunk)
 
     try:
-        summary = streamed_plan(name, program, limits, consume, forked)
-        path, stream = ruler.ready()
-        last = stream.finish()
+        summary = streamed_plan(name, program, limits, consume, forked, stream=stream)
+        path, measuring = ruler.ready()
+        last = measuring.finish()
         if last is not None and trace is not None:
             trace.write(path.on_program(last))
     except BaseException:
@@ -213,7 +227,7 @@ def measured_plan(args: argparse.Namespace, program: Program, limits: PlanLimits
         raise
     if trace is not None:
         trace.close()
-    return summary, stream.measurements(), Trajectory.concatenate(kept) if kept else None
+    return summary, measuring.measurements(), Trajectory.concatenate(kept) if kept else None
 
 
 def error_json(err: InputError) -> str:
