@@ -125,7 +125,7 @@ class Watch:
         return self.idle
 
 
-@pytest.mark.parametrize("cores, idle, forked", [(2, 0.9, True), (2, None, True), (2, 0.2, False), (1, 0.9, False)])
+@pytest.mark.parametrize("cores, idle, forked", [(2, 0.9, True), (2, None, True), (2, 0.6, False), (1, 0.9, False)])
 def test_the_planner_gets_a_second_process_only_with_a_core_to_run_on(monkeypatch, cores, idle, forked):
     import nurbsmotion.cli.plan as plan_command
 
