@@ -132,7 +132,9 @@ class PlanSummary:
     notes: dict[str, float | str]
 
 
-IDLE_CORES_TO_FORK = 0.75  # idle CPUs while the program was read (beside this process) that make a second process worth it: a free core showed 0.9-1.0
+# idle CPUs while the program was read (beside this process) that make a second process
+# worth it: a free core read 0.9-1.0 here, one shared with bursty work in between
+IDLE_CORES_TO_FORK = 0.75
 
 
 def second_process_helps(watch: IdleWatch) -> bool:
