@@ -86,11 +86,20 @@ G0 Z2.54
 """
 
 
-def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid():
+def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid(monkeypatch):
     """planner.repair lowers the speed caps within the filter's reach plus two grid intervals
     of the violating set-point: of the cut's own grid (planner.repair_reach_mm), not the
-    rapids' 0.8 mm, which slowed the whole stroke to 0.9 of its feed."""
+    rapids' 0.8 mm, which slowed the whole stroke to 0.9 of its feed. The stroke needs no
+    repair since the pieces' feed plateaus (speed_limits.feed_plateaus) hold the cut's feed
+    one step into its neighbours; without them it violates the acceleration limit once, as
+    it did when the repair reach was fixed."""
+    from nurbsmotion.planning.lookahead import planner
+
     program = parse_gcode(VCARVE_STROKE, "vcarve_stroke.nc")
+    trajectory = plan_lookahead(program, NO_JERK)
+    assert trajectory.notes["repairs"] == 0
+    assert np.median(trajectory.feed_mm_s[trajectory.block == 2]) >= 0.99 * 2.54
+    monkeypatch.setattr(planner, "feed_plateaus", lambda s, *_: np.full(len(s), np.inf))
     trajectory = plan_lookahead(program, NO_JERK)
     assert trajectory.notes["repairs"] >= 1
     cut = trajectory.feed_mm_s[trajectory.block == 2]

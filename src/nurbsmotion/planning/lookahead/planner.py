@@ -170,8 +170,9 @@ class PlanSettings:
     def feed_plateau_s(self) -> float:
         """A piece's feed F holds F x this beyond its ends (speed_limits.feed_plateaus): the
         filter's half window, and one cycle more for the step that ends on the piece from
-        before it."""
-        return 0.0 if self.tau_f <= 0 else DIP_HALF_TIME * self.tau_f + self.limits.period_s
+        before it (also without a filter: the raw speed there rises linearly in v^2 to the
+        previous grid point, a whole rapid interval away)."""
+        return DIP_HALF_TIME * self.tau_f + self.limits.period_s
 
     @property
     def min_pass_mm_s(self) -> float:
@@ -226,8 +227,7 @@ def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[fl
     if settings.tau_f > 0:
         below_feed = x < grid.feed_mm_s**2
         x = widen_dips(grid.s, np.sqrt(x), settings.tau_f, below_feed) ** 2
-        x = np.minimum(x, feed_plateaus(grid.s, grid.piece, grid.feed_mm_s, settings.feed_plateau_s) ** 2)
-    return x
+    return np.minimum(x, feed_plateaus(grid.s, grid.piece, grid.feed_mm_s, settings.feed_plateau_s) ** 2)
 
 
 def scan_grid(grid: PathGrid, start_mm: float) -> NDArray[np.intp]:
