@@ -436,6 +436,8 @@ def feed_plateaus(s: NDArray[np.float64], piece: NDArray[np.int32], feed_mm_s: N
     starts = np.flatnonzero(np.concatenate([[True], piece[1:] != piece[:-1]]))
     ends = np.concatenate([starts[1:] - 1, [n - 1]])
     feed = feed_mm_s[starts]
+    if feed.min() == feed.max():  # one feed: every point is capped at it already
+        return np.full(n, feed[0])
     half = feed * plateau_s
     lo = np.maximum(np.searchsorted(s, s[starts] - half, side="right") - 1, 0)
     hi = np.minimum(np.searchsorted(s, s[ends] + half, side="left"), n - 1)
