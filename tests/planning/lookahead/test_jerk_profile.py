@@ -110,7 +110,8 @@ def test_wangs_curve_at_1_ms_with_a_jerk_limit_needs_no_repair_round(wang_progra
 def test_widened_dips_spread_each_limit_over_its_bands_half_width():
     """widen_dips against the definition: every inner limit v_j spreads over
     +-DIP_HALF_TIME L_j tau, L_j the level of its band (the first level >= v_j), out to the
-    grid points at or beyond those ends."""
+    grid points at or beyond those ends; points outside ``spreads`` (at their piece's feed:
+    feed_plateaus' part) do not spread."""
     from nurbsmotion.planning.lookahead.speed_limits import DIP_HALF_TIME, dip_levels, widen_dips
 
     rng = np.random.default_rng(5)
@@ -120,7 +121,8 @@ def test_widened_dips_spread_each_limit_over_its_bands_half_width():
         v = rng.uniform(1.0, 200.0, n)
         v[rng.random(n) < 0.2] = np.inf
         tau = float(rng.uniform(0.001, 0.1))
-        inner = v.copy()
+        spreads = rng.random(n) < 0.8
+        inner = np.where(spreads, v, np.inf)
         inner[0] = inner[-1] = np.inf
         expected = v.copy()
         if np.isfinite(inner).any():
@@ -133,24 +135,52 @@ def test_widened_dips_spread_each_limit_over_its_bands_half_width():
                 near = (np.arange(n) >= lo) & (np.arange(n) <= hi)
                 near[0] = near[-1] = False
                 expected[near] = np.minimum(expected[near], inner[j])
-        np.testing.assert_array_equal(widen_dips(s, v, tau), expected)
+        np.testing.assert_array_equal(widen_dips(s, v, tau, spreads), expected)
 
 
-def test_a_short_slower_block_between_fast_ones_is_never_passed_above_its_feed():
+@pytest.mark.parametrize("jerk", [50000.0, None], ids=["jerk", "no-jerk"])
+def test_a_short_slower_block_between_fast_ones_is_never_passed_above_its_feed(jerk):
     """With the jerk filter the set-points' speed is the raw speed averaged over tau: a dip of
     the feed widened too little (main had +-0.75 v tau inside the grid points; the V-carve
-    passed 8 of its feed moves up to 14 % above their feed) lets the average exceed it."""
+    passed 8 of its feed moves up to 14 % above their feed) lets the average exceed it. Also
+    fails with feed plateaus of F tau / 2 only (speed_limits.feed_plateaus: the step that ends
+    on the block starts up to F T before it). Without a jerk limit that step alone passed it
+    above its feed (the raw v^2 rises linearly to the rapid's previous grid point; the V-carve
+    up to 1.44x, the butterfly 1.36x)."""
     from nurbsmotion.planning import PlanLimits
     from nurbsmotion.program import parse_gcode
 
     program = parse_gcode("G21 G90 G64 P0.01\nG1 X30 F6000\nG1 X30.4 F150\nG1 X60 F6000\n", "slow.nc")
-    limits = PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=2500.0, max_jerk_mm_s3=50000.0,
+    limits = PlanLimits(period_s=0.001, chord_error_mm=0.01, max_accel_mm_s2=2500.0, max_jerk_mm_s3=jerk,
                         default_feed_mm_s=100.0, rapid_feed_mm_s=200.0, path_tolerance_mm=0.01)
     trajectory = plan_lookahead(program, limits)
     speed = np.linalg.norm(np.diff(trajectory.position_mm, axis=0), axis=1) / trajectory.period_s
     slow = trajectory.block[1:] == 1
     assert slow.any()
     assert speed[slow].max() <= 2.5 * (1.0 + 1e-6)
+
+
+def test_feed_plateaus_hold_each_pieces_feed_out_to_the_grid_points_beyond_its_reach():
+    """feed_plateaus against the definition: each piece's feed F over the piece and F x
+    plateau_s beyond its first and last point, out to the grid points at or beyond those."""
+    from nurbsmotion.planning.lookahead.speed_limits import feed_plateaus
+
+    rng = np.random.default_rng(11)
+    for _ in range(60):
+        n = int(rng.integers(2, 120))
+        s = np.concatenate([[0.0], np.cumsum(rng.uniform(0.0, 0.5, n - 1))])
+        piece = np.sort(rng.integers(0, 6, n)).astype(np.int32)
+        feeds = rng.uniform(1.0, 200.0, 6)
+        plateau_s = float(rng.uniform(0.001, 0.06))
+        expected = np.full(n, np.inf)
+        for k in np.unique(piece):
+            mine = np.flatnonzero(piece == k)
+            reach = feeds[k] * plateau_s
+            before, after = s <= s[mine[0]] - reach, s >= s[mine[-1]] + reach
+            lo = np.flatnonzero(before)[-1] if before.any() else 0
+            hi = np.flatnonzero(after)[0] if after.any() else n - 1
+            expected[lo:hi + 1] = np.minimum(expected[lo:hi + 1], feeds[k])
+        np.testing.assert_array_equal(feed_plateaus(s, piece, feeds[piece], plateau_s), expected)
 
 
 def test_last_below_and_flat_top_starts_match_a_walk():

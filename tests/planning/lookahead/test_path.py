@@ -35,6 +35,25 @@ def test_each_piece_is_gridded_at_its_own_feed():
     assert np.diff(coarse.s[coarse.piece == 1]).max() > 0.5  # without feed_step_s: one spacing for all
 
 
+def test_a_piece_next_to_a_slower_one_has_a_grid_point_where_the_slower_feeds_plateau_ends():
+    """build_grid(plateau_s): a point F x plateau_s from the junction with a slower piece (F its
+    feed; exact on a line, up to PLATEAU_POINT_MARGIN beyond on a curve), on both sides of the
+    slower piece and in neither slower piece itself; without plateau_s none."""
+    from nurbsmotion.planning.lookahead.path import PLATEAU_POINT_MARGIN
+
+    pieces = (piece(0, [0, 0, 0], [0, 0, 10], 200.0), piece(1, [0, 0, 10], [0, 0, 9], 2.5),
+              piece(2, [0, 0, 9], [5, 0, 9], 200.0))
+    plateau_s = 0.026
+    grid = build_grid(pieces, 0.4, plateau_s=plateau_s)
+    reach = 2.5 * plateau_s * (1.0 + PLATEAU_POINT_MARGIN)
+    first, last = (grid.s[grid.piece == 1][k] for k in (0, -1))
+    assert np.min(np.abs(grid.s - (first - reach))) < 1e-9
+    assert np.min(np.abs(grid.s - (last + reach))) < 1e-9
+    plain = build_grid(pieces, 0.4)
+    assert len(grid) == len(plain) + 2
+    assert np.array_equal(grid.s[grid.piece == 1], plain.s[plain.piece == 1])
+
+
 # a rapid sets the program's highest feed (200 mm/s); the cut at 2.5 mm/s starts from rest
 # (the plunge's corner) on a run with a blended 5.7 deg corner, so the general planner plans it
 SLOW_CUT = "G21 G90 G64 P0.01\nG0 X5\nG1 Z-1 F150\nY1\nX5.1 Y2\n"
@@ -67,11 +86,20 @@ G0 Z2.54
 """
 
 
-def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid():
+def test_a_repair_at_a_slow_cut_reaches_only_as_far_as_the_cuts_own_grid(monkeypatch):
     """planner.repair lowers the speed caps within the filter's reach plus two grid intervals
     of the violating set-point: of the cut's own grid (planner.repair_reach_mm), not the
-    rapids' 0.8 mm, which slowed the whole stroke to 0.9 of its feed."""
+    rapids' 0.8 mm, which slowed the whole stroke to 0.9 of its feed. The stroke needs no
+    repair since the pieces' feed plateaus (speed_limits.feed_plateaus) hold the cut's feed
+    one step into its neighbours; without them it violates the acceleration limit once, as
+    it did when the repair reach was fixed."""
+    from nurbsmotion.planning.lookahead import planner
+
     program = parse_gcode(VCARVE_STROKE, "vcarve_stroke.nc")
+    trajectory = plan_lookahead(program, NO_JERK)
+    assert trajectory.notes["repairs"] == 0
+    assert np.median(trajectory.feed_mm_s[trajectory.block == 2]) >= 0.99 * 2.54
+    monkeypatch.setattr(planner, "feed_plateaus", lambda s, *_: np.full(len(s), np.inf))
     trajectory = plan_lookahead(program, NO_JERK)
     assert trajectory.notes["repairs"] >= 1
     cut = trajectory.feed_mm_s[trajectory.block == 2]

@@ -326,9 +326,12 @@ def interval_lengths(speed_poly: NDArray[np.float64], h: NDArray[np.float64]) ->
     return h * (SPEED_INTEGRAL @ speed_poly)
 
 
-def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
+def piece_u_grid(piece: BlockPiece, spacing_mm: float, from_start_mm: float = 0.0,
+                 from_end_mm: float = 0.0) -> NDArray[np.float64]:
     """u values of the grid of one piece: each coarse interval split so that it is at most
-    ``spacing_mm`` long and turns at most MAX_TURN_RAD."""
+    ``spacing_mm`` long and turns at most MAX_TURN_RAD; plus, where > 0, a point at least
+    ``from_start_mm`` after the piece's start and one ``from_end_mm`` before its end
+    (plateau_points)."""
     curve = piece.curve
     look = coarse_look(curve, piece.u_start, piece.u_end, 2 if curve.degree == 1 else COARSE_PER_SPAN)
     coarse, d = look.u, look.dx
@@ -340,8 +343,26 @@ def piece_u_grid(piece: BlockPiece, spacing_mm: float) -> NDArray[np.float64]:
     count = np.maximum(np.ceil(np.maximum(length / spacing_mm, turn / MAX_TURN_RAD)), 1).astype(np.int64)
     starts = np.repeat(coarse[:-1], count)
     offsets = np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count)
-    fine = starts + np.repeat(du / count, count) * offsets
-    return np.append(fine, coarse[-1])
+    fine = np.append(starts + np.repeat(du / count, count) * offsets, coarse[-1])
+    if from_start_mm <= 0.0 and from_end_mm <= 0.0:
+        return fine
+    return np.union1d(fine, plateau_points(look, from_start_mm, from_end_mm))
+
+
+PLATEAU_POINT_MARGIN = 1e-3  # relative: a plateau point's arc length from its end estimated on the coarse polyline
+
+
+def plateau_points(look: CoarseLook, from_start_mm: float, from_end_mm: float) -> NDArray[np.float64]:
+    """u of the points ``from_start_mm`` after the start and ``from_end_mm`` before the end of a
+    curve part (those > 0 and inside it), placed on its coarse polyline: a chord is never longer
+    than its arc, so the point is at least that far along the curve (exact on a line), less a
+    margin for the interpolation within a coarse interval."""
+    lengths = look.lengths
+    total = float(lengths[-1])
+    wanted = [d * (1.0 + PLATEAU_POINT_MARGIN) for d in (from_start_mm, from_end_mm)]
+    targets = np.array([wanted[0], total - wanted[1]])
+    inside = np.array([from_start_mm > 0.0, from_end_mm > 0.0]) & (targets > 0.0) & (targets < total)
+    return np.interp(targets[inside], lengths, look.u)
 
 
 def arc_length_derivatives(curve: NurbsCurve, u: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
@@ -421,21 +442,40 @@ def interval_curvature_max(s: NDArray[np.float64], curv: NDArray[np.float64], dc
     return np.sqrt(best) + 0.5 * (CURVATURE_SAMPLES[1] - CURVATURE_SAMPLES[0]) * slope
 
 
+def plateau_reach_mm(pieces: tuple[BlockPiece, ...], plateau_s: float) -> list[tuple[float, float]]:
+    """Per piece, how far into it the feed plateau of a slower previous / next piece reaches
+    (F_neighbour x plateau_s; 0 where the neighbour is not slower)."""
+    feeds = [piece.feed_mm_s for piece in pieces]
+    reach = [(0.0, 0.0)] * len(pieces)
+    if plateau_s <= 0.0:
+        return reach
+    for i, feed in enumerate(feeds):
+        before = feeds[i - 1] * plateau_s if i > 0 and feeds[i - 1] < feed else 0.0
+        after = feeds[i + 1] * plateau_s if i + 1 < len(feeds) and feeds[i + 1] < feed else 0.0
+        reach[i] = (before, after)
+    return reach
+
+
 def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float, feed_step_s: float = 0.0,
-               min_spacing_mm: float = 0.0) -> PathGrid:
+               min_spacing_mm: float = 0.0, plateau_s: float = 0.0) -> PathGrid:
     """The grid of a run of pieces (consecutive pieces meet at their ends), at most
     ``spacing_mm`` apart and, with ``feed_step_s``, at most the piece's feed x feed_step_s (not
     below ``min_spacing_mm``): the raw profile is linear in x = v^2 between grid points, so a
     start from rest reaches the feed F no sooner than one interval ds on, at F^2 / (2 ds): with
-    the spacing of a program's rapids (0.4-0.8 mm) a 2.54 mm/s cut accelerated at ~8 mm/s^2."""
+    the spacing of a program's rapids (0.4-0.8 mm) a 2.54 mm/s cut accelerated at ~8 mm/s^2.
+
+    With ``plateau_s`` > 0, a piece next to a slower one (feed F) also gets a point F x
+    plateau_s from their junction: where a slower piece's feed plateau ends
+    (speed_limits.feed_plateaus), so that it ends there and not at the next coarse point."""
     keys = ("s", "piece", "u", "u_s", "u_ss", "tangent", "curv", "dcurv", "feed", "position", "curv_left", "dcurv_left",
             "u_ss_left")
     parts: dict[str, list] = {k: [] for k in keys}
     polys: list[NDArray[np.float64]] = []
     offset = 0.0
+    reach = plateau_reach_mm(pieces, plateau_s)
     for index, piece in enumerate(pieces):
         spacing = min(spacing_mm, max(piece.feed_mm_s * feed_step_s, min_spacing_mm)) if feed_step_s > 0 else spacing_mm
-        u = piece_u_grid(piece, spacing)
+        u = piece_u_grid(piece, spacing, *reach[index])
         (x, t, curv, dcurv, u_s, u_ss), (curv_left, dcurv_left, u_ss_left) = grid_derivatives(piece.curve, u)
         cubed = u_s * u_s * u_s  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
         poly = speed_polynomials(piece.curve, u, 1.0 / u_s, -u_ss / cubed, -u_ss_left / cubed)

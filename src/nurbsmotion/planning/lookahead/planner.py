@@ -29,8 +29,9 @@ from nurbsmotion.planning.lookahead.path import BlockPiece, PathGrid, build_grid
 from nurbsmotion.planning.lookahead.runs import Run, planned_jerk_mm_s3
 from nurbsmotion.planning.lookahead.sampling import Samples, sample_path
 from nurbsmotion.planning.lookahead.scan import interval_bounds, speed_profile
-from nurbsmotion.planning.lookahead.speed_limits import (DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
-                                                         static_speed_limit, tangential_jerk_share, widen_dips)
+from nurbsmotion.planning.lookahead.speed_limits import (DIP_HALF_TIME, DIP_WIDTH_FACTOR, MARGIN, AccelBounds, Caps,
+                                                         feed_plateaus, static_speed_limit, tangential_jerk_share,
+                                                         widen_dips)
 from nurbsmotion.planning.lookahead.verify import Check, MachineLimits, check
 
 MAX_REPAIR_ROUNDS = 16
@@ -166,6 +167,14 @@ class PlanSettings:
     feed_step_s: float = 0.0  # a piece's grid spacing at most its feed x this (path.build_grid); 0: spacing_mm
 
     @property
+    def feed_plateau_s(self) -> float:
+        """A piece's feed F holds F x this beyond its ends (speed_limits.feed_plateaus): the
+        filter's half window, and one cycle more for the step that ends on the piece from
+        before it (also without a filter: the raw speed there rises linearly in v^2 to the
+        previous grid point, a whole rapid interval away)."""
+        return DIP_HALF_TIME * self.tau_f + self.limits.period_s
+
+    @property
     def min_pass_mm_s(self) -> float:
         """Slowest junction speed passed moving: its widened plateau must span a grid interval."""
         return 0.0 if self.tau_f <= 0 else self.spacing_mm / (DIP_WIDTH_FACTOR * self.tau_f)
@@ -207,7 +216,8 @@ def window_pieces(run: Run, cursor: Cursor, length_mm: float) -> tuple[tuple[Blo
 def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[float, ...],
                speed_cap: NDArray[np.float64], bounds: AccelBounds, static_mm_s: NDArray[np.float64]) -> NDArray[np.float64]:
     """x = v^2 cap of every grid point from all constraints (``static_mm_s``: the grid's
-    static_speed_limit), dips widened for the jerk filter."""
+    static_speed_limit), dips widened for the jerk filter: those below the piece's feed in
+    speed bands (widen_dips), the pieces' feeds exactly (feed_plateaus)."""
     v = np.minimum(static_mm_s, speed_cap)
     ends = np.flatnonzero(grid.junction)
     for i, vj in zip(ends, junction_speeds):
@@ -215,8 +225,9 @@ def speed_caps(grid: PathGrid, settings: PlanSettings, junction_speeds: tuple[fl
         v[i + 1] = min(v[i + 1], vj)
     x = bounds.max_speed_squared(v**2)
     if settings.tau_f > 0:
-        x = widen_dips(grid.s, np.sqrt(x), settings.tau_f) ** 2
-    return x
+        below_feed = x < grid.feed_mm_s**2
+        x = widen_dips(grid.s, np.sqrt(x), settings.tau_f, below_feed) ** 2
+    return np.minimum(x, feed_plateaus(grid.s, grid.piece, grid.feed_mm_s, settings.feed_plateau_s) ** 2)
 
 
 def scan_grid(grid: PathGrid, start_mm: float) -> NDArray[np.intp]:
@@ -306,7 +317,7 @@ def plan_window(run: Run, cursor: Cursor, settings: PlanSettings, length_mm: flo
     A window that does not reach the run's end is sampled and verified up to its stop at the
     window's end, so the committed set-points always have a verified way to stop."""
     pieces, junction_speeds, reaches_end = window_pieces(run, cursor, length_mm)
-    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM)
+    grid = build_grid(pieces, settings.spacing_mm, settings.feed_step_s, MIN_SPACING_MM, settings.feed_plateau_s)
     speed_cap, accel_scale = carried_repairs(grid, cursor)
     accel_scale *= settings.tangential_share
     static = static_speed_limit(grid, settings.caps)

@@ -388,7 +388,8 @@ def dip_levels(inner: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array(levels)
 
 
-def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float) -> NDArray[np.float64]:
+def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: float,
+               spreads: NDArray[np.bool_] | None = None) -> NDArray[np.float64]:
     """Spread every low speed limit v_j over +-DIP_HALF_TIME v_j tau around its point, out to the
     grid points at or beyond those ends (the raw profile only holds a plateau on grid points), so
     a moving average over tau seconds only ever sees the dip's own speed while it passes the
@@ -401,9 +402,13 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     Done per speed band (L / DIP_LEVEL_RATIO, L] (geometric levels, dip_levels): the limits in
     a band spread over a fixed +-L tau / 2, at most DIP_LEVEL_RATIO x their own width (on the
     safe side); all bands at once by range_min_update. The two ends (the run's start and end
-    states) are not dips and do not spread."""
+    states) are not dips and do not spread, nor do points outside ``spreads`` (the planner's
+    points at their piece's feed: feed_plateaus spreads those exactly, without the bands'
+    rounding up, to grid points placed at their ends)."""
     inner = v.copy()
     inner[0] = inner[-1] = np.inf
+    if spreads is not None:
+        inner[~spreads] = np.inf
     members = np.flatnonzero(np.isfinite(inner))
     if averaging_s <= 0 or len(members) == 0:
         return v
@@ -415,3 +420,25 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
     out = np.minimum(v, range_min_update(len(s), lo, hi, inner[members]))
     out[0], out[-1] = v[0], v[-1]
     return out
+
+
+def feed_plateaus(s: NDArray[np.float64], piece: NDArray[np.int32], feed_mm_s: NDArray[np.float64],
+                  plateau_s: float) -> NDArray[np.float64]:
+    """Speed cap from the pieces' feeds: each piece's feed F over the piece and F x plateau_s
+    beyond its ends, out to the grid points at or beyond those (path.build_grid puts one there).
+    plateau_s = tau / 2 + T (PlanSettings.feed_plateau_s): as in widen_dips, the set-point's
+    speed is the raw speed averaged over tau, and while the set-point is on the piece the
+    window's raw positions lie within F tau / 2 of it; T more for the step that ends on the piece
+    from up to F T before it. So no step ending on a piece runs above its feed. Exact, per
+    piece, unlike widen_dips' bands: the feed is not checked per cycle (verify.py), every other
+    limit is."""
+    n = len(s)
+    starts = np.flatnonzero(np.concatenate([[True], piece[1:] != piece[:-1]]))
+    ends = np.concatenate([starts[1:] - 1, [n - 1]])
+    feed = feed_mm_s[starts]
+    if feed.min() == feed.max():  # one feed: every point is capped at it already
+        return np.full(n, feed[0])
+    half = feed * plateau_s
+    lo = np.maximum(np.searchsorted(s, s[starts] - half, side="right") - 1, 0)
+    hi = np.minimum(np.searchsorted(s, s[ends] + half, side="left"), n - 1)
+    return range_min_update(n, lo, hi, feed)
