@@ -10,6 +10,9 @@ the rest, so the CLI and the web give the same errors:
   start, mdi, a library upload: every line it names in ``errors``) -> 422 with ``errors``; a
   library program or queue entry that is not there -> 404;
 - a request the gateway cannot read (not JSON, a wrong type) -> 400; no daemon -> 503.
+
+A raw program body (``POST programs``, ``POST jobs?name=``) is streamed into an unnamed file
+and sent along as the file (``program_fd``: web.upload), as the CLI sends its file.
 """
 
 from __future__ import annotations
