@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
 from pathlib import Path
-from typing import Any, AsyncGenerator
+from typing import Any, AsyncGenerator, Sequence
 
 from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, encode
 
@@ -22,6 +23,18 @@ class DaemonUnreachable(Exception):
     """No daemon answers on the socket (not running, or the connection broke)."""
 
 
+def sent_with_files(sock: socket.socket, line: bytes, files: Sequence[int]) -> int:
+    """How much of ``line`` went out with ``files`` on the just-connected ``sock`` (none: 0,
+    the stream sends it all); a daemon that refused and closed at once (peer credentials)
+    counts as all sent: its answer is read next."""
+    if not files:
+        return 0
+    try:
+        return socket.send_fds(sock, [line], list(files))
+    except (BrokenPipeError, ConnectionResetError):
+        return len(line)
+
+
 class DaemonLink:
     """Requests and subscriptions to the daemon at ``socket_path``."""
 
@@ -29,19 +42,30 @@ class DaemonLink:
         self.socket_path = str(socket_path)
         self.timeout_s = timeout_s
 
-    async def _open(self) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+    async def _open(self, line: bytes = b"",
+                    files: Sequence[int] = ()) -> tuple[asyncio.StreamReader, asyncio.StreamWriter]:
+        """A connection with ``line`` sent on it (``files`` passed along with its first bytes:
+        SCM_RIGHTS, as service.client sends them; asyncio's streams cannot)."""
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         try:
-            return await asyncio.open_unix_connection(self.socket_path, limit=LINE_LIMIT_BYTES)
+            sock.setblocking(False)
+            await asyncio.get_running_loop().sock_connect(sock, self.socket_path)
+            sent = sent_with_files(sock, line, files)
+            reader, writer = await asyncio.open_unix_connection(sock=sock, limit=LINE_LIMIT_BYTES)
         except (FileNotFoundError, ConnectionRefusedError) as err:
+            sock.close()
             raise DaemonUnreachable(f"no daemon at {self.socket_path} (is it running?)") from err
         except OSError as err:
+            sock.close()
             raise DaemonUnreachable(f"daemon at {self.socket_path}: {err.strerror or err}") from err
+        writer.write(line[sent:])
+        return reader, writer
 
-    async def request(self, cmd: str, **fields: Any) -> dict[str, Any]:
-        """The daemon's answer to one request (``ok`` true or false)."""
-        reader, writer = await self._open()
+    async def request(self, cmd: str, *, files: Sequence[int] = (), **fields: Any) -> dict[str, Any]:
+        """The daemon's answer to one request (``ok`` true or false); ``files``: descriptors
+        sent along (protocol ``program_fd``: web.upload)."""
+        reader, writer = await self._open(encode({"cmd": cmd, **fields}), files)
         try:
-            writer.write(encode({"cmd": cmd, **fields}))
             await writer.drain()
             line = await asyncio.wait_for(reader.readline(), self.timeout_s)
         except (OSError, asyncio.IncompleteReadError, asyncio.TimeoutError) as err:
@@ -57,9 +81,8 @@ class DaemonLink:
         """The subscription's answer (full status), then every pushed line, as the daemon's JSON
         text (relayed as it is: web.fanout), until the daemon closes the connection or the
         caller stops iterating."""
-        reader, writer = await self._open()
+        reader, writer = await self._open(encode({"cmd": "subscribe", **({} if max_hz is None else {"max_hz": max_hz})}))
         try:
-            writer.write(encode({"cmd": "subscribe", **({} if max_hz is None else {"max_hz": max_hz})}))
             await writer.drain()
             while True:
                 line = await reader.readline()

@@ -10,6 +10,9 @@ the rest, so the CLI and the web give the same errors:
   start, mdi, a library upload: every line it names in ``errors``) -> 422 with ``errors``; a
   library program or queue entry that is not there -> 404;
 - a request the gateway cannot read (not JSON, a wrong type) -> 400; no daemon -> 503.
+
+A raw program body (``POST programs``, ``POST jobs?name=``) is streamed into an unnamed file
+and sent along as the file (``program_fd``: web.upload), as the CLI sends its file.
 """
 
 from __future__ import annotations
@@ -18,17 +21,20 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Awaitable, Callable
+from typing import Any, Awaitable, BinaryIO, Callable
 
 from aiohttp import web
 
+from nurbsmotion.errors import InputError
 from nurbsmotion.service.protocol import PROGRAM_NAME as PROGRAM_NAME_PATTERN
 from nurbsmotion.web.auth import Role
 from nurbsmotion.web.daemon_link import DaemonLink, DaemonUnreachable
+from nurbsmotion.web.upload import upload_file
 
 API = "/api/v1"
 PROGRAM_NAME = re.compile(PROGRAM_NAME_PATTERN)
 COMMAND = "__cmd__"  # a fields_of may name another daemon command than its route's (POST jobs: start, queue.add)
+FILE = "__file__"  # an upload's open file (raw_program), sent along with the request and closed after
 JOB_FILE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
 FILE_TYPES = {".png": "image/png", ".csv": "text/csv", ".json": "application/json", ".log": "text/plain",
               ".asc": "text/plain", ".yaml": "text/yaml"}
@@ -117,40 +123,42 @@ def checked_name(name: Any, what: str = "program name") -> str:
     return name
 
 
-async def raw_program(request: web.Request) -> tuple[str, str]:
-    """(``?name=``, the raw body as text) of an upload."""
+async def raw_program(request: web.Request) -> Fields:
+    """The fields of an upload: ``?name=`` and the raw body as an unnamed file (web.upload),
+    sent to the daemon as the CLI sends a file (``program_fd``: route_handler)."""
     name = checked_name(request.query.get("name"))
-    raw = await request.read()
     try:
-        return name, raw.decode("utf-8-sig")
-    except UnicodeDecodeError as err:
-        raise BadRequest(f"body: not a UTF-8 text file (byte {err.start})") from None
+        upload = await upload_file(request, name)
+    except InputError as err:  # not UTF-8: the CLI's line for the same file
+        raise BadRequest(str(err)) from None
+    return {"name": name, "program_fd": 0, FILE: upload}
 
 
 async def submit_fields(request: web.Request) -> Fields:
     """A program to run: the raw G-code body with ``?name=`` (and ``&start_line=N``), JSON
     ``{"name", "text", "start_line"?}``, or a library program: JSON ``{"program": NAME,
     "start_line"?}`` (``"queue": true``: queued instead, service.job_queue)."""
-    if request.content_type == "application/json":
-        body = pick(await json_body(request), "name", "text", "program", "queue", "keep_override", "block_delete",
-                    "optional_stop", "start_line")
-        if "program" in body:
-            return library_start(body)
-        name, text = body.pop("name", None), body.pop("text", None)
-        if not isinstance(text, str):
-            raise BadRequest("body 'text': the program's G-code is required as a string "
-                             "(or 'program': the name of a library program)")
-        if "queue" in body:
-            raise BadRequest("body 'queue': only library programs are queued ({\"program\": NAME, \"queue\": true})")
-    else:
-        body = {}
-        start_line = request.query.get("start_line")
-        if start_line is not None:
-            if not start_line.isdigit():
-                raise BadRequest(f"query 'start_line': must be a line number, got {start_line!r}")
-            body["start_line"] = int(start_line)
-        name, text = await raw_program(request)
+    if request.content_type != "application/json":
+        return await raw_submit_fields(request)
+    body = pick(await json_body(request), "name", "text", "program", "queue", "keep_override", "block_delete",
+                "optional_stop", "start_line")
+    if "program" in body:
+        return library_start(body)
+    name, text = body.pop("name", None), body.pop("text", None)
+    if not isinstance(text, str):
+        raise BadRequest("body 'text': the program's G-code is required as a string "
+                         "(or 'program': the name of a library program)")
+    if "queue" in body:
+        raise BadRequest("body 'queue': only library programs are queued ({\"program\": NAME, \"queue\": true})")
     return {"name": checked_name(name), "program": text, **body}
+
+
+async def raw_submit_fields(request: web.Request) -> Fields:
+    """``POST jobs?name=part.nc(&start_line=N)`` with the raw G-code body (raw_program)."""
+    start_line = request.query.get("start_line")
+    if start_line is not None and not start_line.isdigit():
+        raise BadRequest(f"query 'start_line': must be a line number, got {start_line!r}")
+    return {**await raw_program(request), **({} if start_line is None else {"start_line": int(start_line)})}
 
 
 def library_start(body: Fields) -> Fields:
@@ -162,11 +170,6 @@ def library_start(body: Fields) -> Fields:
     if queue:
         return {COMMAND: "queue.add", "name": name, **pick(body, "start_line")}
     return {COMMAND: "start", "name": name, **body}
-
-
-async def program_upload(request: web.Request) -> Fields:
-    name, text = await raw_program(request)
-    return {"name": name, "program": text}
 
 
 async def program_name(request: web.Request) -> Fields:
@@ -226,7 +229,7 @@ ROUTES: tuple[Route, ...] = (
     Route("POST", f"{API}/programs", "programs.add", Role.OPERATOR,
           "add a program to the library: raw G-code body with ?name=part.nc; read and checked against the machine "
           "once (file:line errors: 422, not added), then started by name without a second check",
-          program_upload, body=RAW, query=("name",)),
+          raw_program, body=RAW, query=("name",)),
     Route("GET", f"{API}/programs/{{name}}", "programs.get", Role.OBSERVER,
           "one library program: its text and its check (blocks, lines, extent, errors)", program_name),
     Route("DELETE", f"{API}/programs/{{name}}", "programs.remove", Role.OPERATOR, "remove a library program",
@@ -301,12 +304,17 @@ def route_handler(route: Route, link: DaemonLink) -> Callable[[web.Request], Awa
     async def handle(request: web.Request) -> web.Response:
         try:
             fields = await route.fields_of(request) if route.fields_of is not None else {}
-            cmd = fields.pop(COMMAND, route.cmd)
-            return answer(cmd, await link.request(cmd, **fields))
         except BadRequest as err:
             return error(400, str(err))
+        cmd = fields.pop(COMMAND, route.cmd)
+        upload: BinaryIO | None = fields.pop(FILE, None)
+        try:
+            return answer(cmd, await link.request(cmd, files=() if upload is None else (upload.fileno(),), **fields))
         except DaemonUnreachable as err:
             return error(503, str(err))
+        finally:
+            if upload is not None:
+                upload.close()
     return handle
 
 
