@@ -15,7 +15,7 @@ from nurbsmotion.planning.chord_error import ProgramCurves, chord_errors
 from nurbsmotion.planning.lookahead import PlanStream
 from nurbsmotion.geometry.primitives import line_curve
 from nurbsmotion.planning.lookahead.path import BlockPiece
-from nurbsmotion.planning.lookahead.planned_path import PlannedPath, trimmed_curve
+from nurbsmotion.planning.lookahead.planned_path import PlannedPath, groups, trimmed_curve
 from nurbsmotion.planning.measure import MeasureStream
 from nurbsmotion.planning.trajectory import Trajectory
 from nurbsmotion.program import read_program
@@ -86,3 +86,12 @@ def test_a_trimmed_line_ends_exactly_where_its_block_ends():
     assert np.array_equal(trimmed.end_point, b)
     head, _ = trimmed_curve(BlockPiece(0, curve, curve.u_min, 0.5, 20.0))
     assert np.array_equal(head.control_points[0], a)
+
+
+def test_groups_are_each_values_rows_in_order():
+    values = np.array([3, 1, 3, 0, 1, 1, 7, 3], dtype=np.int32)
+    found = groups(values)
+    assert [v for v, _ in found] == [0, 1, 3, 7]
+    for value, at in found:
+        assert at.tolist() == np.flatnonzero(values == value).tolist()
+    assert groups(np.array([], dtype=np.int32)) == []

@@ -60,6 +60,16 @@ def trimmed_curve(piece: BlockPiece) -> tuple[NurbsCurve, UMap]:
     return part, lambda u: np.asarray(part.u_at_arc_length(np.asarray(curve.arc_length(u)) - s0), float)
 
 
+def groups(values: NDArray[np.integer]) -> list[tuple[int, NDArray[np.intp]]]:
+    """(value, the indices where ``values`` has it, ascending) for each distinct value, the
+    values ascending: one stable sort instead of a comparison of all rows per value."""
+    order = np.argsort(values, kind="stable")
+    ordered = values[order]
+    starts = np.flatnonzero(ordered[1:] != ordered[:-1]) + 1
+    bounds = [0, *starts.tolist(), len(values)] if len(values) else [0]
+    return [(int(ordered[lo]), order[lo:hi]) for lo, hi in zip(bounds[:-1], bounds[1:])]
+
+
 class PlannedPath:
     """The planned pieces as a Program (``program``) and how set-points move onto it.
 
@@ -76,6 +86,7 @@ class PlannedPath:
         self.u_maps: list[UMap] = list(u_maps)
         self.set_up = set_up  # streamed: the pieces set up so far (grows), made blocks by ``catch_up``
         self.candidates: dict[int, list[int]] = {}  # block -> the pieces along it (piece_rows)
+        self.first_piece = np.full(16, -1, dtype=np.intp)  # block -> its first candidate piece, -1: none (grows)
         self.add_candidates(0)
 
     @classmethod
@@ -119,20 +130,29 @@ class PlannedPath:
             p = self.pieces[k]
             for b in (p.covered.blocks.tolist() if p.covered is not None else [p.block]):
                 self.candidates.setdefault(b, []).append(k)
+                if len(self.candidates[b]) == 1:
+                    self.note_first_piece(b, k)
+
+    def note_first_piece(self, block: int, piece: int) -> None:
+        """first_piece[block] = piece, the table doubled until it holds ``block``."""
+        while block >= len(self.first_piece):
+            self.first_piece = np.concatenate([self.first_piece, np.full(len(self.first_piece), -1, dtype=np.intp)])
+        self.first_piece[block] = piece
 
     def piece_rows(self, trajectory: Trajectory) -> NDArray[np.intp]:
         """Index into ``pieces`` of every set-point: among the pieces along its block (the
         block's own piece, a blend into it, smoothed pieces covering it), the one whose curve
         passes through the set-point at its u."""
-        blocks = trajectory.block.tolist()
-        found = {b: self.candidates.get(b, []) for b in set(blocks)}
-        rows = np.array([ks[0] if (ks := found[b]) else -1 for b in blocks], dtype=np.intp)
+        blocks = trajectory.block
+        if len(blocks) and (int(blocks.min()) < 0 or int(blocks.max()) >= len(self.first_piece)):
+            raise ValueError("a set-point's block has no planned piece")
+        rows = self.first_piece[blocks]
         if np.any(rows < 0):
             raise ValueError("a set-point's block has no planned piece")
-        for b, ks in found.items():
+        for b, at in groups(blocks):
+            ks = self.candidates[b]
             if len(ks) < 2:
                 continue
-            at = np.flatnonzero(trajectory.block == b)
             for k in ks:
                 curve = self.pieces[k].curve
                 u = trajectory.u[at]
@@ -152,8 +172,7 @@ class PlannedPath:
             return trajectory  # streamed without pieces: a program without motion rests on its block 0
         rows = self.piece_rows(trajectory)
         u = trajectory.u.copy()
-        for k in np.unique(rows).tolist():
-            at = rows == k
+        for k, at in groups(rows):
             u[at] = self.u_maps[k](trajectory.u[at])
         return replace(trajectory, block=rows.astype(np.int32), u=u)
 
