@@ -135,7 +135,8 @@ def main(argv: list[str] | None = None) -> int:
     print(summary)
     if args.write:
         write_section("eds-corpus", "Real vendor EDS files: Wang's curve on three drives of each (T = 4 ms)",
-                      summary + "\n\n" + table(results), "PYTHONPATH=src python benchmarks/bench_eds_corpus.py --write")
+                      summary, "PYTHONPATH=src python benchmarks/bench_eds_corpus.py --write",
+                      detail=summary + "\n\n" + table(results))
     return 0 if failed == 0 else 1
 
 

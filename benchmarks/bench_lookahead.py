@@ -319,6 +319,22 @@ keeping the set-points (a separate process; peak resident memory from getrusage)
 """
 
 
+
+def summary(compared: str, toppra_text: str, ruckig_text: str) -> str:
+    """The section's short table: lookahead's own rows of ``compared``, toppra's verdict, ruckig's table."""
+    lines = compared.splitlines()
+    ours = lines[:2] + [line for line in lines[2:] if "| lookahead" in line]
+    verdict = [line for line in toppra_text.splitlines() if line.startswith("lookahead / toppra")]
+    ratios = [float(line.split("|")[4]) for line in ruckig_text.splitlines() if line.startswith("| ") and
+              line.split("|")[1].strip().isdigit()]
+    ruckig = (f"at most {max(ratios):.4f}x ruckig's time on lines of 2-500 mm" if ratios
+              else ruckig_text.splitlines()[0])
+    return ("Wang's limits (T = 4 ms, chord error 10 um, a = 2500 mm/s^2, F = 200 mm/s); the papers' "
+            "interpolators in the full result.\n\n" + "\n".join(ours) + "\n\nAgainst toppra (per-axis limits, "
+            "no J): " + (verdict[0] if verdict else toppra_text.splitlines()[0]) + "\n\nJerk-limited straight "
+            "line against ruckig: " + ruckig + ".")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=20)
@@ -333,6 +349,8 @@ def main() -> None:
     programs = {"Wang Table 1": read_program(ROOT / "examples" / "wang_table1.nc"),
                 "sharp corners": read_program(ROOT / "examples" / "sharp_corners.yaml"),
                 "mixed.nc": read_program(ROOT / "examples" / "mixed.nc")}
+    compared, toppra_text, ruckig_text = comparison(programs), toppra_comparison(0.001), ruckig_comparison(0.001)
+    rates = throughput(args.repeat, args.previous_src, args.processes)
     body = f"""
 ### Against the papers' interpolators
 
@@ -342,23 +360,24 @@ measured on the set-points by planning.measure (its fluctuation uses the chord |
 is shorter than the arc by ~ dL^3 kappa^2 / 24, and at a corner passed moving cuts the corner);
 "arc" is lookahead's own guarantee: arc length between set-points vs planned step.
 
-{comparison(programs)}
+{compared}
 
 ### Time-optimality against toppra
 
-{toppra_comparison(0.001)}
+{toppra_text}
 
 ### Jerk-limited straight line against ruckig
 
-{ruckig_comparison(0.001)}
+{ruckig_text}
 
 ### Throughput
 
-{throughput(args.repeat, args.previous_src, args.processes)}
+{rates}
 """
     if args.hour_minutes > 0:
         body += "\n### A one-hour program in bounded memory\n" + one_hour(args.hour_minutes)
-    write_section("lookahead", "Look-ahead planner", body, "python benchmarks/bench_lookahead.py")
+    write_section("lookahead", "Look-ahead planner", summary(compared, toppra_text, ruckig_text),
+                  "python benchmarks/bench_lookahead.py", detail=body)
 
 
 if __name__ == "__main__":

@@ -181,15 +181,16 @@ def read_results(path: Path) -> list[RunResult]:
 
 
 def write_doc(results: list[RunResult], command: str) -> None:
-    """docs/benchmarks.md, section demo_runs: the summary and the table of every run."""
+    """docs/benchmarks.md, section demo_runs: the summary; docs/benchmarks/demo_runs.md: the table of every run."""
     from benchmarks._report import write_section
 
-    body = (f"{summary(results)}. Every run `nice -n 10 nurbsmotion demo --no-progress --data-dir DIR` (one DIR for "
-            "all, its own TMPDIR each), even runs beside `nice -n 10 python3 -c 'while 1: pass'`; the host's load "
-            "is mostly other helpers' work. A run passes when it exits 0 with `outcome: completed`; it is "
-            "clean when it leaves no job without outcome.json, no process of its session 10 s after it and "
-            "nothing in its TMPDIR.\n\n" + table(results))
-    write_section("demo_runs", "`nurbsmotion demo`, run after run", body, command)
+    how = ("Every run `nice -n 10 nurbsmotion demo --no-progress --data-dir DIR` (one DIR for "
+           "all, its own TMPDIR each), even runs beside `nice -n 10 python3 -c 'while 1: pass'`; the host's load "
+           "is mostly other helpers' work. A run passes when it exits 0 with `outcome: completed`; it is "
+           "clean when it leaves no job without outcome.json, no process of its session 10 s after it and "
+           "nothing in its TMPDIR.")
+    write_section("demo_runs", "`nurbsmotion demo`, run after run", f"{summary(results)}.", command,
+                  detail=f"{summary(results)}. {how}\n\n" + table(results))
 
 
 def main(argv: list[str] | None = None) -> int:
