@@ -153,12 +153,14 @@ def sweep(write: bool) -> None:
                         f"{'monotone' if falls else 'NOT monotone'}")
         print(verdicts[-1], flush=True)
     if write:
-        body = ("Smoothed and blended within 0.01 mm (the default), T = 1 ms, A = 2500 mm/s^2, feeds capped at "
-                "200 mm/s; J from 1e4 to none (the plan's time must fall monotonically towards the unlimited "
-                "plan, issue 24; equal within 5 ms counts).\n\n" + header + "\n" + "\n".join(rows)
-                + "\n\n" + "\n".join(f"- {v}" for v in verdicts))
-        write_section("jerk_sweep", "Jerk limit sweep (short-segment CAM programs)", body,
-                      "python benchmarks/bench_blend.py --sweep --write")
+        how = ("Smoothed and blended within 0.01 mm (the default), T = 1 ms, A = 2500 mm/s^2, feeds capped at "
+               "200 mm/s; J from 1e4 to none (the plan's time must fall monotonically towards the unlimited "
+               "plan, issue 24; equal within 5 ms counts).")
+        verdict_list = "\n".join(f"- {v}" for v in verdicts)
+        body = f"{how}\n\n" + header + "\n" + "\n".join(rows) + "\n\n" + verdict_list
+        write_section("jerk_sweep", "Jerk limit sweep (short-segment CAM programs)",
+                      f"Motion time at J = {', '.join(f'{j:g}' for j in SWEEP_JERKS if j)}, none:\n\n{verdict_list}",
+                      "python benchmarks/bench_blend.py --sweep --write", detail=body)
 
 
 def main() -> None:

@@ -447,8 +447,12 @@ def main() -> None:
         print(BREAKDOWN)
         lines = [line for name, program in programs().items() for line in breakdown(name, program)]
         if args.write:
+            totals = [line for line in lines if line.split("|")[2].strip() == "all"]  # each program's whole path
+            intro, header = BREAKDOWN.split(" Columns:")[0], BREAKDOWN[BREAKDOWN.index("| program"):]
             write_section("bounds_breakdown", "Jerk-limited bounds: where the plan's time goes",
-                          BREAKDOWN + "\n" + "\n".join(lines), "python benchmarks/bench_bounds.py --breakdown --write")
+                          f"{intro}\n\n{header}\n" + "\n".join(totals),
+                          "python benchmarks/bench_bounds.py --breakdown --write",
+                          detail=BREAKDOWN + "\n" + "\n".join(lines))
         return
     header = ("| program | LinuxCNC 2.9 (no J) | feeds alone | caps | caps + A, the plan's stops | stops: why | "
               "forced (lower bound with J) | our plan, J = 50000 | speed dips | dips x A/J |\n"
@@ -456,9 +460,12 @@ def main() -> None:
     print(header)
     rows = [row(name, program) for name, program in programs().items()]
     if args.write:
-        body = (__doc__.split("\n\n")[1] + "\n\n" + header + "\n" + "\n".join(rows))
-        write_section("bounds", "Jerk-limited lower bounds (short-segment CAM programs)", body,
-                      "python benchmarks/bench_bounds.py --write")
+        table = header + "\n" + "\n".join(rows)
+        write_section("bounds", "Jerk-limited lower bounds (short-segment CAM programs)",
+                      "Lower bounds along the planned path (T = 1 ms, A = 2500 mm/s^2, J = 50000 mm/s^3, tolerance "
+                      "0.01 mm); `forced`: rest only where the physics or the program force it, a lower bound with "
+                      "J. The columns are defined in the full result.\n\n" + table,
+                      "python benchmarks/bench_bounds.py --write", detail=__doc__.split("\n\n")[1] + "\n\n" + table)
 
 
 if __name__ == "__main__":

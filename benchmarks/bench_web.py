@@ -348,7 +348,21 @@ async def ab_rounds(args: argparse.Namespace) -> list[dict[str, Any]]:
     return rows
 
 
-async def main_async(args: argparse.Namespace) -> str:
+
+def late_summary(rows: list[dict[str, Any]]) -> str:
+    """Late cycles per 1000 over all rounds of each kind of client, and its rounds' event p99."""
+    out = ["| clients | rounds | late per 1000 cycles (all rounds) | event -> client p99 ms |", "|---|---|---|---|"]
+    for kind in dict.fromkeys(r["clients"] for r in rows):
+        group = [r for r in rows if r["clients"] == kind]
+        late = 1000 * sum(r["late"] for r in group) / max(1, sum(r["cycles"] for r in group))
+        p99 = [r["p99_ms"] for r in group if r["events"]]
+        shown = f"{min(p99):.1f}-{max(p99):.1f}" if p99 else "-"
+        out.append(f"| {kind} | {len(group)} | {late:.1f} | {shown} |")
+    return "\n".join(out)
+
+
+async def main_async(args: argparse.Namespace) -> tuple[str, str]:
+    """The section's summary and its full result (every round's row)."""
     if args.previous_src is not None:
         rows = await ab_rounds(args)
         idle, preview = None, None
@@ -381,21 +395,23 @@ async def main_async(args: argparse.Namespace) -> str:
                      f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
                      f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
     if idle is None:
-        return (f"This checkout's daemon and gateway against the previous one's (`--previous-src`), restarted "
+        return "", (f"This checkout's daemon and gateway against the previous one's (`--previous-src`), restarted "
                 f"for each: {args.seconds:g} s jobs with 0 and {args.clients} WebSocket clients, before and after "
                 f"alternating round by round. Load average at the end: {load}.\n\n" + "\n".join(table) + "\n")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
-    return (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
+    figures = (f"| figure | value | target |\n|---|---|---|\n"
+               f"| gateway CPU, idle, one client connected ({args.idle_seconds:g} s) | {idle:.2f} % | < 1 % |\n"
+               f"| preview of a {args.preview_lines:,}-line program parsed and drawn (headless Chromium) | {shown} "
+               f"| <= 2000 ms |\n")
+    summary = (f"{args.seconds:g} s jobs at T = 1 ms, the clients interleaved round by round; load average at the "
+               f"end: {load}.\n\n{late_summary(rows)}\n\n{figures}")
+    return summary, (f"The daemon (three simulated drives, T = 1 ms) and `nurbsmotion web` as separate processes, "
             f"clients in the benchmark's process; {args.seconds:g} s jobs with 0 clients, {args.clients} WebSocket "
             f"clients (one daemon subscription in the gateway) and {args.clients} direct subscribers on the control "
             f"socket, interleaved round by round, then one with 1 WebSocket client; the override set every 0.25 s "
             f"gives the clients events to time. "
             f"Load average at the end: {load} (2 cores shared with other work: compare rows of one run).\n\n"
-            + "\n".join(table)
-            + f"\n\n| figure | value | target |\n|---|---|---|\n"
-              f"| gateway CPU, idle, one client connected ({args.idle_seconds:g} s) | {idle:.2f} % | < 1 % |\n"
-              f"| preview of a {args.preview_lines:,}-line program parsed and drawn (headless Chromium) | {shown} "
-              f"| <= 2000 ms |\n")
+            + "\n".join(table) + "\n\n" + figures)
 
 
 def main() -> int:
@@ -410,12 +426,13 @@ def main() -> int:
                         help="src/ of a previous checkout (with its eds/ beside it): its daemon against this one's, "
                              "round by round (printed only)")
     args = parser.parse_args()
-    body = asyncio.run(main_async(args))
+    summary, body = asyncio.run(main_async(args))
     command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}"
     if args.no_write or args.previous_src is not None:
         print(body)
     else:
-        write_section("web", "Web gateway: event latency, cycles with clients, CPU, preview", body, command)
+        write_section("web", "Web gateway: event latency, cycles with clients, CPU, preview", summary, command,
+                      detail=body)
     return 0
 
 
