@@ -1,0 +1,64 @@
+"""The docs' relative links lead somewhere: every link in README.md and docs/**/*.md to a file
+points to one that exists, and a link with #anchor to a heading that file has (GitHub's
+anchors: lower case, punctuation dropped, spaces as hyphens, -1, -2 for repeats)."""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
+LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)|!\[[^\]]*\]\(([^)\s]+)\)")
+FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
+
+
+def slug(heading: str) -> str:
+    """GitHub's anchor of a heading's text."""
+    text = re.sub(r"`|\*\*|\[([^\]]*)\]\([^)]*\)", lambda m: m.group(1) or "", heading.strip().lower())
+    return re.sub(r"[^\w\- ]", "", text).replace(" ", "-")
+
+
+def anchors(path: Path) -> set[str]:
+    seen: Counter[str] = Counter()
+    out = set()
+    for line in FENCE.sub("", path.read_text(encoding="utf-8")).splitlines():
+        match = re.match(r"#{1,6} (.+)", line)
+        if match:
+            base = slug(match.group(1))
+            out.add(base if not seen[base] else f"{base}-{seen[base]}")
+            seen[base] += 1
+    return out
+
+
+def relative_links(path: Path) -> list[str]:
+    text = FENCE.sub("", path.read_text(encoding="utf-8"))
+    text = re.sub(r"`[^`\n]*`", "", text)  # code spans are not links
+    targets = [a or b for a, b in LINK.findall(text)]
+    return [t for t in targets if not re.match(r"[a-z][a-z0-9+.-]*:", t)]  # http:, mailto:, ...
+
+
+def test_the_docs_are_found():
+    assert ROOT / "docs" / "benchmarks.md" in DOCS and ROOT / "README.md" in DOCS
+
+
+def test_slug_follows_github():
+    assert slug("`nurbsmotion check` of long CAM programs") == "nurbsmotion-check-of-long-cam-programs"
+    assert slug("Soak, one hour at T = 1 ms, three axes") == "soak-one-hour-at-t--1-ms-three-axes"
+    assert slug("Why 1 M set-points/s for the whole plan process") == "why-1-m-set-pointss-for-the-whole-plan-process"
+
+
+@pytest.mark.parametrize("doc", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_relative_links_lead_to_a_file_and_heading(doc):
+    broken = []
+    for target in relative_links(doc):
+        name, _, anchor = target.partition("#")
+        path = (doc.parent / name).resolve() if name else doc
+        if not path.exists():
+            broken.append(f"{target}: no file {path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}")
+        elif anchor and path.suffix == ".md" and anchor not in anchors(path):
+            broken.append(f"{target}: no heading #{anchor} in {path.relative_to(ROOT)}")
+    assert not broken, f"{doc.relative_to(ROOT)}: " + "; ".join(broken)
