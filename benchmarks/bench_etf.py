@@ -35,7 +35,7 @@ vcan1 with the can-gw rule; both variants run on that same device:
         --variants bcm,etf:2000 --runs 5 --stalls 0 --host-load /tmp/hostload
     ... --runs 2 --stalls 60,60,60,60,60
 
-Results and the decision: docs/benchmarks.md "ETF + SO_TXTIME against the BCM ring",
+Results and the decision: docs/benchmarks-log.md "ETF + SO_TXTIME against the BCM ring",
 docs/fieldbus.md "ETF or BCM".
 """
 

@@ -7,7 +7,7 @@ For each checkout (this one; with ``--previous-src`` also the previous one, alte
 by round) a fresh daemon and gateway get ``POST /api/v1/programs?name=...`` of an N-line
 program; the figures are each process's peak resident size (``VmHWM``) before and after, and
 the upload's wall time (the daemon's check in its own process included). Printed only: the
-result goes into docs/benchmarks.md's web section by hand.
+result goes into docs/benchmarks.md's section "Web upload" by hand.
 """
 
 from __future__ import annotations
