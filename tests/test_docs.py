@@ -62,3 +62,22 @@ def test_relative_links_lead_to_a_file_and_heading(doc):
         elif anchor and path.suffix == ".md" and anchor not in anchors(path):
             broken.append(f"{target}: no heading #{anchor} in {path.relative_to(ROOT)}")
     assert not broken, f"{doc.relative_to(ROOT)}: " + "; ".join(broken)
+
+
+def test_architecture_names_only_files_that_exist():
+    """docs/architecture.md's map names modules: each `dir/name.py` must exist under
+    src/nurbsmotion (or the repository), each bare `name.py` somewhere under src/nurbsmotion."""
+    text = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8")
+    package = ROOT / "src" / "nurbsmotion"
+    modules = {p.name for p in package.rglob("*.py")}
+    missing = []
+    for name in sorted(set(re.findall(r"[\w/]+\.py\b", text))):
+        if "/" in name:
+            if not ((package / name).exists() or (ROOT / name).exists()):
+                missing.append(name)
+        elif name not in modules:
+            missing.append(name)
+    for folder in sorted(set(re.findall(r"(?<![\w/])((?:[a-z][a-z_]*/)+)(?![\w.])", text))):
+        if not (package / folder).is_dir() and not (ROOT / folder).is_dir():
+            missing.append(folder)
+    assert not missing, f"docs/architecture.md names what is not in the tree: {missing}"
