@@ -81,3 +81,13 @@ def test_architecture_names_only_files_that_exist():
         if not (package / folder).is_dir() and not (ROOT / folder).is_dir():
             missing.append(folder)
     assert not missing, f"docs/architecture.md names what is not in the tree: {missing}"
+
+
+def test_every_control_command_is_in_the_daemon_docs_at_a_glance():
+    from nurbsmotion.service.protocol import COMMANDS
+
+    text = (ROOT / "docs" / "daemon.md").read_text(encoding="utf-8")
+    glance = text[text.index("## At a glance"):text.index("\n## ", text.index("## At a glance") + 1)]
+    named = set(re.findall(r"`([\w]+(?:\.\w+)?)`", glance))
+    named |= {f"{group}.{leaf}" for group in ("programs", "queue") for leaf in re.findall(r"`\.(\w+)`", glance)}
+    assert set(COMMANDS) <= named, f"docs/daemon.md, 'At a glance' lacks {sorted(set(COMMANDS) - named)}"
