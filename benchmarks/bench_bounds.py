@@ -464,7 +464,8 @@ def main() -> None:
         write_section("bounds", "Jerk-limited lower bounds (short-segment CAM programs)",
                       "Lower bounds along the planned path (T = 1 ms, A = 2500 mm/s^2, J = 50000 mm/s^3, tolerance "
                       "0.01 mm); `forced`: rest only where the physics or the program force it, a lower bound with "
-                      "J. The columns are defined in the full result.\n\n" + table,
+                      "J. The columns are defined in the full result. With J = 50000 LinuxCNC's time (no jerk limit) is "
+                      "out of reach wherever `forced` is above 1.00x.\n\n" + table,
                       "python benchmarks/bench_bounds.py --write", detail=__doc__.split("\n\n")[1] + "\n\n" + table)
 
 
