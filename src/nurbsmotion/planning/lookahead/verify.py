@@ -37,6 +37,9 @@ from nurbsmotion.planning.lookahead.speed_limits import window_min
 TOLERANCE = 1e-9  # relative: rounding of the checks themselves
 FLUCTUATION_LIMIT = 1e-6  # guaranteed |arc step - planned step| / planned step
 MIN_STEP_FOR_FLUCTUATION_MM = 1e-6  # steps shorter than 1 nm (coming to rest) are exempt
+# the arc-length arithmetic's resolution, relative to s: the residuals are sums of arc lengths
+# of magnitude s (s_k + an integral - the planned s), each rounded to ~eps s
+ARC_RESOLUTION = 64.0 * float(np.finfo(np.float64).eps)
 
 
 @dataclass(frozen=True)
@@ -292,6 +295,13 @@ def rows_max(values: NDArray[np.float64], first_row: int, n: int) -> NDArray[np.
     return out
 
 
+def arc_excess_mm(residual_step_mm: NDArray[np.float64], s_mm: NDArray[np.float64]) -> NDArray[np.float64]:
+    """|arc(step) - planned step| beyond what the arithmetic resolves at s (ARC_RESOLUTION s):
+    a step of 3 nm at the end of a 1 m curve cannot be resolved to 1e-6 of itself (3e-15 mm,
+    below one rounding of s), so its rounding-level residuals (~4e-12 mm) are no fluctuation."""
+    return np.maximum(np.abs(residual_step_mm) - ARC_RESOLUTION * np.abs(s_mm), 0.0)
+
+
 def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: NDArray[np.float64], limits: MachineLimits,
           before: NDArray[np.float64], after: NDArray[np.float64], previous: Samples | None) -> Check:
     """All figures of a stretch of n set-points. ``before``: the 3 positions preceding it (the
@@ -318,7 +328,10 @@ def check(grid: PathGrid, samples: Samples, s: NDArray[np.float64], planned_ds: 
         raise ValueError("check() needs samples with arc residuals (sample_path sets them)")
     residual_before = np.concatenate([[0.0 if previous is None or previous.arc_residual_mm is None
                                        else previous.arc_residual_mm[-1]], residual[:-1]])
-    arc_fl = np.where(moving, np.abs(residual - residual_before) / safe, 0.0)
+    residual_step = residual - residual_before
+    arc_fl = np.where(moving, np.abs(residual_step) / safe, 0.0)
+    over = np.flatnonzero(arc_fl > FLUCTUATION_LIMIT)  # rare: measured again beyond the rounding of s
+    arc_fl[over] = arc_excess_mm(residual_step[over], s[over]) / safe[over]
     chord_fl = np.where(moving, np.abs(row_norms(step) - planned) / safe, 0.0)
     zeros = np.zeros(n)
     axis_v = (row_max(np.abs(step) / period / limits.axis_velocity_mm_s)
