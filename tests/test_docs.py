@@ -13,6 +13,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = sorted([ROOT / "README.md", *(ROOT / "docs").rglob("*.md")])
 LINK = re.compile(r"(?<!!)\[[^\]]*\]\(([^)\s]+)\)|!\[[^\]]*\]\(([^)\s]+)\)")
+LINK_TARGET = re.compile(r"\]\(([^)\s]+)\)")
 FENCE = re.compile(r"^(```|~~~).*?^\1", re.S | re.M)
 
 
@@ -91,3 +92,27 @@ def test_every_control_command_is_in_the_daemon_docs_at_a_glance():
     named = set(re.findall(r"`([\w]+(?:\.\w+)?)`", glance))
     named |= {f"{group}.{leaf}" for group in ("programs", "queue") for leaf in re.findall(r"`\.(\w+)`", glance)}
     assert set(COMMANDS) <= named, f"docs/daemon.md, 'At a glance' lacks {sorted(set(COMMANDS) - named)}"
+
+
+def readme_docs_list() -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index("\n## Documentation\n")
+    end = text.find("\n## ", start + 1)
+    return text[start:end if end != -1 else len(text)]
+
+
+def test_every_doc_is_in_the_readme_docs_list():
+    """A page under docs/ that README's 'Documentation' list does not link is one a reader never finds."""
+    linked = {target.partition("#")[0] for target in LINK_TARGET.findall(readme_docs_list())}
+    missing = [f"docs/{p.name}" for p in sorted((ROOT / "docs").glob("*.md")) if f"docs/{p.name}" not in linked]
+    assert not missing, f"README.md, '## Documentation' does not link {missing}"
+
+
+def test_every_log_is_linked_from_its_doc():
+    """docs/NAME-log.md holds NAME.md's history: NAME.md must point to it."""
+    unlinked = []
+    for log in sorted((ROOT / "docs").glob("*-log.md")):
+        doc = log.with_name(log.name.removesuffix("-log.md") + ".md")
+        if not doc.exists() or log.name not in {t.partition("#")[0] for t in relative_links(doc)}:
+            unlinked.append(f"{log.name} (from {doc.name})")
+    assert not unlinked, f"history logs their doc does not link: {unlinked}"
