@@ -27,8 +27,7 @@ for it longer than the spin before its deadline starts the cycle late. So the pu
   cycle counters, job progress, state); the rest (override, offsets, homing, spindle, I/O,
   queue, last job) whole in the round of an event and the next, and every FULL_READ_PERIOD_S;
 - lets go of the lock between its steps (between_steps: the master's status, the job's
-  progress, the axes, the diff, the encoding, each send), so a waking cycle thread waits for
-  one step, not for the switch interval;
+  progress, the axes, the diff, the encoding, each send);
 - starts a step only where it ends before the cycle thread's next wake-up (the master's
   ``next_cycle_wake_s``; STEP_ROOM_S), else after that wake-up, and when the cycle thread
   woke meanwhile it sleeps for real until it has the lock (wait_before_step_s: a sleep(0)
