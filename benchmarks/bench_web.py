@@ -361,6 +361,25 @@ def late_summary(rows: list[dict[str, Any]]) -> str:
     return "\n".join(out)
 
 
+def ab_summary(rows: list[dict[str, Any]], clients: int) -> str:
+    """Issue 22's late-cycle target for each side of an A/B run: late cycles per 1000 with 0
+    and ``clients`` clients over all rounds, and in how many rounds the clients' job had more
+    late cycles than the job without clients of the same daemon."""
+    lines = ["| code | late per 1000, 0 clients | late per 1000, %d clients | rounds with more late cycles "
+             "with clients |" % clients, "|---|---|---|---|"]
+    for label in ("before", "after"):
+        none = [r for r in rows if r["clients"] == f"{label}: 0"]
+        some = [r for r in rows if r["clients"] == f"{label}: {clients} WebSocket"]
+        worse = sum(1 for a, b in zip(none, some) if b["late_per_1000"] > a["late_per_1000"])
+        lines.append(f"| {label} | {per_1000(none):.1f} | {per_1000(some):.1f} | {worse} of {len(some)} |")
+    return "\n".join(lines)
+
+
+def per_1000(rows: list[dict[str, Any]]) -> float:
+    """Late cycles per 1000 cycles over ``rows`` (jobs)."""
+    return 1000 * sum(r["late"] for r in rows) / max(1, sum(r["cycles"] for r in rows))
+
+
 async def main_async(args: argparse.Namespace) -> tuple[str, str]:
     """The section's summary and its full result (every round's row)."""
     if args.previous_src is not None:
@@ -397,7 +416,8 @@ async def main_async(args: argparse.Namespace) -> tuple[str, str]:
     if idle is None:
         return "", (f"This checkout's daemon and gateway against the previous one's (`--previous-src`), restarted "
                 f"for each: {args.seconds:g} s jobs with 0 and {args.clients} WebSocket clients, before and after "
-                f"alternating round by round. Load average at the end: {load}.\n\n" + "\n".join(table) + "\n")
+                f"alternating round by round. Load average at the end: {load}.\n\n" + "\n".join(table) + "\n\n"
+                + ab_summary(rows, args.clients) + "\n")
     shown = "not measured (no chromium or playwright)" if preview is None else f"{preview:.0f} ms"
     figures = (f"| figure | value | target |\n|---|---|---|\n"
                f"| gateway CPU, idle, one client connected ({args.idle_seconds:g} s) | {idle:.2f} % | < 1 % |\n"

@@ -104,6 +104,10 @@ class FakeLink:
                                0, 0)
         job.done.set()
 
+    @staticmethod
+    def next_cycle_wake_s() -> float | None:
+        return None  # no cycle loop: the status publisher only lets go of the lock between its steps
+
     def status(self, percentiles: bool = True) -> MasterStatus:
         job = self.job
         axes = tuple(AxisStatus(n, i + 1, "OPERATION ENABLED", 0x1237, self.held[i], self.held[i], 0, 0, 0, None)

@@ -9,8 +9,8 @@ import logging
 import pytest
 
 from nurbsmotion.log import kv, parse_kv
-from nurbsmotion.service.subscriptions import (MAX_PENDING_LINES, StatusHub, attach_event_log, merge_changes,
-                                               status_changes)
+from nurbsmotion.service.subscriptions import (AFTER_WAKE_S, MAX_PENDING_LINES, STEP_ROOM_S, StatusHub,
+                                               attach_event_log, merge_changes, status_changes, wait_before_step_s)
 
 
 class FakeClock:
@@ -380,3 +380,40 @@ def test_a_due_subscriber_with_nothing_changed_waits_for_its_next_tick():
     clock.now = sub.next_status_s
     hub.publish_once()
     assert lines(sub) == [] and sub.next_status_s >= clock.now + 0.049
+
+
+def test_a_publisher_step_starts_only_with_room_before_the_cycle_threads_wake_up():
+    """Else after it: a cycle thread that wakes into a step waits for the lock until it ends
+    (and after a sleep(0), for the switch interval)."""
+    now_s = 50.0
+    assert wait_before_step_s(None, now_s) == 0.0  # no cycle loop: only let go of the lock
+    assert wait_before_step_s(now_s + 2 * STEP_ROOM_S, now_s) == 0.0  # room for a step
+    # woke already and waits for the lock the publisher holds: a real sleep, not sleep(0)
+    assert wait_before_step_s(now_s - 1e-5, now_s) == AFTER_WAKE_S
+    assert wait_before_step_s(now_s + STEP_ROOM_S / 2, now_s) == pytest.approx(STEP_ROOM_S / 2 + AFTER_WAKE_S)
+
+
+def test_the_publisher_asks_when_the_cycle_thread_wakes_before_the_read_and_the_send():
+    calls: list[str] = []
+    status = FakeStatus()
+
+    def read() -> dict:
+        calls.append("read")
+        return status()
+
+    def next_wake_s() -> float | None:
+        calls.append("ask")
+        return None
+
+    def send(data: bytes) -> int:
+        calls.append("send")
+        return len(data)
+
+    hub = StatusHub(read, clock=FakeClock(), publisher_thread=False, next_cycle_wake_s=next_wake_s)
+    sub, _ = hub.subscribe()
+    sub.attach(send)
+    calls.clear()
+    hub.publish_event({"event": "fault", "fields": {"node": "2"}})
+    hub.publish_once()
+    assert "read" in calls and "send" in calls
+    assert calls[calls.index("read") - 1] == "ask" and calls[calls.index("send") - 1] == "ask"

@@ -218,6 +218,8 @@ def test_the_library_uploads_checks_selects_previews_starts_and_queues(console, 
         expect(page.get_by_test_id("check-result")).to_contain_text("broken.nc:2", timeout=20000)
         expect(page.get_by_test_id("check-result")).to_contain_text("not added")
         expect(page.get_by_test_id("program-list")).not_to_contain_text("broken.nc")
+        # a refused program has no preview: the panel says so instead of counting its segments
+        expect(page.get_by_test_id("selected-program")).to_have_text("broken.nc refused: no program selected")
         page.screenshot(path=str(shots / "library-refused-1600.png"), full_page=True)
         page.locator("#file").set_input_files(str(good))
         library = page.get_by_test_id("program-list")

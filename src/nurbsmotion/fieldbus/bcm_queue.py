@@ -223,6 +223,10 @@ class BcmQueueWriter:
         self.echo = SyncEcho(self.channel, self.frames.sync_id)
         self.grid = DeadlineGrid(self.wake_s, time.perf_counter() + self.wake_s)
 
+    def next_wake_s(self) -> float:
+        """When the cycle thread wakes next (no spin)."""
+        return self.grid.next_s
+
     def next_cycle(self) -> int:
         """Sleep until the next wake-up (every WAKE_PERIOD_S, whole cycles), then count the
         SYNCs the kernel sent meanwhile: the wire cycle."""

@@ -110,6 +110,11 @@ class CycleLoop:
             self._thread.join(1.0)
         self._thread = None
 
+    def next_wake_s(self) -> float | None:
+        """``time.perf_counter`` time this thread wakes next, None while it does not run."""
+        writer = self.writer
+        return writer.next_wake_s() if writer is not None and self._thread is not None else None
+
     def stats(self) -> LatenessStats:
         return self.writer.stats if self.writer is not None else self.stats_idle
 

@@ -146,6 +146,9 @@ class Master:
                                     extras, retimed)
         self._heartbeat: MasterHeartbeat | None = None
         self._writer: CycleWriter | None = None
+        # perf_counter time the cycle thread wakes next, None while no cycle loop runs; any
+        # thread (the status publisher keeps its steps out of the cycle's way: service.subscriptions)
+        self.next_cycle_wake_s: Callable[[], float | None] = self._loop.next_wake_s
 
     @property
     def network(self) -> canopen.Network | None:

@@ -88,6 +88,8 @@ class CycleWriter(Protocol):
 
     def start(self) -> None: ...
 
+    def next_wake_s(self) -> float: ...  # perf_counter time the cycle thread wakes next (deadline - spin)
+
     def next_cycle(self) -> int: ...
 
     def horizon(self, c: int, stop_cycles: int, moving: bool) -> int: ...
@@ -131,6 +133,10 @@ class LoopWriter:
 
     def start(self) -> None:
         self.grid = DeadlineGrid(self.period_s, time.perf_counter() + self.period_s)
+
+    def next_wake_s(self) -> float:
+        """When the cycle thread wakes for the next cycle: its spin before the deadline."""
+        return self.grid.next_s - self.spin_s
 
     def next_cycle(self) -> int:
         """Wait for the deadline of the next cycle, send its SYNC and RPDOs; return it."""

@@ -42,7 +42,7 @@ from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, Request
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
 from nurbsmotion.service.start_line import start_line_field
-from nurbsmotion.service.subscriptions import StatusHub, attach_event_log, yield_interpreter
+from nurbsmotion.service.subscriptions import StatusHub, attach_event_log
 from nurbsmotion.service.webhooks import start_webhooks
 
 log = logging.getLogger(__name__)
@@ -141,7 +141,8 @@ class Daemon:
         self.controller = Controller(self.config, link, self._prepare_job, self.records, self.simulation, machine_state,
                                      devices)
         self.programs = Programs(self.config, self.controller, self.store, queue)
-        self.hub = StatusHub(self._status, read_fast=self._fast_status, realtime_priority=STATUS_PUBLISHER_PRIORITY)
+        self.hub = StatusHub(self._status, read_fast=self._fast_status, realtime_priority=STATUS_PUBLISHER_PRIORITY,
+                             next_cycle_wake_s=link.next_cycle_wake_s)
         self._detach_event_log = attach_event_log(self.hub)
         self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
         # the library pruned and the queue runner going before the socket answers: a request never
@@ -177,14 +178,14 @@ class Daemon:
 
     def _status(self) -> dict[str, Any]:
         """The whole status for the status publisher, as a ``status`` request answers it,
-        read in steps that each let go of the interpreter lock (yield_interpreter)."""
-        assert self.controller is not None
-        return with_queue(self.controller.status(step=yield_interpreter), self.programs)
+        read in steps between which it lets go of the interpreter lock (StatusHub.between_steps)."""
+        assert self.controller is not None and self.hub is not None
+        return with_queue(self.controller.status(step=self.hub.between_steps), self.programs)
 
     def _fast_status(self) -> dict[str, Any]:
         """The status fields that move with the machine (controller.FAST_FIELDS), likewise."""
-        assert self.controller is not None
-        return self.controller.status(fast_only=True, step=yield_interpreter)
+        assert self.controller is not None and self.hub is not None
+        return self.controller.status(fast_only=True, step=self.hub.between_steps)
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller

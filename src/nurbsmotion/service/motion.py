@@ -48,6 +48,7 @@ class BusHost(Protocol):
 
 class MotionLink(BusHost, Protocol):
     axis_map: AxisMap
+    next_cycle_wake_s: Callable[[], float | None]  # perf_counter time the cycle thread wakes next
 
     def bring_up(self) -> None: ...
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None,

@@ -26,9 +26,13 @@ for it longer than the spin before its deadline starts the cycle late. So the pu
 - reads between events only the fields that move with the machine (``read_fast``: positions,
   cycle counters, job progress, state); the rest (override, offsets, homing, spindle, I/O,
   queue, last job) whole in the round of an event and the next, and every FULL_READ_PERIOD_S;
-- lets go of the lock between its steps (yield_interpreter: the master's status, the job's
-  progress, the axes, the diff, the encoding, each send), so a waking cycle thread waits for
-  one step, not for the switch interval;
+- lets go of the lock between its steps (between_steps: the master's status, the job's
+  progress, the axes, the diff, the encoding, each send);
+- starts a step only where it ends before the cycle thread's next wake-up (the master's
+  ``next_cycle_wake_s``; STEP_ROOM_S), else after that wake-up, and when the cycle thread
+  woke meanwhile it sleeps for real until it has the lock (wait_before_step_s: a sleep(0)
+  takes the lock back before the woken thread runs, which then waits for the switch
+  interval: docs/web.md, "Out of the cycle thread's way");
 - runs at SCHED_FIFO 1 where allowed, below every thread of the cycle: at normal priority the
   scheduler preempted it for milliseconds while it held the lock under load, and the cycle
   thread waited that long (docs/web.md, "What the subscription costs the cycle").
@@ -58,6 +62,12 @@ FULL_READ_PERIOD_S = 0.5  # between events, the fields that do not move with the
 TICK_SLACK_S = 1e-3  # a subscriber due this soon is served in this round
 FULL_READS_AFTER_EVENT = 2  # rounds that read the whole status after an event (this one and the next)
 MAX_UNSENT_BYTES = 4 * 1024 * 1024  # an attached client whose socket leaves this much unsent is dropped
+# a step starts only this long before the cycle thread's next wake-up: longer than a step on a
+# quiet core (10-150 µs, the diff the longest) with the lock's hand-over; else it waits ...
+STEP_ROOM_S = 300e-6
+# ... until this long after that wake-up: the cycle thread has taken the lock and holds it
+# through its spin (60 µs) and its sends; the step waits for its cycle's work
+AFTER_WAKE_S = 100e-6
 Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
 
 
@@ -147,15 +157,19 @@ class StatusHub:
 
     def __init__(self, read_status: Callable[[], Status], clock: Callable[[], float] = time.monotonic,
                  wall_clock: Callable[[], float] = time.time, publisher_thread: bool = True,
-                 read_fast: Callable[[], Status] | None = None, realtime_priority: int | None = None) -> None:
+                 read_fast: Callable[[], Status] | None = None, realtime_priority: int | None = None,
+                 next_cycle_wake_s: Callable[[], float | None] | None = None) -> None:
         """``read_fast``: the fields of the status that move with the machine (the rest is
         read whole only after events and every FULL_READ_PERIOD_S; None: always whole).
         ``realtime_priority``: the publisher thread's SCHED_FIFO priority where allowed.
+        ``next_cycle_wake_s``: ``time.perf_counter`` time the cycle thread wakes next (None:
+        no cycle runs); the publisher's steps keep out of its way (between_steps).
         ``publisher_thread`` False: nothing publishes but ``publish_once`` calls (tests
         drive the hub step by step with an injected clock)."""
         self._read_status = read_status
         self._read_fast = read_fast
         self._realtime_priority = realtime_priority
+        self._next_cycle_wake_s = next_cycle_wake_s
         self._next_full_s = 0.0
         self._full_reads_due = 0  # an event was published: read the whole status this many rounds
         self._publisher_thread = publisher_thread
@@ -239,12 +253,13 @@ class StatusHub:
     def publish_once(self) -> None:
         """Send queued events, then the status changes of every subscriber that is due (or
         that an event just woke). The publisher thread's step; tests call it directly.
-        Between its steps it lets go of the interpreter lock (yield_interpreter), so a cycle
-        thread that woke meanwhile waits for one step, not for the switch interval."""
+        Between its steps it lets go of the interpreter lock and keeps out of the cycle
+        thread's way (between_steps)."""
         with self._lock:
             subscribers = list(self._subscribers)
         if not subscribers:
             return
+        self.between_steps()
         events = []
         while self._events:
             events.append(self._events.popleft())
@@ -254,12 +269,12 @@ class StatusHub:
             for sub in subscribers:
                 sub.put(body)
         status = self._sample(bool(events))
-        yield_interpreter()
+        self.between_steps()
         with self._lock:
             changes = status_changes(self._last, status)
             self._last = status
         if changes:
-            yield_interpreter()
+            self.between_steps()
         due_s = self._clock() + TICK_SLACK_S
         encoded: dict[int, bytes] = {}  # subscribers at one rate share their pending changes: encode once
         for sub in subscribers:
@@ -276,10 +291,18 @@ class StatusHub:
                     encoded[key] = encode({"notify": "status", "t": stamp, "changes": sub.pending})
                 sub.put(encoded[key])
                 sub.pending = {}
-        if encoded:
-            yield_interpreter()
-        for sub in subscribers:
+        for i, sub in enumerate(subscribers):  # each send lets go of the lock itself
+            self.between_steps(let_go=bool(encoded) and i == 0)
             sub.flush()
+
+    def between_steps(self, let_go: bool = True) -> None:
+        """Between two steps of a round (and of its status reads: the daemon hands this to
+        them): let go of the interpreter lock (``let_go``), and when the next step could still
+        run when the cycle thread wakes, wait until just after that wake-up (wait_before_step_s)."""
+        wake_s = self._next_cycle_wake_s() if self._next_cycle_wake_s is not None else None
+        wait_s = wait_before_step_s(wake_s, time.perf_counter())
+        if wait_s > 0.0 or let_go:
+            time.sleep(wait_s)  # sleep(0) lets go of the lock too
 
     def _sample(self, after_event: bool) -> Status:
         """The status now. Whole when there is no fast read, after an event (in this round
@@ -305,11 +328,20 @@ def next_tick_s(now_s: float, period_s: float) -> float:
     return (math.floor(now_s / period_s + 1e-9) + 1) * period_s
 
 
-def yield_interpreter() -> None:
-    """Let go of the interpreter lock for a moment (time.sleep(0) releases it): a thread
-    waiting for it, the cycle thread above all, takes it now instead of at the switch
-    interval."""
-    time.sleep(0)
+def wait_before_step_s(wake_s: float | None, now_s: float) -> float:
+    """How long the publisher sleeps before its next step (``time.perf_counter`` seconds):
+    0 (``let_go``: only sleep(0)) when the cycle thread's next wake-up ``wake_s`` is at least
+    STEP_ROOM_S away or unknown (None: no cycle loop); else until AFTER_WAKE_S after it. A
+    wake-up already past means the cycle thread woke and waits for the lock the publisher
+    holds (it moves ``wake_s`` on as soon as it has the lock): then too it sleeps
+    AFTER_WAKE_S, for real. A sleep(0) hands the lock over to nobody: it signals the waiter,
+    takes the lock back before the woken thread has run (tens of µs on a virtual machine),
+    and the cycle thread gets it only when its wait reaches the switch interval (T/4), which
+    is later than its 100 µs late threshold."""
+    if wake_s is None:
+        return 0.0
+    ahead_s = wake_s - now_s
+    return max(ahead_s, 0.0) + AFTER_WAKE_S if ahead_s < STEP_ROOM_S else 0.0
 
 
 class EventLogHandler(logging.Handler):

@@ -213,6 +213,14 @@ function showProgram(name, text, check) {
   markSelected();
 }
 
+function clearProgram(label) {
+  // no program selected: the panel says why, the preview asks for one, nothing is marked
+  program = null;
+  $("program-name").textContent = label;
+  render();
+  markSelected();
+}
+
 function extentText(e) {
   return e ? e.axes.map((a, i) => a + " " + e.min_mm[i] + ".." + e.max_mm[i]).join(" ") + " mm" : "";
 }
@@ -238,7 +246,7 @@ $("file").addEventListener("change", async () => {
   $("file").value = "";
   if (answer.ok === false) {
     showCheck(name + " refused, not added:\n" + [answer.error].concat(answer.errors).filter((v, i, a) => v && a.indexOf(v) === i).join("\n"), true);
-    program = null; render();
+    clearProgram(name + " refused: no program selected");  // a refused program has no preview
     return;
   }
   program.check = answer.program.check;
@@ -284,7 +292,7 @@ async function loadPrograms() {
       smallButton("✕", "remove from the library", async () => {
         if (!confirm("Remove " + p.name + " from the library?")) return;
         await api("DELETE", "programs/" + encodeURIComponent(p.name));
-        if (program && program.name === p.name) { program = null; $("program-name").textContent = "no program selected"; render(); }
+        if (program && program.name === p.name) clearProgram("no program selected");
         loadPrograms();
       }));
     list.append(li);
