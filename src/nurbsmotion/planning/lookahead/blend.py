@@ -4,7 +4,8 @@ Between consecutive pieces that are lines or planar circular arcs (geometry/corn
 each corner the machine passes moving becomes a quintic blend: both neighbours are trimmed
 by the trim distance d (their u_start / u_end) and the blend piece goes between them, with
 the outgoing block's index (source lines and program events still map to blocks in order)
-and the smaller of the two feeds. The joins are tangent and curvature-continuous, so
+and the smaller of the two feeds, the outgoing one from its middle on where that is faster
+(BlockPiece.feed_out_mm_s). The joins are tangent and curvature-continuous, so
 split_runs passes them without slowing; the speed on the blend comes from its own curvature
 and jerk terms (speed_limits.py).
 
@@ -295,9 +296,11 @@ def assembled(pieces: list[BlockPiece], plan: CornerPlan, blends: BlendCorners) 
             if shapes.is_arc[i] or shapes.is_arc[i + 1]:
                 points = exact_ends(points, pieces[i], u_end[i], shapes.is_arc[i], after, u_start[i + 1],
                                     shapes.is_arc[i + 1])
-            out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, min(piece.feed_mm_s, after.feed_mm_s),
+            slower = min(piece.feed_mm_s, after.feed_mm_s)
+            out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, slower,
                                   ordinal=len(out), corners=blends, corner=b,
-                                  near=blend_near(piece, after, shapes, i, float(plan.tolerance[b]))))
+                                  near=blend_near(piece, after, shapes, i, float(plan.tolerance[b])),
+                                  feed_out_mm_s=after.feed_mm_s if after.feed_mm_s > slower else None))
     return out
 
 
