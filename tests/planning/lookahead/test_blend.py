@@ -309,3 +309,15 @@ def test_entering_a_slow_block_keeps_the_slower_feed_on_the_whole_blend():
     program = parse_gcode("G1 X20 F120\nG1 Z-5 F30\n", "retract.nc")
     blend_piece = next(p for p in planned_pieces(program, NO_JERK) if p.corners is not None)
     assert (blend_piece.feed_mm_s, blend_piece.feed_out_mm_s) == (0.5, None)
+
+
+@pytest.mark.parametrize(("feed_mm_s", "blended"), [(16.7, True), (100.0, False)])
+def test_without_jerk_limit_a_sharp_corner_is_blended_where_that_beats_the_stop(feed_mm_s, blended):
+    """90 deg, no jerk limit: the blend passes at ~8 mm/s, below SHARP_PASS_SHARE of either
+    feed; from 16.7 mm/s crossing it costs less than stopping (v / A), from 100 mm/s more."""
+    program = polyline(turn(90.0), feed_mm_s=feed_mm_s)
+    assert any(p.corners is not None for p in planned_pieces(program, NO_JERK)) == blended
+    assert not any(p.corners is not None for p in planned_pieces(program, LIMITS))
+    trajectory = plan_lookahead(program, NO_JERK)
+    assert rests_at(trajectory, turn(90.0)[1]) != blended
+    assert_blended_plan_holds(trajectory, program, NO_JERK)
