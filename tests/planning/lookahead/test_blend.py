@@ -278,3 +278,46 @@ def test_a_near_reversal_stays_a_stop_at_any_feed(feed_mm_s):
     program = polyline(turn(theta), feed_mm_s=feed_mm_s)
     assert not any(p.corners is not None for p in planned_pieces(program, NO_JERK))
     assert rests_at(plan_lookahead(program, NO_JERK), turn(theta)[1])
+
+
+def steps_mm_s(trajectory) -> np.ndarray:
+    """Speed (mm/s) of the step ending at each row (row 0: 0)."""
+    step = np.linalg.norm(np.diff(trajectory.position_mm, axis=0), axis=1) / trajectory.period_s
+    return np.concatenate([[0.0], step])
+
+
+@pytest.mark.parametrize("limits", [LIMITS, NO_JERK], ids=["jerk", "no-jerk"])
+def test_leaving_a_slow_block_speeds_up_from_the_blends_middle(limits):
+    """A plunge at 0.5 mm/s, then a cut at 2 mm/s round a 90 deg corner: the blend keeps the
+    plunge's feed to its middle and takes the cut's from there (LinuxCNC's blend runs at the
+    larger feed throughout), so the cut's feed is reached earlier than at the blend's end."""
+    program = parse_gcode("G1 Z-5 F30\nG1 X20 F120\n", "plunge.nc")
+    blend_piece = next(p for p in planned_pieces(program, limits) if p.corners is not None)
+    assert (blend_piece.feed_mm_s, blend_piece.feed_out_mm_s) == (0.5, 2.0)
+    trajectory = plan_lookahead(program, limits)
+    speed = steps_mm_s(trajectory)
+    middle, end = blend_piece.curve.points(np.array([0.5, 1.0]))[:, :3]
+    to_middle = np.linalg.norm(trajectory.position_mm - middle, axis=1)
+    first_half = np.arange(len(speed)) <= int(np.argmin(to_middle))
+    assert speed[first_half].max() <= 0.5 * (1.0 + 1e-6)
+    assert speed_near(trajectory, end) > 0.5 * 1.5
+    assert speed.max() <= 2.0 * (1.0 + 1e-6)
+    assert_blended_plan_holds(trajectory, program, limits)
+
+
+def test_entering_a_slow_block_keeps_the_slower_feed_on_the_whole_blend():
+    program = parse_gcode("G1 X20 F120\nG1 Z-5 F30\n", "retract.nc")
+    blend_piece = next(p for p in planned_pieces(program, NO_JERK) if p.corners is not None)
+    assert (blend_piece.feed_mm_s, blend_piece.feed_out_mm_s) == (0.5, None)
+
+
+@pytest.mark.parametrize(("feed_mm_s", "blended"), [(16.7, True), (100.0, False)])
+def test_without_jerk_limit_a_sharp_corner_is_blended_where_that_beats_the_stop(feed_mm_s, blended):
+    """90 deg, no jerk limit: the blend passes at ~8 mm/s, below SHARP_PASS_SHARE of either
+    feed; from 16.7 mm/s crossing it costs less than stopping (v / A), from 100 mm/s more."""
+    program = polyline(turn(90.0), feed_mm_s=feed_mm_s)
+    assert any(p.corners is not None for p in planned_pieces(program, NO_JERK)) == blended
+    assert not any(p.corners is not None for p in planned_pieces(program, LIMITS))
+    trajectory = plan_lookahead(program, NO_JERK)
+    assert rests_at(trajectory, turn(90.0)[1]) != blended
+    assert_blended_plan_holds(trajectory, program, NO_JERK)

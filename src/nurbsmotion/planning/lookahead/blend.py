@@ -4,7 +4,8 @@ Between consecutive pieces that are lines or planar circular arcs (geometry/corn
 each corner the machine passes moving becomes a quintic blend: both neighbours are trimmed
 by the trim distance d (their u_start / u_end) and the blend piece goes between them, with
 the outgoing block's index (source lines and program events still map to blocks in order)
-and the smaller of the two feeds. The joins are tangent and curvature-continuous, so
+and the smaller of the two feeds, the outgoing one from its middle on where that is faster
+(BlockPiece.feed_out_mm_s). The joins are tangent and curvature-continuous, so
 split_runs passes them without slowing; the speed on the blend comes from its own curvature
 and jerk terms (speed_limits.py).
 
@@ -19,7 +20,9 @@ as much as a stop and the jerk filter's plateau around it more (grbl's braid 43.
 every corner up to 90 deg blended, 36.9 s up to 30), while on the V-carve's 2.54 mm/s cuts
 the same blends pass at nearly the feed (37.74 -> 37.41 s with J, 30.35 -> 30.04 s without).
 Rapid-to-feed corners compare the blend with the rapid's feed, so they stay stops, as in
-LinuxCNC (tp.c handleModeChange). A corner also stays a junction where a piece is not a line
+LinuxCNC (tp.c handleModeChange). Without a jerk limit a sharp corner between two blocks of
+one feed is also blended where its blend is estimated faster than the stop (worth_blending;
+a 90 deg corner at 16.7 mm/s is, at 100 mm/s it is not). A corner also stays a junction where a piece is not a line
 or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
 (corner_blend.trim_distances, monotone). The tolerance of a corner is the outgoing block's
 G64 P, else the machine's ``path_tolerance_mm``.
@@ -63,6 +66,32 @@ def pass_speed_mm_s(points: NDArray[np.float64], limits: PlanLimits) -> NDArray[
         if jerk is not None:
             v = np.minimum(v, np.cbrt(JERK_SHARE * MARGIN * jerk / (kappa * kappa + slope)))
     return v
+
+
+def worth_blending(points: NDArray[np.float64], feed_in_mm_s: NDArray[np.float64], feed_out_mm_s: NDArray[np.float64],
+                   limits: PlanLimits, leniency: float = 0.0) -> NDArray[np.bool_]:
+    """(n,) which sharp corners' blends (control points (n, 6, 3)) beat a stop. Those that pass
+    (pass_speed_mm_s, w) at SHARP_PASS_SHARE of the faster feed at least: a crawl costs as much
+    as a stop (with a jerk limit, the filter's plateau around it more); a rapid-to-feed corner
+    compares with the rapid's feed, so it stays a stop where the rapid is the faster, as in
+    LinuxCNC (tp.c handleModeChange). Without a jerk limit also a corner between two blocks of
+    one feed v whose blend is
+    estimated faster than the stop against cruising at v: a stop costs v / A, a blend
+    decelerated to w, crossed at w along its length L (bounded by its control polygon's) and
+    left again (v - w)^2 / (A v) + L (1 / w - 1 / v) (fusion360_led_floor's 90 deg corners at
+    16.7 mm/s, w ~ 8 mm/s: 6.2 against 6.7 ms). ``leniency`` > 0 blends more (share and cost
+    bound by that fraction: setup.py's margin for a corner that surely stays a stop)."""
+    w = pass_speed_mm_s(points, limits)
+    feed = np.maximum(feed_in_mm_s, feed_out_mm_s)
+    near_feed = w >= SHARP_PASS_SHARE * feed * (1.0 - leniency)
+    if planned_jerk_mm_s3(limits) is not None:
+        return np.asarray(near_feed)
+    accel = limits.max_accel_mm_s2
+    length = np.linalg.norm(np.diff(points, axis=1), axis=2).sum(axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        blend_s = (feed - w) ** 2 / (accel * feed) + length * (1.0 / w - 1.0 / feed)
+    cheaper = (feed_in_mm_s == feed_out_mm_s) & (w > 0) & (blend_s < feed / accel * (1.0 + leniency))
+    return np.asarray(near_feed | cheaper)
 
 
 def is_line(curve: NurbsCurve) -> bool:
@@ -143,8 +172,8 @@ def blend_pieces(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramSto
     good = (d > 0) & cb.monotone(points)
     sharp = deflection[corners] > math.radians(MAX_DEFLECTION_DEG)
     if sharp.any():
-        feed = np.array([max(pieces[c].feed_mm_s, pieces[c + 1].feed_mm_s) for c in corners[sharp].tolist()])
-        good[sharp] &= pass_speed_mm_s(points[sharp], limits) >= SHARP_PASS_SHARE * feed
+        feeds = np.array([(pieces[c].feed_mm_s, pieces[c + 1].feed_mm_s) for c in corners[sharp].tolist()])
+        good[sharp] &= worth_blending(points[sharp], feeds[:, 0], feeds[:, 1], limits)
     if not good.any():
         return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
     plan = CornerPlan(shapes, corners[good], d[good], tolerance[corners[good]], t_in, t_out, deflection)
@@ -295,9 +324,11 @@ def assembled(pieces: list[BlockPiece], plan: CornerPlan, blends: BlendCorners) 
             if shapes.is_arc[i] or shapes.is_arc[i + 1]:
                 points = exact_ends(points, pieces[i], u_end[i], shapes.is_arc[i], after, u_start[i + 1],
                                     shapes.is_arc[i + 1])
-            out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, min(piece.feed_mm_s, after.feed_mm_s),
+            slower = min(piece.feed_mm_s, after.feed_mm_s)
+            out.append(BlockPiece(after.block, cb.bezier_curve(points), 0.0, 1.0, slower,
                                   ordinal=len(out), corners=blends, corner=b,
-                                  near=blend_near(piece, after, shapes, i, float(plan.tolerance[b]))))
+                                  near=blend_near(piece, after, shapes, i, float(plan.tolerance[b])),
+                                  feed_out_mm_s=after.feed_mm_s if after.feed_mm_s > slower else None))
     return out
 
 

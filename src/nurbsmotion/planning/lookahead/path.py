@@ -27,7 +27,7 @@ chord (verify.py), which is what the chord-error limit plans and checks.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from threading import Lock
 from weakref import WeakKeyDictionary
@@ -45,6 +45,7 @@ _GL_NODES, _GL_WEIGHTS = np.polynomial.legendre.leggauss(GAUSS_POINTS)
 CURVATURE_SAMPLES = np.linspace(0.0, 1.0, 5)
 SPEED_DEGREE = 6
 TINY_SPEED = 1e-300
+BLEND_MIDDLE_U = 0.5  # a blend's curve runs over u in [0, 1] (corner_blend.bezier_curve): its middle
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,7 +88,12 @@ class BlockPiece:
     (``corners`` set: its curve replaces corner ``corner`` of them; ``block`` is the outgoing
     block's); or a smoothed piece (``covered`` set: its own curve along several blocks, the
     first of them ``block``; ``deviation_mm``: how far it may be from the program, which the
-    blends at its ends leave out of their tolerance). ``ordinal``: the piece's place in the
+    blends at its ends leave out of their tolerance). ``feed_out_mm_s``: a blend's feed from
+    its middle (u > BLEND_MIDDLE_U) on, where the outgoing block is faster than the incoming
+    one (its first half keeps the smaller feed; None: ``feed_mm_s`` throughout), so that
+    leaving a slow block (a plunge) speeds up along the blend's second half, which runs near
+    the outgoing block and carries its index, as LinuxCNC's blend does along the whole of it
+    (blendmath.c: the larger of the two feeds). ``ordinal``: the piece's place in the
     program's list of pieces (-1: not known), which names it where (block, u) does not (a
     blend and its outgoing block share a block)."""
 
@@ -102,6 +108,18 @@ class BlockPiece:
     covered: Covered | None = None
     deviation_mm: float = 0.0
     near: ProgramNear | None = None
+    feed_out_mm_s: float | None = None
+
+    def slower(self, factor: float) -> BlockPiece:
+        """The piece with its feed(s) x factor."""
+        out = None if self.feed_out_mm_s is None else self.feed_out_mm_s * factor
+        return replace(self, feed_mm_s=self.feed_mm_s * factor, feed_out_mm_s=out)
+
+    def feeds_at(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Feed cap at parameters u: feed_mm_s, and feed_out_mm_s beyond a blend's middle."""
+        if self.feed_out_mm_s is None:
+            return np.full(len(u), self.feed_mm_s)
+        return np.where(u > BLEND_MIDDLE_U, self.feed_out_mm_s, self.feed_mm_s)
 
     @property
     def last_block(self) -> int:
@@ -446,11 +464,12 @@ def plateau_reach_mm(pieces: tuple[BlockPiece, ...], plateau_s: float) -> list[t
     """Per piece, how far into it the feed plateau of a slower previous / next piece reaches
     (F_neighbour x plateau_s; 0 where the neighbour is not slower)."""
     feeds = [piece.feed_mm_s for piece in pieces]
+    end_feeds = [piece.feed_mm_s if piece.feed_out_mm_s is None else piece.feed_out_mm_s for piece in pieces]
     reach = [(0.0, 0.0)] * len(pieces)
     if plateau_s <= 0.0:
         return reach
     for i, feed in enumerate(feeds):
-        before = feeds[i - 1] * plateau_s if i > 0 and feeds[i - 1] < feed else 0.0
+        before = end_feeds[i - 1] * plateau_s if i > 0 and end_feeds[i - 1] < feed else 0.0
         after = feeds[i + 1] * plateau_s if i + 1 < len(feeds) and feeds[i + 1] < feed else 0.0
         reach[i] = (before, after)
     return reach
@@ -476,6 +495,8 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float, feed_step_s: f
     for index, piece in enumerate(pieces):
         spacing = min(spacing_mm, max(piece.feed_mm_s * feed_step_s, min_spacing_mm)) if feed_step_s > 0 else spacing_mm
         u = piece_u_grid(piece, spacing, *reach[index])
+        if piece.feed_out_mm_s is not None and u[0] < BLEND_MIDDLE_U < u[-1]:
+            u = np.union1d(u, [BLEND_MIDDLE_U])  # the feed steps up there: a grid point on it
         (x, t, curv, dcurv, u_s, u_ss), (curv_left, dcurv_left, u_ss_left) = grid_derivatives(piece.curve, u)
         cubed = u_s * u_s * u_s  # sigma' = -u_ss / u_s^3 (sigma = 1 / u_s is continuous at knots)
         poly = speed_polynomials(piece.curve, u, 1.0 / u_s, -u_ss / cubed, -u_ss_left / cubed)
@@ -486,7 +507,7 @@ def build_grid(pieces: tuple[BlockPiece, ...], spacing_mm: float, feed_step_s: f
                            ("curv_left", to_3d(curv_left)), ("dcurv_left", to_3d(dcurv_left))):
             parts[key].append(value)
         parts["piece"].append(np.full(len(u), index, dtype=np.int32))
-        parts["feed"].append(np.full(len(u), piece.feed_mm_s))
+        parts["feed"].append(piece.feeds_at(u))
         offset = float(s[-1])
     cat = {k: np.concatenate(v) if len(v) > 1 else v[0] for k, v in parts.items()}  # one piece: no copies
     kappa_max = interval_curvature_max(cat["s"], cat["curv"], cat["dcurv"], cat["curv_left"], cat["dcurv_left"])

@@ -710,7 +710,7 @@ def runs_from_rest(run: Run, feed_floor_mm_s: float | None,
     floor = feed_floor_mm_s if feed_floor_mm_s is not None else piece.feed_mm_s / 2.0**MAX_FEED_HALVINGS
     if piece.feed_mm_s / 2.0 < floor:
         raise error
-    return [(Run((replace(piece, feed_mm_s=piece.feed_mm_s / 2.0),), ()), floor, FALLBACK_SLOWER)]
+    return [(Run((piece.slower(0.5),), ()), floor, FALLBACK_SLOWER)]
 
 
 def failing_piece(run: Run, error: PlanningError) -> int:

@@ -176,15 +176,15 @@ class PathSections:
         return self.too_slow_to_blend(shapes, pieces)
 
     def too_slow_to_blend(self, shapes: cb.Pieces, pieces: list[BlockPiece]) -> bool:
-        """A sharp corner (above MAX_DEFLECTION_DEG) whose blend fails its checks or passes below
-        SHARP_PASS_SHARE of the feed by CUT_MARGIN_SPEED at least (blend.blend_pieces)."""
+        """A sharp corner (above MAX_DEFLECTION_DEG) whose blend fails its checks or is not worth
+        it by CUT_MARGIN_SPEED at least (blend.worth_blending, as blend.blend_pieces asks)."""
         first, second = shapes.take(np.array([0])), shapes.take(np.array([1]))
         tolerance = corner_tolerances(pieces, self.limits, self.stops)
         d = cb.trim_distances(first, second, tolerance)
         points = cb.blend_points(first, second, d)
         if not (d[0] > 0 and cb.monotone(points)[0]):
             return True
-        feed = max(pieces[0].feed_mm_s, pieces[1].feed_mm_s)
-        return float(blend.pass_speed_mm_s(points, self.limits)[0]) < blend.SHARP_PASS_SHARE * feed * (1.0 - CUT_MARGIN_SPEED)
+        feed_in, feed_out = np.array([pieces[0].feed_mm_s]), np.array([pieces[1].feed_mm_s])
+        return not bool(blend.worth_blending(points, feed_in, feed_out, self.limits, CUT_MARGIN_SPEED)[0])
 
 

@@ -424,7 +424,8 @@ def widen_dips(s: NDArray[np.float64], v: NDArray[np.float64], averaging_s: floa
 
 def feed_plateaus(s: NDArray[np.float64], piece: NDArray[np.int32], feed_mm_s: NDArray[np.float64],
                   plateau_s: float) -> NDArray[np.float64]:
-    """Speed cap from the pieces' feeds: each piece's feed F over the piece and F x plateau_s
+    """Speed cap from the pieces' feeds: each piece's feed F (each part of one feed: a blend
+    steps up at its middle, path.BlockPiece.feed_out_mm_s) over the piece and F x plateau_s
     beyond its ends, out to the grid points at or beyond those (path.build_grid puts one there).
     plateau_s = tau / 2 + T (PlanSettings.feed_plateau_s): as in widen_dips, the set-point's
     speed is the raw speed averaged over tau, and while the set-point is on the piece the
@@ -433,7 +434,7 @@ def feed_plateaus(s: NDArray[np.float64], piece: NDArray[np.int32], feed_mm_s: N
     piece, unlike widen_dips' bands: the feed is not checked per cycle (verify.py), every other
     limit is."""
     n = len(s)
-    starts = np.flatnonzero(np.concatenate([[True], piece[1:] != piece[:-1]]))
+    starts = np.flatnonzero(np.concatenate([[True], (piece[1:] != piece[:-1]) | (feed_mm_s[1:] != feed_mm_s[:-1])]))
     ends = np.concatenate([starts[1:] - 1, [n - 1]])
     feed = feed_mm_s[starts]
     if feed.min() == feed.max():  # one feed: every point is capped at it already
