@@ -36,6 +36,7 @@ import dataclasses
 import datetime as dt
 import hashlib
 import json
+import shlex
 import os
 import shutil
 import subprocess
@@ -409,7 +410,7 @@ def write_docs(body: str, args: argparse.Namespace) -> None:
     from benchmarks._report import write_section
 
     load = subprocess.run(["uptime"], capture_output=True, text=True).stdout.strip()
-    command = "python benchmarks/bench_vs_linuxcnc.py " + " ".join(sys.argv[1:])
+    command = "python benchmarks/bench_vs_linuxcnc.py " + shlex.join(sys.argv[1:])
     text = f"""
 LinuxCNC 2.9 (Debian's linuxcnc-uspace, its trajectory planner in the uspace simulation)
 against ours on the same programs under the same limits: T = 1 ms, feed capped at 200 mm/s,
