@@ -348,13 +348,12 @@ async def ab_rounds(args: argparse.Namespace) -> list[dict[str, Any]]:
     return rows
 
 
-
 def late_summary(rows: list[dict[str, Any]]) -> str:
     """Late cycles per 1000 over all rounds of each kind of client, and its rounds' event p99."""
     out = ["| clients | rounds | late per 1000 cycles (all rounds) | event -> client p99 ms |", "|---|---|---|---|"]
     for kind in dict.fromkeys(r["clients"] for r in rows):
         group = [r for r in rows if r["clients"] == kind]
-        late = 1000 * sum(r["late"] for r in group) / max(1, sum(r["cycles"] for r in group))
+        late = per_1000(group)
         p99 = [r["p99_ms"] for r in group if r["events"]]
         shown = f"{min(p99):.1f}-{max(p99):.1f}" if p99 else "-"
         out.append(f"| {kind} | {len(group)} | {late:.1f} | {shown} |")
