@@ -96,10 +96,12 @@ def is_straight(pieces: tuple[BlockPiece, ...]) -> bool:
     return all(float(np.dot(end_tangents(p)[0], first)) > 1.0 - 1e-9 for p in pieces)
 
 
-def stop_reasons(program: Program) -> tuple[list[tuple[float, str, float]], list[tuple[float, float, float]]]:
+def stop_reasons(program: Program, jerk: float | None = JERK
+                 ) -> tuple[list[tuple[float, str, float]], list[tuple[float, float, float]]]:
     """([(s of the stop, reason, blend speed or 0)], [(s from, s to, jerk-limited time) of each
-    straight rest-to-rest run]) along the planned path (module docstring)."""
-    lim = limits(JERK, 0.01)
+    straight rest-to-rest run; none without a jerk limit: with_accel is exact there]) along the
+    planned path (module docstring)."""
+    lim = limits(jerk, 0.01)
     stops = ProgramStops.of(program, lim)
     pieces = path_pieces(program, lim, stops)
     settings = settings_for(lim, max_program_feed(program, lim), 2000)
@@ -108,7 +110,7 @@ def stop_reasons(program: Program) -> tuple[list[tuple[float, str, float]], list
     for k, run in enumerate(runs):
         length = sum(piece_length(p) for p in run.pieces)
         feeds = {p.feed_mm_s for p in run.pieces}
-        if is_straight(run.pieces) and len(feeds) == 1:  # a rapid into a collinear plunge: caps + A only
+        if jerk is not None and is_straight(run.pieces) and len(feeds) == 1:  # a rapid into a collinear plunge: caps + A only
             straight.append((s0, s0 + length, jerk_limited_time(length, feeds.pop())))
         s0 += length
         if k + 1 < len(runs):
@@ -144,12 +146,7 @@ def stop_reason(a: BlockPiece, b: BlockPiece, program: Program, lim, stops: Prog
 def forced_speeds(s: np.ndarray, cap: np.ndarray, reasons: list[tuple[float, str, float]]) -> np.ndarray:
     """caps + A resting only where the program or a reversal forces it, every other stop at its
     blend's speed."""
-    capped = cap.copy()
-    for s_stop, reason, speed in reasons:
-        i = min(int(np.searchsorted(s, s_stop)), len(s) - 1)
-        capped[i] = 0.0 if reason in ("program", "reversal") else min(capped[i], speed)
-    capped[0], capped[-1] = 0.0, 0.0
-    return with_accel(s, capped)
+    return with_accel(s, rested(s, cap, reasons, ("program", "reversal")))
 
 
 def forced_steps(s: np.ndarray, v: np.ndarray, straight: list[tuple[float, float, float]]) -> np.ndarray:
@@ -182,16 +179,18 @@ def reason_counts(reasons: list[tuple[float, str, float]]) -> str:
     return ", ".join(parts)
 
 
-def caps(program: Program) -> tuple[np.ndarray, np.ndarray, float]:
+def caps(program: Program, jerk: float | None = JERK) -> tuple[np.ndarray, np.ndarray, float]:
     """(s, speed cap at s, feeds-alone time) along the planned path."""
-    s, cap, feeds_s, _ = caps_and_blocks(program)
+    s, cap, feeds_s, _, _ = caps_and_blocks(program, jerk)
     return s, cap, feeds_s
 
 
-def caps_and_blocks(program: Program) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-    """caps with the block of every sample (a blend's: its outgoing block's)."""
-    s_all, cap_all, block_all, feeds_s, s0 = [], [], [], 0.0, 0.0
-    for piece in planned_pieces(program, limits(JERK, 0.01)):
+def caps_and_blocks(program: Program, jerk: float | None = JERK
+                    ) -> tuple[np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+    """caps with the block of every sample (a blend's: its outgoing block's) and the curvature
+    there; without a jerk limit the caps are the feed and sqrt(A / kappa)."""
+    s_all, cap_all, block_all, kappa_all, feeds_s, s0 = [], [], [], [], 0.0, 0.0
+    for piece in planned_pieces(program, limits(jerk, 0.01)):
         curve = piece.curve
         length = float(curve.arc_length(piece.u_end) - curve.arc_length(piece.u_start))
         u = np.linspace(piece.u_start, piece.u_end, max(int(length / STEP_MM), 4))
@@ -202,14 +201,17 @@ def caps_and_blocks(program: Program) -> tuple[np.ndarray, np.ndarray, float, np
         s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(x, axis=0), axis=1))])
         kappa = np.linalg.norm(c, axis=1)
         rate = np.concatenate([np.linalg.norm(np.diff(c, axis=0), axis=1) / np.maximum(np.diff(s), 1e-12), [0.0]])
-        cap = np.minimum(piece.feed_mm_s, np.minimum(np.sqrt(ACCEL / np.maximum(kappa, 1e-12)),
-                                                     np.cbrt(JERK / np.maximum(rate + kappa**2, 1e-12))))
+        cap = np.minimum(piece.feed_mm_s, np.sqrt(ACCEL / np.maximum(kappa, 1e-12)))
+        if jerk is not None:
+            cap = np.minimum(cap, np.cbrt(jerk / np.maximum(rate + kappa**2, 1e-12)))
         s_all.append(s0 + s)
+        kappa_all.append(kappa)
         cap_all.append(cap)
         block_all.append(np.full(len(s), piece.block))
         feeds_s += length / piece.feed_mm_s
         s0 += float(s[-1])
-    return np.concatenate(s_all), np.concatenate(cap_all), feeds_s, np.concatenate(block_all)
+    return (np.concatenate(s_all), np.concatenate(cap_all), feeds_s, np.concatenate(block_all),
+            np.concatenate(kappa_all))
 
 
 def time_s(s: np.ndarray, v: np.ndarray) -> float:
@@ -229,15 +231,85 @@ def with_accel(s: np.ndarray, cap: np.ndarray) -> np.ndarray:
     return np.sqrt(x)
 
 
-def row(name: str, program: Program) -> str:
-    trajectory = plan_lookahead(program, limits(JERK, 0.01))
-    s, cap, feeds_s = caps(program)
+def plan_rests(trajectory, s: np.ndarray, cap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(samples of s where the plan rests, the caps with rest there and at both ends): the
+    plan's repeated set-points mapped onto s by the distance travelled."""
     step = np.linalg.norm(np.diff(trajectory.position_mm, axis=0), axis=1)
     travelled = np.concatenate([[0.0], np.cumsum(step)])
     rest = travelled[np.flatnonzero(step == 0.0) + 1] * s[-1] / max(travelled[-1], 1e-300)
     stops = np.unique(np.clip(np.searchsorted(s, rest), 0, len(s) - 1))
     stopped = cap.copy()
     stopped[stops], stopped[0], stopped[-1] = 0.0, 0.0, 0.0
+    return stops, stopped
+
+
+def with_resultant_accel(s: np.ndarray, cap: np.ndarray, kappa: np.ndarray) -> np.ndarray:
+    """Largest speeds under the caps with a_t^2 + (kappa v^2)^2 <= A^2 (the resultant, as the
+    planner limits it): each step of v^2 by at most 2 ds sqrt(A^2 - (kappa_min x)^2), taken at
+    the slower end's v^2 and the step's smaller curvature (more room than any profile has, so
+    still a lower bound; exact as ds -> 0)."""
+    x = cap**2
+    ds = np.diff(s)
+    k = np.minimum(kappa[1:], kappa[:-1])
+    for i in range(1, len(x)):
+        room = np.sqrt(max(ACCEL * ACCEL - (k[i - 1] * x[i - 1]) ** 2, 0.0))
+        x[i] = min(x[i], x[i - 1] + 2.0 * room * ds[i - 1])
+    for i in range(len(x) - 2, -1, -1):
+        room = np.sqrt(max(ACCEL * ACCEL - (k[i] * x[i + 1]) ** 2, 0.0))
+        x[i] = min(x[i], x[i + 1] + 2.0 * room * ds[i])
+    return np.sqrt(x)
+
+
+def rested(s: np.ndarray, cap: np.ndarray, reasons: list[tuple[float, str, float]], rest: tuple[str, ...]) -> np.ndarray:
+    """The caps with rest at the stops of the reasons in ``rest``, every other stop at its blend's
+    speed, and rest at both ends."""
+    capped = cap.copy()
+    for s_stop, reason, speed in reasons:
+        i = min(int(np.searchsorted(s, s_stop)), len(s) - 1)
+        capped[i] = 0.0 if reason in rest else min(capped[i], speed)
+    capped[0], capped[-1] = 0.0, 0.0
+    return capped
+
+
+NO_JERK_HEADER = ("| program | LinuxCNC 2.9 | feeds alone | caps | caps + A (tangent), the plan's stops | stops: why | "
+                  "forced, A on the tangent | forced, resultant A | + rest at rapid/feed | our plan, no J |\n"
+                  "|---|---|---|---|---|---|---|---|---|---|")
+
+
+def no_jerk_row(name: str, program: Program) -> str:
+    """The bounds without a jerk limit (NO_JERK): along the path planned without J."""
+    trajectory = plan_lookahead(program, limits(None, 0.01))
+    s, cap, feeds_s, _, kappa = caps_and_blocks(program, None)
+    stops, stopped = plan_rests(trajectory, s, cap)
+    accel_s = time_s(s, with_accel(s, stopped))
+    reasons, _ = stop_reasons(program, None)
+    forced = rested(s, cap, reasons, ("program", "reversal"))
+    forced_s = time_s(s, with_accel(s, forced))
+    resultant_s = time_s(s, with_resultant_accel(s, forced, kappa))
+    ruled_s = time_s(s, with_resultant_accel(s, rested(s, cap, reasons, ("program", "reversal", "rapid/feed")), kappa))
+    linuxcnc, plan_s = LINUXCNC_S[name], trajectory.duration_s
+    cells = [f"{x:.3f} s ({x / linuxcnc:.3f}x)" for x in (time_s(s, cap), accel_s)]
+    bounds = [f"{x:.3f} s ({x / linuxcnc:.3f}x)" for x in (forced_s, resultant_s, ruled_s, plan_s)]
+    line = (f"| {name} | {linuxcnc:.2f} s | {feeds_s:.3f} s | {cells[0]} | {cells[1]} | {len(stops)}: "
+            f"{reason_counts(reasons)} | " + " | ".join(bounds) + " |")
+    print(line, flush=True)
+    return line
+
+
+NO_JERK = """Without a jerk limit (--no-jerk), along the path planned without J (its blends sized
+and kept by the no-J rules): `caps` min(F, sqrt(A / kappa)) with no time to change speed;
+`caps + A` the same with |a_t| <= A and rest at the plan's own stops; `forced, A on the tangent`
+rest only at program stops and reversals, every other stop of the plan passed at its blend's
+speed (what the tolerance allows); `forced, resultant A` the same with a_t^2 + (kappa v^2)^2 <= A^2
+(with_resultant_accel), the tightest lower bound here (continuous time: a 1 ms plan is a few
+cycles slower per rest); `+ rest at rapid/feed` also at rest where a rapid meets a feed move (our
+rule and LinuxCNC's, tp.c handleModeChange)."""
+
+
+def row(name: str, program: Program) -> str:
+    trajectory = plan_lookahead(program, limits(JERK, 0.01))
+    s, cap, feeds_s = caps(program)
+    stops, stopped = plan_rests(trajectory, s, cap)
     accel_s = time_s(s, with_accel(s, stopped))
     v = trajectory.feed_mm_s
     feed = np.array([limits(JERK, 0.01).feed_for(b.feed_mm_s) for b in program.blocks])[trajectory.block]
@@ -387,7 +459,7 @@ def breakdown(name: str, program: Program) -> list[str]:
     """Where the plan's time goes against the forced bound, step class by step class."""
     lim = limits(JERK, 0.01)
     trajectory = plan_lookahead(program, lim)
-    s, cap, _, blocks = caps_and_blocks(program)
+    s, cap, _, blocks, _ = caps_and_blocks(program)
     reasons, straight = stop_reasons(program)
     v = forced_speeds(s, cap, reasons)
     bound_dt = forced_steps(s, v, straight)
@@ -440,9 +512,15 @@ plan's time over a step: its set-points' travel mapped onto s. Columns:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--write", action="store_true", help="write the section of docs/benchmarks.md")
+    parser.add_argument("--no-jerk", action="store_true", help="the bounds without a jerk limit (print only)")
     parser.add_argument("--breakdown", action="store_true",
                         help="where each plan's time goes by class of step (section bounds_breakdown; minutes)")
     args = parser.parse_args()
+    if args.no_jerk:
+        print(NO_JERK + "\n\n" + NO_JERK_HEADER)
+        for name, program in programs().items():
+            no_jerk_row(name, program)
+        return
     if args.breakdown:
         print(BREAKDOWN)
         lines = [line for name, program in programs().items() for line in breakdown(name, program)]
