@@ -119,16 +119,22 @@ _PEAK_B4 = _bernstein4(_PEAK_T)
 _PEAK_B3 = np.array([1.0, 3.0, 3.0, 1.0]) * _PEAK_T[:, None] ** np.arange(4) * (1.0 - _PEAK_T[:, None]) ** (3 - np.arange(4))
 
 
-def curvature_peaks(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(largest curvature |c|, largest slope |dc/ds| of the curvature vector) of each blend
-    (control points (n, 6, 3)), from PEAK samples: c = (x'' - (x'' . t) t) / |x'|^2, s by
-    the trapezoid rule on |x'|."""
+def curvature_samples(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(curvature vectors c (n, PEAK, 3), arc length between consecutive samples (n, PEAK - 1))
+    of each blend (control points (n, 6, 3)) at PEAK samples equally spaced in t:
+    c = (x'' - (x'' . t) t) / |x'|^2, s by the trapezoid rule on |x'|."""
     d1 = 5.0 * np.einsum("mk,nkd->nmd", _PEAK_B4, np.diff(points, axis=1))
     d2 = 20.0 * np.einsum("mk,nkd->nmd", _PEAK_B3, np.diff(points, n=2, axis=1))
     speed = np.maximum(np.linalg.norm(d1, axis=2), 1e-300)
     t = d1 / speed[..., None]
     c = (d2 - np.einsum("nmd,nmd->nm", d2, t)[..., None] * t) / (speed**2)[..., None]
-    ds = 0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(_PEAK_T)
+    return c, 0.5 * (speed[:, 1:] + speed[:, :-1]) * np.diff(_PEAK_T)
+
+
+def curvature_peaks(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(largest curvature |c|, largest slope |dc/ds| of the curvature vector) of each blend
+    (control points (n, 6, 3)), from its curvature_samples."""
+    c, ds = curvature_samples(points)
     slope = np.linalg.norm(np.diff(c, axis=1), axis=2) / np.maximum(ds, 1e-300)
     return np.linalg.norm(c, axis=2).max(axis=1), slope.max(axis=1)
 

@@ -311,13 +311,42 @@ def test_entering_a_slow_block_keeps_the_slower_feed_on_the_whole_blend():
     assert (blend_piece.feed_mm_s, blend_piece.feed_out_mm_s) == (0.5, None)
 
 
-@pytest.mark.parametrize(("feed_mm_s", "blended"), [(16.7, True), (100.0, False)])
-def test_without_jerk_limit_a_sharp_corner_is_blended_where_that_beats_the_stop(feed_mm_s, blended):
-    """90 deg, no jerk limit: the blend passes at ~8 mm/s, below SHARP_PASS_SHARE of either
-    feed; from 16.7 mm/s crossing it costs less than stopping (v / A), from 100 mm/s more."""
+@pytest.mark.parametrize("feed_mm_s", [16.7, 100.0, 200.0])
+def test_without_jerk_limit_a_sharp_corner_is_blended_where_that_beats_the_stop(feed_mm_s, monkeypatch):
+    """90 deg, no jerk limit: the blend passes at ~8 mm/s, below SHARP_PASS_SHARE of the feed,
+    but crossing it (blend.crossing_loss_s) costs less than stopping (F / A and the held cycle)
+    from 16.7 mm/s to 200 mm/s (grbl's braid: its plunge-to-cut corners at 116.7 mm/s), so it is
+    blended; the plan with the corner forced to a stop is slower. With J it stays a stop."""
     program = polyline(turn(90.0), feed_mm_s=feed_mm_s)
-    assert any(p.corners is not None for p in planned_pieces(program, NO_JERK)) == blended
+    assert any(p.corners is not None for p in planned_pieces(program, NO_JERK))
     assert not any(p.corners is not None for p in planned_pieces(program, LIMITS))
-    trajectory = plan_lookahead(program, NO_JERK)
-    assert rests_at(trajectory, turn(90.0)[1]) != blended
-    assert_blended_plan_holds(trajectory, program, NO_JERK)
+    blended = plan_lookahead(program, NO_JERK)
+    assert not rests_at(blended, turn(90.0)[1])
+    assert_blended_plan_holds(blended, program, NO_JERK)
+    monkeypatch.setattr(blend, "worth_blending", lambda points, *args, **kwargs: np.zeros(len(points), dtype=bool))
+    stopped = plan_lookahead(program, NO_JERK)
+    assert rests_at(stopped, turn(90.0)[1])
+    assert blended.duration_s < stopped.duration_s
+
+
+@pytest.mark.parametrize("theta_deg", [60.0, 90.0, 140.0])
+def test_the_crossing_loss_is_its_speed_profile_integrated_along_the_blend(theta_deg):
+    """crossing_loss_s against the same model integrated on the blend's own NURBS curve, 4001
+    points instead of 65: v = min(F, sqrt(A / kappa), sqrt(w^2 + 2 A |s - s_w|)), the time over
+    the blend less its length at F, and the ramps at A from its ends to F."""
+    from nurbsmotion.geometry import corner_blend as cb
+
+    th = np.radians(theta_deg)
+    first = cb.line_pieces(np.array([[-20.0, 0.0, 0.0]]), np.array([[0.0, 0.0, 0.0]]))
+    second = cb.line_pieces(np.array([[0.0, 0.0, 0.0]]), np.array([[20 * np.cos(th), 20 * np.sin(th), 0.0]]))
+    points = cb.blend_points(first, second, cb.trim_distances(first, second, np.array([0.01])))
+    curve = cb.bezier_curve(points[0])
+    u = np.linspace(0.0, 1.0, 4001)
+    s, kappa = np.asarray(curve.arc_length(u)), np.asarray(curve.curvature(u))
+    feed, accel = 116.7, 2500.0
+    cap = np.minimum(feed, np.sqrt(accel / np.maximum(kappa, 1e-300)))
+    k = int(np.argmin(cap))
+    v = np.minimum(cap, np.sqrt(cap[k] ** 2 + 2.0 * accel * np.abs(s - s[k])))
+    expected = (np.sum(np.diff(s) * (2.0 / (v[1:] + v[:-1]) - 1.0 / feed))
+                + ((feed - v[0]) ** 2 + (feed - v[-1]) ** 2) / (2.0 * accel * feed))
+    assert blend.crossing_loss_s(points, np.array([feed]), accel)[0] == pytest.approx(expected, rel=2e-3)

@@ -68,6 +68,27 @@ def pass_speed_mm_s(points: NDArray[np.float64], limits: PlanLimits) -> NDArray[
     return v
 
 
+def crossing_loss_s(points: NDArray[np.float64], feed_mm_s: NDArray[np.float64], accel_mm_s2: float) -> NDArray[np.float64]:
+    """(n,) time crossing each blend (control points (n, 6, 3)) costs against cruising at its
+    feed F, without a jerk limit: along the blend's curvature samples the speed
+    v = min(F, sqrt(A / kappa), sqrt(w^2 + 2 A |s - s_w|)) (its caps, and at A from and to its
+    slowest sample w at s_w), each step costing ds (1 / v_mean - 1 / F), and at both ends the ramp
+    between v_end and F at A, (F - v_end)^2 / (2 A F). A is on the tangent only (the normal
+    acceleration is not charged against it), so this is an estimate, not a bound."""
+    c, ds = cb.curvature_samples(points)
+    s = np.concatenate([np.zeros((len(points), 1)), np.cumsum(ds, axis=1)], axis=1)
+    feed = np.asarray(feed_mm_s, dtype=np.float64)[:, None]
+    with np.errstate(divide="ignore"):
+        cap = np.minimum(feed, np.sqrt(accel_mm_s2 / np.linalg.norm(c, axis=2)))
+    slowest = np.argmin(cap, axis=1)[:, None]
+    w, s_w = np.take_along_axis(cap, slowest, axis=1), np.take_along_axis(s, slowest, axis=1)
+    v = np.minimum(cap, np.sqrt(w * w + 2.0 * accel_mm_s2 * np.abs(s - s_w)))
+    with np.errstate(divide="ignore"):
+        inside = np.sum(ds * (2.0 / (v[:, 1:] + v[:, :-1]) - 1.0 / feed), axis=1)
+    ramps = ((feed[:, 0] - v[:, 0]) ** 2 + (feed[:, 0] - v[:, -1]) ** 2) / (2.0 * accel_mm_s2 * feed[:, 0])
+    return np.asarray(inside + ramps)
+
+
 def worth_blending(points: NDArray[np.float64], feed_in_mm_s: NDArray[np.float64], feed_out_mm_s: NDArray[np.float64],
                    limits: PlanLimits, leniency: float = 0.0) -> NDArray[np.bool_]:
     """(n,) which sharp corners' blends (control points (n, 6, 3)) beat a stop. Those that pass
@@ -75,22 +96,19 @@ def worth_blending(points: NDArray[np.float64], feed_in_mm_s: NDArray[np.float64
     as a stop (with a jerk limit, the filter's plateau around it more); a rapid-to-feed corner
     compares with the rapid's feed, so it stays a stop where the rapid is the faster, as in
     LinuxCNC (tp.c handleModeChange). Without a jerk limit also a corner between two blocks of
-    one feed v whose blend is
-    estimated faster than the stop against cruising at v: a stop costs v / A, a blend
-    decelerated to w, crossed at w along its length L (bounded by its control polygon's) and
-    left again (v - w)^2 / (A v) + L (1 / w - 1 / v) (fusion360_led_floor's 90 deg corners at
-    16.7 mm/s, w ~ 8 mm/s: 6.2 against 6.7 ms). ``leniency`` > 0 blends more (share and cost
+    one feed F whose blend's crossing (crossing_loss_s) costs less than the stop against
+    cruising at F: braking to rest and back at A, F / A, and the corner's set-point held one
+    cycle T (grbl's braid: its 90 deg plunge-to-cut corners at 116.7 mm/s, w = 8.6 mm/s, 41 against
+    47.7 ms; fusion360_led_floor's at 16.7 mm/s). ``leniency`` > 0 blends more (share and cost
     bound by that fraction: setup.py's margin for a corner that surely stays a stop)."""
     w = pass_speed_mm_s(points, limits)
     feed = np.maximum(feed_in_mm_s, feed_out_mm_s)
     near_feed = w >= SHARP_PASS_SHARE * feed * (1.0 - leniency)
     if planned_jerk_mm_s3(limits) is not None:
         return np.asarray(near_feed)
-    accel = limits.max_accel_mm_s2
-    length = np.linalg.norm(np.diff(points, axis=1), axis=2).sum(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        blend_s = (feed - w) ** 2 / (accel * feed) + length * (1.0 / w - 1.0 / feed)
-    cheaper = (feed_in_mm_s == feed_out_mm_s) & (w > 0) & (blend_s < feed / accel * (1.0 + leniency))
+    accel = MARGIN * limits.max_accel_mm_s2
+    stop_s = feed / accel + limits.period_s
+    cheaper = (feed_in_mm_s == feed_out_mm_s) & (w > 0) & (crossing_loss_s(points, feed, accel) < stop_s * (1.0 + leniency))
     return np.asarray(near_feed | cheaper)
 
 
