@@ -350,3 +350,16 @@ def test_the_crossing_loss_is_its_speed_profile_integrated_along_the_blend(theta
     expected = (np.sum(np.diff(s) * (2.0 / (v[1:] + v[:-1]) - 1.0 / feed))
                 + ((feed - v[0]) ** 2 + (feed - v[-1]) ** 2) / (2.0 * accel * feed))
     assert blend.crossing_loss_s(points, np.array([feed]), accel)[0] == pytest.approx(expected, rel=2e-3)
+
+
+@pytest.mark.parametrize(("first", "blended"), [("G0", True), ("G1 F12000", False)])
+def test_without_jerk_limit_a_rapid_meeting_a_feed_move_stays_a_stop_at_any_feed(first, blended):
+    """A 90 deg corner into a rapid, both at 200 mm/s, no jerk limit: after a rapid it is blended
+    (crossing beats stopping), after a feed move of the rapid's speed it stays a stop, as in
+    LinuxCNC (tp.c handleModeChange: no blend between rapid and feed motions)."""
+    limits = replace(NO_JERK, rapid_feed_mm_s=200.0)
+    program = parse_gcode(f"G21 {first} X20\nG0 X20 Y20\n", "mode.nc")
+    assert any(p.corners is not None for p in planned_pieces(program, limits)) == blended
+    trajectory = plan_lookahead(program, limits)
+    assert rests_at(trajectory, (20.0, 0.0, 0.0)) != blended
+    assert_blended_plan_holds(trajectory, program, limits)

@@ -90,13 +90,13 @@ def crossing_loss_s(points: NDArray[np.float64], feed_mm_s: NDArray[np.float64],
 
 
 def worth_blending(points: NDArray[np.float64], feed_in_mm_s: NDArray[np.float64], feed_out_mm_s: NDArray[np.float64],
-                   limits: PlanLimits, leniency: float = 0.0) -> NDArray[np.bool_]:
+                   one_mode: NDArray[np.bool_], limits: PlanLimits, leniency: float = 0.0) -> NDArray[np.bool_]:
     """(n,) which sharp corners' blends (control points (n, 6, 3)) beat a stop. Those that pass
     (pass_speed_mm_s, w) at SHARP_PASS_SHARE of the faster feed at least: a crawl costs as much
     as a stop (with a jerk limit, the filter's plateau around it more); a rapid-to-feed corner
     compares with the rapid's feed, so it stays a stop where the rapid is the faster, as in
     LinuxCNC (tp.c handleModeChange). Without a jerk limit also a corner between two blocks of
-    one feed F whose blend's crossing (crossing_loss_s) costs less than the stop against
+    one feed F and one mode (``one_mode``: two feed moves or two rapids) whose blend's crossing (crossing_loss_s) costs less than the stop against
     cruising at F: braking to rest and back at A, F / A, and the corner's set-point held one
     cycle T (grbl's braid: its 90 deg plunge-to-cut corners at 116.7 mm/s, w = 8.6 mm/s, 41 against
     47.7 ms; fusion360_led_floor's at 16.7 mm/s). ``leniency`` > 0 blends more (share and cost
@@ -108,7 +108,8 @@ def worth_blending(points: NDArray[np.float64], feed_in_mm_s: NDArray[np.float64
         return np.asarray(near_feed)
     accel = MARGIN * limits.max_accel_mm_s2
     stop_s = feed / accel + limits.period_s
-    cheaper = (feed_in_mm_s == feed_out_mm_s) & (w > 0) & (crossing_loss_s(points, feed, accel) < stop_s * (1.0 + leniency))
+    same = (feed_in_mm_s == feed_out_mm_s) & one_mode & (w > 0)
+    cheaper = same & (crossing_loss_s(points, feed, accel) < stop_s * (1.0 + leniency))
     return np.asarray(near_feed | cheaper)
 
 
@@ -191,7 +192,9 @@ def blend_pieces(pieces: list[BlockPiece], limits: PlanLimits, stops: ProgramSto
     sharp = deflection[corners] > math.radians(MAX_DEFLECTION_DEG)
     if sharp.any():
         feeds = np.array([(pieces[c].feed_mm_s, pieces[c + 1].feed_mm_s) for c in corners[sharp].tolist()])
-        good[sharp] &= worth_blending(points[sharp], feeds[:, 0], feeds[:, 1], limits)
+        one_mode = np.array([not stops.mode_change(pieces[c].last_block, pieces[c + 1].block)
+                             for c in corners[sharp].tolist()], dtype=bool)
+        good[sharp] &= worth_blending(points[sharp], feeds[:, 0], feeds[:, 1], one_mode, limits)
     if not good.any():
         return [replace(p, ordinal=i) for i, p in enumerate(pieces)]
     plan = CornerPlan(shapes, corners[good], d[good], tolerance[corners[good]], t_in, t_out, deflection)

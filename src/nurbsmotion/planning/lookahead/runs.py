@@ -37,7 +37,7 @@ from nurbsmotion.planning.limits import PlanLimits
 from nurbsmotion.planning.lookahead.path import BlockPiece
 from nurbsmotion.planning.lookahead.speed_limits import MARGIN
 from nurbsmotion.program import BlockKind, Program
-from nurbsmotion.program.records import BlockRecords
+from nurbsmotion.program.records import KINDS, BlockRecords
 
 MIN_BLOCK_LENGTH_MM = 1e-9  # shorter blocks are skipped (no motion)
 
@@ -114,6 +114,7 @@ class ProgramStops:
     dwell_s_before: dict[int, float] | None = None  # block index -> G4 dwell before it
     deviation_mm: dict[int, float] | None = None  # block index -> junction deviation into it
     tolerance_mm: dict[int, float] | None = None  # block index -> its G64 P (path tolerance of the corner into it)
+    rapids: frozenset[int] = frozenset()  # block indices of rapids (G00): a rapid meeting a feed move is a mode change
 
     @classmethod
     def of(cls, program: Program, limits: PlanLimits) -> "ProgramStops":
@@ -122,11 +123,18 @@ class ProgramStops:
             marked = np.flatnonzero(~np.isnan(blocks.blend_tolerances_mm))
             given = dict(zip(marked.tolist(), blocks.blend_tolerances_mm[marked].tolist()))
             stop_after = frozenset(np.flatnonzero(blocks.exact_stops).tolist())
+            rapids = frozenset(np.flatnonzero(blocks.kinds == KINDS.index(BlockKind.RAPID)).tolist())
         else:
             given = {i: b.blend_tolerance_mm for i, b in enumerate(blocks) if b.blend_tolerance_mm is not None}
             stop_after = frozenset(i for i, b in enumerate(blocks) if b.exact_stop)
+            rapids = frozenset(i for i, b in enumerate(blocks) if b.kind == BlockKind.RAPID)
         deviations = {i: min(p, limits.junction_deviation_mm) for i, p in given.items()}
-        return cls(stop_after, program.dwell_s_before(), deviations, given)
+        return cls(stop_after, program.dwell_s_before(), deviations, given, rapids)
+
+    def mode_change(self, before: int, after: int) -> bool:
+        """Whether the corner from block ``before`` into block ``after`` joins a rapid and a feed
+        move (LinuxCNC never blends those: tp.c handleModeChange)."""
+        return (before in self.rapids) != (after in self.rapids)
 
     def dwell_between(self, after_block: int, up_to_block: int) -> float:
         """Dwell before the blocks after_block + 1 .. up_to_block (bisected: a call per junction)."""

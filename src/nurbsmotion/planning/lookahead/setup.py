@@ -185,6 +185,7 @@ class PathSections:
         if not (d[0] > 0 and cb.monotone(points)[0]):
             return True
         feed_in, feed_out = np.array([pieces[0].feed_mm_s]), np.array([pieces[1].feed_mm_s])
-        return not bool(blend.worth_blending(points, feed_in, feed_out, self.limits, CUT_MARGIN_SPEED)[0])
+        one_mode = np.array([not self.stops.mode_change(pieces[0].last_block, pieces[1].block)])
+        return not bool(blend.worth_blending(points, feed_in, feed_out, one_mode, self.limits, CUT_MARGIN_SPEED)[0])
 
 
