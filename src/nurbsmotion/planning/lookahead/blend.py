@@ -21,8 +21,9 @@ every corner up to 90 deg blended, 36.9 s up to 30), while on the V-carve's 2.54
 the same blends pass at nearly the feed (37.74 -> 37.41 s with J, 30.35 -> 30.04 s without).
 Rapid-to-feed corners compare the blend with the rapid's feed, so they stay stops, as in
 LinuxCNC (tp.c handleModeChange). Without a jerk limit a sharp corner between two blocks of
-one feed is also blended where its blend is estimated faster than the stop (worth_blending;
-a 90 deg corner at 16.7 mm/s is, at 100 mm/s it is not). A corner also stays a junction where a piece is not a line
+one feed and one mode (two feed moves or two rapids) is also blended where crossing its blend
+costs less than the stop (worth_blending, crossing_loss_s: a 90 deg corner within 0.01 mm from
+16.7 to 200 mm/s is). A corner also stays a junction where a piece is not a line
 or a planar arc (NURBS blocks, helices), and where no blend passes the shape checks
 (corner_blend.trim_distances, monotone). The tolerance of a corner is the outgoing block's
 G64 P, else the machine's ``path_tolerance_mm``.
