@@ -29,7 +29,10 @@ With --breakdown: where each plan's time goes against the forced bound, by class
 (cruise, dip, stop, rapid), beside a tighter lower bound with J at each slow stretch's lowest
 point and a feasible profile of the tangential jerk model (BREAKDOWN says what each is).
 
-Run: python benchmarks/bench_bounds.py [--breakdown] [--write]
+With --no-jerk: the same kind of bounds without a jerk limit, along the path planned without J
+(NO_JERK says what each column is; printed only).
+
+Run: python benchmarks/bench_bounds.py [--breakdown | --no-jerk] [--write]
 """
 
 from __future__ import annotations
