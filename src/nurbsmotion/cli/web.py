@@ -1,9 +1,9 @@
 """``nurbsmotion web``: the web gateway (API, WebSocket, console page) beside the daemon, and
 ``nurbsmotion web keys add NAME --role operator|observer | list | remove NAME`` for its keys.
 
-The gateway reads the machine's YAML for ``web:`` (listen address, auth, upload limit, CORS),
-``control.socket`` and ``data_dir`` (where the keys are); the options override it. It is a
-separate process: it talks to the daemon only through the control socket (docs/web.md).
+The gateway reads the machine's YAML for ``web:`` (listen address, auth, upload limit, CORS,
+niceness), ``control.socket`` and ``data_dir`` (where the keys are); the options override it.
+It is a separate process: it talks to the daemon only through the control socket (docs/web.md).
 """
 
 from __future__ import annotations
@@ -63,7 +63,8 @@ def settings_of(args: argparse.Namespace) -> "WebSettings":
     data_dir = args.data_dir or (machine.data_dir if machine is not None else "var/nurbsmotion")
     return WebSettings(socket=socket, data_dir=data_dir, host=web.host, port=web.port,
                        require_auth=web.require_auth or args.require_auth,
-                       max_upload_bytes=int(web.max_upload_mb * 1024 * 1024), cors_origins=web.cors_origins)
+                       max_upload_bytes=int(web.max_upload_mb * 1024 * 1024), cors_origins=web.cors_origins,
+                       nice=web.nice)
 
 
 def _keys(args: argparse.Namespace) -> int:

@@ -171,6 +171,7 @@ class WebConfig:
     require_auth: bool = False  # on loopback; any other address always requires keys
     max_upload_mb: float = 64.0
     cors_origins: tuple[str, ...] = ()
+    nice: int = 10  # added to the gateway's niceness at start-up: it never competes with the daemon
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -201,7 +202,8 @@ def _origins(doc: Doc) -> Any:
 
 def _web(doc: Doc) -> Any:
     found = fields(doc, {"listen": (_listen, {}), "require_auth": (boolean, {}),
-                          "max_upload_mb": (number, {"minimum": 0}), "cors_origins": (_origins, {})})
+                          "max_upload_mb": (number, {"minimum": 0}), "cors_origins": (_origins, {}),
+                          "nice": (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 19})})
     host, port = found.pop("listen", (WebConfig.host, WebConfig.port))
     return WebConfig(host=host, port=port, **found)
 
