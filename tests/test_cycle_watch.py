@@ -20,14 +20,16 @@ class Clocks:
         self.now = 0.0
         self.cpu = 0.0
         self.threads = {"nurbsmotion-cycle": 0.0, "job-receiver": 0.0, "control-client": 0.0}
+        self.gc = 0.0
 
     def watch(self) -> CycleWatch:
         return CycleWatch(T, THRESHOLD_S, clock=lambda: self.now, process_cpu=lambda: self.cpu,
-                          threads_cpu=lambda: dict(self.threads))
+                          threads_cpu=lambda: dict(self.threads), gc_time=lambda: self.gc)
 
-    def step(self, seconds: float, cpu_s: float = 0.0, busy: str = "") -> None:
+    def step(self, seconds: float, cpu_s: float = 0.0, busy: str = "", gc_s: float = 0.0) -> None:
         self.now += seconds
         self.cpu += cpu_s
+        self.gc += gc_s
         if busy:
             self.threads[busy] += cpu_s
 
@@ -49,6 +51,20 @@ def test_a_thread_of_the_process_holding_the_cycle_thread_is_named(caplog):
     [line] = [r.getMessage() for r in caplog.records]
     assert line.startswith("cycle_thread_late ") and "held_by=thread:job-receiver" in line
     assert "late_ms=292" in line and "away_ms=300" in line and "wire_cycles=70" in line and "process_cpu_ms=280" in line
+    assert "gc_ms=0 " in line
+
+
+def test_garbage_collections_filling_the_gap_are_named_with_their_time(caplog):
+    clocks = Clocks()
+    watch = clocks.watch()
+    clocks.step(0.0, gc_s=5.0)  # collections before the watch began are not this gap's
+    on_time(watch, clocks, 3)
+    clocks.step(0.140, 0.120, "job-receiver", gc_s=0.110)  # a full collection: 110 of the 140 ms
+    with caplog.at_level(logging.WARNING, logger="nurbsmotion.cycle_watch"):
+        wake = watch.woke(0.132, 35)
+    assert wake is not None and wake.held_by == "gc" and wake.gc_s == pytest.approx(0.110)
+    [line] = [r.getMessage() for r in caplog.records]
+    assert "gc_ms=110 " in line and "held_by=gc" in line
 
 
 def test_the_kernel_sending_while_the_process_got_no_cpu_is_other_work():
@@ -110,6 +126,8 @@ def test_a_catch_up_wake_up_soon_after_a_late_one_is_not_reported_again():
     (0.01, 5, False, "machine")])
 def test_held_by(cpu_s, wire, ran_out, expected):
     assert held_by(0.3, cpu_s, wire, T, ran_out, "x") == expected
+    assert held_by(0.3, cpu_s, wire, T, ran_out, "x", gc_s=0.149) == expected  # under half the gap
+    assert held_by(0.3, cpu_s, wire, T, ran_out, "x", gc_s=0.150) == "gc"
 
 
 def test_busiest_leaves_out_the_cycle_thread_and_counts_new_threads():

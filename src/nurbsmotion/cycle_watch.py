@@ -8,6 +8,8 @@ lateness alone also counts the catch-up wake-ups after one late one), this says 
 measurements
 what kept it away, so an integrator knows what to fix on the machine:
 
+- ``held_by=gc``: the process' garbage collections (gc_clock) took at least half the gap:
+  a collection holds the interpreter lock throughout.
 - ``held_by=thread:<name>``: this process ran meanwhile (process CPU >= half the gap), so
   another of its threads held the interpreter lock; the busiest thread of the last second
   (per-thread CPU from /proc/self/task) is named.
@@ -19,7 +21,7 @@ what kept it away, so an integrator knows what to fix on the machine:
   machine (or virtual machine) stood still.
 
 The figures come with it: ``late_ms`` (after the wake-up's deadline), ``away_ms`` (since the
-previous wake-up), ``wire_cycles`` (SYNCs sent meanwhile), ``process_cpu_ms``. At most one
+previous wake-up), ``wire_cycles`` (SYNCs sent meanwhile), ``process_cpu_ms``, ``gc_ms`` (time in collections). At most one
 line a second (the others are counted in ``suppressed=``). Cost per wake-up: one read of
 the process CPU clock; the per-thread figures are read once a second and after a late wake-up.
 """
@@ -33,6 +35,7 @@ import time
 from dataclasses import dataclass
 from typing import Callable
 
+from nurbsmotion.gc_clock import process_gc_s
 from nurbsmotion.log import kv
 
 log = logging.getLogger(__name__)
@@ -81,16 +84,20 @@ class LateWake:
     process_cpu_s: float
     queue_ran_out: bool
     held_by: str
+    gc_s: float = 0.0
 
     def message(self, suppressed: int) -> str:
         return kv("cycle_thread_late", late_ms=round(self.late_s * 1e3, 1), away_ms=round(self.away_s * 1e3, 1),
                   wire_cycles=self.wire_cycles, process_cpu_ms=round(self.process_cpu_s * 1e3, 1),
-                  queue_ran_out=self.queue_ran_out, held_by=self.held_by, suppressed=suppressed)
+                  gc_ms=round(self.gc_s * 1e3, 1), queue_ran_out=self.queue_ran_out, held_by=self.held_by,
+                  suppressed=suppressed)
 
 
 def held_by(away_s: float, process_cpu_s: float, wire_cycles: int, period_s: float, queue_ran_out: bool,
-            busiest_thread: str) -> str:
+            busiest_thread: str, gc_s: float = 0.0) -> str:
     """What kept the cycle thread away for ``away_s`` (module docstring)."""
+    if gc_s >= HELD_SHARE * away_s:
+        return "gc"
     if process_cpu_s >= HELD_SHARE * away_s:
         return f"thread:{busiest_thread or 'unknown'}"
     if queue_ran_out or wire_cycles * period_s >= HELD_SHARE * away_s:
@@ -114,13 +121,16 @@ class CycleWatch:
 
     def __init__(self, period_s: float, threshold_s: float, clock: Callable[[], float] = time.monotonic,
                  process_cpu: Callable[[], float] = time.process_time,
-                 threads_cpu: Callable[[], ThreadCpu] = threads_cpu_s, own_name: str = "nurbsmotion-cycle") -> None:
+                 threads_cpu: Callable[[], ThreadCpu] = threads_cpu_s, own_name: str = "nurbsmotion-cycle",
+                 gc_time: Callable[[], float] = process_gc_s) -> None:
         self.period_s = period_s
         self.threshold_s = threshold_s
         self._clock = clock
         self._process_cpu = process_cpu
         self._threads_cpu = threads_cpu
         self._own_name = own_name
+        self._gc_time = gc_time
+        self._last_gc_s = gc_time()  # the process' collections are timed from here on (gc_clock)
         self._last_wake_s = -1.0
         self._last_cpu_s = 0.0
         self._threads: ThreadCpu = {}
@@ -133,10 +143,10 @@ class CycleWatch:
         """One wake-up, ``late_s`` after its deadline, ``wire_cycles`` SYNCs sent since the
         previous one; a LateWake (also logged, at most once a second) when the thread was
         away longer than ``threshold_s``, else None."""
-        now, cpu = self._clock(), self._process_cpu()
-        away, used = now - self._last_wake_s, cpu - self._last_cpu_s
+        now, cpu, gc_s = self._clock(), self._process_cpu(), self._gc_time()
+        away, used, collecting = now - self._last_wake_s, cpu - self._last_cpu_s, gc_s - self._last_gc_s
         first = self._last_wake_s < 0
-        self._last_wake_s, self._last_cpu_s = now, cpu
+        self._last_wake_s, self._last_cpu_s, self._last_gc_s = now, cpu, gc_s
         if first or away <= self.threshold_s:  # away, not late: a wake-up after a late one is late too
             if now - self._threads_at_s >= THREAD_SAMPLE_PERIOD_S:
                 self._threads, self._threads_at_s = self._threads_cpu(), now
@@ -146,7 +156,7 @@ class CycleWatch:
         culprit = busiest(self._threads, threads, self._own_name)
         self._threads, self._threads_at_s = threads, now
         wake = LateWake(late_s, away, wire_cycles, used, queue_ran_out,
-                        held_by(away, used, wire_cycles, self.period_s, queue_ran_out, culprit))
+                        held_by(away, used, wire_cycles, self.period_s, queue_ran_out, culprit, collecting), collecting)
         if now - self._logged_at_s >= LOG_EVERY_S:
             log.warning(wake.message(self.suppressed))
             self._logged_at_s, self.suppressed = now, 0
