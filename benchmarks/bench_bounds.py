@@ -523,13 +523,12 @@ def main() -> None:
         print(NO_JERK + "\n\n" + NO_JERK_HEADER)
         rows = [no_jerk_row(name, program) for name, program in programs().items()]
         if args.write:
-            table = NO_JERK_HEADER + "\n" + "\n".join(rows)
-            write_section("bounds_no_jerk", "Lower bounds without a jerk limit (short-segment CAM programs)",
-                          "Lower bounds along the path planned without J (T = 1 ms, A = 2500 mm/s^2, tolerance "
-                          "0.01 mm); `+ rest at rapid/feed` is the tightest that keeps our rule and LinuxCNC's. "
-                          "Issue 24's 0.85x of LinuxCNC is out of reach wherever it is above 0.85x. The columns are "
-                          "defined in the full result.\n\n" + table,
-                          "python benchmarks/bench_bounds.py --no-jerk --write", detail=NO_JERK + "\n\n" + table)
+            body, detail = table_section("Lower bounds along the path planned without J (T = 1 ms, A = 2500 mm/s^2, "
+                                         "tolerance 0.01 mm); `+ rest at rapid/feed` is the tightest that keeps our "
+                                         "rule and LinuxCNC's. Issue 24's 0.85x of LinuxCNC is out of reach wherever "
+                                         "it is above 0.85x.", NO_JERK_HEADER, rows, NO_JERK)
+            write_section("bounds_no_jerk", "Lower bounds without a jerk limit (short-segment CAM programs)", body,
+                          "python benchmarks/bench_bounds.py --no-jerk --write", detail=detail)
         return
     if args.breakdown:
         print(BREAKDOWN)
@@ -548,13 +547,20 @@ def main() -> None:
     print(header)
     rows = [row(name, program) for name, program in programs().items()]
     if args.write:
-        table = header + "\n" + "\n".join(rows)
-        write_section("bounds", "Jerk-limited lower bounds (short-segment CAM programs)",
-                      "Lower bounds along the planned path (T = 1 ms, A = 2500 mm/s^2, J = 50000 mm/s^3, tolerance "
-                      "0.01 mm); `forced`: rest only where the physics or the program force it, a lower bound with "
-                      "J. The columns are defined in the full result. With J = 50000 LinuxCNC's time (no jerk limit) is "
-                      "out of reach wherever `forced` is above 1.00x.\n\n" + table,
-                      "python benchmarks/bench_bounds.py --write", detail=__doc__.split("\n\n")[1] + "\n\n" + table)
+        body, detail = table_section("Lower bounds along the planned path (T = 1 ms, A = 2500 mm/s^2, J = 50000 "
+                                     "mm/s^3, tolerance 0.01 mm); `forced`: rest only where the physics or the "
+                                     "program force it, a lower bound with J. With J = 50000 LinuxCNC's time (no jerk "
+                                     "limit) is out of reach wherever `forced` is above 1.00x.",
+                                     header, rows, __doc__.split("\n\n")[1])
+        write_section("bounds", "Jerk-limited lower bounds (short-segment CAM programs)", body,
+                      "python benchmarks/bench_bounds.py --write", detail=detail)
+
+
+def table_section(intro: str, header: str, rows: list[str], columns: str) -> tuple[str, str]:
+    """(section body, full result) of a bounds table: ``intro`` and the table; the full result
+    is ``columns`` (what each column means) and the same table."""
+    table = header + "\n" + "\n".join(rows)
+    return f"{intro} The columns are defined in the full result.\n\n{table}", f"{columns}\n\n{table}"
 
 
 if __name__ == "__main__":
