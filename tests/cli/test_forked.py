@@ -13,7 +13,8 @@ from typing import Iterator
 import numpy as np
 import pytest
 
-from nurbsmotion.cli._forked import MIN_IDLE_WINDOW_S, IdleWatch, drained, forked_iteration, idle_ticks
+from nurbsmotion.cli._forked import MIN_IDLE_WINDOW_S, IdleWatch, forked_iteration, idle_ticks
+from nurbsmotion.steps import drained
 from nurbsmotion.errors import InputError, InputErrors
 
 

@@ -108,6 +108,8 @@ class FakeLink:
     def next_cycle_wake_s() -> float | None:
         return None  # no cycle loop: the status publisher only lets go of the lock between its steps
 
+    cycle_slack = None  # no cycle thread: the status publisher runs its rounds itself
+
     def status(self, percentiles: bool = True) -> MasterStatus:
         job = self.job
         axes = tuple(AxisStatus(n, i + 1, "OPERATION ENABLED", 0x1237, self.held[i], self.held[i], 0, 0, 0, None)

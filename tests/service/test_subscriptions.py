@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
+import time
 
 import pytest
 
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack
 from nurbsmotion.log import kv, parse_kv
-from nurbsmotion.service.subscriptions import (AFTER_WAKE_S, MAX_PENDING_LINES, STEP_ROOM_S, StatusHub,
+from nurbsmotion.service import subscriptions
+from nurbsmotion.service.subscriptions import (AFTER_WAKE_S, MAX_PENDING_LINES, STEP_ROOM_S, StatusHub, Subscription,
                                                attach_event_log, merge_changes, status_changes, wait_before_step_s)
 
 
@@ -417,3 +421,97 @@ def test_the_publisher_asks_when_the_cycle_thread_wakes_before_the_read_and_the_
     hub.publish_once()
     assert "read" in calls and "send" in calls
     assert calls[calls.index("read") - 1] == "ask" and calls[calls.index("send") - 1] == "ask"
+
+
+class CycleThread:
+    """A stand-in for the master's cycle thread: runs the slack's steps with room to spare."""
+
+    def __init__(self, slack: CycleSlack) -> None:
+        self.slack = slack
+        self.stopping = threading.Event()
+        self.thread = threading.Thread(target=self._run, name="nurbsmotion-cycle", daemon=True)
+
+    def _run(self) -> None:
+        while not self.stopping.wait(1e-3):
+            self.slack.run(time.perf_counter() + 1.0)
+
+    def __enter__(self) -> CycleThread:
+        self.slack.start()
+        self.thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stopping.set()
+        self.thread.join(5.0)
+        self.slack.stop()
+
+
+def subscribed_on_a_slack(status: FakeStatus) -> tuple[StatusHub, Subscription, CycleSlack]:
+    """A hub on a cycle thread's slack with one subscriber, the slack accepting work from then on."""
+    slack = CycleSlack()
+    hub = StatusHub(status, clock=FakeClock(), publisher_thread=False, slack=slack)
+    sub, _ = hub.subscribe()
+    slack.start()
+    return hub, sub, slack
+
+
+def test_with_a_cycle_thread_running_the_round_runs_in_its_slack(monkeypatch):
+    monkeypatch.setattr(subscriptions, "SLACK_WAIT_S", 30.0)  # however loaded the host: no fallback
+    status, readers = FakeStatus(), []
+
+    def read() -> dict:
+        readers.append(threading.current_thread().name)
+        return status()
+
+    slack = CycleSlack()
+    hub = StatusHub(read, clock=FakeClock(), publisher_thread=False, slack=slack)
+    sub, _ = hub.subscribe()
+    readers.clear()
+    with CycleThread(slack):
+        hub.publish_event({"event": "job_started", "fields": {}})
+        hub.publish_once()
+    assert readers == ["nurbsmotion-cycle"]
+    assert [line["notify"] for line in lines(sub)] == ["event"]
+    assert slack.steps_run >= 3  # the round's pauses: after the subscribers, after the read, ...
+    assert slack.withdrawn == 0
+
+
+def test_a_cycle_thread_without_slack_for_a_while_leaves_the_round_to_the_publisher(monkeypatch):
+    monkeypatch.setattr(subscriptions, "SLACK_WAIT_S", 0.01)
+    status = FakeStatus()
+    hub, sub, slack = subscribed_on_a_slack(status)  # the cycle thread runs, but never has room (nobody calls run)
+    status.value["state"] = "running"
+    hub.publish_event({"event": "job_started", "fields": {}})
+    hub.publish_once()
+    assert [line["notify"] for line in lines(sub)] == ["event", "status"]
+    assert slack.withdrawn == 1
+    slack.run(time.perf_counter() + 1.0)
+    assert slack.steps_run == 0  # withdrawn: the cycle thread does not run it twice
+
+
+def test_a_round_handed_back_by_an_ending_cycle_thread_finishes_in_the_publisher(monkeypatch):
+    monkeypatch.setattr(subscriptions, "SLACK_WAIT_S", 30.0)
+    status = FakeStatus()
+    hub, sub, slack = subscribed_on_a_slack(status)
+    status.value["state"] = "fault"
+    hub.publish_event({"event": "fault", "fields": {}})
+    ender = threading.Timer(0.02, slack.stop)  # the drives are disabled: the cycle thread ends
+    ender.start()
+    hub.publish_once()
+    ender.join()
+    assert [line["notify"] for line in lines(sub)] == ["event", "status"]
+    assert slack.withdrawn == 0
+
+
+def test_a_read_that_fails_in_the_slack_fails_the_publishers_round():
+    def read() -> dict:
+        raise RuntimeError("a bug in the status read")
+
+    status = FakeStatus()
+    calls = iter([status, read])
+    slack = CycleSlack()
+    hub = StatusHub(lambda: next(calls)(), clock=FakeClock(), publisher_thread=False, slack=slack)
+    hub.subscribe()
+    hub.publish_event({"event": "fault", "fields": {}})
+    with CycleThread(slack), pytest.raises(RuntimeError, match="a bug in the status read"):
+        hub.publish_once()

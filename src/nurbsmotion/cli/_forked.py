@@ -128,20 +128,6 @@ def _end_child(pid: int, finished: bool) -> None:
     os.waitpid(pid, 0)
 
 
-def drained(items: Generator[Item, None, Result], each: Callable[[Item], None]) -> Result:
-    """Hand every item of ``items`` to ``each`` in order; the generator's return value. The
-    generator is closed on any error (a forked child is then ended)."""
-    try:
-        while True:
-            try:
-                item = next(items)
-            except StopIteration as end:
-                return end.value
-            each(item)
-    finally:
-        items.close()
-
-
 def cores_available() -> int:
     """CPUs this process may run on (its affinity mask where the OS has one)."""
     if hasattr(os, "sched_getaffinity"):

@@ -15,7 +15,8 @@ import sys
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Callable
 
-from nurbsmotion.cli._forked import IdleWatch, cores_available, drained, forked_iteration
+from nurbsmotion.steps import drained
+from nurbsmotion.cli._forked import IdleWatch, cores_available, forked_iteration
 from nurbsmotion.cli._planning_options import add_planning_arguments, limits_summary, planner, planning_setup
 from nurbsmotion.errors import InputError
 from nurbsmotion.planning import ALGORITHM_MODULES, PlanLimits, Trajectory

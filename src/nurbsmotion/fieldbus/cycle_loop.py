@@ -10,7 +10,9 @@ The writer may hold many cycles queued (the kernel queue, fieldbus.bcm_queue): a
 changes only cycles beyond k + the writer's change guard; the queued cycles after that are
 computed again from the controller state kept for each (the *rewind*). A phase change is
 never rewound. The controller's notices (fieldbus.controller: phase changes, ready, refused
-jobs, homing outcomes) are acted on here: jobs start and finish, bring-up is woken.
+jobs, homing outcomes) are acted on here: jobs start and finish, bring-up is woken. After
+each commit it runs other threads' short steps while its next wake-up is far enough away
+(fieldbus.cycle_slack: the status publisher's rounds).
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from nurbsmotion.fieldbus.controller import (MOVING_PHASES, CycleController, Ena
                                              Notice, PhaseChanged, Quit, QuickStopped, Ready, Refused, Req, Request,
                                              Phase)
 from nurbsmotion.fieldbus.cycle import LatenessStats
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.drive_state import CW_QUICK_STOP
 from nurbsmotion.fieldbus.feedback import Feedback
@@ -74,6 +77,7 @@ class CycleLoop:
         self._quit = False
         self._rt_priority: int | None = None
         self._heartbeat_cycle = -1  # the cycle the heartbeat watchdog saw last
+        self.slack = CycleSlack()  # other threads' short steps, run after a cycle's commit (fieldbus.cycle_slack)
 
     # ------------------------------------------------------------------ from other threads
     @property
@@ -164,6 +168,7 @@ class CycleLoop:
             self._plan(0, [])
             writer.start()
             writer.commit(0, self.horizon, self._take_first_new(), self.ctl.tail)
+            self.slack.start()
             while not self._quit:
                 k = writer.next_cycle()
                 self.cycle = self.fb.wire_cycle = k
@@ -178,10 +183,13 @@ class CycleLoop:
                 self._plan(k, requests)
                 writer.commit(k, self.horizon, self._take_first_new(), self.ctl.tail)
                 self._after_cycle(k)
+                self.slack.run(writer.next_wake_s())
+            self.slack.stop()
             if self.job is not None:  # shutdown before its end reached the wire
                 self._finish_job(self.job, self.job.outcome or "aborted")
         except Exception as err:  # pragma: no cover - a bug must still stop the axes
             log.exception("cycle loop failed")
+            self.slack.stop()
             self.supervisor.report(None, None, "bus_error", 0, k, f"cycle loop failed at cycle {k}: {err!r}",
                                    Phase.DISABLED, self.job, [])
             self.emergency_stop()

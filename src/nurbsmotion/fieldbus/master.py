@@ -41,6 +41,7 @@ from nurbsmotion.fieldbus.busload import BusLoad, check_bus_load, config_bus_loa
 from nurbsmotion.fieldbus.controller import CycleController, Phase, Req, Request
 from nurbsmotion.fieldbus.connection import BusConnection, send_quick_stop
 from nurbsmotion.fieldbus.cycle_loop import HISTORY_CYCLES, CycleLoop
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack
 from nurbsmotion.fieldbus.cyclic_velocity import spindle_cyclic_velocity
 from nurbsmotion.fieldbus.drive_state import state_name
 from nurbsmotion.fieldbus.feedback import Feedback
@@ -149,6 +150,8 @@ class Master:
         # perf_counter time the cycle thread wakes next, None while no cycle loop runs; any
         # thread (the status publisher keeps its steps out of the cycle's way: service.subscriptions)
         self.next_cycle_wake_s: Callable[[], float | None] = self._loop.next_wake_s
+        # other threads' short steps, run by the cycle thread in its slack (fieldbus.cycle_slack)
+        self.cycle_slack: CycleSlack = self._loop.slack
 
     @property
     def network(self) -> canopen.Network | None:

@@ -41,9 +41,11 @@ from nurbsmotion.service.machine_state import MachineState, cleared, selected, w
 from nurbsmotion.service.machine_state_store import MachineStateStore
 from nurbsmotion.service.motion import MotionLink, Simulation
 from nurbsmotion.service.program_file import ProgramFile
-from nurbsmotion.service.job_common import MDI_NAME
+from nurbsmotion.service.job_common import MDI_NAME, RunningJob, running_job_id
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.start_line import resume_of, start_line_options
+from nurbsmotion.fieldbus.cycle_slack import run_steps
+from nurbsmotion.steps import Steps
 from nurbsmotion.service.records import JobRecords
 
 log = logging.getLogger(__name__)
@@ -300,13 +302,10 @@ class Controller:
         """Where the axes hold, machine mm (axis map in force)."""
         return held_position_mm(self.link, self.link.status())
 
-    def running_job_id(self) -> str | None:
+    def running_job(self) -> RunningJob | None:
+        """The job running now (None: none)."""
         job = self._job
-        return job.record.job_id if job is not None else None
-
-    def running_job_name(self) -> str | None:
-        job = self._job
-        return job.name if job is not None else None
+        return RunningJob(job.record.job_id, job.name) if job is not None else None
 
     def inject_fault(self, spec: str) -> dict[str, Any]:
         if self.simulation is None:
@@ -316,11 +315,11 @@ class Controller:
         return {"ok": True}
 
     def job_info(self, job_id: str) -> dict[str, Any]:
-        return {"ok": True, "job": self.records.info(job_id, self.running_job_id())}
+        return {"ok": True, "job": self.records.info(job_id, running_job_id(self.running_job()))}
 
     def jobs(self, limit: int = 20) -> dict[str, Any]:
         """The newest ``limit`` records (newest first), one summary each."""
-        return {"ok": True, **self.records.listing(limit, self.running_job_id())}
+        return {"ok": True, **self.records.listing(limit, running_job_id(self.running_job()))}
 
     # ------------------------------------------------------------------ status
     def state(self, status: MasterStatus | None = None) -> str:
@@ -336,21 +335,26 @@ class Controller:
             return status.phase
         return "running"
 
-    def status(self, fast_only: bool = False, step: Callable[[], None] = lambda: None) -> dict[str, Any]:
-        """The ``status`` answer. ``fast_only``: only FAST_FIELDS, those that change every
+    def status(self, fast_only: bool = False) -> dict[str, Any]:
+        """The ``status`` answer (status_steps, read at once)."""
+        return run_steps(self.status_steps(fast_only))
+
+    def status_steps(self, fast_only: bool = False) -> Steps[dict[str, Any]]:
+        """The ``status`` answer, read in short steps (a generator: it yields between the parts
+        and returns the answer). ``fast_only``: only FAST_FIELDS, those that change every
         cycle while the machine moves (axis positions, cycle counters, the job's progress)
         or with its state; the status publisher reads these at the subscribers' rate and the
-        rest after events (service.subscriptions), and passes ``step``, called between the
-        parts (it lets go of the interpreter lock there). A fast read's ``cycles`` has the
-        lateness p99 of the last whole read (the percentile was most of the master's read)."""
+        rest after events (service.subscriptions), each step in the cycle thread's slack. A
+        fast read's ``cycles`` has the lateness p99 of the last whole read (the percentile
+        was most of the master's read)."""
         status = self.link.status(percentiles=not fast_only)
-        step()
+        yield None
         self.homing.forget_faulted(status.faults)
         job = self._job
         progress = job_progress(job, status, self.feed_override.effective(job))
-        step()
+        yield None
         axes = axes_status(status, self.link.axis_map, self.config)
-        step()
+        yield None
         fast = {"ok": True, "state": self.state(status), "phase": status.phase, "job": progress, "axes": axes,
                 "cycles": cycles_status(status),
                 "faults": [self.outcomes.fault_record(f, status, job.start_cycle if job is not None else
@@ -358,7 +362,7 @@ class Controller:
                            for f in status.faults[self._faults_acknowledged:]]}
         if fast_only:
             return fast
-        step()
+        yield None
         return {**fast, "override": self.feed_override.status(job), "last_job": self._last,
                 "simulate": self.simulation is not None, "coordinates": self.state_store.state.status(),
                 "homing": self.homing.status(), **self.machine.status()}

@@ -22,6 +22,8 @@ import numpy as np
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import InputError, Refused
+from nurbsmotion.fieldbus.cycle_slack import run_steps
+from nurbsmotion.steps import Steps
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
 from nurbsmotion.runtime import STATUS_PUBLISHER_PRIORITY, cap_switch_interval
@@ -59,7 +61,7 @@ def dispatch(controller: Controller, request: Request, programs: Programs | None
         "submit": lambda: submit(controller, request),
         "mdi": lambda: controller.mdi(f["text"]),
         "offsets": lambda: controller.offsets(f),
-        "status": lambda: with_queue(controller.status(), programs),
+        "status": lambda: status_answer(controller, programs),
         "job": lambda: controller.job_info(f["id"]),
         "jobs": lambda: controller.jobs(int(f.get("limit", 20))),
         "stop": controller.stop,
@@ -88,6 +90,13 @@ def submit(controller: Controller, request: Request) -> dict[str, Any]:
         return controller.submit(f["name"], program, bool(f.get("keep_override", False)),
                                  bool(f.get("block_delete", True)), bool(f.get("optional_stop", True)),
                                  start_line=start_line_field(f.get("start_line")))
+
+
+def status_answer(controller: Controller, programs: Programs | None) -> dict[str, Any]:
+    """``status``: read in the cycle thread's slack while it runs (fieldbus.cycle_slack), so a
+    poller (the CLI, a pendant, a dashboard) never holds the interpreter lock when the cycle
+    thread wakes; encoding and sending the answer stay with the request's thread."""
+    return with_queue(run_steps(controller.status_steps(), controller.link.cycle_slack), programs)
 
 
 def with_queue(status: dict[str, Any], programs: Programs | None) -> dict[str, Any]:
@@ -142,7 +151,7 @@ class Daemon:
                                      devices)
         self.programs = Programs(self.config, self.controller, self.store, queue)
         self.hub = StatusHub(self._status, read_fast=self._fast_status, realtime_priority=STATUS_PUBLISHER_PRIORITY,
-                             next_cycle_wake_s=link.next_cycle_wake_s)
+                             next_cycle_wake_s=link.next_cycle_wake_s, slack=link.cycle_slack)
         self._detach_event_log = attach_event_log(self.hub)
         self._stop_webhooks = start_webhooks(self.config.notify, self.config.source)
         # the library pruned and the queue runner going before the socket answers: a request never
@@ -176,16 +185,16 @@ class Daemon:
         checker = self.programs.checker if self.programs is not None else None  # large programs' check
         return prepare_job(name, text, self.config, start, options, self.planner_worker, self.store, checker)
 
-    def _status(self) -> dict[str, Any]:
+    def _status(self) -> Steps[dict[str, Any]]:
         """The whole status for the status publisher, as a ``status`` request answers it,
-        read in steps between which it lets go of the interpreter lock (StatusHub.between_steps)."""
-        assert self.controller is not None and self.hub is not None
-        return with_queue(self.controller.status(step=self.hub.between_steps), self.programs)
+        read in steps (fieldbus.cycle_slack: the publisher runs them in the cycle thread's slack)."""
+        assert self.controller is not None
+        return with_queue((yield from self.controller.status_steps()), self.programs)
 
-    def _fast_status(self) -> dict[str, Any]:
+    def _fast_status(self) -> Steps[dict[str, Any]]:
         """The status fields that move with the machine (controller.FAST_FIELDS), likewise."""
-        assert self.controller is not None and self.hub is not None
-        return self.controller.status(fast_only=True, step=self.hub.between_steps)
+        assert self.controller is not None
+        return (yield from self.controller.status_steps(fast_only=True))
 
     def _handle(self, request: Request) -> dict[str, Any]:
         controller = self.controller

@@ -25,6 +25,18 @@ from nurbsmotion.config.spindle import SpindleConfig
 
 
 @dataclass(frozen=True)
+class RunningJob:
+    """The job running now, as others see it (Controller.running_job)."""
+
+    job_id: str
+    name: str
+
+
+def running_job_id(job: RunningJob | None) -> str | None:
+    return job.job_id if job is not None else None
+
+
+@dataclass(frozen=True)
 class JobPause:
     """A planned set-point row where the job holds until ``resume`` (M0, M1, M6)."""
 

@@ -30,7 +30,7 @@ from nurbsmotion.config import AxisConfig, MachineConfig
 from nurbsmotion.errors import InputError, Refused
 from nurbsmotion.log import kv
 from nurbsmotion.service.machine_io import AxisMotion
-from nurbsmotion.service.job_common import JOG_NAME
+from nurbsmotion.service.job_common import JOG_NAME, RunningJob, running_job_id
 
 
 log = logging.getLogger(__name__)
@@ -132,8 +132,7 @@ class JogHost(Protocol):
     def submit(self, name: str, text: str, keep_override: bool = False, block_delete: bool = True,
                optional_stop: bool = True, needs_homing: bool = True, jog: AxisMotion | None = None,
                start_line: int | None = None) -> dict[str, Any]: ...
-    def running_job_id(self) -> str | None: ...
-    def running_job_name(self) -> str | None: ...
+    def running_job(self) -> RunningJob | None: ...
     def stop(self, reason: str = "stop") -> dict[str, Any]: ...
 
 
@@ -175,14 +174,15 @@ class Jogging:
     def renew(self) -> dict[str, Any]:
         """Extend the continuous jog's lease by LEASE_S from now."""
         with self._lock:
-            if self._job_id is None or self.controller.running_job_id() != self._job_id:
+            if self._job_id is None or running_job_id(self.controller.running_job()) != self._job_id:
                 raise Refused("jog_renew", "no continuous jog is running")
             self._lease_until = time.monotonic() + LEASE_S
             return {"ok": True, "job": self._job_id}
 
     def stop(self) -> dict[str, Any]:
         """``jog stop``: the running jog (any kind) decelerates with the stop ramp."""
-        job = self.controller.running_job_name()
+        running = self.controller.running_job()
+        job = running.name if running is not None else None
         if job != JOG_NAME:
             raise Refused("jog stop", "no jog is running" if job is None else f"the running job is {job}, not a jog "
                           f"(use stop)")
@@ -194,7 +194,7 @@ class Jogging:
         while True:
             time.sleep(WATCH_S)
             with self._lock:
-                if self._job_id != job_id or self.controller.running_job_id() != job_id:
+                if self._job_id != job_id or running_job_id(self.controller.running_job()) != job_id:
                     return
                 expired = time.monotonic() > self._lease_until
                 if expired:

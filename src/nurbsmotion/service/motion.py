@@ -14,6 +14,7 @@ import canopen
 import numpy as np
 
 from nurbsmotion.axes import AxisMap
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack
 from nurbsmotion.fieldbus.cyclic_velocity import CyclicVelocity
 from nurbsmotion.fieldbus.homing import HomingOutcome, HomingPlan, HomingProcedure
 from nurbsmotion.fieldbus.reports import JobResult, MasterStatus
@@ -49,6 +50,9 @@ class BusHost(Protocol):
 class MotionLink(BusHost, Protocol):
     axis_map: AxisMap
     next_cycle_wake_s: Callable[[], float | None]  # perf_counter time the cycle thread wakes next
+
+    @property
+    def cycle_slack(self) -> CycleSlack | None: ...  # runs short steps in the cycle thread's slack (None: no such thread)
 
     def bring_up(self) -> None: ...
     def stream(self, counts: np.ndarray, on_progress: Callable[[int, int], None] | None = None,

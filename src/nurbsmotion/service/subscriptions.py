@@ -20,22 +20,22 @@ its connection (``Subscription.attach``: a non-blocking send; what the socket ca
 waits for the next round), so a round wakes one thread for all clients instead of one per
 client.
 
-The cycle thread must not pay for it (issue 22): every microsecond the publisher runs Python
+The cycle thread must not pay for it (issue 22): every microsecond another thread runs Python
 holds the interpreter lock the cycle thread may wake up needing, and a cycle thread that waits
-for it longer than the spin before its deadline starts the cycle late. So the publisher
-- reads between events only the fields that move with the machine (``read_fast``: positions,
-  cycle counters, job progress, state); the rest (override, offsets, homing, spindle, I/O,
-  queue, last job) whole in the round of an event and the next, and every FULL_READ_PERIOD_S;
-- lets go of the lock between its steps (between_steps: the master's status, the job's
-  progress, the axes, the diff, the encoding, each send);
-- starts a step only where it ends before the cycle thread's next wake-up (the master's
-  ``next_cycle_wake_s``; STEP_ROOM_S), else after that wake-up, and when the cycle thread
-  woke meanwhile it sleeps for real until it has the lock (wait_before_step_s: a sleep(0)
-  takes the lock back before the woken thread runs, which then waits for the switch
-  interval: docs/web.md, "Out of the cycle thread's way");
-- runs at SCHED_FIFO 1 where allowed, below every thread of the cycle: at normal priority the
-  scheduler preempted it for milliseconds while it held the lock under load, and the cycle
-  thread waited that long (docs/web.md, "What the subscription costs the cycle").
+for it longer than the spin before its deadline starts the cycle late. So
+- a round is short steps (``_round_steps``: the status read's parts, the diff, the encoding,
+  each send) and, while the cycle thread runs, the cycle thread itself runs them in the slack
+  after its cycle, each only while its next wake-up is far enough away (fieldbus.cycle_slack);
+  the publisher thread only waits for the round (docs/web.md, "The round in the cycle's slack");
+- between events it reads only the fields that move with the machine (``read_fast``:
+  positions, cycle counters, job progress, state); the rest (override, offsets, homing,
+  spindle, I/O, queue, last job) whole in the round of an event and the next, and every
+  FULL_READ_PERIOD_S;
+- with no cycle thread (before bring-up, after a fault disabled the drives), or when the
+  cycle thread had no slack for SLACK_WAIT_S, the publisher thread runs the steps itself,
+  letting go of the lock between them and starting one only where it ends before the cycle
+  thread's next wake-up (``between_steps``; docs/web.md, "Out of the cycle thread's way"),
+  at SCHED_FIFO 1 where allowed, below every thread of the cycle.
 The cycle thread pays one ``deque.append`` and ``Event.set`` per log line it writes (faults).
 """
 
@@ -49,6 +49,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from nurbsmotion.fieldbus.cycle_slack import WAIT_S, CycleSlack, run_steps
+from nurbsmotion.steps import Steps
 from nurbsmotion.log import attach_handler, kv, parse_kv
 from nurbsmotion.runtime import set_thread_realtime
 from nurbsmotion.service.protocol import Status, encode, merge_changes, status_changes
@@ -68,6 +70,10 @@ STEP_ROOM_S = 300e-6
 # ... until this long after that wake-up: the cycle thread has taken the lock and holds it
 # through its spin (60 µs) and its sends; the step waits for its cycle's work
 AFTER_WAKE_S = 100e-6
+# a round the cycle thread has not finished in this long (no slack: it is overloaded) is
+# finished by the publisher's thread instead: subscribers still get their status
+SLACK_WAIT_S = WAIT_S
+StatusRead = Callable[[], "Status | Steps[Status]"]  # the status at once, or in steps (fieldbus.cycle_slack)
 Writer = Callable[[bytes], int]  # a non-blocking send: bytes taken (BlockingIOError: none); OSError: gone
 
 
@@ -155,12 +161,15 @@ class Subscription:
 class StatusHub:
     """Samples ``read_status`` for the subscribers and fans out status changes and events."""
 
-    def __init__(self, read_status: Callable[[], Status], clock: Callable[[], float] = time.monotonic,
+    def __init__(self, read_status: StatusRead, clock: Callable[[], float] = time.monotonic,
                  wall_clock: Callable[[], float] = time.time, publisher_thread: bool = True,
-                 read_fast: Callable[[], Status] | None = None, realtime_priority: int | None = None,
-                 next_cycle_wake_s: Callable[[], float | None] | None = None) -> None:
-        """``read_fast``: the fields of the status that move with the machine (the rest is
+                 read_fast: StatusRead | None = None, realtime_priority: int | None = None,
+                 next_cycle_wake_s: Callable[[], float | None] | None = None, slack: CycleSlack | None = None) -> None:
+        """``read_status``: the whole status, at once or in steps (fieldbus.cycle_slack).
+        ``read_fast``: the fields of the status that move with the machine (the rest is
         read whole only after events and every FULL_READ_PERIOD_S; None: always whole).
+        ``slack``: the cycle thread's slack, where the rounds' steps run while a cycle
+        thread runs (fieldbus.cycle_slack; None: always in the publisher's thread).
         ``realtime_priority``: the publisher thread's SCHED_FIFO priority where allowed.
         ``next_cycle_wake_s``: ``time.perf_counter`` time the cycle thread wakes next (None:
         no cycle runs); the publisher's steps keep out of its way (between_steps).
@@ -170,6 +179,7 @@ class StatusHub:
         self._read_fast = read_fast
         self._realtime_priority = realtime_priority
         self._next_cycle_wake_s = next_cycle_wake_s
+        self._slack = slack
         self._next_full_s = 0.0
         self._full_reads_due = 0  # an event was published: read the whole status this many rounds
         self._publisher_thread = publisher_thread
@@ -186,7 +196,7 @@ class StatusHub:
     # ------------------------------------------------------------------ clients
     def subscribe(self, max_hz: float = DEFAULT_MAX_HZ) -> tuple[Subscription, Status]:
         """A new subscription and the full status it starts from."""
-        status = self._read_status()
+        status = run_steps(read_in_steps(self._read_status), self._slack, wait_s=SLACK_WAIT_S)
         sub = Subscription(period_s=1.0 / max_hz)
         with self._lock:
             self._subscribers.append(sub)
@@ -252,14 +262,21 @@ class StatusHub:
 
     def publish_once(self) -> None:
         """Send queued events, then the status changes of every subscriber that is due (or
-        that an event just woke). The publisher thread's step; tests call it directly.
-        Between its steps it lets go of the interpreter lock and keeps out of the cycle
-        thread's way (between_steps)."""
+        that an event just woke): one round (_round_steps). The publisher thread's step;
+        tests call it directly. With a cycle thread running, its steps run in that thread's
+        slack (fieldbus.cycle_slack) while this thread waits; else here, letting go of the
+        interpreter lock between them and keeping out of the cycle thread's way (between_steps)."""
+        run_steps(self._round_steps(), self._slack, lambda let_go: self.between_steps(let_go is not False),
+                  SLACK_WAIT_S)
+
+    def _round_steps(self) -> Steps[None]:
+        """The round of publish_once in steps: it yields where the round may pause (False:
+        before a send after the first, which lets go of the interpreter lock itself)."""
         with self._lock:
             subscribers = list(self._subscribers)
         if not subscribers:
             return
-        self.between_steps()
+        yield True
         events = []
         while self._events:
             events.append(self._events.popleft())
@@ -268,13 +285,13 @@ class StatusHub:
             body = encode({"notify": "event", "t": stamp, **event})
             for sub in subscribers:
                 sub.put(body)
-        status = self._sample(bool(events))
-        self.between_steps()
+        status = yield from self._sample(bool(events))
+        yield True
         with self._lock:
             changes = status_changes(self._last, status)
             self._last = status
         if changes:
-            self.between_steps()
+            yield True
         due_s = self._clock() + TICK_SLACK_S
         encoded: dict[int, bytes] = {}  # subscribers at one rate share their pending changes: encode once
         for sub in subscribers:
@@ -291,20 +308,20 @@ class StatusHub:
                     encoded[key] = encode({"notify": "status", "t": stamp, "changes": sub.pending})
                 sub.put(encoded[key])
                 sub.pending = {}
-        for i, sub in enumerate(subscribers):  # each send lets go of the lock itself
-            self.between_steps(let_go=bool(encoded) and i == 0)
+        for i, sub in enumerate(subscribers):
+            yield bool(encoded) and i == 0
             sub.flush()
 
     def between_steps(self, let_go: bool = True) -> None:
-        """Between two steps of a round (and of its status reads: the daemon hands this to
-        them): let go of the interpreter lock (``let_go``), and when the next step could still
-        run when the cycle thread wakes, wait until just after that wake-up (wait_before_step_s)."""
+        """Between two steps of a round run in the publisher's thread: let go of the
+        interpreter lock (``let_go``), and when the next step could still run when the cycle
+        thread wakes, wait until just after that wake-up (wait_before_step_s)."""
         wake_s = self._next_cycle_wake_s() if self._next_cycle_wake_s is not None else None
         wait_s = wait_before_step_s(wake_s, time.perf_counter())
         if wait_s > 0.0 or let_go:
             time.sleep(wait_s)  # sleep(0) lets go of the lock too
 
-    def _sample(self, after_event: bool) -> Status:
+    def _sample(self, after_event: bool) -> Steps[Status]:
         """The status now. Whole when there is no fast read, after an event (in this round
         and the next: a change is logged just before or after it is made) and every
         FULL_READ_PERIOD_S; otherwise the last sample with the fields that move with the
@@ -317,8 +334,17 @@ class StatusHub:
         if self._read_fast is None or last is None or self._full_reads_due > 0 or now >= self._next_full_s:
             self._full_reads_due = max(0, self._full_reads_due - 1)
             self._next_full_s = now + FULL_READ_PERIOD_S
-            return self._read_status()
-        return {**last, **self._read_fast()}
+            return (yield from read_in_steps(self._read_status))
+        fast = yield from read_in_steps(self._read_fast)
+        return {**last, **fast}
+
+
+def read_in_steps(read: StatusRead) -> Steps[Status]:
+    """What ``read`` gives: a status at once, or its steps (fieldbus.cycle_slack) run one by one."""
+    result = read()
+    if isinstance(result, dict):
+        return result
+    return (yield from result)
 
 
 def next_tick_s(now_s: float, period_s: float) -> float:

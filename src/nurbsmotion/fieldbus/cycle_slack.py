@@ -1,0 +1,137 @@
+"""Other threads' short work, run by the cycle thread in the slack after its cycle.
+
+In CPython one thread runs Python at a time (the interpreter lock). A thread that holds the
+lock when the cycle thread wakes delays the cycle: until it lets go, or until the cycle thread's
+wait reaches the switch interval (T/4). Timing another thread's steps around the cycle
+thread's wake-up (service.subscriptions before issue 22's last change) leaves hand-overs of
+the lock that take tens of microseconds on a virtual machine. The one thread whose work can
+never be in the way of the cycle thread's wake-up is the cycle thread itself.
+
+So background work that must run in the daemon's process (the status publisher's rounds) is
+handed over as an iterator of short steps. After its cycle's commit the cycle thread runs
+steps only while its next wake-up is at least ``room_s`` away; the rest waits for the next
+cycle. This is the background slot of a real-time task: LinuxCNC's servo thread likewise
+copies its status for the user interfaces in its own period.
+
+Work submitted while no cycle thread runs is refused (``submit`` returns None): the
+submitter runs it itself. Work still queued when the cycle thread ends is handed back
+(``SlackWork.returned``).
+"""
+
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterator, TypeVar
+
+from nurbsmotion.steps import Steps, drained
+
+log = logging.getLogger(__name__)
+
+ROOM_S = 300e-6  # a step starts only this long before the next wake-up: longer than a step (10-150 us)
+# work the cycle thread has not finished in this long (it has no slack: overloaded) is taken
+# back and finished by the thread that submitted it
+WAIT_S = 0.25
+T = TypeVar("T")
+
+
+@dataclass
+class SlackWork:
+    """Steps handed to the cycle thread, and how they ended."""
+
+    steps: Iterator[object]
+    done: threading.Event = field(default_factory=threading.Event)
+    error: Exception | None = None  # a step raised: the submitter raises it again
+    result: object = None  # what the steps returned (a generator's return value)
+    returned: bool = False  # the cycle thread ended first: the submitter runs the rest of the steps
+
+
+class CycleSlack:
+    """The queue of background work the cycle thread runs after its cycles."""
+
+    def __init__(self, room_s: float = ROOM_S, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.room_s = room_s
+        self._clock = clock
+        self._queue: collections.deque[SlackWork] = collections.deque()
+        self._lock = threading.Lock()  # held by the cycle thread while it runs a step
+        self._open = False
+        self.steps_run = 0
+        self.withdrawn = 0  # work the submitter took back after waiting (run_steps)
+
+    @property
+    def open(self) -> bool:
+        return self._open
+
+    def start(self) -> None:
+        """The cycle thread runs: accept work from now on."""
+        with self._lock:
+            self._open = True
+
+    def stop(self) -> None:
+        """The cycle thread ends: refuse new work and hand back what is queued."""
+        with self._lock:
+            self._open = False
+            while self._queue:
+                work = self._queue.popleft()
+                work.returned = True
+                work.done.set()
+
+    def submit(self, steps: Iterator[object]) -> SlackWork | None:
+        """Queue ``steps`` for the cycle thread; None when no cycle thread runs."""
+        work = SlackWork(steps)
+        with self._lock:
+            if not self._open:
+                return None
+            self._queue.append(work)
+        return work
+
+    def withdraw(self, work: SlackWork) -> bool:
+        """Take ``work`` back before the cycle thread started it or between two of its steps:
+        True when it was still queued (the submitter runs the rest of its steps itself)."""
+        with self._lock:
+            if work in self._queue:
+                self._queue.remove(work)
+                self.withdrawn += 1
+                return True
+            return False
+
+    def run(self, next_wake_s: float) -> None:
+        """The cycle thread, after its commit: run queued steps while ``next_wake_s`` (its
+        next wake-up, on this clock) is at least ``room_s`` away. A step that raises ends
+        its work (the submitter sees the error); the cycle goes on."""
+        queue = self._queue
+        if not queue:
+            return
+        with self._lock:
+            while queue and next_wake_s - self._clock() >= self.room_s:
+                work = queue[0]
+                try:
+                    next(work.steps)
+                    self.steps_run += 1
+                    continue
+                except StopIteration as done:
+                    work.result = done.value
+                except Exception as err:  # noqa: BLE001 - another thread's bug must not stop the cycle
+                    work.error = err
+                queue.popleft()
+                work.done.set()
+
+
+def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callable[[object], None] = lambda _: None,
+              wait_s: float = WAIT_S) -> T:
+    """Run ``steps`` to their end and return their result: in the cycle thread's ``slack``
+    while one runs (this thread waits); else, or when the cycle thread has not finished them
+    within ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each
+    step's value. A step's exception is raised here."""
+    work = slack.submit(steps) if slack is not None else None
+    if work is not None and slack is not None:
+        if work.done.wait(wait_s) or not slack.withdraw(work):
+            work.done.wait()
+            if work.error is not None:
+                raise work.error
+            if not work.returned:
+                return work.result  # type: ignore[return-value]  # the generator's own return value
+    return drained(steps, between)

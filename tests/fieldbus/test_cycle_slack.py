@@ -1,0 +1,141 @@
+"""fieldbus.cycle_slack: other threads' steps run by the cycle thread only where they fit
+before its next wake-up; the master's cycle thread runs them (simulated drives)."""
+
+from __future__ import annotations
+
+import threading
+from typing import Iterator
+
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps
+from nurbsmotion.steps import Steps
+from tests.helpers import wait_for
+
+
+class StepClock:
+    """A clock each step moves on by ``step_s``."""
+
+    def __init__(self, step_s: float) -> None:
+        self.now = 0.0
+        self.step_s = step_s
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def counted_steps(clock: StepClock, n: int, ran: list[int]) -> Iterator[None]:
+    for i in range(n):
+        ran.append(i)
+        clock.now += clock.step_s
+        yield
+
+
+def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
+    clock = StepClock(step_s=100e-6)
+    slack = CycleSlack(room_s=300e-6, clock=clock)
+    slack.start()
+    ran: list[int] = []
+    work = slack.submit(counted_steps(clock, 10, ran))
+    assert work is not None
+    slack.run(next_wake_s=clock.now + 550e-6)  # room at 0, 100 and 200 us: three steps, then 250 us left
+    assert ran == [0, 1, 2] and not work.done.is_set()
+    slack.run(next_wake_s=clock.now + 299e-6)  # less than the room: nothing
+    assert ran == [0, 1, 2]
+    slack.run(next_wake_s=clock.now + 10.0)
+    assert ran == list(range(10)) and work.done.is_set() and work.error is None and not work.returned
+    assert slack.steps_run == 10
+
+
+def test_work_waits_for_the_one_before_it_and_a_raising_step_ends_only_its_own():
+    clock = StepClock(step_s=0.0)
+    slack = CycleSlack(clock=clock)
+    slack.start()
+
+    def failing() -> Iterator[None]:
+        yield
+        raise ValueError("a bug in the publisher")
+
+    ran: list[int] = []
+    bad, good = slack.submit(failing()), slack.submit(counted_steps(clock, 2, ran))
+    assert bad is not None and good is not None
+    slack.run(next_wake_s=1.0)
+    assert isinstance(bad.error, ValueError) and bad.done.is_set()
+    assert ran == [0, 1] and good.done.is_set() and good.error is None
+
+
+def test_no_cycle_thread_refuses_work_and_its_end_hands_back_what_is_queued():
+    slack = CycleSlack()
+    assert slack.submit(iter(())) is None  # not started: the submitter runs it itself
+    slack.start()
+    work = slack.submit(iter([None, None]))
+    assert work is not None
+    slack.stop()
+    assert work.done.is_set() and work.returned and work.error is None
+    assert slack.submit(iter(())) is None
+
+
+def test_work_withdrawn_before_the_cycle_thread_took_it_is_the_submitters_again():
+    clock = StepClock(step_s=0.0)
+    slack = CycleSlack(clock=clock)
+    slack.start()
+    ran: list[int] = []
+    steps = counted_steps(clock, 3, ran)
+    work = slack.submit(steps)
+    assert work is not None
+    slack.run(next_wake_s=0.0)  # no room
+    assert slack.withdraw(work)
+    slack.run(next_wake_s=1.0)
+    assert ran == [] and not work.done.is_set()
+    assert list(steps) == [None, None, None]  # the rest runs where the submitter wants
+    assert not slack.withdraw(work)
+
+
+def test_the_masters_cycle_thread_runs_the_steps_against_its_next_wake_up(monkeypatch):
+    from tests.fieldbus.test_master_sim import rig
+
+    with rig() as (master, _, _):
+        slack = master.cycle_slack
+        wait_for(lambda: slack.open, what="the cycle thread accepting work")
+        run, given = slack.run, []
+        monkeypatch.setattr(slack, "run", lambda next_wake_s: given.append(next_wake_s) or run(next_wake_s))
+        seen: list[tuple[str, float | None, float]] = []
+
+        def steps() -> Iterator[None]:
+            for _ in range(50):
+                seen.append((threading.current_thread().name, master.next_cycle_wake_s(), given[-1]))
+                yield
+
+        work = slack.submit(steps())
+        assert work is not None
+        assert work.done.wait(30.0) and work.error is None and not work.returned
+        assert {name for name, _, _ in seen} == {"nurbsmotion-cycle"}
+        # the room is judged against the writer's next wake-up, the one the cycle thread sleeps for
+        assert all(wake_s == judged_s for _, wake_s, judged_s in seen)
+        assert slack.steps_run == 50
+    assert not slack.open  # the cycle thread ended: work is refused again
+
+
+def test_run_steps_returns_the_result_from_the_cycle_thread_or_from_here():
+    def answer() -> Steps[tuple[str, str]]:
+        first = threading.current_thread().name
+        yield None
+        return first, threading.current_thread().name
+
+    assert run_steps(answer()) == ("MainThread", "MainThread")  # no slack: here
+    slack = CycleSlack()
+    slack.start()
+    stop = threading.Event()
+
+    def cycle() -> None:
+        while not stop.wait(1e-3):
+            slack.run(float("inf"))
+
+    thread = threading.Thread(target=cycle, name="nurbsmotion-cycle")
+    thread.start()
+    try:
+        assert run_steps(answer(), slack, wait_s=30.0) == ("nurbsmotion-cycle", "nurbsmotion-cycle")
+    finally:
+        stop.set()
+        thread.join()
+    between: list[object] = []
+    assert run_steps(answer(), slack, between.append, wait_s=0.0) == ("MainThread", "MainThread")  # no room
+    assert between == [None] and slack.withdrawn == 1
