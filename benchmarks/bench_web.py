@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import json
+import math
 import os
 import shutil
 import socket
@@ -362,16 +363,41 @@ def late_summary(rows: list[dict[str, Any]]) -> str:
 
 def ab_summary(rows: list[dict[str, Any]], clients: int) -> str:
     """Issue 22's late-cycle target for each side of an A/B run: late cycles per 1000 with 0
-    and ``clients`` clients over all rounds, and in how many rounds the clients' job had more
-    late cycles than the job without clients of the same daemon."""
+    and ``clients`` clients over all rounds, in how many rounds the clients' job had more
+    late cycles than the job without clients of the same daemon, and the median of those
+    paired differences with its distribution-free interval (paired_median)."""
     lines = ["| code | late per 1000, 0 clients | late per 1000, %d clients | rounds with more late cycles "
-             "with clients |" % clients, "|---|---|---|---|"]
+             "with clients | paired difference per 1000: median [interval] |" % clients, "|---|---|---|---|---|"]
     for label in ("before", "after"):
         none = [r for r in rows if r["clients"] == f"{label}: 0"]
         some = [r for r in rows if r["clients"] == f"{label}: {clients} WebSocket"]
-        worse = sum(1 for a, b in zip(none, some) if b["late_per_1000"] > a["late_per_1000"])
-        lines.append(f"| {label} | {per_1000(none):.1f} | {per_1000(some):.1f} | {worse} of {len(some)} |")
+        differences = [b["late_per_1000"] - a["late_per_1000"] for a, b in zip(none, some)]
+        worse = sum(1 for d in differences if d > 0)
+        median, low, high, confidence = paired_median(differences)
+        lines.append(f"| {label} | {per_1000(none):.1f} | {per_1000(some):.1f} | {worse} of {len(some)} | "
+                     f"{median:+.1f} [{low:+.1f}, {high:+.1f}] ({confidence:.0%}) |")
     return "\n".join(lines)
+
+
+def paired_median(differences: list[float]) -> tuple[float, float, float, float]:
+    """The median of the rounds' paired differences and the widest order-statistic interval
+    [d_(j), d_(n+1-j)] that holds the true median with at least 90 % confidence by the sign
+    test (distribution-free: one noisy round moves it by one rank, not by its size); the
+    interval's confidence 1 - 2 P(Binomial(n, 1/2) < j). n < 5 gives the whole range."""
+    d = sorted(differences)
+    n = len(d)
+    if n == 0:
+        return math.nan, math.nan, math.nan, 0.0
+    below = 0.0
+    j = 1
+    while True:  # the largest j whose interval still holds >= 90 %
+        below_next = below + math.comb(n, j - 1) / 2 ** n
+        if j > n // 2 or 1 - 2 * below_next < 0.90:
+            break
+        below, j = below_next, j + 1
+    j = max(1, j - 1)
+    confidence = 1 - 2 * sum(math.comb(n, i) for i in range(j)) / 2 ** n
+    return statistics.median(d), d[j - 1], d[n - j], confidence
 
 
 def per_1000(rows: list[dict[str, Any]]) -> float:
