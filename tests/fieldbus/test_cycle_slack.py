@@ -42,7 +42,20 @@ def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
     assert ran == [0, 1, 2]
     slack.run(next_wake_s=clock.now + 10.0)
     assert ran == list(range(10)) and work.done.is_set() and work.error is None and not work.returned
-    assert slack.steps_run == 10
+    assert slack.steps_run == 11  # ten yields and the step that ends the generator
+    assert slack.overruns == 0  # the third step ended 250 us before the wake-up
+
+
+def test_a_step_that_ends_after_the_wake_up_is_counted_as_an_overrun():
+    clock = StepClock(step_s=400e-6)  # longer than the room: a step that overran
+    slack = CycleSlack(room_s=300e-6, clock=clock)
+    slack.start()
+    ran: list[int] = []
+    slack.submit(counted_steps(clock, 3, ran))
+    slack.run(next_wake_s=clock.now + 350e-6)
+    assert ran == [0] and slack.overruns == 1
+    slack.run(next_wake_s=clock.now + 10.0)
+    assert ran == [0, 1, 2] and slack.overruns == 1 and slack.steps_run == 4
 
 
 def test_work_waits_for_the_one_before_it_and_a_raising_step_ends_only_its_own():
@@ -110,7 +123,7 @@ def test_the_masters_cycle_thread_runs_the_steps_against_its_next_wake_up(monkey
         assert {name for name, _, _ in seen} == {"nurbsmotion-cycle"}
         # the room is judged against the writer's next wake-up, the one the cycle thread sleeps for
         assert all(wake_s == judged_s for _, wake_s, judged_s in seen)
-        assert slack.steps_run == 50
+        assert slack.steps_run == 51
     assert not slack.open  # the cycle thread ended: work is refused again
 
 

@@ -59,6 +59,7 @@ class CycleSlack:
         self._lock = threading.Lock()  # held by the cycle thread while it runs a step
         self._open = False
         self.steps_run = 0
+        self.overruns = 0  # steps that ended after the next wake-up: each may have made a cycle late
         self.withdrawn = 0  # work the submitter took back after waiting (run_steps)
 
     @property
@@ -110,12 +111,14 @@ class CycleSlack:
                 work = queue[0]
                 try:
                     next(work.steps)
-                    self.steps_run += 1
                     continue
                 except StopIteration as done:
                     work.result = done.value
                 except Exception as err:  # noqa: BLE001 - another thread's bug must not stop the cycle
                     work.error = err
+                finally:
+                    self.steps_run += 1
+                    self.overruns += self._clock() > next_wake_s
                 queue.popleft()
                 work.done.set()
 

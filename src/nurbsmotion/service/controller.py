@@ -44,7 +44,7 @@ from nurbsmotion.service.program_file import ProgramFile
 from nurbsmotion.service.job_common import MDI_NAME, RunningJob, running_job_id
 from nurbsmotion.service.streamed_job import StreamedJob
 from nurbsmotion.service.start_line import resume_of, start_line_options
-from nurbsmotion.fieldbus.cycle_slack import run_steps
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps
 from nurbsmotion.steps import Steps
 from nurbsmotion.service.records import JobRecords
 
@@ -356,7 +356,7 @@ class Controller:
         axes = axes_status(status, self.link.axis_map, self.config)
         yield None
         fast = {"ok": True, "state": self.state(status), "phase": status.phase, "job": progress, "axes": axes,
-                "cycles": cycles_status(status),
+                "cycles": {**cycles_status(status), **slack_status(self.link.cycle_slack)},
                 "faults": [self.outcomes.fault_record(f, status, job.start_cycle if job is not None else
                                                       self._last_job_faults.get((f.node_id, f.kind, f.cycle)))
                            for f in status.faults[self._faults_acknowledged:]]}
@@ -472,6 +472,14 @@ def cycles_status(status: MasterStatus) -> dict[str, Any]:
     t = status.timing
     return {"count": t.cycles, "late": t.late_cycles, "missed": t.missed_cycles, "send_errors": t.send_errors,
             "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3), "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)}
+
+
+def slack_status(slack: CycleSlack | None) -> dict[str, int]:
+    """The status' ``cycles`` of the cycle thread's slack (fieldbus.cycle_slack): other threads'
+    steps it ran, those that ended after its next wake-up, work taken back for want of slack."""
+    if slack is None:
+        return {"slack_steps": 0, "slack_overruns": 0, "slack_withdrawn": 0}
+    return {"slack_steps": slack.steps_run, "slack_overruns": slack.overruns, "slack_withdrawn": slack.withdrawn}
 
 
 def _limits(pair: tuple[float, float] | None) -> list[float] | None:
