@@ -223,6 +223,9 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
             "gateway_cpu_percent": cpu["gateway"], "daemon_cpu_percent": cpu["daemon"],
             "late_per_1000": 1000 * (after["late"] - before["late"]) / max(1, after["count"] - before["count"]),
             "normal_wakeups_per_s": switches / wall,
+            # the cycle thread's background steps (fieldbus.cycle_slack; absent before it: -1)
+            "slack_steps": after.get("slack_steps", -1) - before.get("slack_steps", 0),
+            "slack_overruns": after.get("slack_overruns", -1) - before.get("slack_overruns", 0),
             "load": Path("/proc/loadavg").read_text().split()[0]}
 
 
@@ -350,14 +353,23 @@ async def ab_rounds(args: argparse.Namespace) -> list[dict[str, Any]]:
 
 
 def late_summary(rows: list[dict[str, Any]]) -> str:
-    """Late cycles per 1000 over all rounds of each kind of client, and its rounds' event p99."""
-    out = ["| clients | rounds | late per 1000 cycles (all rounds) | event -> client p99 ms |", "|---|---|---|---|"]
+    """Late cycles per 1000 over all rounds of each kind of client, its rounds' event p99, and
+    against the job without clients of the same round: the median of the paired differences
+    with its sign-test interval (paired_median)."""
+    out = ["| clients | rounds | late per 1000 cycles (all rounds) | paired difference to 0 clients per 1000: "
+           "median [interval] | event -> client p99 ms |", "|---|---|---|---|---|"]
+    none = [r for r in rows if r["clients"] == "0"]
     for kind in dict.fromkeys(r["clients"] for r in rows):
         group = [r for r in rows if r["clients"] == kind]
         late = per_1000(group)
         p99 = [r["p99_ms"] for r in group if r["events"]]
         shown = f"{min(p99):.1f}-{max(p99):.1f}" if p99 else "-"
-        out.append(f"| {kind} | {len(group)} | {late:.1f} | {shown} |")
+        paired = "-"
+        if kind != "0" and len(group) == len(none) > 1:
+            median, low, high, confidence = paired_median([b["late_per_1000"] - a["late_per_1000"]
+                                                           for a, b in zip(none, group)])
+            paired = f"{median:+.1f} [{low:+.1f}, {high:+.1f}] ({confidence:.0%})"
+        out.append(f"| {kind} | {len(group)} | {late:.1f} | {paired} | {shown} |")
     return "\n".join(out)
 
 
@@ -400,6 +412,11 @@ def paired_median(differences: list[float]) -> tuple[float, float, float, float]
     return statistics.median(d), d[j - 1], d[n - j], confidence
 
 
+def slack_shown(count: int) -> str:
+    """A slack counter's change over a job; '-' for a daemon without the counters."""
+    return "-" if count < 0 else f"{count:,}"
+
+
 def per_1000(rows: list[dict[str, Any]]) -> float:
     """Late cycles per 1000 cycles over ``rows`` (jobs)."""
     return 1000 * sum(r["late"] for r in rows) / max(1, sum(r["cycles"] for r in rows))
@@ -430,14 +447,16 @@ async def main_async(args: argparse.Namespace) -> tuple[str, str]:
     load = " / ".join(Path("/proc/loadavg").read_text().split()[:3])
     table = ["| clients | job outcome | cycles | late (> 10 % T) | late per 1000 cycles | missed (> T) | "
              "events timed | event -> client median ms | p99 ms | of which in the daemon: median ms | p99 ms | "
-             "gateway CPU % | daemon CPU % | daemon normal-priority wake-ups/s | load (1 min) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "gateway CPU % | daemon CPU % | daemon normal-priority wake-ups/s | cycle-thread slack steps | "
+             "of them past the wake-up | load (1 min) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         table.append(f"| {r['clients']} | {r['outcome']} | {r['cycles']:,} | {r['late']} | {r['late_per_1000']:.0f} | "
                      f"{r['missed']} | {r['events']} | {r['median_ms']:.1f} | {r['p99_ms']:.1f} | "
                      f"{r['daemon_median_ms']:.1f} | {r['daemon_p99_ms']:.1f} | "
                      f"{r['gateway_cpu_percent']:.1f} | {r['daemon_cpu_percent']:.0f} | "
-                     f"{r['normal_wakeups_per_s']:.0f} | {r['load']} |")
+                     f"{r['normal_wakeups_per_s']:.0f} | {slack_shown(r['slack_steps'])} | "
+                     f"{slack_shown(r['slack_overruns'])} | {r['load']} |")
     if idle is None:
         return "", (f"This checkout's daemon and gateway against the previous one's (`--previous-src`), restarted "
                 f"for each: {args.seconds:g} s jobs with 0 and {args.clients} WebSocket clients, before and after "
