@@ -34,7 +34,7 @@ for it longer than the spin before its deadline starts the cycle late. So
 - with no cycle thread (before bring-up, after a fault disabled the drives), or when the
   cycle thread had no slack for SLACK_WAIT_S, the publisher thread runs the steps itself,
   letting go of the lock between them and starting one only where it ends before the cycle
-  thread's next wake-up (``between_steps``; docs/web.md, "Out of the cycle thread's way"),
+  thread's next wake-up (``between_steps``; docs/web-log.md, "Out of the cycle thread's way"),
   at SCHED_FIFO 1 where allowed, below every thread of the cycle.
 The cycle thread pays one ``deque.append`` and ``Event.set`` per log line it writes (faults).
 """

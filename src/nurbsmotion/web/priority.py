@@ -3,7 +3,7 @@
 On a real machine the browsers run elsewhere, and the gateway's work (relaying the daemon's
 subscription to every WebSocket, answering the API) can always wait a few milliseconds; the
 daemon's normal-priority threads cannot, when they hold the interpreter lock its SCHED_FIFO
-cycle thread wakes needing (docs/web.md, "The gateway's priority"). So the gateway adds
+cycle thread wakes needing (docs/web-log.md, "The gateway's priority"). So the gateway adds
 ``web.nice`` (default 10) to its niceness at start-up, before it starts any thread (Linux
 keeps a niceness per thread; later threads inherit it). The kernel caps niceness at 19.
 """
