@@ -5,7 +5,10 @@ numpy allocates a fresh buffer for every temporary. glibc serves requests of 128
 (a (5500, 3) float64 array) with mmap and gives them back with munmap, and trims free space
 at the top of the heap back to the kernel, so the next temporary of that size starts with
 fresh page faults: about 500 per plan of Wang's Table 1 curve at T = 1 ms, a quarter of the
-planning time on this virtual machine (docs/benchmarks.md, "Look-ahead throughput"). Real-time Linux
+planning time on this virtual machine (docs/benchmarks.md, "Look-ahead throughput"), in a
+process whose heap glibc trimmed after the plan before: it trims only the heap's top, so the
+same plan pays 0 or ~700 faults by what the process allocated earlier (docs/reliability.md,
+flake 15); with keep_freed_memory, none in either case. Real-time Linux
 processes turn this off with mallopt (M_MMAP_THRESHOLD, M_TRIM_THRESHOLD) for the same
 reason in their cycle loops. The cost: the process keeps up to TRIM_THRESHOLD_BYTES of
 freed heap instead of returning it. A library user calls keep_freed_memory() if they want it.
