@@ -400,16 +400,13 @@ def paired_median(differences: list[float]) -> tuple[float, float, float, float]
     n = len(d)
     if n == 0:
         return math.nan, math.nan, math.nan, 0.0
-    below = 0.0
-    j = 1
-    while True:  # the largest j whose interval still holds >= 90 %
-        below_next = below + math.comb(n, j - 1) / 2 ** n
-        if j > n // 2 or 1 - 2 * below_next < 0.90:
-            break
-        below, j = below_next, j + 1
-    j = max(1, j - 1)
-    confidence = 1 - 2 * sum(math.comb(n, i) for i in range(j)) / 2 ** n
-    return statistics.median(d), d[j - 1], d[n - j], confidence
+    j = next((j for j in range(n // 2, 0, -1) if sign_test_confidence(n, j) >= 0.90), 1)
+    return statistics.median(d), d[j - 1], d[n - j], sign_test_confidence(n, j)
+
+
+def sign_test_confidence(n: int, j: int) -> float:
+    """Confidence that [d_(j), d_(n+1-j)] of n sorted values holds their median: 1 - 2 P(B(n, 1/2) < j)."""
+    return 1 - 2 * sum(math.comb(n, i) for i in range(j)) / 2 ** n
 
 
 def slack_shown(count: int) -> str:
