@@ -10,7 +10,9 @@ Figures (issue 22's benchmarks):
   during a job, so each client gets a stream of ``override_changed`` events);
 - late and missed cycles of a job with 0 clients, 10 WebSocket clients (the gateway holds one
   daemon subscription for all of them: web.fanout) and 10 direct ``subscribe`` connections on
-  the daemon's control socket, interleaved round by round, with the daemon's CPU;
+  the daemon's control socket, interleaved round by round, with the daemon's CPU; with
+  ``--clients-off-realtime-cpu`` also 10 WebSocket clients whose process keeps off the daemon's
+  real-time CPU (the gateway does by itself: web.cpus);
 - the gateway's CPU while idle (one client connected) and while a job streams to 10 clients;
 - the console's time to parse and draw the preview of a 100,000-line program in headless
   Chromium (``window.previewDrawnMs``), when Debian's chromium and playwright are installed.
@@ -176,12 +178,33 @@ def ready_cycles(c: Client) -> dict[str, Any]:
     return dict(c.call("status")["cycles"])
 
 
+def this_process_on(cpus: set[int]) -> None:
+    """Every thread of this process (the clients, their event loop, the job's thread) on
+    ``cpus``; threads started later inherit their starter's CPUs."""
+    for task in Path("/proc/self/task").iterdir():
+        try:
+            os.sched_setaffinity(int(task.name), cpus)
+        except OSError:  # the thread ended
+            continue
+
+
+def off_realtime_cpu() -> set[int]:
+    """The CPUs but the daemon's real-time one (runtime.realtime_cpu: the last), as an
+    operator keeps browsers and other programs off an isolated real-time CPU (isolcpus)."""
+    cpus = os.sched_getaffinity(0)
+    return cpus - {max(cpus)} if len(cpus) > 1 else cpus
+
+
 async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seconds: float,
-                    pids: dict[str, int]) -> dict[str, Any]:
-    """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected."""
+                    pids: dict[str, int], clients_cpus: set[int] | None = None) -> dict[str, Any]:
+    """One job with ``clients`` of ``kind`` ("WebSocket" or "direct") connected; with
+    ``clients_cpus``, this process's threads run on those CPUs for the job."""
     latencies: list[Latency] = []
     stop = asyncio.Event()
     await asyncio.sleep(SETTLE_S)  # the gateway closes its daemon subscription 5 s after the last client left
+    everywhere = os.sched_getaffinity(0)
+    if clients_cpus is not None:
+        this_process_on(clients_cpus)
     tasks = [asyncio.create_task(client(ws_url, latencies, stop)) for _ in range(clients if kind == "WebSocket" else 0)]
     direct = [DirectSubscriber(socket_path, latencies) for _ in range(clients if kind == "direct" else 0)]
     await asyncio.sleep(1.0)
@@ -213,9 +236,13 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
     await asyncio.gather(*tasks, return_exceptions=True)
     for subscriber in direct:
         await asyncio.to_thread(subscriber.close)
+    this_process_on(everywhere)
+    label = f"{clients} {kind}" if clients else "0"
+    if clients_cpus is not None:
+        label += f", clients on CPU {','.join(map(str, sorted(clients_cpus)))}"
     total = sorted(t for t, _ in latencies)
     daemon_part = sorted(d for _, d in latencies)
-    return {"clients": f"{clients} {kind}" if clients else "0", "outcome": outcome,
+    return {"clients": label, "outcome": outcome,
             "cycles": after["count"] - before["count"],
             "late": after["late"] - before["late"], "missed": after["missed"] - before["missed"],
             "events": len(latencies), "median_ms": median_ms(total), "p99_ms": p99_ms(total),
@@ -430,10 +457,14 @@ async def main_async(args: argparse.Namespace) -> tuple[str, str]:
             await running.start()
             idle = await idle_cpu(running.ws_url, running.pids["gateway"], args.idle_seconds)
             rows = []
+            kinds: list[tuple[int, str, set[int] | None]] = [(0, "WebSocket", None), (args.clients, "WebSocket", None),
+                                                              (args.clients, "direct", None)]
+            if args.clients_off_realtime_cpu:
+                kinds.append((args.clients, "WebSocket", off_realtime_cpu()))
             for _ in range(args.rounds):
-                for n, kind in ((0, "WebSocket"), (args.clients, "WebSocket"), (args.clients, "direct")):
+                for n, kind, cpus in kinds:
                     rows.append(await job_round(running.ws_url, str(running.socket_path), n, kind, args.seconds,
-                                                running.pids))
+                                                running.pids, cpus))
                     print(rows[-1], flush=True)
             rows.append(await job_round(running.ws_url, str(running.socket_path), 1, "WebSocket",
                                         min(args.seconds, 20.0), running.pids))
@@ -486,9 +517,13 @@ def main() -> int:
     parser.add_argument("--previous-src", type=Path,
                         help="src/ of a previous checkout (with its eds/ beside it): its daemon against this one's, "
                              "round by round (printed only)")
+    parser.add_argument("--clients-off-realtime-cpu", action="store_true",
+                        help="also, each round, the WebSocket clients with this process kept off the daemon's "
+                             "real-time CPU (as browsers elsewhere, or isolcpus, keep them)")
     args = parser.parse_args()
     summary, body = asyncio.run(main_async(args))
-    command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}"
+    command = f"python benchmarks/bench_web.py --seconds {args.seconds:g} --rounds {args.rounds}" + (
+        " --clients-off-realtime-cpu" if args.clients_off_realtime_cpu else "")
     if args.no_write or args.previous_src is not None:
         print(body)
     else:

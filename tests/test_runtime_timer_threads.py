@@ -88,3 +88,33 @@ def test_nothing_is_pinned_on_one_cpu_or_without_real_time(monkeypatch):
     monkeypatch.setattr(runtime.os, "sched_setscheduler", refused)
     assert runtime.set_thread_realtime(20).startswith("normal:")
     assert calls == []
+
+
+def test_reserving_the_realtime_cpu_moves_normal_threads_off_it_and_keeps_it_for_fifo_ones(monkeypatch, tmp_path):
+    """runtime.reserve_realtime_cpu: normal threads (and so those they start) on the others,
+    SCHED_FIFO ones left; afterwards a thread already off it still pins onto it, and the
+    planner worker still goes to the others."""
+    for tid in (11, 12, 13):
+        (tmp_path / str(tid)).mkdir()
+    affinity: dict[int, set[int]] = {0: {0, 1, 2, 3}}
+    monkeypatch.setattr(runtime, "_reserved", None)  # restored after the test
+    monkeypatch.setattr(runtime.os, "sched_getaffinity", lambda pid: affinity.get(pid, {0, 1, 2, 3}))
+    monkeypatch.setattr(runtime.os, "sched_setaffinity", lambda pid, cpus: affinity.__setitem__(pid, set(cpus)))
+    monkeypatch.setattr(runtime.os, "sched_getscheduler", lambda tid: runtime.os.SCHED_FIFO if tid == 12 else 0)
+    monkeypatch.setattr(runtime.os, "sched_setscheduler", lambda pid, policy, param: None)
+    split = runtime.reserve_realtime_cpu(tmp_path)
+    assert split == runtime.CpuSplit(3, frozenset({0, 1, 2}))
+    assert affinity[11] == affinity[13] == {0, 1, 2} and 12 not in affinity
+    affinity[0] = {0, 1, 2}  # the calling thread, now off the real-time CPU like its new threads
+    assert runtime.realtime_cpu() == 3
+    assert runtime.set_thread_realtime(20) == "SCHED_FIFO" and affinity[0] == {3}
+    assert runtime.keep_off_realtime_cpu(4242) == {0, 1, 2} and affinity[4242] == {0, 1, 2}
+
+
+def test_with_one_cpu_nothing_is_reserved(monkeypatch, tmp_path):
+    (tmp_path / "11").mkdir()
+    calls = []
+    monkeypatch.setattr(runtime, "_reserved", None)
+    monkeypatch.setattr(runtime.os, "sched_getaffinity", lambda pid: {0})
+    monkeypatch.setattr(runtime.os, "sched_setaffinity", lambda pid, cpus: calls.append(pid))
+    assert runtime.reserve_realtime_cpu(tmp_path) is None and runtime._reserved is None and calls == []

@@ -149,9 +149,12 @@ def thread_cpus() -> set[int]:
 
 
 def realtime_cpu(allowed: set[int] | None = None) -> int | None:
-    """The CPU for the SCHED_FIFO threads: the last of ``allowed`` (the calling thread's CPUs),
-    None when there are fewer than two."""
+    """The CPU for the SCHED_FIFO threads: the last of ``allowed`` (default: the one
+    reserve_realtime_cpu reserved, else the calling thread's CPUs), None when there are fewer
+    than two."""
     if allowed is None:
+        if _reserved is not None:
+            return _reserved.realtime
         if not hasattr(os, "sched_getaffinity"):
             return None
         allowed = os.sched_getaffinity(0)
@@ -173,18 +176,58 @@ def pin_to_realtime_cpu(thread_id: int = 0) -> int | None:
 
 def keep_off_realtime_cpu(pid: int) -> set[int] | None:
     """Run process ``pid`` on every CPU but realtime_cpu(); its CPUs, or None (unchanged)."""
-    if not hasattr(os, "sched_getaffinity"):
-        return None
-    allowed = os.sched_getaffinity(0)
-    cpu = realtime_cpu(allowed)
-    if cpu is None:
-        return None
-    others = allowed - {cpu}
+    if _reserved is not None:
+        others = set(_reserved.normal)
+    else:
+        if not hasattr(os, "sched_getaffinity"):
+            return None
+        allowed = os.sched_getaffinity(0)
+        cpu = realtime_cpu(allowed)
+        if cpu is None:
+            return None
+        others = allowed - {cpu}
     try:
         os.sched_setaffinity(pid, others)
     except OSError:
         return None
     return others
+
+
+@dataclass(frozen=True)
+class CpuSplit:
+    """The daemon's CPUs: ``realtime`` for its SCHED_FIFO threads, ``normal`` for the rest."""
+
+    realtime: int
+    normal: frozenset[int]
+
+
+_reserved: CpuSplit | None = None  # set once by the daemon's process (reserve_realtime_cpu)
+
+
+def reserve_realtime_cpu(task_dir: Path = Path("/proc/self/task")) -> CpuSplit | None:
+    """Keep every thread of this process that is not SCHED_FIFO/RR off realtime_cpu(), and so
+    every thread they start later (a new thread inherits its creator's affinity:
+    pthread_create); SCHED_FIFO threads still go onto it (pin_to_realtime_cpu). Call it in the
+    main thread before the others start. The split, or None (one CPU: nothing changes).
+
+    A normal thread preempted on the real-time CPU while it holds the interpreter lock keeps
+    the woken cycle thread waiting for the lock until the thread runs again (docs/web.md)."""
+    global _reserved
+    allowed = thread_cpus()
+    cpu = realtime_cpu(allowed)
+    if cpu is None:
+        return None
+    split = CpuSplit(cpu, frozenset(allowed - {cpu}))
+    for entry in task_dir.iterdir() if task_dir.is_dir() else ():
+        tid = int(entry.name)
+        try:
+            if os.sched_getscheduler(tid) in (os.SCHED_FIFO, os.SCHED_RR):
+                continue
+            os.sched_setaffinity(tid, split.normal)
+        except OSError:  # the thread ended
+            continue
+    _reserved = split
+    return split
 
 
 class GcQuiet:

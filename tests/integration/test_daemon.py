@@ -67,6 +67,45 @@ def test_a_job_completes_and_the_drives_applied_exactly_the_plan(daemon):
     _back_home(daemon)
 
 
+def daemon_threads(pid: int) -> list[tuple[int, int, set[int]]]:
+    """(policy, SCHED_FIFO priority, CPUs) of every thread of process ``pid`` still running."""
+    threads = []
+    for entry in Path(f"/proc/{pid}/task").iterdir():
+        tid = int(entry.name)
+        try:
+            threads.append((os.sched_getscheduler(tid), os.sched_getparam(tid).sched_priority,
+                            os.sched_getaffinity(tid)))
+        except OSError:  # it ended meanwhile
+            continue
+    return threads
+
+
+def test_the_daemons_normal_threads_stay_off_the_realtime_cpu_during_a_job(daemon):
+    """runtime.reserve_realtime_cpu: only the SCHED_FIFO threads above the publisher's
+    priority run on the last CPU; every other thread (control clients, job watcher, planner
+    side, publisher) on the others, including those started for the job."""
+    cpus = os.sched_getaffinity(0)
+    if len(cpus) < 2 or not hasattr(os, "sched_getscheduler"):
+        pytest.skip("needs two CPUs and Linux scheduling calls")
+    realtime, normal = max(cpus), cpus - {max(cpus)}
+    assert f"cpus realtime={realtime} normal={','.join(map(str, sorted(normal)))}" in daemon.log()
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as subscriber:  # the publisher's thread too
+        subscriber.connect(str(daemon.socket))
+        subscriber.sendall(b'{"cmd": "subscribe"}\n')
+        job = daemon.request("submit", name="long.nc", program=LONG)["job"]
+        daemon.wait_progress(0.2)
+        assert daemon.proc is not None
+        threads = daemon_threads(daemon.proc.pid)
+    daemon.wait_job_end(job["id"])
+    fifo_above_publisher = [t for t in threads if t[0] == os.SCHED_FIFO and t[1] > 1]
+    others = [t for t in threads if t not in fifo_above_publisher]
+    assert others and all(t[2] == normal for t in others), others
+    assert all(t[2] == {realtime} for t in fifo_above_publisher), fifo_above_publisher
+    if os.geteuid() == 0:  # SCHED_FIFO allowed: the cycle, receive and simulated drives' threads
+        assert len(fifo_above_publisher) >= 3
+    _back_home(daemon)
+
+
 def test_a_bad_program_is_rejected_with_its_lines_and_nothing_moves(daemon):
     before = daemon.request("status")
     jobs_before = sorted(JobRecords(daemon.data_dir).root.glob("*"))

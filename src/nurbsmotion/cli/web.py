@@ -2,13 +2,14 @@
 ``nurbsmotion web keys add NAME --role operator|observer | list | remove NAME`` for its keys.
 
 The gateway reads the machine's YAML for ``web:`` (listen address, auth, upload limit, CORS,
-niceness), ``control.socket`` and ``data_dir`` (where the keys are); the options override it.
+niceness, CPUs), ``control.socket`` and ``data_dir`` (where the keys are); the options override it.
 It is a separate process: it talks to the daemon only through the control socket (docs/web.md).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -16,6 +17,7 @@ from typing import TYPE_CHECKING
 from nurbsmotion.cli._control import config_path
 from nurbsmotion.config import ControlConfig, MachineConfig, WebConfig, load_config, parse_listen
 from nurbsmotion.errors import InputError
+from nurbsmotion.runtime import thread_cpus
 
 if TYPE_CHECKING:
     from nurbsmotion.web.app import WebSettings
@@ -59,12 +61,15 @@ def settings_of(args: argparse.Namespace) -> "WebSettings":
         except ValueError as err:
             raise InputError("--listen", str(err)) from None
         web = replace(web, host=host, port=port)
+    from nurbsmotion.web.priority import cpus_for
+
+    cpus_for(web.cpus, thread_cpus(), os.cpu_count() or 1)  # a CPU this machine lacks: one error, before anything starts
     socket = args.socket or (machine.control.socket if machine is not None else ControlConfig().socket)
     data_dir = args.data_dir or (machine.data_dir if machine is not None else "var/nurbsmotion")
     return WebSettings(socket=socket, data_dir=data_dir, host=web.host, port=web.port,
                        require_auth=web.require_auth or args.require_auth,
                        max_upload_bytes=int(web.max_upload_mb * 1024 * 1024), cors_origins=web.cors_origins,
-                       nice=web.nice)
+                       nice=web.nice, cpus=web.cpus)
 
 
 def _keys(args: argparse.Namespace) -> int:

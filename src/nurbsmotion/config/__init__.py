@@ -13,6 +13,7 @@ section uses), ``homing`` (``axes[i].homing``, ``axes[i].sim``), ``io`` (the I/O
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from enum import Enum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -162,6 +163,13 @@ class MachineSettings:
     safe_z_mm: float | None = None
 
 
+class GatewayCpus(Enum):
+    """``web.cpus`` as a word (web.priority); else a list of CPU numbers."""
+
+    AUTO = "auto"  # every CPU the gateway may use but the daemon's real-time one (runtime.realtime_cpu)
+    ALL = "all"  # where it was started
+
+
 @dataclass(frozen=True)
 class WebConfig:
     """``nurbsmotion web``: where the gateway listens and who may use it (docs/web.md)."""
@@ -172,6 +180,7 @@ class WebConfig:
     max_upload_mb: float = 64.0
     cors_origins: tuple[str, ...] = ()
     nice: int = 10  # added to the gateway's niceness at start-up: it never competes with the daemon
+    cpus: GatewayCpus | tuple[int, ...] = GatewayCpus.AUTO  # where its threads run (web.priority)
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -200,10 +209,24 @@ def _origins(doc: Doc) -> Any:
     return MISSING if MISSING in origins else origins
 
 
+def _cpus(doc: Doc) -> Any:
+    """``auto``, ``all`` or a non-empty list of CPU numbers (checked against the machine when
+    the gateway starts: web.priority)."""
+    if not isinstance(doc.node, yaml.SequenceNode):
+        word = string(doc, choices=tuple(c.value for c in GatewayCpus))
+        return MISSING if word is MISSING else GatewayCpus(word)
+    numbers = sequence_of(lambda item: number(item, integer=True, minimum=0, exclusive_min=False))(doc)
+    if numbers == ():
+        doc.fail("must list at least one CPU (or be auto or all)")
+        return MISSING
+    return numbers if numbers is MISSING else tuple(sorted(set(numbers)))
+
+
 def _web(doc: Doc) -> Any:
     found = fields(doc, {"listen": (_listen, {}), "require_auth": (boolean, {}),
                           "max_upload_mb": (number, {"minimum": 0}), "cors_origins": (_origins, {}),
-                          "nice": (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 19})})
+                          "nice": (number, {"integer": True, "minimum": 0, "exclusive_min": False, "maximum": 19}),
+                          "cpus": (_cpus, {})})
     host, port = found.pop("listen", (WebConfig.host, WebConfig.port))
     return WebConfig(host=host, port=port, **found)
 

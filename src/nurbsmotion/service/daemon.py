@@ -26,7 +26,7 @@ from nurbsmotion.fieldbus.cycle_slack import run_steps
 from nurbsmotion.steps import Steps
 from nurbsmotion.log import kv
 from nurbsmotion.program import ReadOptions
-from nurbsmotion.runtime import STATUS_PUBLISHER_PRIORITY, cap_switch_interval
+from nurbsmotion.runtime import STATUS_PUBLISHER_PRIORITY, cap_switch_interval, reserve_realtime_cpu
 from nurbsmotion.service.checked_store import CheckedStore
 from nurbsmotion.service.controller import Controller
 from nurbsmotion.service.devices import open_devices
@@ -258,7 +258,9 @@ class Daemon:
 
 
 def run_daemon(config: MachineConfig) -> int:
-    """Serve until SIGTERM or SIGINT, then stop in order (module docstring); exit code 0."""
+    """Serve until SIGTERM or SIGINT, then stop in order (module docstring); exit code 0. The
+    process's threads that are not SCHED_FIFO stay off the real-time CPU
+    (runtime.reserve_realtime_cpu)."""
     stop = threading.Event()
 
     def on_signal(signum: int, frame: object) -> None:
@@ -266,6 +268,9 @@ def run_daemon(config: MachineConfig) -> int:
         stop.set()
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
+    split = reserve_realtime_cpu()  # before any thread of ours starts: they inherit it
+    log.info(kv("cpus", realtime="none" if split is None else split.realtime,
+                normal="all" if split is None else ",".join(map(str, sorted(split.normal)))))
     daemon = Daemon(config)
     try:
         daemon.start()

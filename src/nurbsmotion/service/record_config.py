@@ -5,6 +5,7 @@ commands, which read records, do not import the configuration loader."""
 from __future__ import annotations
 
 import dataclasses
+from enum import Enum
 from typing import Any
 
 from nurbsmotion.config import MachineConfig
@@ -19,10 +20,15 @@ def config_dict(config: MachineConfig, offset_counts: Any = None) -> dict[str, A
                        for a, o in zip(config.axes, offsets))
     spindle = dataclasses.replace(config.spindle, od=None) if isinstance(config.spindle, SpindleConfig) \
         else config.spindle
-    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle))
+    out = dataclasses.asdict(dataclasses.replace(config, axes=plain_axes, spindle=spindle), dict_factory=plain_dict)
     out.pop("lines", None)
     if isinstance(out["spindle"], dict):
         out["spindle"].pop("od", None)
     for axis in out["axes"]:
         axis.pop("od", None)
     return out
+
+
+def plain_dict(items: list[tuple[str, Any]]) -> dict[str, Any]:
+    """asdict's mapping with enum members as their YAML words (``web.cpus: auto``)."""
+    return {key: value.value if isinstance(value, Enum) else value for key, value in items}

@@ -23,12 +23,13 @@ from typing import Any, Awaitable, Callable
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
+from nurbsmotion.config import GatewayCpus
 from nurbsmotion.log import kv
 from nurbsmotion.web.auth import FailedAttempts, KeyStore, OneShotTokens, Role
 from nurbsmotion.web.daemon_link import DaemonLink, DaemonUnreachable
 from nurbsmotion.web.fanout import FanoutClient, StatusFanout
 from nurbsmotion.web.openapi import openapi_document
-from nurbsmotion.web.priority import lower_own_priority
+from nurbsmotion.web.priority import lower_own_priority, place_own_threads
 from nurbsmotion.web.routes import API, ROUTES, error, job_file_handler, route_handler
 
 log = logging.getLogger(__name__)
@@ -62,6 +63,7 @@ class WebSettings:
     max_upload_bytes: int = 64 * 1024 * 1024
     cors_origins: tuple[str, ...] = field(default_factory=tuple)
     nice: int = 10  # added to the gateway's niceness at start-up (web.priority)
+    cpus: GatewayCpus | tuple[int, ...] = GatewayCpus.AUTO  # where its threads run (web.priority)
 
     @property
     def auth_required(self) -> bool:
@@ -316,10 +318,11 @@ async def relay_to(ws: web.WebSocketResponse, client: FanoutClient) -> None:
 
 
 def run_gateway(settings: WebSettings) -> None:
-    """Serve until SIGINT/SIGTERM (aiohttp's run_app handles both), at ``settings.nice``
-    lower priority than the gateway was started with (web.priority)."""
+    """Serve until SIGINT/SIGTERM (aiohttp's run_app handles both), on ``settings.cpus`` at
+    ``settings.nice`` lower priority than the gateway was started with (web.priority)."""
+    cpus = place_own_threads(settings.cpus)
     niceness = lower_own_priority(settings.nice)
     log.info(kv("web_listening", host=settings.host, port=settings.port, auth=settings.auth_required,
-                socket=settings.socket, niceness=niceness))
+                socket=settings.socket, niceness=niceness, cpus=",".join(map(str, sorted(cpus))) or "any"))
     web.run_app(make_app(settings), host=settings.host, port=settings.port, print=None, handle_signals=True,
                 access_log=None)
