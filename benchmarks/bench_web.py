@@ -253,7 +253,29 @@ async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seco
             # the cycle thread's background steps (fieldbus.cycle_slack; absent before it: -1)
             "slack_steps": after.get("slack_steps", -1) - before.get("slack_steps", 0),
             "slack_overruns": after.get("slack_overruns", -1) - before.get("slack_overruns", 0),
+            "overrun_places": places_between(before.get("slack_overrun_places", {}),
+                                             after.get("slack_overrun_places", {})),
             "load": Path("/proc/loadavg").read_text().split()[0]}
+
+
+def places_between(before: dict[str, int], after: dict[str, int]) -> dict[str, int]:
+    """The slack steps that overran a wake-up during a job, by where they ended
+    (fieldbus.cycle_slack.step_place)."""
+    return {place: n - before.get(place, 0) for place, n in after.items() if n > before.get(place, 0)}
+
+
+def overrun_places_summary(rows: list[dict[str, Any]]) -> str:
+    """Each kind of client's slack steps past a wake-up, summed over its jobs, by place."""
+    lines = []
+    for kind in dict.fromkeys(r["clients"] for r in rows):
+        total: dict[str, int] = {}
+        for r in rows:
+            if r["clients"] == kind:
+                for place, n in r.get("overrun_places", {}).items():
+                    total[place] = total.get(place, 0) + n
+        shown = ", ".join(f"{place} x{n}" for place, n in sorted(total.items(), key=lambda item: -item[1])) or "none"
+        lines.append(f"- {kind}: {shown}")
+    return "Slack steps past the wake-up, by where the step ended:\n\n" + "\n".join(lines)
 
 
 def median_ms(sorted_s: list[float]) -> float:
@@ -503,7 +525,7 @@ async def main_async(args: argparse.Namespace) -> tuple[str, str]:
             f"socket, interleaved round by round, then one with 1 WebSocket client; the override set every 0.25 s "
             f"gives the clients events to time. "
             f"Load average at the end: {load} (2 cores shared with other work: compare rows of one run).\n\n"
-            + "\n".join(table) + "\n\n" + figures)
+            + "\n".join(table) + "\n\n" + overrun_places_summary(rows) + "\n\n" + figures)
 
 
 def main() -> int:

@@ -1,5 +1,6 @@
 """benchmarks/bench_web.py's A/B verdict: the median of the rounds' paired differences and
-its distribution-free interval (sign test), so one noisy round moves it by a rank."""
+its distribution-free interval (sign test), so one noisy round moves it by a rank; and where
+the slack steps that overran a wake-up ended, job by job."""
 
 from __future__ import annotations
 
@@ -32,3 +33,14 @@ def test_few_rounds_give_the_whole_range_with_the_confidence_it_has():
     assert paired_median([1.0, 3.0, 2.0]) == (2.0, 1.0, 3.0, 0.75)
     median, low, high, confidence = paired_median([])
     assert math.isnan(median) and confidence == 0.0
+
+
+def test_the_overrun_places_of_a_job_are_the_counters_growth_summed_by_kind():
+    from benchmarks.bench_web import overrun_places_summary, places_between
+
+    assert places_between({"a:1": 2}, {"a:1": 3, "b:end": 1}) == {"a:1": 1, "b:end": 1}
+    assert places_between({"a:1": 2}, {"a:1": 2}) == {}
+    rows = [{"clients": "0", "overrun_places": {}},
+            {"clients": "10 WebSocket", "overrun_places": {"a:1": 1, "b:end": 2}},
+            {"clients": "10 WebSocket", "overrun_places": {"a:1": 2}}]
+    assert overrun_places_summary(rows).splitlines()[2:] == ["- 0: none", "- 10 WebSocket: a:1 x3, b:end x2"]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import threading
 from typing import Iterator
 
-from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps, step_place
 from nurbsmotion.steps import Steps
 from tests.helpers import wait_for
 
@@ -56,6 +56,26 @@ def test_a_step_that_ends_after_the_wake_up_is_counted_as_an_overrun():
     assert ran == [0] and slack.overruns == 1
     slack.run(next_wake_s=clock.now + 10.0)
     assert ran == [0, 1, 2] and slack.overruns == 1 and slack.steps_run == 4
+    assert slack.overrun_places == {f"counted_steps:{YIELD_LINE}": 1}  # the step that ended at the first yield
+
+
+YIELD_LINE = counted_steps.__code__.co_firstlineno + 4  # counted_steps' yield
+
+
+def outer_steps(clock: StepClock, ran: list[int]) -> Iterator[None]:
+    yield from counted_steps(clock, 1, ran)
+
+
+def test_an_overrun_is_placed_at_the_innermost_generators_yield_or_end():
+    clock = StepClock(step_s=400e-6)
+    slack = CycleSlack(room_s=300e-6, clock=clock)
+    slack.start()
+    slack.submit(outer_steps(clock, []))
+    slack.run(next_wake_s=clock.now + 350e-6)  # through yield from: counted_steps' yield
+    assert slack.overruns == 1 and slack.overrun_places == {f"counted_steps:{YIELD_LINE}": 1}
+    ended = outer_steps(clock, [])
+    list(ended)
+    assert step_place(ended) == "outer_steps:end"
 
 
 def test_work_waits_for_the_one_before_it_and_a_raising_step_ends_only_its_own():

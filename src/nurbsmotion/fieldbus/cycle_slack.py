@@ -60,6 +60,7 @@ class CycleSlack:
         self._open = False
         self.steps_run = 0
         self.overruns = 0  # steps that ended after the next wake-up: each may have made a cycle late
+        self.overrun_places: collections.Counter[str] = collections.Counter()  # step_place of each overrun
         self.withdrawn = 0  # work the submitter took back after waiting (run_steps)
 
     @property
@@ -118,9 +119,23 @@ class CycleSlack:
                     work.error = err
                 finally:
                     self.steps_run += 1
-                    self.overruns += self._clock() > next_wake_s
+                    if self._clock() > next_wake_s:
+                        self.overruns += 1
+                        self.overrun_places[step_place(work.steps)] += 1
                 queue.popleft()
                 work.done.set()
+
+
+def step_place(steps: Iterator[object]) -> str:
+    """Where the last step of ``steps`` ended: ``function:line`` of the innermost generator
+    (through ``yield from``) at its yield, ``function:end`` once it returned; for telling
+    which step overran a wake-up."""
+    inner, name = steps, getattr(getattr(steps, "gi_code", None), "co_qualname", type(steps).__name__)
+    while getattr(inner, "gi_yieldfrom", None) is not None:
+        inner = inner.gi_yieldfrom  # type: ignore[attr-defined]
+        name = getattr(getattr(inner, "gi_code", None), "co_qualname", type(inner).__name__)
+    frame = getattr(inner, "gi_frame", None)
+    return f"{name}:{frame.f_lineno if frame is not None else 'end'}"
 
 
 def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callable[[object], None] = lambda _: None,

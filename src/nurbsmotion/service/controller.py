@@ -474,12 +474,13 @@ def cycles_status(status: MasterStatus) -> dict[str, Any]:
             "lateness_p99_ms": round(t.lateness_p99_s * 1e3, 3), "lateness_max_ms": round(t.lateness_max_s * 1e3, 3)}
 
 
-def slack_status(slack: CycleSlack | None) -> dict[str, int]:
+def slack_status(slack: CycleSlack | None) -> dict[str, Any]:
     """The status' ``cycles`` of the cycle thread's slack (fieldbus.cycle_slack): other threads'
     steps it ran, those that ended after its next wake-up, work taken back for want of slack."""
     if slack is None:
-        return {"slack_steps": 0, "slack_overruns": 0, "slack_withdrawn": 0}
-    return {"slack_steps": slack.steps_run, "slack_overruns": slack.overruns, "slack_withdrawn": slack.withdrawn}
+        return {"slack_steps": 0, "slack_overruns": 0, "slack_withdrawn": 0, "slack_overrun_places": {}}
+    return {"slack_steps": slack.steps_run, "slack_overruns": slack.overruns, "slack_withdrawn": slack.withdrawn,
+            "slack_overrun_places": dict(slack.overrun_places)}
 
 
 def _limits(pair: tuple[float, float] | None) -> list[float] | None:
