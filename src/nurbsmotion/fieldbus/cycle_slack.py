@@ -31,7 +31,11 @@ from nurbsmotion.steps import Steps, drained
 
 log = logging.getLogger(__name__)
 
-ROOM_S = 300e-6  # a step starts only this long before the next wake-up: longer than a step (10-150 us)
+# a step starts only this long before the next wake-up: a step (10-150 us) and the work of the
+# lower-priority real-time threads (receive, simulated drives) it pushes back, which runs only
+# once the cycle thread sleeps. At 300 us, 1-9 steps a 20 s job still ended past the wake-up and
+# 10 subscribers cost 2.8 late cycles per 1000; at 600 us 0-1 and 1.5 (docs/web.md).
+ROOM_S = 600e-6
 # work the cycle thread has not finished in this long (it has no slack: overloaded) is taken
 # back and finished by the thread that submitted it
 WAIT_S = 0.25

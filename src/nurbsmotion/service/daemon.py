@@ -269,11 +269,11 @@ def run_daemon(config: MachineConfig) -> int:
 
     previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGTERM, signal.SIGINT)}
     split = reserve_realtime_cpu()  # before any thread of ours starts: they inherit it
-    log.info(kv("cpus", realtime="none" if split is None else split.realtime,
-                normal="all" if split is None else ",".join(map(str, sorted(split.normal)))))
     daemon = Daemon(config)
     try:
         daemon.start()
+        log.info(kv("cpus", realtime="none" if split is None else split.realtime,
+                    normal="all" if split is None else ",".join(map(str, sorted(split.normal)))))
         while not stop.wait(0.5):
             pass
     finally:
