@@ -44,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks._report import write_section  # noqa: E402
 
+from nurbsmotion.runtime import cpu_split, thread_cpus  # noqa: E402
 from nurbsmotion.service.client import Client  # noqa: E402
 
 MACHINE = """\
@@ -189,10 +190,10 @@ def this_process_on(cpus: set[int]) -> None:
 
 
 def off_realtime_cpu() -> set[int]:
-    """The CPUs but the daemon's real-time one (runtime.realtime_cpu: the last), as an
-    operator keeps browsers and other programs off an isolated real-time CPU (isolcpus)."""
-    cpus = os.sched_getaffinity(0)
-    return cpus - {max(cpus)} if len(cpus) > 1 else cpus
+    """The CPUs but the daemon's real-time one (runtime.cpu_split), as an operator keeps
+    browsers and other programs off an isolated real-time CPU (isolcpus)."""
+    split = cpu_split(thread_cpus())
+    return set(split.normal) if split is not None else thread_cpus()
 
 
 async def job_round(ws_url: str, socket_path: str, clients: int, kind: str, seconds: float,

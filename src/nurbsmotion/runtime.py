@@ -176,21 +176,14 @@ def pin_to_realtime_cpu(thread_id: int = 0) -> int | None:
 
 def keep_off_realtime_cpu(pid: int) -> set[int] | None:
     """Run process ``pid`` on every CPU but realtime_cpu(); its CPUs, or None (unchanged)."""
-    if _reserved is not None:
-        others = set(_reserved.normal)
-    else:
-        if not hasattr(os, "sched_getaffinity"):
-            return None
-        allowed = os.sched_getaffinity(0)
-        cpu = realtime_cpu(allowed)
-        if cpu is None:
-            return None
-        others = allowed - {cpu}
+    split = _reserved or cpu_split(thread_cpus())
+    if split is None:
+        return None
     try:
-        os.sched_setaffinity(pid, others)
+        os.sched_setaffinity(pid, split.normal)
     except OSError:
         return None
-    return others
+    return set(split.normal)
 
 
 @dataclass(frozen=True)
@@ -199,6 +192,12 @@ class CpuSplit:
 
     realtime: int
     normal: frozenset[int]
+
+
+def cpu_split(allowed: set[int]) -> CpuSplit | None:
+    """``allowed`` split into realtime_cpu(allowed) and the others; None with fewer than two."""
+    cpu = realtime_cpu(allowed)
+    return None if cpu is None else CpuSplit(cpu, frozenset(allowed - {cpu}))
 
 
 _reserved: CpuSplit | None = None  # set once by the daemon's process (reserve_realtime_cpu)
@@ -213,11 +212,9 @@ def reserve_realtime_cpu(task_dir: Path = Path("/proc/self/task")) -> CpuSplit |
     A normal thread preempted on the real-time CPU while it holds the interpreter lock keeps
     the woken cycle thread waiting for the lock until the thread runs again (docs/web.md)."""
     global _reserved
-    allowed = thread_cpus()
-    cpu = realtime_cpu(allowed)
-    if cpu is None:
+    split = cpu_split(thread_cpus())
+    if split is None:
         return None
-    split = CpuSplit(cpu, frozenset(allowed - {cpu}))
     for entry in task_dir.iterdir() if task_dir.is_dir() else ():
         tid = int(entry.name)
         try:

@@ -134,11 +134,11 @@ def step_place(steps: Iterator[object]) -> str:
     """Where the last step of ``steps`` ended: ``function:line`` of the innermost generator
     (through ``yield from``) at its yield, ``function:end`` once it returned; for telling
     which step overran a wake-up."""
-    inner, name = steps, getattr(getattr(steps, "gi_code", None), "co_qualname", type(steps).__name__)
+    inner = steps
     while getattr(inner, "gi_yieldfrom", None) is not None:
         inner = inner.gi_yieldfrom  # type: ignore[attr-defined]
-        name = getattr(getattr(inner, "gi_code", None), "co_qualname", type(inner).__name__)
-    frame = getattr(inner, "gi_frame", None)
+    code, frame = getattr(inner, "gi_code", None), getattr(inner, "gi_frame", None)
+    name = code.co_qualname if code is not None else type(inner).__name__
     return f"{name}:{frame.f_lineno if frame is not None else 'end'}"
 
 

@@ -19,7 +19,7 @@ import os
 
 from nurbsmotion.config import GatewayCpus
 from nurbsmotion.errors import InputError
-from nurbsmotion.runtime import realtime_cpu
+from nurbsmotion.runtime import cpu_split
 
 NICE_RANGE = (0, 19)  # web.nice: 0 leaves the gateway as started; 19 is the kernel's lowest priority
 
@@ -40,8 +40,8 @@ def cpus_for(choice: GatewayCpus | tuple[int, ...], allowed: set[int], machine_c
     if choice is GatewayCpus.ALL:
         return set(allowed)
     if choice is GatewayCpus.AUTO:
-        cpu = realtime_cpu(allowed)
-        return set(allowed) - {cpu} if cpu is not None else set(allowed)
+        split = cpu_split(allowed)
+        return set(split.normal) if split is not None else set(allowed)
     assert isinstance(choice, tuple)
     missing = [n for n in choice if n >= machine_cpus]
     if missing:
