@@ -78,7 +78,25 @@ def test_an_overrun_is_placed_at_the_innermost_generators_yield_or_end():
     assert step_place(ended) == "outer_steps:end"
 
 
-def test_work_waits_for_the_one_before_it_and_a_raising_step_ends_only_its_own():
+def test_queued_works_take_turns_step_by_step():
+    clock = StepClock(step_s=0.0)
+    slack = CycleSlack(clock=clock)
+    slack.start()
+    ran: list[tuple[str, int]] = []
+
+    def named(name: str, n: int) -> Iterator[None]:
+        for i in range(n):
+            ran.append((name, i))
+            yield
+
+    long, short = slack.submit(named("long", 4)), slack.submit(named("short", 2))
+    assert long is not None and short is not None
+    slack.run(next_wake_s=1.0)
+    assert ran == [("long", 0), ("short", 0), ("long", 1), ("short", 1), ("long", 2), ("long", 3)]
+    assert long.done.is_set() and short.done.is_set() and (long.steps_run, short.steps_run) == (4, 2)
+
+
+def test_a_raising_step_ends_only_its_own_work():
     clock = StepClock(step_s=0.0)
     slack = CycleSlack(clock=clock)
     slack.start()
@@ -172,3 +190,38 @@ def test_run_steps_returns_the_result_from_the_cycle_thread_or_from_here():
     between: list[object] = []
     assert run_steps(answer(), slack, between.append, wait_s=0.0) == ("MainThread", "MainThread")  # no room
     assert between == [None] and slack.withdrawn == 1
+
+
+def test_run_steps_waits_while_the_cycle_thread_makes_progress_and_takes_back_work_that_makes_none():
+    clock = StepClock(step_s=0.0)
+    slack = CycleSlack(room_s=0.0, clock=lambda: clock.now)
+    slack.start()
+    stop, paused = threading.Event(), threading.Event()
+
+    def one_step_a_millisecond() -> None:  # the slack of a busy cycle
+        while not stop.wait(1e-3):
+            if not paused.is_set():
+                clock.now += 1.0
+                slack.run(next_wake_s=clock.now)  # room for one step: then the wake-up is reached
+                clock.now += 1.0
+
+    def names(n: int) -> Steps[set[str]]:
+        seen = set()
+        for _ in range(n):
+            seen.add(threading.current_thread().name)
+            clock.now += 0.5
+            yield None
+        return seen
+
+    thread = threading.Thread(target=one_step_a_millisecond, name="nurbsmotion-cycle")
+    thread.start()
+    try:
+        # 400 steps at about one a millisecond outlast the 0.2 s wait: progress keeps the work there
+        assert run_steps(names(400), slack, wait_s=0.2) == {"nurbsmotion-cycle"}
+        assert slack.withdrawn == 0
+        paused.set()  # an overloaded cycle: no step for the wait, so the work comes back here
+        assert run_steps(names(3), slack, wait_s=0.2) == {"MainThread"}
+        assert slack.withdrawn == 1
+    finally:
+        stop.set()
+        thread.join()

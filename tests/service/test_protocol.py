@@ -4,7 +4,8 @@ import json
 
 import pytest
 
-from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, encode, parse_request
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, ProtocolError, encode, encode_steps, parse_request
+from nurbsmotion.steps import drained
 
 
 def test_a_valid_request_is_decoded_with_its_fields():
@@ -48,3 +49,20 @@ def test_non_finite_numbers_anywhere_become_null_and_finite_ones_stay_as_they_we
     assert encode({"a": [1.5, float("inf")], "b": {"c": (float("-inf"), 2)}, "d": "x"}) == \
         b'{"a":[1.5,null],"b":{"c":[null,2]},"d":"x"}\n'
     assert encode({"a": [1.5, 0.1], "b": {"c": (3, None)}}) == b'{"a":[1.5,0.1],"b":{"c":[3,null]}}\n'
+
+
+@pytest.mark.parametrize("obj", [
+    {"ok": True, "axes": [{"name": "X", "mm": 1.25}], "cycles": {"late": 3, "p99": float("nan")}, "é": "ü\n"},
+    {"ok": False, "error": "one line"},
+    {},
+])
+def test_encoding_in_steps_gives_the_same_line_one_field_a_step(obj):
+    steps: list[object] = []
+    assert drained(encode_steps(obj), steps.append) == encode(obj)
+    assert len(steps) == len(obj)
+
+
+def test_encoding_in_steps_keeps_jsons_own_rules_for_keys_that_are_not_text():
+    steps: list[object] = []
+    assert drained(encode_steps({1: "a", None: 2}), steps.append) == encode({1: "a", None: 2}) == b'{"1":"a","null":2}\n'
+    assert steps == []

@@ -14,13 +14,17 @@ import pytest
 from nurbsmotion.errors import InputError
 from nurbsmotion.service.access import PeerCredentials, peer_allowed
 from nurbsmotion.service.client import Client, DaemonUnavailable
-from nurbsmotion.service.protocol import MAX_REQUEST_BYTES
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, EncodedResponse
 from nurbsmotion.service.server import ControlServer
 
 
 def _handler(request):
     if request.cmd == "reset":
         raise InputError("reset", "nothing to reset")
+    if request.cmd == "status":  # encoded ahead (as the daemon does in the cycle thread's slack): its line is sent
+        answer = EncodedResponse({"ok": True, "cmd": "status"})
+        answer.line = b'{"ok":true,"cmd":"status","encoded":"ahead"}\n'
+        return answer
     return {"ok": True, "cmd": request.cmd}
 
 
@@ -45,7 +49,8 @@ def _raw(path, data: bytes) -> dict:
 def test_socket_is_group_rw_only_and_answers(server):
     assert stat.S_IMODE(os.stat(server.path).st_mode) == 0o660
     with Client(server.path) as client:
-        assert client.request("status") == {"ok": True, "cmd": "status"}
+        assert client.request("status") == {"ok": True, "cmd": "status", "encoded": "ahead"}
+        assert client.request("jobs") == {"ok": True, "cmd": "jobs"}
         refused = client.request("reset")
         assert refused["ok"] is False and refused["error"] == "reset: nothing to reset"
 

@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 # once the cycle thread sleeps. Steps past the wake-up in 48 jobs of 20 s: 111 at 300 us, 7 at
 # 600 us; 10 clients' added late cycles per 1000: +2.8 to +4.7, then +1.5 to +2.0 (docs/web.md).
 ROOM_S = 600e-6
-# work the cycle thread has not finished in this long (it has no slack: overloaded) is taken
+# work the cycle thread ran no step of in this long (it has no slack: overloaded) is taken
 # back and finished by the thread that submitted it
 WAIT_S = 0.25
 T = TypeVar("T")
@@ -51,6 +51,7 @@ class SlackWork:
     error: Exception | None = None  # a step raised: the submitter raises it again
     result: object = None  # what the steps returned (a generator's return value)
     returned: bool = False  # the cycle thread ended first: the submitter runs the rest of the steps
+    steps_run: int = 0  # by the cycle thread so far (run_steps takes work back that makes no progress)
 
 
 class CycleSlack:
@@ -116,6 +117,8 @@ class CycleSlack:
                 work = queue[0]
                 try:
                     next(work.steps)
+                    work.steps_run += 1
+                    queue.rotate(-1)  # one step of each queued work in turn: a long one starves none
                     continue
                 except StopIteration as done:
                     work.result = done.value
@@ -145,15 +148,25 @@ def step_place(steps: Iterator[object]) -> str:
 def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callable[[object], None] = lambda _: None,
               wait_s: float = WAIT_S) -> T:
     """Run ``steps`` to their end and return their result: in the cycle thread's ``slack``
-    while one runs (this thread waits); else, or when the cycle thread has not finished them
-    within ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each
-    step's value. A step's exception is raised here."""
+    while one runs (this thread waits); else, or when the cycle thread ran none of them for
+    ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each step's
+    value. A step's exception is raised here."""
     work = slack.submit(steps) if slack is not None else None
-    if work is not None and slack is not None:
-        if work.done.wait(wait_s) or not slack.withdraw(work):
-            work.done.wait()
-            if work.error is not None:
-                raise work.error
-            if not work.returned:
-                return work.result  # type: ignore[return-value]  # the generator's own return value
+    if work is not None and slack is not None and not taken_back(work, slack, wait_s):
+        work.done.wait()
+        if work.error is not None:
+            raise work.error
+        if not work.returned:
+            return work.result  # type: ignore[return-value]  # the generator's own return value
     return drained(steps, between)
+
+
+def taken_back(work: SlackWork, slack: CycleSlack, wait_s: float) -> bool:
+    """Wait while the cycle thread makes progress on ``work``; True when it ran none of its
+    steps for ``wait_s`` and the work was taken back (the caller runs the rest)."""
+    seen = -1
+    while not work.done.wait(wait_s):
+        if work.steps_run == seen:
+            return slack.withdraw(work)
+        seen = work.steps_run
+    return False

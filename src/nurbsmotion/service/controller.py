@@ -392,7 +392,8 @@ class Controller:
         self.files.stop_traffic()
         if self.simulation is not None:
             try:
-                outcome["drive_recordings"] = self.simulation.write_recordings(str(job.record.drives_dir))
+                outcome["drive_recordings"] = self.simulation.write_recordings(str(job.record.drives_dir),
+                                                                               self.link.cycle_slack)
             except OSError as err:
                 log.warning(kv("recording_not_written", job=job.record.job_id, error=err))
         self.state_store.keep_program_state(job, outcome["outcome"])

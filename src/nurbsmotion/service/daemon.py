@@ -40,7 +40,7 @@ from nurbsmotion.service.planner import needs_planner_worker, prepare_job
 from nurbsmotion.service.planner_worker import PlannerWorker
 from nurbsmotion.service.program_file import ProgramFile, clear_spool, requested_program
 from nurbsmotion.service.programs import LIBRARY_COMMANDS, Programs
-from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, Request
+from nurbsmotion.service.protocol import MAX_REQUEST_BYTES, EncodedResponse, Request, encode_steps
 from nurbsmotion.service.records import JobRecords
 from nurbsmotion.service.server import ControlServer
 from nurbsmotion.service.start_line import start_line_field
@@ -92,11 +92,17 @@ def submit(controller: Controller, request: Request) -> dict[str, Any]:
                                  start_line=start_line_field(f.get("start_line")))
 
 
-def status_answer(controller: Controller, programs: Programs | None) -> dict[str, Any]:
-    """``status``: read in the cycle thread's slack while it runs (fieldbus.cycle_slack), so a
-    poller (the CLI, a pendant, a dashboard) never holds the interpreter lock when the cycle
-    thread wakes; encoding and sending the answer stay with the request's thread."""
-    return with_queue(run_steps(controller.status_steps(), controller.link.cycle_slack), programs)
+def status_answer(controller: Controller, programs: Programs | None) -> EncodedResponse:
+    """``status``: read and encoded in the cycle thread's slack while it runs
+    (fieldbus.cycle_slack), so a poller (the CLI, a pendant, a dashboard) never holds the
+    interpreter lock when the cycle thread wakes (a status encoded in the request's thread
+    was there at a tenth of the late wake-ups of a job with a poller, docs/web.md); the job
+    queue's summary is added in the request's thread (it takes the queue's lock), the send
+    stays there."""
+    slack = controller.link.cycle_slack
+    answer = EncodedResponse(with_queue(run_steps(controller.status_steps(), slack), programs))
+    answer.line = run_steps(encode_steps(answer), slack)
+    return answer
 
 
 def with_queue(status: dict[str, Any], programs: Programs | None) -> dict[str, Any]:

@@ -18,6 +18,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from nurbsmotion.steps import Steps
+
 MAX_REQUEST_BYTES = 80 * 1024 * 1024  # a library program (web.max_upload_mb, default 64 MB) as JSON text
 MAX_FDS = 2  # file descriptors a request line may carry (more are closed unread)
 PROGRAM_NAME = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$"  # a library program's name: a file name, no path
@@ -130,11 +132,34 @@ def encode(obj: dict[str, Any]) -> bytes:
     """One response or request line (compact JSON + newline; NaN/inf become null). The C
     encoder refuses a non-finite float: only then is the object walked (_finite) in Python,
     which took the status publisher ~75 % of an encode (issue 22)."""
+    return (_dumps(obj) + "\n").encode("utf-8")
+
+
+def encode_steps(obj: dict[str, Any]) -> Steps[bytes]:
+    """:func:`encode`'s line, one top-level field a step (steps.Steps): each json.dumps is one
+    C call that holds the interpreter lock throughout, so the daemon encodes a status answer
+    in the cycle thread's slack (fieldbus.cycle_slack), where it cannot delay a wake-up."""
+    if not all(isinstance(key, str) for key in obj):
+        return encode(obj)  # JSON's own key conversions: in one go
+    parts = []
+    for key, value in obj.items():
+        yield None
+        parts.append(f"{json.dumps(key)}:{_dumps(value)}")
+    return ("{" + ",".join(parts) + "}\n").encode("utf-8")
+
+
+def _dumps(value: Any) -> str:
     try:
-        text = json.dumps(obj, separators=(",", ":"), allow_nan=False)
+        return json.dumps(value, separators=(",", ":"), allow_nan=False)
     except ValueError:
-        text = json.dumps(_finite(obj), separators=(",", ":"))
-    return (text + "\n").encode("utf-8")
+        return json.dumps(_finite(value), separators=(",", ":"))
+
+
+class EncodedResponse(dict[str, Any]):
+    """A response whose line was encoded ahead (``line``: :func:`encode_steps`' bytes); the
+    control server sends ``line`` instead of encoding the response again."""
+
+    line: bytes = b""
 
 
 def error_response(message: str, errors: list[str] | None = None) -> dict[str, Any]:

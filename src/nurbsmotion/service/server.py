@@ -24,7 +24,8 @@ from typing import Any, Callable, Iterator
 from nurbsmotion.errors import InputError
 from nurbsmotion.log import kv
 from nurbsmotion.service import access
-from nurbsmotion.service.protocol import MAX_FDS, MAX_REQUEST_BYTES, ProtocolError, Request, encode, error_response, parse_request
+from nurbsmotion.service.protocol import (MAX_FDS, MAX_REQUEST_BYTES, EncodedResponse, ProtocolError, Request, encode,
+                                         error_response, parse_request)
 from nurbsmotion.service.subscriptions import DEFAULT_MAX_HZ, MAX_HZ_RANGE, StatusHub, Subscription
 
 log = logging.getLogger(__name__)
@@ -248,7 +249,7 @@ class ControlServer:
     @staticmethod
     def _send(conn: socket.socket, response: dict[str, Any]) -> bool:
         try:
-            conn.sendall(encode(response))
+            conn.sendall(response.line if isinstance(response, EncodedResponse) else encode(response))
             return True
         except OSError:
             return False

@@ -24,6 +24,7 @@ from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
 from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 from nurbsmotion.sim.timing import SyncSettings
+from nurbsmotion.steps import Steps, drained
 
 log = logging.getLogger(__name__)
 
@@ -277,13 +278,17 @@ class SimNetwork:
     def write_recordings(self, directory: str | Path, timelines: bool = False) -> list[Path]:
         """Write ``<dir>/node<id>.csv`` (applied set-points) for every drive, and with
         ``timelines`` ``<dir>/node<id>.sync.csv`` (every SYNC); returns the paths."""
+        return drained(self.recording_steps(directory, timelines), lambda _: None)
+
+    def recording_steps(self, directory: str | Path, timelines: bool = False) -> Steps[list[Path]]:
+        """:meth:`write_recordings` in short steps (recording.CSV_ROWS_PER_STEP rows each)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         paths = []
         for node_id, drive in sorted(self.drives.items()):
-            paths.append(drive.write_recording(directory / f"node{node_id}.csv"))
+            paths.append((yield from drive.recorder.csv_steps(directory / f"node{node_id}.csv")))
             if timelines:
-                paths.append(drive.write_timeline(directory / f"node{node_id}.sync.csv"))
+                paths.append((yield from drive.timeline.csv_steps(directory / f"node{node_id}.sync.csv")))
         return paths
 
     def _realtime_thread(self, name: str) -> Callable[[], None]:
