@@ -1,8 +1,10 @@
 """What recording a job's feedback.csv costs the cycle loop: the master streams jobs to three
 simulated drives at T = 1 ms (the soak's setup, benchmarks/bench_soak.py), alternating jobs
-without and with the service's FeedbackLog (Master.record_feedback + a flush every second on
-another thread, as the daemon's job watcher does); figures per mode: late and missed cycles,
-rows written, the flush's own time.
+without and with the service's FeedbackLog (Master.record_feedback + a flush every second by
+another thread, as the daemon's job watcher does), the lines formatted in that thread (as
+before 2026-11-29) or in the cycle thread's slack (as the daemon does now,
+fieldbus.cycle_slack); figures per mode: late and missed cycles, rows written, the flush's
+time as the flushing thread sees it.
 
     PYTHONPATH=src python benchmarks/bench_feedback.py --jobs 10
 """
@@ -25,13 +27,24 @@ from benchmarks._report import write_section  # noqa: E402
 from benchmarks.bench_soak import COUNTS_PER_MM, MOVE_MM, MOVE_S, move, run_as_hardware, three_axes  # noqa: E402
 
 from nurbsmotion.fieldbus import Master  # noqa: E402
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps  # noqa: E402
 from nurbsmotion.service.feedback import FeedbackLog  # noqa: E402
 
-MODES = ("without", "with")
+WITHOUT = "without feedback.csv"
+IN_THREAD = "feedback.csv formatted in the flushing thread"
+IN_SLACK = "feedback.csv formatted in the cycle thread's slack"
+MODES = (WITHOUT, IN_THREAD, IN_SLACK)
 
 
-def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path | None) -> tuple[int, float]:
-    """One job; with ``folder``: recorded to feedback.csv there. (rows written, flush seconds)"""
+def flush(log: FeedbackLog, start_cycle: int, slack: CycleSlack | None) -> None:
+    """The samples so far into the file: formatted here (``slack`` None) or in the slack."""
+    log.write(run_steps(log.line_steps(start_cycle), slack))
+
+
+def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path | None,
+            slack: CycleSlack | None = None) -> tuple[int, float]:
+    """One job; with ``folder``: recorded to feedback.csv there, formatted in ``slack`` if
+    given. (rows written, flush seconds)"""
     log = FeedbackLog(folder / "feedback.csv", master.axis_map) if folder is not None else None
     if log is not None:
         master.record_feedback(log.add)
@@ -41,12 +54,13 @@ def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path 
     while job.wait(1.0) is None:
         if log is not None and job.start_cycle >= 0:
             t0 = time.perf_counter()
-            log.flush(job.start_cycle)
+            flush(log, job.start_cycle, slack)
             flush_s += time.perf_counter() - t0
     if log is None:
         return 0, 0.0
     master.record_feedback(None)
     t0 = time.perf_counter()
+    flush(log, max(job.start_cycle, 0), slack)
     log.close(max(job.start_cycle, 0))
     return log.rows, flush_s + time.perf_counter() - t0
 
@@ -56,12 +70,13 @@ def measure(jobs: int, period_ms: float) -> dict[str, dict[str, float]]:
                for m in MODES}
     distance = np.array(MOVE_MM) * COUNTS_PER_MM
     with three_axes(period_ms, "feedback") as master, tempfile.TemporaryDirectory() as tmp:
-        for k in range(2 * jobs):
-            mode = MODES[k % 2]
+        for k in range(len(MODES) * jobs):
+            mode = MODES[k % len(MODES)]
             before = master.status().timing
             t0 = time.monotonic()
             rows, flush_s = run_job(master, distance, master.config.cycle_period_s,
-                                    Path(tmp) if mode == "with" else None)
+                                    Path(tmp) if mode != WITHOUT else None,
+                                    master.cycle_slack if mode == IN_SLACK else None)
             after = master.status().timing
             distance = -distance
             f = figures[mode]
@@ -82,14 +97,14 @@ def report(figures: dict[str, dict[str, float]], period_ms: float, load: tuple[f
     for mode in MODES:
         f = figures[mode]
         cycles = max(f["cycles"], 1)
-        rows.append(f"| {mode} feedback.csv | {f['jobs']:.0f} | {f['cycles']:.0f} | {f['late']:.0f} "
+        rows.append(f"| {mode} | {f['jobs']:.0f} | {f['cycles']:.0f} | {f['late']:.0f} "
                     f"({100.0 * f['late'] / cycles:.2f} %) | {f['missed']:.0f} ({100.0 * f['missed'] / cycles:.3f} %) | "
                     f"{f['rows']:.0f} | {1e3 * f['flush_s'] / max(f['motion_s'], 1e-9):.1f} ms/s |")
     return f"""Master + three simulated drives (X, Y CSP, Z IP) in one process on the virtual bus,
 T = {period_ms:g} ms; jobs ({MOVE_S:g} s moves) alternate without and with the job's feedback.csv
 (every TPDO1 through Master.record_feedback into service.feedback.FeedbackLog, flushed once a
-second by another thread). Load average before / after: {load[0]:.2f} / {load[1]:.2f} (other work
-shares the 2 cores: compare the two rows of one run, not runs).
+second by another thread, its lines formatted there or in the cycle thread's slack). Load average before / after: {load[0]:.2f} / {load[1]:.2f} (other work
+shares the 2 cores: compare the rows of one run, not runs).
 
 | mode | jobs | cycles | late | missed | rows | flush time per second of motion |
 | --- | --- | --- | --- | --- | --- | --- |

@@ -57,7 +57,6 @@ axes:
   - {{name: X, node_id: 1, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
   - {{name: Y, node_id: 2, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
   - {{name: Z, node_id: 3, mode: csp, counts_per_mm: 1000, soft_limits_mm: [-500, 500], max_velocity_mm_s: 200}}
-monitoring: {{feedback_log: false}}
 control: {{socket: {socket}}}
 data_dir: {data_dir}
 web: {{listen: "127.0.0.1:{port}"}}

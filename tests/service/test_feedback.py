@@ -28,3 +28,24 @@ def test_rows_are_written_per_tpdo_with_the_axis_scale_and_the_job_cycle(tmp_pat
     assert [float(r["position_mm"]) for r in rows] == [1.0, -2.0, -2.05, -2.1]
     assert [round(float(r["time_s"]), 4) for r in rows] == [0.0, 0.001, 0.002, 0.0025]
     assert log.rows == 4
+
+
+def test_lines_formatted_in_steps_are_the_samples_received_before_the_first_step(tmp_path):
+    log = FeedbackLog(tmp_path / "feedback.csv", AxisMap.from_config(parse_config(AXES, "m.yaml")))
+    for k in range(5):
+        log.add(10 + k, 0, 0x0237, 1500 + k, 50.0 + k * 1e-3)
+    steps = log.line_steps(10, rows_per_step=2)
+    next(steps)  # a sample received from here on waits for the next flush
+    log.add(15, 0, 0x0237, 1505, 50.005)
+    chunks: list[bytes] = []
+    try:
+        while True:
+            next(steps)
+    except StopIteration as end:
+        chunks = end.value
+    assert [c.count(b"\n") for c in chunks] == [2, 2, 1]  # two lines a step
+    log.write(chunks)
+    log.close(10)
+    rows = list(csv.DictReader((tmp_path / "feedback.csv").read_text().splitlines()))
+    assert [r["job_cycle"] for r in rows] == ["0", "1", "2", "3", "4", "5"]  # the late one by close
+    assert log.rows == 6

@@ -52,14 +52,21 @@ def test_sync_timeline_rows_round_trip(tmp_path: Path) -> None:
         read_csv(tmp_path / "t.csv")
 
 
-def test_csv_in_steps_writes_the_rows_recorded_before_its_first_step(tmp_path: Path) -> None:
+def test_csv_in_chunks_a_step_holds_the_rows_recorded_before_its_first_step(tmp_path: Path) -> None:
     recorder = SetpointRecorder()
     for i in range(7):
         recorder.append(i, 8, i * 10, i * 10 - 1, i % 256, i * 1_000_000)
     expected = recorder.records()
-    steps = recorder.csv_steps(tmp_path / "r.csv", rows_per_step=3)
-    next(steps)  # the rows up to here are written: one appended later is not
+    steps = recorder.csv_chunks(rows_per_step=3)
+    next(steps)  # the rows up to here are formatted: one appended later is not
     recorder.append(7, 8, 70, 69, 7, 7_000_000)
-    yielded = 1 + sum(1 for _ in steps)
-    assert yielded == 3  # 7 rows, 3 a step
+    yielded = 1
+    try:
+        while True:
+            next(steps)
+            yielded += 1
+    except StopIteration as end:
+        chunks = end.value
+    assert yielded == 3 and [c.count(b"\n") for c in chunks] == [1, 3, 3, 1]  # the header, then 3 rows a step
+    (tmp_path / "r.csv").write_bytes(b"".join(chunks))
     assert read_csv(tmp_path / "r.csv") == expected

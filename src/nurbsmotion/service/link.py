@@ -68,7 +68,10 @@ class SimulatedDrives:
         one takes effect at the next SYNC, so wait for two more applied rows (or ``settle_s``,
         e.g. when the drives are disabled and record nothing). The rows are formatted in
         the cycle thread's ``slack`` while it runs (fieldbus.cycle_slack): in one go they held
-        the interpreter lock ~30 ms per drive of a 20 s job, and the cycle thread waited."""
+        the interpreter lock ~30 ms per drive of a 20 s job, and the cycle thread waited;
+        the files are written here (chunked_file)."""
+        from nurbsmotion.sim.network import write_tables
+
         drives = list(self.network.drives.values())
         wanted = [len(d.recorder) + 2 for d in drives]
         deadline = time.monotonic() + settle_s
@@ -76,7 +79,8 @@ class SimulatedDrives:
             time.sleep(0.002)
         with self._lock:
             self._recording = False
-            return [str(p) for p in run_steps(self.network.recording_steps(folder), slack)]
+            tables = run_steps(self.network.recording_steps(folder), slack)
+        return [str(p) for p in write_tables(tables)]  # in this thread, a system call a chunk
 
     def _clear(self) -> None:
         for drive in self.network.drives.values():

@@ -24,9 +24,23 @@ from nurbsmotion.sim.homing import HomeSensors
 from nurbsmotion.sim.io_node import SimIoNode
 from nurbsmotion.can.socketcan_batch import BatchedSocketcanBus, BatchNotifier
 from nurbsmotion.sim.timing import SyncSettings
+from nurbsmotion.chunked_file import write_file
 from nurbsmotion.steps import Steps, drained
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Table:
+    """One recording file: its path and its text in encoded chunks (recording.csv_chunks)."""
+
+    path: Path
+    chunks: list[bytes]
+
+
+def write_tables(tables: list[Table]) -> list[Path]:
+    """Write each table (chunked_file: one system call a chunk); their paths."""
+    return [write_file(t.path, t.chunks) for t in tables]
 
 # The receive thread's read timeout: how long stop() waits for it at most (canopen: 1 s).
 NOTIFIER_CYCLE_S = 0.1
@@ -278,18 +292,18 @@ class SimNetwork:
     def write_recordings(self, directory: str | Path, timelines: bool = False) -> list[Path]:
         """Write ``<dir>/node<id>.csv`` (applied set-points) for every drive, and with
         ``timelines`` ``<dir>/node<id>.sync.csv`` (every SYNC); returns the paths."""
-        return drained(self.recording_steps(directory, timelines), lambda _: None)
+        return write_tables(drained(self.recording_steps(directory, timelines), lambda _: None))
 
-    def recording_steps(self, directory: str | Path, timelines: bool = False) -> Steps[list[Path]]:
-        """:meth:`write_recordings` in short steps (recording.CSV_ROWS_PER_STEP rows each)."""
+    def recording_steps(self, directory: str | Path, timelines: bool = False) -> Steps[list[Table]]:
+        """The files of :meth:`write_recordings`, formatted in short steps
+        (recording.CSV_ROWS_PER_STEP rows each); ``write_tables`` writes them."""
         directory = Path(directory)
-        directory.mkdir(parents=True, exist_ok=True)
-        paths = []
+        tables = []
         for node_id, drive in sorted(self.drives.items()):
-            paths.append((yield from drive.recorder.csv_steps(directory / f"node{node_id}.csv")))
+            tables.append(Table(directory / f"node{node_id}.csv", (yield from drive.recorder.csv_chunks())))
             if timelines:
-                paths.append((yield from drive.timeline.csv_steps(directory / f"node{node_id}.sync.csv")))
-        return paths
+                tables.append(Table(directory / f"node{node_id}.sync.csv", (yield from drive.timeline.csv_chunks())))
+        return tables
 
     def _realtime_thread(self, name: str) -> Callable[[], None]:
         """Make the calling thread SCHED_FIFO rt_priority (when set) and note its policy."""

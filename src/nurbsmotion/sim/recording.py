@@ -19,12 +19,14 @@ from __future__ import annotations
 import array
 import csv
 import enum
+import io
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Generic, TypeVar
 
 import numpy as np
 
+from nurbsmotion.chunked_file import take_text, write_file
 from nurbsmotion.steps import Steps, drained
 
 # rows formatted per step of csv_steps: ~50 us on the 2-core test machine (6 columns)
@@ -100,23 +102,26 @@ class _Recorder(Generic[R]):
 
     def write_csv(self, path: str | Path) -> Path:
         """Write the rows as CSV with a header line; returns the path."""
-        return drained(self.csv_steps(path), lambda _: None)
+        return write_file(path, drained(self.csv_chunks(), lambda _: None))
 
-    def csv_steps(self, path: str | Path, rows_per_step: int = CSV_ROWS_PER_STEP) -> Steps[Path]:
-        """:meth:`write_csv` in steps of ``rows_per_step`` rows (steps.Steps): each step's
-        formatting is one C call that holds the interpreter lock throughout (a whole job's
-        rows took ~30 ms per drive), so the daemon runs them in the cycle thread's slack
-        (fieldbus.cycle_slack). The rows recorded before the first step are written."""
-        path = Path(path)
+    def csv_chunks(self, rows_per_step: int = CSV_ROWS_PER_STEP) -> Steps[list[bytes]]:
+        """The CSV text of :meth:`write_csv` (header line first), encoded, one chunk of
+        ``rows_per_step`` rows a step (steps.Steps): each step's formatting is one C call
+        that holds the interpreter lock throughout (a whole job's rows took ~30 ms per
+        drive), so the daemon runs them in the cycle thread's slack (fieldbus.cycle_slack)
+        and writes the chunks in its own thread (chunked_file). The rows recorded before
+        the first step."""
         width, end = self._width, len(self) * self._width
-        with path.open("w", newline="", encoding="utf-8") as out:
-            writer = csv.writer(out)
-            writer.writerow(self.header())
-            for start in range(0, end, rows_per_step * width):
-                yield None
-                chunk = self._values[start: min(start + rows_per_step * width, end)]
-                writer.writerows(np.frombuffer(chunk, dtype=np.int64).reshape(-1, width).tolist())
-        return path
+        text = io.StringIO()
+        writer = csv.writer(text)
+        writer.writerow(self.header())
+        chunks = [take_text(text)]
+        for start in range(0, end, rows_per_step * width):
+            yield None
+            values = self._values[start: min(start + rows_per_step * width, end)]
+            writer.writerows(np.frombuffer(values, dtype=np.int64).reshape(-1, width).tolist())
+            chunks.append(take_text(text))
+        return chunks
 
 
 class SetpointRecorder(_Recorder[SetpointRecord]):
