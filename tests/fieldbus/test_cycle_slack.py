@@ -31,7 +31,7 @@ def counted_steps(clock: StepClock, n: int, ran: list[int]) -> Iterator[None]:
 
 def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
     clock = StepClock(step_s=100e-6)
-    slack = CycleSlack(room_s=300e-6, clock=clock)
+    slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=1.0)
     slack.start()
     ran: list[int] = []
     work = slack.submit(counted_steps(clock, 10, ran))
@@ -46,9 +46,21 @@ def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
     assert slack.overruns == 0  # the third step ended 250 us before the wake-up
 
 
+def test_steps_start_only_within_the_budget_after_the_slack_began():
+    clock = StepClock(step_s=40e-6)
+    slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=100e-6)
+    slack.start()
+    ran: list[int] = []
+    slack.submit(counted_steps(clock, 10, ran))
+    slack.run(next_wake_s=clock.now + 1.0)  # steps start at 0, 40 and 80 us: the one at 120 us waits
+    assert ran == [0, 1, 2]
+    slack.run(next_wake_s=clock.now + 1.0)  # the next cycle's slack: a budget of its own
+    assert ran == [0, 1, 2, 3, 4, 5]
+
+
 def test_a_step_that_ends_after_the_wake_up_is_counted_as_an_overrun():
     clock = StepClock(step_s=400e-6)  # longer than the room: a step that overran
-    slack = CycleSlack(room_s=300e-6, clock=clock)
+    slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=1.0)
     slack.start()
     ran: list[int] = []
     slack.submit(counted_steps(clock, 3, ran))
