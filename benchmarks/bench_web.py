@@ -335,14 +335,15 @@ class Running:
     """The daemon and the gateway started from ``src`` (a fresh folder, machine file and
     port), until ``stop``."""
 
-    def __init__(self, src: Path) -> None:
+    def __init__(self, src: Path, feedback_log: bool = True) -> None:
         self.src = src
         self.folder = Path(tempfile.mkdtemp(prefix="nm-bench-web-"))
         self.port = free_port()
         self.config = self.folder / "machine.yaml"
         self.socket_path = self.folder / "ctl.sock"
         self.config.write_text(MACHINE.format(channel=f"bench-web-{uuid.uuid4().hex}", socket=self.socket_path,
-                                              data_dir=self.folder / "data", port=self.port))
+                                              data_dir=self.folder / "data", port=self.port)
+                               + ("" if feedback_log else "monitoring: {feedback_log: false}\n"))
         self.base = f"http://127.0.0.1:{self.port}"
         self.ws_url = f"ws://127.0.0.1:{self.port}/api/v1/ws"
         self.daemon: subprocess.Popen[bytes] | None = None
@@ -474,7 +475,7 @@ async def main_async(args: argparse.Namespace) -> tuple[str, str]:
         rows = await ab_rounds(args)
         idle, preview = None, None
     else:
-        running = Running(SRC)
+        running = Running(SRC, feedback_log=not args.no_feedback_log)
         try:
             await running.start()
             idle = await idle_cpu(running.ws_url, running.pids["gateway"], args.idle_seconds)
@@ -539,6 +540,9 @@ def main() -> int:
     parser.add_argument("--previous-src", type=Path,
                         help="src/ of a previous checkout (with its eds/ beside it): its daemon against this one's, "
                              "round by round (printed only)")
+    parser.add_argument("--no-feedback-log", action="store_true",
+                        help="the daemon without the jobs' feedback.csv (monitoring.feedback_log: false; before "
+                             "2026-11-29 the benchmark always ran so)")
     parser.add_argument("--clients-off-realtime-cpu", action="store_true",
                         help="also, each round, the WebSocket clients with this process kept off the daemon's "
                              "real-time CPU (as browsers elsewhere, or isolcpus, keep them)")

@@ -11,8 +11,9 @@ So background work that must run in the daemon's process (the status publisher's
 the ``status`` answers, the formatting of a job's files) is handed over as an iterator of
 short steps. After its cycle's commit the cycle thread starts steps only while its next
 wake-up is at least ``room_s`` away and within ``budget_s`` of the slack's beginning; queued
-works take turns step by step; the rest waits for the next cycle. This is the background slot of a real-time task: LinuxCNC's servo thread likewise
-copies its status for the user interfaces in its own period.
+works take turns step by step; the rest waits for the next cycle. This is the background
+slot of a real-time task: LinuxCNC's servo thread likewise copies its status for the user
+interfaces in its own period.
 
 Work submitted while no cycle thread runs is refused (``submit`` returns None): the
 submitter runs it itself. Work still queued when the cycle thread ends is handed back
@@ -172,7 +173,7 @@ def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callabl
 def taken_back(work: SlackWork, slack: CycleSlack, wait_s: float) -> bool:
     """Wait while the cycle thread makes progress on ``work``; True when it ran none of its
     steps for ``wait_s`` and the work was taken back (the caller runs the rest)."""
-    seen = -1
+    seen = 0
     while not work.done.wait(wait_s):
         if work.steps_run == seen:
             return slack.withdraw(work)
