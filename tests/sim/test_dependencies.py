@@ -11,11 +11,13 @@ import nurbsmotion.sim
 # socketcan_batch: transport only (python-can's SocketCAN bus with batched system calls), no CANopen;
 # arrival_clock: a clock on the frames' receive timestamps, no CANopen (the master judges its
 # heartbeat consumer on it too: the same rule for both judges, no protocol code shared);
-# runtime: process settings (a thread's SCHED_FIFO policy), no CANopen
+# runtime: process settings (a thread's SCHED_FIFO policy), no CANopen;
+# steps, chunked_file: leaf modules (work written as generators of steps, files written a
+# chunk a system call) for the recordings the daemon formats in the cycle thread's slack
 ALLOWED_NURBSMOTION = {"nurbsmotion", "nurbsmotion.can", "nurbsmotion.can.cia402", "nurbsmotion.errors",
                        "nurbsmotion.log", "nurbsmotion.can.socketcan_batch", "nurbsmotion.can.arrival_clock",
-                       "nurbsmotion.runtime"}
-ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum",
+                       "nurbsmotion.runtime", "nurbsmotion.steps", "nurbsmotion.chunked_file"}
+ALLOWED_TOP_LEVEL = {"__future__", "array", "bisect", "can", "canopen", "collections", "csv", "dataclasses", "enum", "io",
                      "logging", "math", "numpy", "pathlib", "select", "struct", "threading", "time", "typing"}
 
 

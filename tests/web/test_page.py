@@ -133,6 +133,8 @@ def test_the_console_homes_jogs_previews_and_runs_a_program(console, tmp_path):
         page.locator("input[name=step][value='10']").check()
         page.get_by_test_id("jog-X+").click()
         expect(page.get_by_test_id("dro-X")).to_have_text("10.000", timeout=20000)
+        # the jog is a job: it ends (its files written) after the axis arrived; a jog before is refused busy
+        expect(page.get_by_test_id("machine-state")).to_have_text("idle", timeout=20000)
         page.get_by_test_id("jog-X-").click()
         expect(page.get_by_test_id("dro-X")).to_have_text("0.000", timeout=20000)
         page.locator("#file").set_input_files(str(program))
