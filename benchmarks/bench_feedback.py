@@ -27,18 +27,13 @@ from benchmarks._report import write_section  # noqa: E402
 from benchmarks.bench_soak import COUNTS_PER_MM, MOVE_MM, MOVE_S, move, run_as_hardware, three_axes  # noqa: E402
 
 from nurbsmotion.fieldbus import Master  # noqa: E402
-from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps  # noqa: E402
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack  # noqa: E402
 from nurbsmotion.service.feedback import FeedbackLog  # noqa: E402
 
 WITHOUT = "without feedback.csv"
 IN_THREAD = "feedback.csv formatted in the flushing thread"
 IN_SLACK = "feedback.csv formatted in the cycle thread's slack"
 MODES = (WITHOUT, IN_THREAD, IN_SLACK)
-
-
-def flush(log: FeedbackLog, start_cycle: int, slack: CycleSlack | None) -> None:
-    """The samples so far into the file: formatted here (``slack`` None) or in the slack."""
-    log.write(run_steps(log.line_steps(start_cycle), slack))
 
 
 def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path | None,
@@ -54,14 +49,13 @@ def run_job(master: Master, distance: np.ndarray, period_s: float, folder: Path 
     while job.wait(1.0) is None:
         if log is not None and job.start_cycle >= 0:
             t0 = time.perf_counter()
-            flush(log, job.start_cycle, slack)
+            log.flush(job.start_cycle, slack)
             flush_s += time.perf_counter() - t0
     if log is None:
         return 0, 0.0
     master.record_feedback(None)
     t0 = time.perf_counter()
-    flush(log, max(job.start_cycle, 0), slack)
-    log.close(max(job.start_cycle, 0))
+    log.close(max(job.start_cycle, 0), slack)
     return log.rows, flush_s + time.perf_counter() - t0
 
 

@@ -23,7 +23,8 @@ from typing import BinaryIO
 
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.chunked_file import write_all
-from nurbsmotion.steps import Steps, drained
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, run_steps
+from nurbsmotion.steps import Steps
 
 HEADER = "job_cycle,axis,node,statusword,position_counts,position_mm,time_s\n"
 ROWS_PER_STEP = 50  # lines formatted per step of line_steps: ~75 us on the 2-core test machine
@@ -47,9 +48,11 @@ class FeedbackLog:
         """The master's FeedbackSink: called on the receive thread, so only an append."""
         self._samples.append((cycle, axis, statusword, position_counts, timestamp))
 
-    def flush(self, start_cycle: int) -> None:
-        """Write the samples received so far; ``start_cycle``: the master cycle of job cycle 0."""
-        self.write(drained(self.line_steps(start_cycle), lambda _: None))
+    def flush(self, start_cycle: int, slack: CycleSlack | None = None) -> None:
+        """Write the samples received so far; ``start_cycle``: the master cycle of job cycle 0.
+        The lines are formatted in the cycle thread's ``slack`` when given (fieldbus.cycle_slack),
+        else here; they are written here."""
+        self.write(run_steps(self.line_steps(start_cycle), slack))
 
     def line_steps(self, start_cycle: int, rows_per_step: int = ROWS_PER_STEP) -> Steps[list[bytes]]:
         """The lines of the samples received so far, encoded, one chunk of ``rows_per_step``
@@ -81,8 +84,8 @@ class FeedbackLog:
         if self._out is not None:
             write_all(self._out, chunks)
 
-    def close(self, start_cycle: int) -> None:
-        self.flush(start_cycle)
+    def close(self, start_cycle: int, slack: CycleSlack | None = None) -> None:
+        self.flush(start_cycle, slack)
         if self._out is not None:
             self._out.close()
             self._out = None

@@ -9,7 +9,6 @@ import shutil
 
 from nurbsmotion.config import MachineConfig
 from nurbsmotion.errors import FieldbusError, InputError
-from nurbsmotion.fieldbus.cycle_slack import run_steps
 from nurbsmotion.log import kv
 from nurbsmotion.service.active_job import ActiveJob, JobPlan
 from nurbsmotion.service.feedback import FeedbackLog
@@ -72,16 +71,14 @@ class JobFiles:
             return
         self.link.record_feedback(None)
         try:
-            start_cycle = max(job.start_cycle, 0)
-            job.feedback.write(run_steps(job.feedback.line_steps(start_cycle), self.link.cycle_slack))
-            job.feedback.close(start_cycle)
+            job.feedback.close(max(job.start_cycle, 0), self.link.cycle_slack)
         except OSError as err:
             log.warning(kv("feedback_not_written", job=job.record.job_id, error=err.strerror or err))
 
     def flush_feedback(self, job: ActiveJob) -> None:
         if job.feedback is not None and job.start_cycle >= 0:
             try:  # formatted in the cycle thread's slack, written here (service.feedback)
-                job.feedback.write(run_steps(job.feedback.line_steps(job.start_cycle), self.link.cycle_slack))
+                job.feedback.flush(job.start_cycle, self.link.cycle_slack)
             except OSError as err:
                 log.warning(kv("feedback_not_written", job=job.record.job_id, error=err.strerror or err))
                 self.link.record_feedback(None)

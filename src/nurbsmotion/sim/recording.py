@@ -111,14 +111,14 @@ class _Recorder(Generic[R]):
         drive), so the daemon runs them in the cycle thread's slack (fieldbus.cycle_slack)
         and writes the chunks in its own thread (chunked_file). The rows recorded before
         the first step."""
-        width, end = self._width, len(self) * self._width
+        recorded, width, end = self._values, self._width, len(self) * self._width  # a clear() meanwhile: these rows
         text = io.StringIO()
         writer = csv.writer(text)
         writer.writerow(self.header())
         chunks = [take_text(text)]
         for start in range(0, end, rows_per_step * width):
             yield None
-            values = self._values[start: min(start + rows_per_step * width, end)]
+            values = recorded[start: min(start + rows_per_step * width, end)]
             writer.writerows(np.frombuffer(values, dtype=np.int64).reshape(-1, width).tolist())
             chunks.append(take_text(text))
         return chunks
