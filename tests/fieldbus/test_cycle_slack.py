@@ -46,16 +46,44 @@ def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
     assert slack.overruns == 0  # the third step ended 250 us before the wake-up
 
 
-def test_steps_start_only_within_the_budget_after_the_slack_began():
+def test_bulk_steps_start_only_within_the_budget_after_the_slack_began():
     clock = StepClock(step_s=40e-6)
     slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=100e-6)
     slack.start()
     ran: list[int] = []
-    slack.submit(counted_steps(clock, 10, ran))
+    slack.submit(counted_steps(clock, 10, ran), bulk=True)
     slack.run(next_wake_s=clock.now + 1.0)  # steps start at 0, 40 and 80 us: the one at 120 us waits
     assert ran == [0, 1, 2]
     slack.run(next_wake_s=clock.now + 1.0)  # the next cycle's slack: a budget of its own
     assert ran == [0, 1, 2, 3, 4, 5]
+
+
+def test_other_work_runs_whole_while_the_room_allows_and_before_bulk_work():
+    clock = StepClock(step_s=40e-6)
+    slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=100e-6)
+    slack.start()
+    files: list[int] = []
+    answer: list[int] = []
+    bulk = slack.submit(counted_steps(clock, 10, files), bulk=True)
+    reply = slack.submit(counted_steps(clock, 5, answer))
+    assert bulk is not None and reply is not None and bulk.bulk and not reply.bulk
+    slack.run(next_wake_s=clock.now + 1.0)  # the answer's steps (200 us, past the budget), then no bulk step
+    assert answer == list(range(5)) and reply.done.is_set() and files == []
+    slack.run(next_wake_s=clock.now + 1.0)
+    assert files == [0, 1, 2]
+    slack.submit(counted_steps(clock, 10, answer))
+    slack.run(next_wake_s=clock.now + 500e-6)  # the room bounds other work: steps at 0, 40, 80, 120, 160, 200 us
+    assert answer == list(range(5)) + list(range(6)) and files == [0, 1, 2]
+
+
+def test_bulk_work_is_withdrawn_and_handed_back_like_other_work():
+    slack = CycleSlack(clock=StepClock(step_s=0.0))
+    slack.start()
+    taken, kept = slack.submit(iter([None]), bulk=True), slack.submit(iter([None, None]), bulk=True)
+    assert taken is not None and kept is not None
+    assert slack.withdraw(taken) and not slack.withdraw(taken) and slack.withdrawn == 1
+    slack.stop()
+    assert kept.returned and kept.done.is_set() and not taken.done.is_set()
 
 
 def test_a_step_that_ends_after_the_wake_up_is_counted_as_an_overrun():

@@ -4,6 +4,7 @@ import csv
 
 from nurbsmotion.axes import AxisMap
 from nurbsmotion.config import parse_config
+from nurbsmotion.fieldbus.cycle_slack import CycleSlack, SlackWork
 from nurbsmotion.service.feedback import HEADER, FeedbackLog
 
 AXES = ("axes:\n  - {name: X, node_id: 4, counts_per_mm: 1000, offset_counts: 500}\n"
@@ -49,3 +50,25 @@ def test_lines_formatted_in_steps_are_the_samples_received_before_the_first_step
     rows = list(csv.DictReader((tmp_path / "feedback.csv").read_text().splitlines()))
     assert [r["job_cycle"] for r in rows] == ["0", "1", "2", "3", "4", "5"]  # the late one by close
     assert log.rows == 6
+
+
+class SubmitsSeen(CycleSlack):
+    """A slack without a cycle thread that notes how work was submitted (run_steps then runs it)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.bulk: list[bool] = []
+
+    def submit(self, steps, bulk: bool = False) -> SlackWork | None:  # type: ignore[no-untyped-def]
+        self.bulk.append(bulk)
+        return None
+
+
+def test_the_lines_go_to_the_slack_as_bulk_work(tmp_path):
+    log = FeedbackLog(tmp_path / "feedback.csv", AxisMap.from_config(parse_config(AXES, "m.yaml")))
+    log.add(10, 0, 0x0237, 1500, 50.0)
+    slack = SubmitsSeen()
+    log.flush(10, slack)
+    log.close(10, slack)
+    assert slack.bulk == [True, True]  # within the slack's budget, after status answers and rounds
+    assert log.rows == 1

@@ -10,8 +10,11 @@ never be in the way of the cycle thread's wake-up is the cycle thread itself.
 So background work that must run in the daemon's process (the status publisher's rounds,
 the ``status`` answers, the formatting of a job's files) is handed over as an iterator of
 short steps. After its cycle's commit the cycle thread starts steps only while its next
-wake-up is at least ``room_s`` away and within ``budget_s`` of the slack's beginning; queued
-works take turns step by step; the rest waits for the next cycle. This is the background
+wake-up is at least ``room_s`` away; queued works take turns step by step; the rest waits for
+the next cycle. Bulk work (a job's files: many steps, nobody waiting on a reply) goes after
+the others and starts only within ``budget_s`` of the slack's beginning, so the
+lower-priority real-time threads it pushes back are never held long; a status round or answer
+runs whole while the room allows, so it is not spread over cycles. This is the background
 slot of a real-time task: LinuxCNC's servo thread likewise copies its status for the user
 interfaces in its own period.
 
@@ -38,8 +41,8 @@ log = logging.getLogger(__name__)
 # once the cycle thread sleeps. Steps past the wake-up in 48 jobs of 20 s: 111 at 300 us, 7 at
 # 600 us; 10 clients' added late cycles per 1000: +2.8 to +4.7, then +1.5 to +2.0 (docs/web.md).
 ROOM_S = 600e-6
-# and only this long after the slack began: the other real-time threads' work it pushes back
-# stays short however much is queued (a job's feedback.csv lines: 60 steps a second)
+# bulk work starts only this long after the slack began: the other real-time threads' work it
+# pushes back stays short however much is queued (a job's feedback.csv lines: 60 steps a second)
 BUDGET_S = 100e-6
 # work the cycle thread ran no step of in this long (it has no slack: overloaded) is taken
 # back and finished by the thread that submitted it
@@ -57,6 +60,7 @@ class SlackWork:
     result: object = None  # what the steps returned (a generator's return value)
     returned: bool = False  # the cycle thread ended first: the submitter runs the rest of the steps
     steps_run: int = 0  # by the cycle thread so far (run_steps takes work back that makes no progress)
+    bulk: bool = False  # a job's files: after the other work, within the budget only
 
 
 class CycleSlack:
@@ -68,6 +72,7 @@ class CycleSlack:
         self.budget_s = budget_s
         self._clock = clock
         self._queue: collections.deque[SlackWork] = collections.deque()
+        self._bulk: collections.deque[SlackWork] = collections.deque()
         self._lock = threading.Lock()  # held by the cycle thread while it runs a step
         self._open = False
         self.steps_run = 0
@@ -88,58 +93,73 @@ class CycleSlack:
         """The cycle thread ends: refuse new work and hand back what is queued."""
         with self._lock:
             self._open = False
-            while self._queue:
-                work = self._queue.popleft()
-                work.returned = True
-                work.done.set()
+            for queue in (self._queue, self._bulk):
+                while queue:
+                    work = queue.popleft()
+                    work.returned = True
+                    work.done.set()
 
-    def submit(self, steps: Iterator[object]) -> SlackWork | None:
-        """Queue ``steps`` for the cycle thread; None when no cycle thread runs."""
-        work = SlackWork(steps)
+    def submit(self, steps: Iterator[object], bulk: bool = False) -> SlackWork | None:
+        """Queue ``steps`` for the cycle thread (``bulk``: within the budget, after the
+        other work); None when no cycle thread runs."""
+        work = SlackWork(steps, bulk=bulk)
         with self._lock:
             if not self._open:
                 return None
-            self._queue.append(work)
+            (self._bulk if bulk else self._queue).append(work)
         return work
 
     def withdraw(self, work: SlackWork) -> bool:
         """Take ``work`` back before the cycle thread started it or between two of its steps:
         True when it was still queued (the submitter runs the rest of its steps itself)."""
+        queue = self._bulk if work.bulk else self._queue
         with self._lock:
-            if work in self._queue:
-                self._queue.remove(work)
+            if work in queue:
+                queue.remove(work)
                 self.withdrawn += 1
                 return True
             return False
 
     def run(self, next_wake_s: float) -> None:
         """The cycle thread, after its commit: start queued steps while ``next_wake_s`` (its
-        next wake-up, on this clock) is at least ``room_s`` away and ``budget_s`` has not
-        passed since this call began. A step that raises ends its work (the submitter sees
-        the error); the cycle goes on."""
-        queue = self._queue
-        if not queue:
+        next wake-up, on this clock) is at least ``room_s`` away; bulk steps only once no other
+        work is queued and only until ``budget_s`` has passed since this call began. A step
+        that raises ends its work (the submitter sees the error); the cycle goes on."""
+        queue, bulk = self._queue, self._bulk
+        if not queue and not bulk:
             return
         with self._lock:
-            last_start_s = min(next_wake_s - self.room_s, self._clock() + self.budget_s)
-            while queue and self._clock() <= last_start_s:
-                work = queue[0]
-                try:
-                    next(work.steps)
-                    work.steps_run += 1
-                    queue.rotate(-1)  # one step of each queued work in turn: a long one starves none
-                    continue
-                except StopIteration as done:
-                    work.result = done.value
-                except Exception as err:  # noqa: BLE001 - another thread's bug must not stop the cycle
-                    work.error = err
-                finally:
-                    self.steps_run += 1
-                    if self._clock() > next_wake_s:
-                        self.overruns += 1
-                        self.overrun_places[step_place(work.steps)] += 1
-                queue.popleft()
-                work.done.set()
+            last_start_s = next_wake_s - self.room_s
+            last_bulk_start_s = min(last_start_s, self._clock() + self.budget_s)
+            while True:
+                now_s = self._clock()
+                if queue and now_s <= last_start_s:
+                    self._step(queue, next_wake_s)
+                elif bulk and now_s <= last_bulk_start_s:
+                    self._step(bulk, next_wake_s)
+                else:
+                    return
+
+    def _step(self, queue: collections.deque[SlackWork], next_wake_s: float) -> None:
+        """One step of the first work in ``queue``, which then goes to the back (queued works
+        take turns: a long one starves none) or, once it ended, out."""
+        work = queue[0]
+        try:
+            next(work.steps)
+            work.steps_run += 1
+            queue.rotate(-1)
+            return
+        except StopIteration as done:
+            work.result = done.value
+        except Exception as err:  # noqa: BLE001 - another thread's bug must not stop the cycle
+            work.error = err
+        finally:
+            self.steps_run += 1
+            if self._clock() > next_wake_s:
+                self.overruns += 1
+                self.overrun_places[step_place(work.steps)] += 1
+        queue.popleft()
+        work.done.set()
 
 
 def step_place(steps: Iterator[object]) -> str:
@@ -155,12 +175,12 @@ def step_place(steps: Iterator[object]) -> str:
 
 
 def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callable[[object], None] = lambda _: None,
-              wait_s: float = WAIT_S) -> T:
+              wait_s: float = WAIT_S, bulk: bool = False) -> T:
     """Run ``steps`` to their end and return their result: in the cycle thread's ``slack``
-    while one runs (this thread waits); else, or when the cycle thread ran none of them for
+    while one runs (this thread waits; ``bulk``: CycleSlack.submit); else, or when the cycle thread ran none of them for
     ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each step's
     value. A step's exception is raised here."""
-    work = slack.submit(steps) if slack is not None else None
+    work = slack.submit(steps, bulk) if slack is not None else None
     if work is not None and slack is not None and not taken_back(work, slack, wait_s):
         work.done.wait()
         if work.error is not None:

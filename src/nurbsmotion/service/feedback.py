@@ -52,7 +52,7 @@ class FeedbackLog:
         """Write the samples received so far; ``start_cycle``: the master cycle of job cycle 0.
         The lines are formatted in the cycle thread's ``slack`` when given (fieldbus.cycle_slack),
         else here; they are written here."""
-        self.write(run_steps(self.line_steps(start_cycle), slack))
+        self.write(run_steps(self.line_steps(start_cycle), slack, bulk=True))
 
     def line_steps(self, start_cycle: int, rows_per_step: int = ROWS_PER_STEP) -> Steps[list[bytes]]:
         """The lines of the samples received so far, encoded, one chunk of ``rows_per_step``

@@ -79,7 +79,7 @@ class SimulatedDrives:
             time.sleep(0.002)
         with self._lock:
             self._recording = False
-            tables = run_steps(self.network.recording_steps(folder), slack)
+            tables = run_steps(self.network.recording_steps(folder), slack, bulk=True)
         return [str(p) for p in write_tables(tables)]  # in this thread, a system call a chunk
 
     def _clear(self) -> None:
