@@ -46,7 +46,7 @@ def test_steps_run_only_while_the_next_wake_up_is_at_least_the_room_away():
     assert slack.overruns == 0  # the third step ended 250 us before the wake-up
 
 
-def test_bulk_steps_start_only_within_the_budget_after_the_slack_began():
+def test_steps_start_only_within_the_budget_after_the_slack_began():
     clock = StepClock(step_s=40e-6)
     slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=100e-6)
     slack.start()
@@ -58,22 +58,21 @@ def test_bulk_steps_start_only_within_the_budget_after_the_slack_began():
     assert ran == [0, 1, 2, 3, 4, 5]
 
 
-def test_other_work_runs_whole_while_the_room_allows_and_before_bulk_work():
+def test_bulk_work_runs_only_when_no_other_work_is_queued():
     clock = StepClock(step_s=40e-6)
     slack = CycleSlack(room_s=300e-6, clock=clock, budget_s=100e-6)
     slack.start()
     files: list[int] = []
     answer: list[int] = []
     bulk = slack.submit(counted_steps(clock, 10, files), bulk=True)
-    reply = slack.submit(counted_steps(clock, 5, answer))
+    reply = slack.submit(counted_steps(clock, 4, answer))
     assert bulk is not None and reply is not None and bulk.bulk and not reply.bulk
-    slack.run(next_wake_s=clock.now + 1.0)  # the answer's steps (200 us, past the budget), then no bulk step
-    assert answer == list(range(5)) and reply.done.is_set() and files == []
-    slack.run(next_wake_s=clock.now + 1.0)
-    assert files == [0, 1, 2]
-    slack.submit(counted_steps(clock, 10, answer))
-    slack.run(next_wake_s=clock.now + 500e-6)  # the room bounds other work: steps at 0, 40, 80, 120, 160, 200 us
-    assert answer == list(range(5)) + list(range(6)) and files == [0, 1, 2]
+    slack.run(next_wake_s=clock.now + 1.0)  # the answer's steps at 0, 40 and 80 us: the budget
+    assert answer == [0, 1, 2] and files == []
+    slack.run(next_wake_s=clock.now + 1.0)  # its last step and its end, then bulk at 40 and 80 us
+    assert answer == [0, 1, 2, 3] and reply.done.is_set() and files == [0, 1]
+    slack.run(next_wake_s=clock.now + 250e-6)  # the room too: nothing
+    assert files == [0, 1]
 
 
 def test_bulk_work_is_withdrawn_and_handed_back_like_other_work():

@@ -70,5 +70,5 @@ def test_the_lines_go_to_the_slack_as_bulk_work(tmp_path):
     slack = SubmitsSeen()
     log.flush(10, slack)
     log.close(10, slack)
-    assert slack.bulk == [True, True]  # within the slack's budget, after status answers and rounds
+    assert slack.bulk == [True, True]  # run when no status answer or round is queued
     assert log.rows == 1

@@ -10,11 +10,12 @@ never be in the way of the cycle thread's wake-up is the cycle thread itself.
 So background work that must run in the daemon's process (the status publisher's rounds,
 the ``status`` answers, the formatting of a job's files) is handed over as an iterator of
 short steps. After its cycle's commit the cycle thread starts steps only while its next
-wake-up is at least ``room_s`` away; queued works take turns step by step; the rest waits for
-the next cycle. Bulk work (a job's files: many steps, nobody waiting on a reply) goes after
-the others and starts only within ``budget_s`` of the slack's beginning, so the
-lower-priority real-time threads it pushes back are never held long; a status round or answer
-runs whole while the room allows, so it is not spread over cycles. This is the background
+wake-up is at least ``room_s`` away and within ``budget_s`` of the slack's beginning; queued
+works take turns step by step; the rest waits for the next cycle. Bulk work (a job's files:
+many steps, nobody waiting on a reply) runs only when no other work is queued, so a status
+round or answer is not held behind a job's feedback.csv lines. (Rounds run whole while the
+room allowed, the budget for bulk work only, cost 10 clients +2.2 to +2.8 late cycles per
+1000; with the budget for every step, +0.2, -1.2 and +0.1: docs/web.md.) This is the background
 slot of a real-time task: LinuxCNC's servo thread likewise copies its status for the user
 interfaces in its own period.
 
@@ -41,8 +42,8 @@ log = logging.getLogger(__name__)
 # once the cycle thread sleeps. Steps past the wake-up in 48 jobs of 20 s: 111 at 300 us, 7 at
 # 600 us; 10 clients' added late cycles per 1000: +2.8 to +4.7, then +1.5 to +2.0 (docs/web.md).
 ROOM_S = 600e-6
-# bulk work starts only this long after the slack began: the other real-time threads' work it
-# pushes back stays short however much is queued (a job's feedback.csv lines: 60 steps a second)
+# and only this long after the slack began: the other real-time threads' work it pushes back
+# stays short however much is queued (a job's feedback.csv lines: 60 steps a second)
 BUDGET_S = 100e-6
 # work the cycle thread ran no step of in this long (it has no slack: overloaded) is taken
 # back and finished by the thread that submitted it
@@ -60,7 +61,7 @@ class SlackWork:
     result: object = None  # what the steps returned (a generator's return value)
     returned: bool = False  # the cycle thread ended first: the submitter runs the rest of the steps
     steps_run: int = 0  # by the cycle thread so far (run_steps takes work back that makes no progress)
-    bulk: bool = False  # a job's files: after the other work, within the budget only
+    bulk: bool = False  # a job's files: run when no other work is queued
 
 
 class CycleSlack:
@@ -100,8 +101,8 @@ class CycleSlack:
                     work.done.set()
 
     def submit(self, steps: Iterator[object], bulk: bool = False) -> SlackWork | None:
-        """Queue ``steps`` for the cycle thread (``bulk``: within the budget, after the
-        other work); None when no cycle thread runs."""
+        """Queue ``steps`` for the cycle thread (``bulk``: only when no other work is
+        queued); None when no cycle thread runs."""
         work = SlackWork(steps, bulk=bulk)
         with self._lock:
             if not self._open:
@@ -122,23 +123,16 @@ class CycleSlack:
 
     def run(self, next_wake_s: float) -> None:
         """The cycle thread, after its commit: start queued steps while ``next_wake_s`` (its
-        next wake-up, on this clock) is at least ``room_s`` away; bulk steps only once no other
-        work is queued and only until ``budget_s`` has passed since this call began. A step
+        next wake-up, on this clock) is at least ``room_s`` away and ``budget_s`` has not
+        passed since this call began; bulk steps only once no other work is queued. A step
         that raises ends its work (the submitter sees the error); the cycle goes on."""
         queue, bulk = self._queue, self._bulk
         if not queue and not bulk:
             return
         with self._lock:
-            last_start_s = next_wake_s - self.room_s
-            last_bulk_start_s = min(last_start_s, self._clock() + self.budget_s)
-            while True:
-                now_s = self._clock()
-                if queue and now_s <= last_start_s:
-                    self._step(queue, next_wake_s)
-                elif bulk and now_s <= last_bulk_start_s:
-                    self._step(bulk, next_wake_s)
-                else:
-                    return
+            last_start_s = min(next_wake_s - self.room_s, self._clock() + self.budget_s)
+            while (queue or bulk) and self._clock() <= last_start_s:
+                self._step(queue if queue else bulk, next_wake_s)
 
     def _step(self, queue: collections.deque[SlackWork], next_wake_s: float) -> None:
         """One step of the first work in ``queue``, which then goes to the back (queued works
