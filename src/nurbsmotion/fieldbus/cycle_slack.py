@@ -13,9 +13,8 @@ short steps. After its cycle's commit the cycle thread starts steps only while i
 wake-up is at least ``room_s`` away and within ``budget_s`` of the slack's beginning; queued
 works take turns step by step; the rest waits for the next cycle. Bulk work (a job's files:
 many steps, nobody waiting on a reply) runs only when no other work is queued, so a status
-round or answer is not held behind a job's feedback.csv lines. (Rounds run whole while the
-room allowed, the budget for bulk work only, cost 10 clients +2.2 to +2.8 late cycles per
-1000; with the budget for every step, +0.2, -1.2 and +0.1: docs/web.md.) This is the background
+round or answer is not held behind a job's feedback.csv lines (why every step keeps the
+budget: docs/web.md, "What the subscription costs the cycle"). This is the background
 slot of a real-time task: LinuxCNC's servo thread likewise copies its status for the user
 interfaces in its own period.
 
@@ -171,8 +170,8 @@ def step_place(steps: Iterator[object]) -> str:
 def run_steps(steps: Steps[T], slack: CycleSlack | None = None, between: Callable[[object], None] = lambda _: None,
               wait_s: float = WAIT_S, bulk: bool = False) -> T:
     """Run ``steps`` to their end and return their result: in the cycle thread's ``slack``
-    while one runs (this thread waits; ``bulk``: CycleSlack.submit); else, or when the cycle thread ran none of them for
-    ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each step's
+    while one runs (this thread waits; ``bulk`` as in CycleSlack.submit); else, or when the
+    cycle thread ran none of them for ``wait_s`` (it has no slack: overloaded), here, calling ``between`` with each step's
     value. A step's exception is raised here."""
     work = slack.submit(steps, bulk) if slack is not None else None
     if work is not None and slack is not None and not taken_back(work, slack, wait_s):
